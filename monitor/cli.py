@@ -1,0 +1,67 @@
+"""The ``propwatch`` console command: a thin dispatcher over subcommand modules.
+
+Each subcommand lives in its own module with ``main(argv=None) -> int`` and is
+imported only when asked for, so ``propwatch monitor`` never imports torch or
+``offline``. Library errors (``PropwatchError``) become one line on stderr and
+exit code 2; nothing else is caught.
+"""
+
+from __future__ import annotations
+
+import importlib
+import sys
+
+from monitor.errors import PropwatchError
+
+# name -> (module, one-line help). Offline commands need the ``offline`` extra.
+COMMANDS: dict[str, tuple[str, str]] = {
+    "simulate": ("offline.sim.cli", "simulate flights (npz or PX4-like tlog) with ground truth"),
+    "train-propellers": ("offline.propellers.cli", "virtual load cell + LSTM propeller models"),
+    "dataset": ("offline.dataset.cli", "generate labelled fault data sets (A, B, C, ...)"),
+    "train": ("offline.classifier.train_cli", "train the CNN fault classifier"),
+    "export": ("offline.classifier.export_cli", "export a trained classifier to ONNX"),
+    "evaluate": ("offline.classifier.evaluate_cli", "evaluate a classifier on data sets"),
+    "calibrate": ("offline.calibrate.cli", "fit model extensions to measured flights"),
+    "crazypad": ("offline.crazypad.cli", "sim-to-real experiment on CrazyPAD"),
+    "diagnose": ("monitor.diagnose.cli", "diagnose recorded flight logs"),
+    "monitor": ("monitor.daemon.cli", "run the onboard monitor daemon"),
+    "replay": ("monitor.replay", "replay a .tlog as if it were PX4"),
+}
+
+
+def usage() -> str:
+    width = max(map(len, COMMANDS))
+    lines = ["usage: propwatch COMMAND [ARGS...]", "", "commands:"]
+    lines += [f"  {name:<{width}}  {help_}" for name, (_, help_) in COMMANDS.items()]
+    lines += ["", "'propwatch COMMAND --help' for a command's options."]
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if not argv or argv[0] in ("-h", "--help"):
+        print(usage())
+        return 0 if argv else 2
+    name, rest = argv[0], argv[1:]
+    if name not in COMMANDS:
+        print(f"propwatch: unknown command {name!r}\n\n{usage()}", file=sys.stderr)
+        return 2
+    module_name = COMMANDS[name][0]
+    try:
+        module = importlib.import_module(module_name)
+    except ImportError as exc:
+        if module_name.startswith("offline") and getattr(exc, "name", "") in ("torch", "onnx", "matplotlib", "scipy"):
+            print(f"propwatch {name}: needs the offline extra (pip install 'propwatch[offline]'): {exc}", file=sys.stderr)
+            return 2
+        raise
+    try:
+        return int(module.main(rest) or 0)
+    except PropwatchError as exc:
+        print(f"propwatch {name}: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,136 @@
+"""Classifier features: the one numpy module used by training and by the monitor.
+
+Input is a mapping of canonical signals, each with any leading axes (flights)
+and time on the last axis (plus a trailing axis of 4 for ``motor_rpm``):
+
+| signal             | shape      | unit  | meaning |
+| motor_rpm          | (..., T, 4)| RPM   | target RPM per rotor, PX4 order, from the ESC fit (monitor.esc) or ESC telemetry |
+| roll_rad, pitch_rad, yaw_rad | (..., T) | rad | attitude, Euler ZYX |
+| roll_rate_rad_s, pitch_rate_rad_s, yaw_rate_rad_s | (..., T) | rad/s | body rates (FRD) |
+
+A feature is named; a model stores its ordered list of names and the monitor
+computes exactly those. ``PAPER_FEATURES`` are the paper's ten signals.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable, Mapping, Sequence
+
+import numpy as np
+
+from monitor.errors import ModelError
+
+SAMPLE_RATE_HZ = 20.0
+WINDOW_STEPS = 100
+
+SIGNALS = (
+    "motor_rpm",
+    "roll_rad",
+    "pitch_rad",
+    "yaw_rad",
+    "roll_rate_rad_s",
+    "pitch_rate_rad_s",
+    "yaw_rate_rad_s",
+)
+
+Signals = Mapping[str, np.ndarray]
+
+
+def _rpm(i: int) -> Callable[[Signals], np.ndarray]:
+    return lambda s: s["motor_rpm"][..., i]
+
+
+def _rpm_rel(i: int) -> Callable[[Signals], np.ndarray]:
+    # Each rotor's share of the mean: invariant to payload and to the ESC fit's scale.
+    def f(s: Signals) -> np.ndarray:
+        rpm = s["motor_rpm"]
+        mean = np.mean(rpm, axis=-1)
+        return rpm[..., i] / np.where(np.abs(mean) > 1.0, mean, 1.0) - 1.0
+
+    return f
+
+
+def _plain(name: str) -> Callable[[Signals], np.ndarray]:
+    return lambda s: s[name]
+
+
+FEATURES: dict[str, Callable[[Signals], np.ndarray]] = {
+    **{f"rpm_{i + 1}": _rpm(i) for i in range(4)},
+    **{f"rpm_rel_{i + 1}": _rpm_rel(i) for i in range(4)},
+    **{n: _plain(n) for n in SIGNALS[1:]},
+    "rpm_mean": lambda s: np.mean(s["motor_rpm"], axis=-1),
+    "yaw_sin": lambda s: np.sin(s["yaw_rad"]),
+    "yaw_cos": lambda s: np.cos(s["yaw_rad"]),
+}
+
+PAPER_FEATURES: tuple[str, ...] = (
+    "rpm_1", "rpm_2", "rpm_3", "rpm_4",
+    "roll_rad", "pitch_rad", "yaw_rad",
+    "roll_rate_rad_s", "pitch_rate_rad_s", "yaw_rate_rad_s",
+)
+
+
+def check_feature_names(names: Sequence[str]) -> None:
+    unknown = [n for n in names if n not in FEATURES]
+    if unknown:
+        raise ModelError(f"unknown feature(s) {unknown}; known: {sorted(FEATURES)}")
+
+
+def compute_features(signals: Signals, names: Sequence[str] = PAPER_FEATURES) -> np.ndarray:
+    """Stack the named features on a last axis: (..., T, F) float32. NaN in, NaN out."""
+    check_feature_names(names)
+    missing = [s for s in SIGNALS if s not in signals and any(_needs(n, s) for n in names)]
+    if missing:
+        raise ModelError(f"signals missing for features: {missing}")
+    cols = [np.asarray(FEATURES[n](signals), dtype=np.float64) for n in names]
+    return np.stack(cols, axis=-1).astype(np.float32)
+
+
+def _needs(feature: str, signal: str) -> bool:
+    if signal == "motor_rpm":
+        return feature.startswith("rpm")
+    if signal == "yaw_rad":
+        return feature in ("yaw_rad", "yaw_sin", "yaw_cos")
+    return feature == signal
+
+
+def sliding_windows(features: np.ndarray, window: int = WINDOW_STEPS, hop: int = 1) -> np.ndarray:
+    """(..., T, F) -> (..., N, window, F) as a strided view (no copy); N = (T - window)//hop + 1."""
+    if features.shape[-2] < window:
+        shape = features.shape[:-2] + (0, window, features.shape[-1])
+        return np.empty(shape, dtype=features.dtype)
+    v = np.lib.stride_tricks.sliding_window_view(features, window, axis=-2)  # (..., N, F, window)
+    v = np.swapaxes(v, -1, -2)
+    return v[..., ::hop, :, :]
+
+
+def valid_windows(windows: np.ndarray) -> np.ndarray:
+    """(..., N) mask: windows with no NaN or inf anywhere (never classify invented data)."""
+    return np.isfinite(windows).all(axis=(-1, -2))
+
+
+@dataclass(frozen=True)
+class Normalizer:
+    """Per-feature standardisation; its statistics travel inside the model's metadata."""
+
+    mean: tuple[float, ...]
+    std: tuple[float, ...]
+
+    @classmethod
+    def fit(cls, features: np.ndarray) -> "Normalizer":
+        flat = features.reshape(-1, features.shape[-1]).astype(np.float64)
+        flat = flat[np.isfinite(flat).all(axis=1)]
+        std = flat.std(axis=0)
+        std = np.where(std > 1e-9, std, 1.0)
+        return cls(tuple(map(float, flat.mean(axis=0))), tuple(map(float, std)))
+
+    def apply(self, x: np.ndarray) -> np.ndarray:
+        return ((x - np.asarray(self.mean, np.float32)) / np.asarray(self.std, np.float32)).astype(np.float32)
+
+    def to_dict(self) -> dict:
+        return {"mean": list(self.mean), "std": list(self.std)}
+
+    @classmethod
+    def from_dict(cls, d: Mapping) -> "Normalizer":
+        return cls(tuple(map(float, d["mean"])), tuple(map(float, d["std"])))

@@ -1,0 +1,1 @@
+"""propwatch offline toolchain: simulator, propeller models, data sets, training, export, calibration."""
