@@ -33,6 +33,11 @@ class FlightTable:
     source: str = ""
     motor_names: tuple[str, str, str, str] = ("1", "2", "3", "4")
     warnings: tuple[str, ...] = field(default_factory=tuple)
+    # Optional measured extras (None when the log lacks them); calibration uses them.
+    accel_frd_m_s2: np.ndarray | None = None  # (T, 3) specific force from the IMU, FRD
+    vel_ned_m_s: np.ndarray | None = None  # (T, 3)
+    pos_ned_m: np.ndarray | None = None  # (T, 3)
+    extras: dict = field(default_factory=dict)  # reader-specific columns, e.g. {"motor_pwm_applied": (T,4)}
 
     def __post_init__(self) -> None:
         n = len(self.timestamp_us)
@@ -43,6 +48,10 @@ class FlightTable:
                      "yaw_rate_rad_s", "battery_v", "airborne"):
             if getattr(self, name).shape != (n,):
                 raise LogFormatError(f"{self.source}: {name} must have shape ({n},), got {getattr(self, name).shape}")
+        for name in ("accel_frd_m_s2", "vel_ned_m_s", "pos_ned_m"):
+            v = getattr(self, name)
+            if v is not None and v.shape != (n, 3):
+                raise LogFormatError(f"{self.source}: {name} must have shape ({n}, 3), got {v.shape}")
 
     def __len__(self) -> int:
         return len(self.timestamp_us)
