@@ -26,9 +26,12 @@ never invents a value.
 from __future__ import annotations
 
 import math
+import struct
 from collections import Counter
 from dataclasses import dataclass
-from typing import Any, Union
+from typing import Any
+
+from monitor import mavlink_esc
 
 # MAVLink constants (common.xml), named here so the module needs no dialect import.
 MAV_AUTOPILOT_INVALID = 8
@@ -112,7 +115,7 @@ class ClockReset:
     previous_us: int
 
 
-Sample = Union[Attitude, ActuatorOutputs, EscRpm, Battery, Heartbeat, LandedState, ClockReset]
+Sample = Attitude | ActuatorOutputs | EscRpm | Battery | Heartbeat | LandedState | ClockReset
 
 
 def is_flying(landed_state: int) -> bool:
@@ -141,6 +144,7 @@ class MavlinkDecoder:
         self.component_id = component_id
         self.battery_id = battery_id
         self.reboot_jump_us = reboot_jump_us
+        mavlink_esc.register()  # so every pymavlink parser yields ESC_STATUS, not UNKNOWN_291
         self.clock_us: int | None = None
         self.ignored: Counter = Counter()  # (system, component) -> messages ignored
         self.undecodable: Counter = Counter()  # message type -> count
@@ -199,16 +203,18 @@ class MavlinkDecoder:
         return out
 
     def _esc_from_unknown(self, msg: Any) -> Any | None:
+        """An UNKNOWN_291 from a parser that predates ``mavlink_esc.register()``: decode its raw bytes."""
         try:
-            from monitor import mavlink_esc  # the lead's ESC_STATUS codec (id 291)
-        except ImportError:
-            self.undecodable["UNKNOWN_291 (no ESC_STATUS codec)"] += 1
+            index, time_usec, rpm = mavlink_esc.decode_esc_status(msg)
+            buf = bytes(msg.get_msgbuf())
+            # pymavlink leaves an unknown message's header empty: read the ids from the frame.
+            sys_id, comp_id = (buf[5], buf[6]) if buf[0] == 0xFD else (buf[3], buf[4])
+        except (ValueError, IndexError, struct.error) as exc:
+            self.undecodable[f"UNKNOWN_291: {exc}"] += 1
             return None
-        try:
-            return mavlink_esc.decode_unknown(msg)
-        except Exception as exc:  # noqa: BLE001 - a bad packet must not stop the stream
-            self.undecodable[f"ESC_STATUS: {exc}"] += 1
-            return None
+        esc = mavlink_esc.MAVLink_esc_status_message(index, time_usec, rpm, [math.nan] * 4, [math.nan] * 4)
+        esc._header.srcSystem, esc._header.srcComponent = sys_id, comp_id
+        return esc
 
     # -- one handler per message type ---------------------------------------------
     def _attitude(self, m: Any, out: list[Sample]) -> None:
