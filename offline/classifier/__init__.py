@@ -1,0 +1,1 @@
+"""The CNN fault classifier (issue 4): model, training, ONNX export, evaluation."""

@@ -1,0 +1,25 @@
+"""``propwatch export``: checkpoint (.pt) -> ONNX file for the monitor, checked by loading it back."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from monitor.model import Classifier
+from offline.classifier.export import export_onnx
+from offline.classifier.train import load_checkpoint
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(prog="propwatch export", description=__doc__)
+    p.add_argument("checkpoint", type=Path)
+    p.add_argument("--out", type=Path, required=True, help="ONNX path")
+    a = p.parse_args(argv)
+    path = export_onnx(load_checkpoint(a.checkpoint), a.out)
+    info = Classifier(path).info  # the monitor's own loader must accept it
+    print(f"wrote {path}: {len(info.features)} features x {info.window} steps at {info.sample_rate_hz} Hz")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
