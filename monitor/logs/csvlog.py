@@ -1,0 +1,236 @@
+"""CSV logs through a named column mapping (``monitor/formats.yaml``) -> ``RawFlight``.
+
+A mapping says, per signal, which column holds it (or that it is not
+logged), in which unit, and with which sign/frame flip. Plain or gzip CSV;
+a damaged gzip stream or a cut-off last line is read up to the damage with a
+warning.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import zlib
+from dataclasses import dataclass, fields
+from pathlib import Path
+
+import numpy as np
+
+from monitor.config import from_mapping, read_yaml
+from monitor.errors import ConfigError, LogFormatError
+from monitor.logs.raw import DEFAULT_MIN_HEIGHT_M, RawFlight, Stream
+from monitor.logs.units import M_S2_PER_G, RAD_PER_DEG, US_PER_MS, US_PER_S, V_PER_MV
+
+FORMATS_FILE = Path(__file__).resolve().parent.parent / "formats.yaml"
+
+# Unit -> factor into the project unit (rad, rad/s, V, m, m/s, m/s², µs).
+TO_PROJECT = {
+    "": 1.0, "rad": 1.0, "deg": RAD_PER_DEG, "rad_s": 1.0, "deg_s": RAD_PER_DEG,
+    "V": 1.0, "mV": V_PER_MV, "m": 1.0, "m_s": 1.0, "m_s2": 1.0, "g": M_S2_PER_G,
+    "us": 1.0, "ms": float(US_PER_MS), "s": float(US_PER_S),
+}
+
+
+@dataclass(frozen=True)
+class ColumnSpec:
+    column: str | None = None  # None: not logged in this layout
+    unit: str = ""
+    scale: float = 1.0  # sign / frame flip after the unit conversion
+    required: bool = True  # a named column missing from the file is an error unless False
+
+    def __post_init__(self) -> None:
+        if self.unit not in TO_PROJECT:
+            raise ConfigError(f"unit: unknown unit {self.unit!r} (known: {', '.join(sorted(TO_PROJECT))})")
+
+
+_NONE = ColumnSpec()
+
+
+@dataclass(frozen=True)
+class CsvFormat:
+    description: str
+    time: ColumnSpec
+    cmd_unit: str
+    motors: tuple[str | None, str | None, str | None, str | None]
+    motor_names: tuple[str, str, str, str]
+    roll: ColumnSpec
+    pitch: ColumnSpec
+    yaw: ColumnSpec
+    roll_rate: ColumnSpec
+    pitch_rate: ColumnSpec
+    yaw_rate: ColumnSpec
+    battery: ColumnSpec = _NONE
+    armed: ColumnSpec = _NONE
+    height: ColumnSpec = _NONE
+    acc_x: ColumnSpec = _NONE
+    acc_y: ColumnSpec = _NONE
+    acc_z: ColumnSpec = _NONE
+    vel_n: ColumnSpec = _NONE
+    vel_e: ColumnSpec = _NONE
+    vel_d: ColumnSpec = _NONE
+    pos_n: ColumnSpec = _NONE
+    pos_e: ColumnSpec = _NONE
+    pos_d: ColumnSpec = _NONE
+    min_height_m: float = DEFAULT_MIN_HEIGHT_M
+    delimiter: str = ","
+
+    def __post_init__(self) -> None:
+        if self.cmd_unit not in ("us", "cf16"):
+            raise ConfigError(f"cmd_unit: must be 'us' or 'cf16', got {self.cmd_unit!r}")
+        if self.time.column is None:
+            raise ConfigError("time.column: a CSV format needs a time column")
+        if self.time.unit not in ("us", "ms", "s"):
+            raise ConfigError(f"time.unit: must be us, ms or s, got {self.time.unit!r}")
+
+    def columns(self) -> list[str]:
+        """Every column this layout reads (required or not)."""
+        out = [self.time.column] + [m for m in self.motors if m]
+        out += [getattr(self, f.name).column for f in fields(self)
+                if isinstance(getattr(self, f.name), ColumnSpec) and f.name != "time" and getattr(self, f.name).column]
+        return list(dict.fromkeys(out))
+
+    def required_columns(self) -> list[str]:
+        out = [self.time.column] + [m for m in self.motors if m]
+        out += [getattr(self, f.name).column for f in fields(self)
+                if isinstance(getattr(self, f.name), ColumnSpec) and getattr(self, f.name).column
+                and getattr(self, f.name).required]
+        return list(dict.fromkeys(out))
+
+
+def load_formats(path: str | Path = FORMATS_FILE) -> dict[str, CsvFormat]:
+    data = read_yaml(path)
+    out = {}
+    for name, spec in data.items():
+        if not isinstance(spec, dict):
+            raise ConfigError(f"{path}: format {name!r} must be a mapping")
+        out[name] = _build_format(spec, f"{path}: {name}")
+    return out
+
+
+def _build_format(spec: dict, origin: str) -> CsvFormat:
+    # The loader builds nested dataclasses from mappings; ColumnSpec fields are mappings.
+    return from_mapping(CsvFormat, spec, origin=origin)[0]
+
+
+def get_format(name: str, path: str | Path = FORMATS_FILE) -> CsvFormat:
+    formats = load_formats(path)
+    if name not in formats:
+        raise LogFormatError(f"unknown CSV format {name!r}; known: {', '.join(sorted(formats))} (in {path})")
+    return formats[name]
+
+
+def _read_text(path: Path) -> tuple[str, str | None]:
+    """The file's text and a damage warning (gzip cut short or corrupt: keep what decoded)."""
+    raw = path.read_bytes()
+    if raw[:2] != b"\x1f\x8b":
+        return raw.decode("utf-8", errors="replace"), None
+    d = zlib.decompressobj(wbits=31)
+    try:
+        text = d.decompress(raw)
+        if not d.eof:
+            return text.decode("utf-8", errors="replace"), f"{path.name}: gzip stream ends early: read up to the damage"
+        return text.decode("utf-8", errors="replace"), None
+    except zlib.error as exc:
+        # Decompress block by block to keep what precedes the corrupt block.
+        d = zlib.decompressobj(wbits=31)
+        parts = []
+        for i in range(0, len(raw), 4096):
+            try:
+                parts.append(d.decompress(raw[i:i + 4096]))
+            except zlib.error:
+                break
+        return b"".join(parts).decode("utf-8", errors="replace"), f"{path.name}: corrupt gzip data ({exc}): read up to the damage"
+
+
+def _parse(text: str, delimiter: str, path: Path) -> tuple[list[str], np.ndarray, list[str]]:
+    warnings = []
+    reader = csv.reader(io.StringIO(text), delimiter=delimiter)
+    try:
+        header = [h.strip() for h in next(reader)]
+    except StopIteration:
+        raise LogFormatError(f"{path}: empty CSV file") from None
+    rows, bad = [], 0
+    for row in reader:
+        if len(row) != len(header):
+            bad += 1
+            continue
+        try:
+            rows.append([float(v) if v.strip() else np.nan for v in row])
+        except ValueError:
+            bad += 1
+    if bad:
+        warnings.append(f"{path.name}: {bad} malformed row(s) skipped (truncated or corrupted)")
+    return header, np.array(rows, dtype=np.float64).reshape(-1, len(header)), warnings
+
+
+def read_csv(path: str | Path, fmt: str | CsvFormat, formats_path: str | Path = FORMATS_FILE) -> RawFlight:
+    path = Path(path)
+    spec = get_format(fmt, formats_path) if isinstance(fmt, str) else fmt
+    if not path.is_file():
+        raise LogFormatError(f"{path}: no such file")
+    text, damage = _read_text(path)
+    header, data, warnings = _parse(text, spec.delimiter, path)
+    if damage:
+        warnings.insert(0, damage)
+    missing = [c for c in spec.required_columns() if c not in header]
+    if missing:
+        hint = _matching_formats(header, formats_path)
+        raise LogFormatError(f"{path}: columns {missing} needed by format {_name(spec, formats_path)!r} are missing"
+                             + (f"; the header fits format(s) {hint}" if hint else ""))
+    if len(data) == 0:
+        raise LogFormatError(f"{path}: no data rows")
+    col = {h: i for i, h in enumerate(header)}
+
+    def values(cs: ColumnSpec, what: str) -> np.ndarray:
+        if cs.column is None or cs.column not in col:
+            if cs.column is not None:
+                warnings.append(f"{what} ({cs.column}) not in this file: unknown")
+            return np.full(len(data), np.nan)
+        return data[:, col[cs.column]] * TO_PROJECT[cs.unit] * cs.scale
+
+    t_us = np.round(data[:, col[spec.time.column]] * TO_PROJECT[spec.time.unit]).astype(np.int64)
+    for what in ("roll", "pitch", "yaw", "roll_rate", "pitch_rate", "yaw_rate"):
+        if getattr(spec, what).column is None:
+            warnings.append(f"{what} is not logged in format {_name(spec, formats_path)!r}")
+    motors = np.stack([data[:, col[m]] if m else np.full(len(data), np.nan) for m in spec.motors], axis=1)
+    if not any(spec.motors):
+        warnings.append(f"motor commands are not logged in format {_name(spec, formats_path)!r}")
+
+    def opt(*specs: ColumnSpec) -> Stream | None:
+        if all(s.column is None or s.column not in col for s in specs):
+            return None
+        v = np.stack([values(s, s.column or "") for s in specs], axis=1)
+        return Stream.build(t_us, v if len(specs) > 1 else v[:, 0])
+
+    height = opt(spec.height)
+    if height is not None:
+        height = Stream(height.t_us, height.values - height.values[0])
+    return RawFlight(
+        source=str(path),
+        cmd_unit=spec.cmd_unit,
+        motor_cmd=Stream.build(t_us, motors),
+        attitude_rad=Stream.build(t_us, np.stack([values(spec.roll, "roll"), values(spec.pitch, "pitch"),
+                                                  values(spec.yaw, "yaw")], axis=1)),
+        rates_rad_s=Stream.build(t_us, np.stack([values(spec.roll_rate, "roll_rate"), values(spec.pitch_rate, "pitch_rate"),
+                                                 values(spec.yaw_rate, "yaw_rate")], axis=1)),
+        battery_v=opt(spec.battery),
+        armed=opt(spec.armed),
+        height_m=height,
+        accel_frd_m_s2=opt(spec.acc_x, spec.acc_y, spec.acc_z),
+        vel_ned_m_s=opt(spec.vel_n, spec.vel_e, spec.vel_d),
+        pos_ned_m=opt(spec.pos_n, spec.pos_e, spec.pos_d),
+        motor_names=spec.motor_names,
+        min_height_m=spec.min_height_m,
+        warnings=warnings,
+    )
+
+
+def _name(spec: CsvFormat, formats_path) -> str:
+    for name, s in load_formats(formats_path).items():
+        if s == spec:
+            return name
+    return spec.description
+
+
+def _matching_formats(header: list[str], formats_path) -> list[str]:
+    return [n for n, s in load_formats(formats_path).items() if all(c in header for c in s.required_columns())]

@@ -1,0 +1,149 @@
+"""ArduPilot DataFlash ``.bin`` logs (pymavlink's DFReader) -> ``RawFlight``.
+
+Messages used, old (Copter 3.3: ``TimeMS``, ``Ch1..``, CURR) and new
+(``TimeUS``, ``C1..``, BAT) field names alike:
+- RCOU: motor PWM µs. ArduCopter quad-X numbers its motors as PX4 does
+  (1 front-right CCW, 2 rear-left CCW, 3 front-left CW, 4 rear-right CW;
+  ArduPilot "Connect ESCs and motors" page), with motor i on output i by
+  default, so Ch1..Ch4 map straight onto PX4 order.
+- ATT: Roll, Pitch, Yaw in degrees (yaw 0..360) -> rad.
+- RATE: R, P, Y in deg/s -> rad/s (IMU GyrX/Y/Z in rad/s if RATE is absent).
+- BAT.Volt (V) or CURR.Volt (cV); EV 10/11 armed/disarmed; CTUN.Alt height;
+  IMU Acc (m/s², FRD) and EKF1/NKF1/XKF1 velocity/position (NED) as extras.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+from pathlib import Path
+
+import numpy as np
+
+from monitor.errors import LogFormatError
+from monitor.logs.raw import EVENT_MAX_AGE_US, RawFlight, Stream
+from monitor.logs.units import V_PER_CV, deg_to_rad, ms_to_us, wrap_pi
+
+WANTED = ["RCOU", "ATT", "RATE", "IMU", "BAT", "CURR", "EV", "CTUN", "EKF1", "NKF1", "XKF1"]
+EV_ARMED, EV_DISARMED = 10, 11  # ArduCopter LogEvent DATA_ARMED / DATA_DISARMED
+
+
+def _time_us(msg, names, last_us: int) -> int:
+    if "TimeUS" in names:
+        return int(msg.TimeUS)
+    if "TimeMS" in names:
+        return int(ms_to_us(msg.TimeMS))
+    return last_us  # EV has no time field in Copter 3.3: it happened at the last stamped message
+
+
+def _motor_fields(d: dict) -> tuple[str, ...]:
+    return ("C1", "C2", "C3", "C4") if "C1" in d else ("Ch1", "Ch2", "Ch3", "Ch4")
+
+
+def read_dataflash(path: str | Path) -> RawFlight:
+    from pymavlink import mavutil
+
+    path = Path(path)
+    if not path.is_file():
+        raise LogFormatError(f"{path}: no such file")
+    err = io.StringIO()
+    rows: dict[str, list] = {k: [] for k in ("cmd", "att", "rate", "imu", "bat", "armed", "alt", "ekf")}
+    try:
+        with contextlib.redirect_stderr(err):
+            m = mavutil.mavlink_connection(str(path), dialect="ardupilotmega")
+            if not hasattr(m, "formats"):
+                raise LogFormatError(f"{path}: not an ArduPilot DataFlash log")
+            last_us = 0
+            while True:
+                msg = m.recv_match(type=WANTED)
+                if msg is None:
+                    break
+                typ = msg.get_type()
+                names = msg.get_fieldnames()
+                t = _time_us(msg, names, last_us)
+                last_us = max(last_us, t)
+                _collect(typ, {n: getattr(msg, n) for n in names}, t, rows)
+            leftover = int(m.data_len - m.offset)
+            m.close()
+    except LogFormatError:
+        raise
+    except Exception as exc:  # pymavlink raises bare exceptions on garbage headers
+        raise LogFormatError(f"{path}: cannot read as DataFlash: {exc}") from exc
+
+    warnings = []
+    skipped = [ln for ln in err.getvalue().splitlines() if "Skipped" in ln or "Failed to parse" in ln]
+    if skipped:
+        warnings.append(f"{path.name}: corrupted data skipped ({len(skipped)} place(s), first: {skipped[0].strip()})")
+    if leftover > 0:
+        warnings.append(f"{path.name}: log ends in a truncated message ({leftover} bytes unread): read up to the damage")
+    if not rows["cmd"]:
+        raise LogFormatError(f"{path}: no RCOU messages (motor outputs): cannot diagnose")
+    if not rows["att"]:
+        raise LogFormatError(f"{path}: no ATT messages (attitude): cannot diagnose")
+    rates = rows["rate"]
+    if not rows["rate"] and rows["imu"]:
+        warnings.append("no RATE messages: body rates taken from IMU gyro")
+        rates = [(t, v[:3]) for t, v in rows["imu"]]
+    if not rates:
+        raise LogFormatError(f"{path}: no RATE or IMU messages (body rates): cannot diagnose")
+
+    def stream(items, cols=None):
+        if not items:
+            return None
+        t = np.array([i[0] for i in items], dtype=np.int64)
+        v = np.array([i[1] for i in items], dtype=np.float64)
+        return Stream.build(t, v if cols is None else v[:, cols])
+
+    att = stream(rows["att"])
+    att_v = att.values.copy()
+    att_v[:, :2] = deg_to_rad(att_v[:, :2])
+    att_v[:, 2] = wrap_pi(deg_to_rad(att_v[:, 2]))
+    rate_s = stream(rates)
+    rate_v = rate_s.values if not rows["rate"] else deg_to_rad(rate_s.values)
+    alt = stream(rows["alt"])
+    if alt is not None:
+        alt = Stream(alt.t_us, alt.values - alt.values[0])
+    ekf = stream(rows["ekf"])
+    return RawFlight(
+        source=str(path),
+        cmd_unit="us",
+        motor_cmd=stream(rows["cmd"]),
+        attitude_rad=Stream(att.t_us, att_v),
+        rates_rad_s=Stream(rate_s.t_us, rate_v),
+        battery_v=stream(rows["bat"]),
+        armed=_events(stream(rows["armed"])),
+        height_m=alt,
+        accel_frd_m_s2=stream(rows["imu"], [3, 4, 5]),
+        vel_ned_m_s=None if ekf is None else Stream(ekf.t_us, ekf.values[:, :3]),
+        pos_ned_m=None if ekf is None else Stream(ekf.t_us, ekf.values[:, 3:]),
+        warnings=warnings,
+    )
+
+
+def _events(s: Stream | None) -> Stream | None:
+    # EV is logged once per change: the state holds until the next event.
+    return None if s is None else Stream(s.t_us, s.values, EVENT_MAX_AGE_US)
+
+
+def _collect(typ: str, d: dict, t: int, rows: dict) -> None:
+    if typ == "RCOU":
+        rows["cmd"].append((t, [d[f] for f in _motor_fields(d)]))
+    elif typ == "ATT":
+        rows["att"].append((t, [d["Roll"], d["Pitch"], d["Yaw"]]))
+    elif typ == "RATE":
+        rows["rate"].append((t, [d["R"], d["P"], d["Y"]]))
+    elif typ == "IMU":
+        rows["imu"].append((t, [d["GyrX"], d["GyrY"], d["GyrZ"], d["AccX"], d["AccY"], d["AccZ"]]))
+    elif typ == "BAT":
+        rows["bat"].append((t, d["Volt"]))
+    elif typ == "CURR" and "Volt" in d:
+        rows["bat"].append((t, d["Volt"] * V_PER_CV))
+    elif typ == "EV" and d.get("Id") in (EV_ARMED, EV_DISARMED):
+        rows["armed"].append((t, 1.0 if d["Id"] == EV_ARMED else 0.0))
+    elif typ == "CTUN" and "Alt" in d:
+        rows["alt"].append((t, d["Alt"]))
+    elif typ in ("EKF1", "NKF1", "XKF1") and "VN" in d and "PN" in d:
+        if typ == "XKF1" and d.get("C", 0) != 0:
+            return  # XKF1 is logged per EKF core; keep the primary
+        rows["ekf"].append((t, [d["VN"], d["VE"], d["VD"], d["PN"], d["PE"], d["PD"]]))
+

@@ -1,0 +1,191 @@
+"""MAVLink telemetry logs (``.tlog``) -> ``RawFlight``.
+
+A tlog is a sequence of [8-byte big-endian receive time µs][MAVLink v1/v2
+frame]. Frames are located here by their headers and only the message ids
+propwatch uses are handed to pymavlink's ``decode`` (which checks the CRC);
+the rest are skipped unparsed, which is what makes a long log fast. Every
+decoded message then goes, in order, through ``monitor.mavlink_decode``'s
+``MavlinkDecoder``, the same decoder the onboard daemon uses, so both see the
+same samples on the same boot clock.
+
+Bytes that are not a valid frame (corruption) are skipped with a warning; a
+frame cut off at the end of the file (truncation) ends the read with a warning.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from monitor import mavlink_decode as md
+from monitor.errors import LogFormatError
+from monitor.logs.raw import RawFlight, Stream
+from monitor.logs.units import US_PER_MS
+
+TS_BYTES = 8
+V1_MAGIC, V2_MAGIC = 0xFE, 0xFD
+V1_OVERHEAD = 8  # magic, len, seq, sys, comp, msgid, crc(2)
+V2_OVERHEAD = 12  # magic, len, incompat, compat, seq, sys, comp, msgid(3), crc(2)
+V2_SIGNATURE = 13
+MAVLINK_IFLAG_SIGNED = 0x01
+HEARTBEAT_ID, LOCAL_POSITION_NED_ID, HIGHRES_IMU_ID = 0, 32, 105
+# ids the shared decoder handles, plus the extras read here for calibration
+WANTED_IDS = frozenset(set(md.STREAM_IDS.values()) | {HEARTBEAT_ID, LOCAL_POSITION_NED_ID, HIGHRES_IMU_ID})
+# A receive time further than this from the previous one is a false frame start.
+MAX_TS_JUMP_US = 3_600_000_000
+
+
+def _mavlink():
+    from pymavlink.dialects.v20 import common
+
+    md.mavlink_esc.register()
+    return common.MAVLink(None)
+
+
+def iter_frames(buf: bytes, wanted=WANTED_IDS):
+    """Yield (offset, frame bytes) for wanted ids; returns (skipped_bytes, truncated) via StopIteration.value."""
+    n, off, skipped, last_ts = len(buf), 0, 0, None
+    while off + TS_BYTES + 1 < n:
+        magic = buf[off + TS_BYTES]
+        p = off + TS_BYTES
+        if magic == V2_MAGIC and p + 10 <= n:
+            flen = V2_OVERHEAD + buf[p + 1] + (V2_SIGNATURE if buf[p + 2] & MAVLINK_IFLAG_SIGNED else 0)
+            msgid = buf[p + 7] | (buf[p + 8] << 8) | (buf[p + 9] << 16)
+        elif magic == V1_MAGIC and p + 6 <= n:
+            flen = V1_OVERHEAD + buf[p + 1]
+            msgid = buf[p + 5]
+        else:
+            if p + 10 > n and magic in (V1_MAGIC, V2_MAGIC):
+                return skipped, True
+            off, skipped = off + 1, skipped + 1
+            continue
+        ts = int.from_bytes(buf[off:off + TS_BYTES], "big")
+        if last_ts is not None and abs(ts - last_ts) > MAX_TS_JUMP_US:
+            off, skipped = off + 1, skipped + 1
+            continue
+        if p + flen > n:
+            return skipped, True
+        if msgid in wanted:
+            ok = yield off, buf[p:p + flen]
+            if ok is False:  # CRC failed: not a frame after all
+                off, skipped = off + 1, skipped + 1
+                continue
+        last_ts = ts
+        off = p + flen
+    return skipped, off < n  # bytes left that cannot hold a frame: cut off
+
+
+class _Collector:
+    """Decoder samples -> per-boot-session lists of (t_us, values)."""
+
+    def __init__(self):
+        self.sessions: list[dict[str, list]] = [self._empty()]
+        self.output_source: str | None = None
+        self.battery_source: str | None = None
+
+    @staticmethod
+    def _empty() -> dict[str, list]:
+        return {k: [] for k in ("cmd", "att", "rate", "bat", "armed", "landed", "esc", "pos", "vel", "acc")}
+
+    def add(self, s) -> None:
+        cur = self.sessions[-1]
+        if isinstance(s, md.ClockReset):
+            self.sessions.append(self._empty())
+        elif isinstance(s, md.Attitude):
+            cur["att"].append((s.timestamp_us, (s.roll_rad, s.pitch_rad, s.yaw_rad)))
+            cur["rate"].append((s.timestamp_us, (s.roll_rate_rad_s, s.pitch_rate_rad_s, s.yaw_rate_rad_s)))
+        elif isinstance(s, md.ActuatorOutputs):
+            # One source of motor outputs per log (PX4 may send both); motors 1..4 are outputs 1..4.
+            self.output_source = self.output_source or s.source
+            if s.source == self.output_source and s.first_channel == 1:
+                cur["cmd"].append((s.timestamp_us, s.values_us[:4]))
+        elif isinstance(s, md.EscRpm) and s.first_index == 0:
+            cur["esc"].append((s.timestamp_us, s.rpm[:4]))
+        elif isinstance(s, md.Battery) and s.timestamp_us is not None:
+            self.battery_source = self.battery_source or s.source
+            if s.source == self.battery_source:
+                cur["bat"].append((s.timestamp_us, s.voltage_v))
+        elif isinstance(s, md.Heartbeat) and s.timestamp_us is not None:
+            cur["armed"].append((s.timestamp_us, 1.0 if s.armed else 0.0))
+        elif isinstance(s, md.LandedState) and s.timestamp_us is not None:
+            cur["landed"].append((s.timestamp_us, 0.0 if md.is_flying(s.landed_state) else 1.0))
+
+
+def _stream(items) -> Stream | None:
+    if not items:
+        return None
+    return Stream.build([i[0] for i in items], [i[1] for i in items])
+
+
+def read_tlog(path: str | Path, system_id: int | None = None) -> RawFlight:
+    path = Path(path)
+    if not path.is_file():
+        raise LogFormatError(f"{path}: no such file")
+    buf = path.read_bytes()
+    mav = _mavlink()
+    dec = md.MavlinkDecoder(system_id=system_id)
+    col = _Collector()
+    frames = iter_frames(buf)
+    bad_crc = 0
+    skipped, truncated = 0, False
+    try:
+        off, frame = next(frames)
+        while True:
+            try:
+                msg = mav.decode(bytearray(frame))
+            except Exception:  # pymavlink raises MAVError on a CRC or length mismatch
+                bad_crc += 1
+                off, frame = frames.send(False)
+                continue
+            for s in dec.decode(msg):
+                col.add(s)
+            _extras(msg, dec, col)
+            off, frame = frames.send(True)
+    except StopIteration as stop:
+        if stop.value:
+            skipped, truncated = stop.value
+    warnings = []
+    if skipped or bad_crc:
+        warnings.append(f"{path.name}: corrupted data skipped ({skipped} bytes, {bad_crc} frames failing their CRC)")
+    if truncated:
+        warnings.append(f"{path.name}: last frame cut off (truncated log): read up to the damage")
+    if len(col.sessions) > 1:
+        warnings.append(f"{path.name}: the autopilot rebooted {len(col.sessions) - 1} time(s): using the longest boot session")
+    cur = max(col.sessions, key=lambda d: len(d["att"]))
+    if dec.system_id is None:
+        raise LogFormatError(f"{path}: no autopilot HEARTBEAT found: not a MAVLink telemetry log, or empty")
+    for key, what in (("cmd", "SERVO_OUTPUT_RAW/ACTUATOR_OUTPUT_STATUS (motor outputs)"), ("att", "ATTITUDE")):
+        if not cur[key]:
+            raise LogFormatError(f"{path}: no {what} messages from the autopilot: cannot diagnose")
+    pos = _stream(cur["pos"])
+    height = None if pos is None else Stream(pos.t_us, -(pos.values[:, 2] - pos.values[0, 2]))
+    return RawFlight(
+        source=str(path),
+        cmd_unit="us",
+        motor_cmd=_stream(cur["cmd"]),
+        attitude_rad=_stream(cur["att"]),
+        rates_rad_s=_stream(cur["rate"]),
+        battery_v=_stream(cur["bat"]),
+        armed=_stream(cur["armed"]),
+        landed=_stream(cur["landed"]),
+        height_m=height,
+        esc_rpm=_stream(cur["esc"]),
+        accel_frd_m_s2=_stream(cur["acc"]),
+        vel_ned_m_s=_stream(cur["vel"]),
+        pos_ned_m=pos,
+        warnings=warnings,
+    )
+
+
+def _extras(msg, dec: md.MavlinkDecoder, col: _Collector) -> None:
+    """Position/velocity and accelerometer for calibration; not needed by the classifier."""
+    kind = msg.get_type()
+    if kind not in ("LOCAL_POSITION_NED", "HIGHRES_IMU") or msg.get_srcSystem() != dec.system_id:
+        return
+    cur = col.sessions[-1]
+    if kind == "LOCAL_POSITION_NED":
+        t = int(msg.time_boot_ms) * US_PER_MS
+        cur["pos"].append((t, (msg.x, msg.y, msg.z)))
+        cur["vel"].append((t, (msg.vx, msg.vy, msg.vz)))
+    else:
+        cur["acc"].append((int(msg.time_usec), (msg.xacc, msg.yacc, msg.zacc)))
+

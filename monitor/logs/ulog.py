@@ -1,0 +1,100 @@
+"""PX4 ULog (``.ulg``, pyulog) -> ``RawFlight``.
+
+Topics: actuator_outputs (instance 0, ``output[0..3]`` PWM µs, already in PX4
+motor order), vehicle_attitude (``q``, scalar-first, FRD->NED),
+vehicle_angular_velocity (``xyz`` rad/s FRD), battery_status (``voltage_v``),
+esc_status (``esc[i].esc_rpm``), and for the airborne rule and calibration
+vehicle_status (arming_state), vehicle_land_detected (landed),
+vehicle_local_position (NED) and sensor_combined (accelerometer).
+ULog timestamps are µs on the boot clock already.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from monitor.errors import LogFormatError
+from monitor.logs.raw import RawFlight, Stream
+from monitor.logs.units import quat_wxyz_to_euler_zyx
+
+TOPICS = ["actuator_outputs", "vehicle_attitude", "vehicle_angular_velocity", "battery_status", "esc_status",
+          "vehicle_status", "vehicle_land_detected", "vehicle_local_position", "sensor_combined"]
+ARMING_STATE_ARMED = 2  # PX4 vehicle_status.arming_state
+
+
+def _pyulog():
+    try:
+        from pyulog import ULog
+    except ImportError as exc:  # optional dependency
+        raise LogFormatError("reading .ulg needs pyulog (pip install 'propwatch[logs]')") from exc
+    return ULog
+
+
+def _topic(ulog, name: str) -> dict | None:
+    sets = [d for d in ulog.data_list if d.name == name]
+    if not sets:
+        return None
+    return min(sets, key=lambda d: d.multi_id).data  # instance 0: main outputs / primary sensor
+
+
+def _cols(data: dict, names: list[str]) -> np.ndarray | None:
+    if not all(n in data for n in names):
+        return None
+    return np.stack([np.asarray(data[n], dtype=np.float64) for n in names], axis=1)
+
+
+def read_ulog(path: str | Path) -> RawFlight:
+    path = Path(path)
+    if not path.is_file():
+        raise LogFormatError(f"{path}: no such file")
+    ULog = _pyulog()
+    try:
+        ulog = ULog(str(path), TOPICS)
+    except Exception as exc:  # pyulog raises plain exceptions on bad headers
+        raise LogFormatError(f"{path}: not a readable ULog file: {exc}") from exc
+    warnings = []
+    if getattr(ulog, "file_corruption", False):
+        warnings.append(f"{path.name}: ULog file is corrupted or truncated: read up to the damage")
+
+    def need(name: str, fields: list[str]) -> Stream:
+        d = _topic(ulog, name)
+        if d is None:
+            raise LogFormatError(f"{path}: topic {name} not logged: cannot diagnose")
+        v = _cols(d, fields)
+        if v is None:
+            raise LogFormatError(f"{path}: topic {name} lacks fields {fields}")
+        return Stream.build(d["timestamp"], v)
+
+    def opt(name: str, fields: list[str]) -> Stream | None:
+        d = _topic(ulog, name)
+        v = None if d is None else _cols(d, fields)
+        return None if v is None else Stream.build(d["timestamp"], v if v.shape[1] > 1 else v[:, 0])
+
+    cmd = need("actuator_outputs", [f"output[{i}]" for i in range(4)])
+    if len(cmd) and np.nanmax(cmd.values) <= 1.0:
+        warnings.append("actuator_outputs look normalised (<= 1), not PWM µs: the ESC fit will not apply")
+    q = need("vehicle_attitude", [f"q[{i}]" for i in range(4)])
+    rates = need("vehicle_angular_velocity", [f"xyz[{i}]" for i in range(3)])
+    battery = opt("battery_status", ["voltage_v"]) or opt("battery_status", ["voltage_filtered_v"])
+    status = opt("vehicle_status", ["arming_state"])
+    armed = None if status is None else Stream(status.t_us, (status.values == ARMING_STATE_ARMED).astype(float))
+    pos = opt("vehicle_local_position", ["x", "y", "z"])
+    height = None if pos is None else Stream(pos.t_us, -(pos.values[:, 2] - pos.values[0, 2]))
+    return RawFlight(
+        source=str(path),
+        cmd_unit="us",
+        motor_cmd=cmd,
+        attitude_rad=Stream(q.t_us, quat_wxyz_to_euler_zyx(q.values)),
+        rates_rad_s=rates,
+        battery_v=battery,
+        armed=armed,
+        landed=opt("vehicle_land_detected", ["landed"]),
+        height_m=height,
+        esc_rpm=opt("esc_status", [f"esc[{i}].esc_rpm" for i in range(4)]),
+        accel_frd_m_s2=opt("sensor_combined", [f"accelerometer_m_s2[{i}]" for i in range(3)]),
+        vel_ned_m_s=opt("vehicle_local_position", ["vx", "vy", "vz"]),
+        pos_ned_m=pos,
+        warnings=warnings,
+    )
