@@ -1,0 +1,119 @@
+"""The alert rule (per propeller), the STATUSTEXT wording, and the events file.
+
+Rule, per propeller: P(faulty) >= threshold in ``consecutive`` classified
+windows in a row raises an alert, then that propeller stays quiet for
+``refractory_s`` seconds of ``time.monotonic()`` (a wall-clock step never
+re-arms or silences it). STATUSTEXT is rate-limited on the same clock.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from monitor.daemon.config import AlertConfig
+from monitor.labels import N_PROPS
+
+STATUSTEXT_MAX_CHARS = 50
+MAV_SEVERITY_CRITICAL = 2
+MAV_SEVERITY_WARNING = 4
+
+
+@dataclass(frozen=True)
+class Alert:
+    time_boot_ms: int
+    faulty_propellers: tuple[int, ...]  # 1..4, PX4 order
+    fault_probability: tuple[float, ...]  # all four
+    label: int  # 1..16, the most likely label of the window
+    label_probability: tuple[float, ...]
+    critical: bool
+
+    def statustext(self) -> str:
+        """E.g. ``PROP 3 FAULT p=0.97``; several: ``PROP 1,3 FAULT p=0.91,0.97``; <= 50 chars."""
+        props = ",".join(str(p) for p in self.faulty_propellers)
+        probs = ",".join(f"{self.fault_probability[p - 1]:.2f}" for p in self.faulty_propellers)
+        return f"PROP {props} FAULT p={probs}"[:STATUSTEXT_MAX_CHARS]
+
+    @property
+    def severity(self) -> int:
+        return MAV_SEVERITY_CRITICAL if self.critical else MAV_SEVERITY_WARNING
+
+    def event(self) -> dict:
+        return {
+            "time_boot_ms": self.time_boot_ms,
+            "label": self.label,
+            "faulty_propellers": list(self.faulty_propellers),
+            "probabilities": [round(p, 4) for p in self.fault_probability],
+            "label_probabilities": [round(p, 4) for p in self.label_probability],
+            "severity": "CRITICAL" if self.critical else "WARNING",
+        }
+
+
+class AlertRule:
+    def __init__(self, config: AlertConfig, clock: Callable[[], float] = time.monotonic):
+        self.config = config
+        self.clock = clock
+        self._streak = np.zeros(N_PROPS, dtype=np.int64)
+        self._quiet_until = np.full(N_PROPS, -np.inf)
+
+    def reset(self) -> None:
+        """Streaks count consecutive windows: a gap in classification breaks them."""
+        self._streak[:] = 0
+
+    def update(self, time_boot_ms: int, fault_probability: np.ndarray, label_probability: np.ndarray) -> Alert | None:
+        p = np.asarray(fault_probability, dtype=np.float64)
+        hot = np.isfinite(p) & (p >= self.config.threshold)
+        self._streak = np.where(hot, self._streak + 1, 0)
+        now = self.clock()
+        firing = (self._streak >= self.config.consecutive) & (now >= self._quiet_until)
+        if not firing.any():
+            return None
+        self._quiet_until[firing] = now + self.config.refractory_s
+        props = tuple(int(i) + 1 for i in np.flatnonzero(firing))
+        lp = np.asarray(label_probability, dtype=np.float64)
+        critical = bool(max(p[i - 1] for i in props) >= self.config.critical_threshold)
+        return Alert(int(time_boot_ms), props, tuple(map(float, p)), int(np.argmax(lp)) + 1,
+                     tuple(map(float, lp)), critical)
+
+
+class RateLimiter:
+    """At most one event per ``min_interval_s`` on a monotonic clock."""
+
+    def __init__(self, min_interval_s: float, clock: Callable[[], float] = time.monotonic):
+        self.min_interval_s = min_interval_s
+        self.clock = clock
+        self._last = -np.inf
+
+    def allow(self) -> bool:
+        now = self.clock()
+        if now - self._last < self.min_interval_s:
+            return False
+        self._last = now
+        return True
+
+
+class EventWriter:
+    """One JSON line per alert, flushed at once so a crash loses nothing already decided."""
+
+    def __init__(self, path: str | Path | None):
+        self.path = Path(path) if path else None
+        self._fh = None
+        if self.path is not None:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            self._fh = self.path.open("a", encoding="utf-8")
+
+    def write(self, alert: Alert) -> None:
+        if self._fh is not None:
+            self._fh.write(json.dumps(alert.event()) + "\n")
+            self._fh.flush()
+
+    def close(self) -> None:
+        if self._fh is not None:
+            self._fh.close()
+            self._fh = None
+

@@ -1,0 +1,88 @@
+"""``propwatch monitor`` (and ``python -m monitor``): the onboard monitor daemon.
+
+    propwatch monitor --connect udpin:0.0.0.0:14540 [--config /etc/propwatch/monitor.yaml]
+                      [--events PATH] [--model PATH] [--vehicle PATH] [--report PATH]
+
+Exits 0 on SIGTERM/SIGINT or at the end of a .tlog; 2 with one clear line on
+a bad config, model or connection (via ``monitor.cli``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import signal
+import sys
+import time
+
+from monitor.config import from_mapping
+from monitor.daemon.alerts import EventWriter
+from monitor.daemon.config import load_monitor_config
+from monitor.daemon.link import Link
+from monitor.daemon.pipeline import Pipeline
+from monitor.daemon.sdnotify import Notifier
+from monitor.daemon.service import Daemon
+from monitor.errors import ConfigError, ModelError
+from monitor.esc import PAPER_ESC, EscCurve
+from monitor.model import Classifier
+from monitor.vehicle import load_vehicle
+
+log = logging.getLogger("propwatch.monitor")
+
+
+def parse_args(argv: list[str] | None) -> argparse.Namespace:
+    p = argparse.ArgumentParser(prog="propwatch monitor", description="Onboard propeller-fault monitor (MAVLink).")
+    p.add_argument("--connect", required=True, help="pymavlink URL: udpin:0.0.0.0:14540, udpout:H:P, tcp:H:P, /dev/ttyAMA0,921600, or a .tlog")
+    p.add_argument("--config", help="monitor YAML (see deploy/monitor.yaml); defaults for every key")
+    p.add_argument("--events", help="append one JSON line per alert here (overrides events_path)")
+    p.add_argument("--model", help="classifier ONNX (overrides model_path)")
+    p.add_argument("--vehicle", help="vehicle YAML whose ESC curve overrides the model's")
+    p.add_argument("--report", help="write counters and latency percentiles as JSON at exit")
+    p.add_argument("--tlog-speed", type=float, help="for a .tlog: 1 = recorded pace, 0 = as fast as possible")
+    p.add_argument("--log-level", default="INFO", choices=["DEBUG", "INFO", "WARNING", "ERROR"])
+    return p.parse_args(argv)
+
+
+def choose_esc(classifier: Classifier, vehicle_path: str) -> EscCurve:
+    """The ESC curve: a vehicle YAML if given, else the model's training vehicle, else the paper's."""
+    if vehicle_path:
+        log.info("ESC curve from vehicle file %s", vehicle_path)
+        return load_vehicle(vehicle_path).esc
+    esc = (classifier.info.metadata.get("vehicle") or {}).get("esc")
+    if esc:
+        try:
+            return from_mapping(EscCurve, esc, origin=f"{classifier.path} metadata propwatch.vehicle.esc")[0]
+        except ConfigError as exc:
+            raise ModelError(str(exc)) from None
+    log.warning("model %s carries no ESC curve; using the paper's fit", classifier.path)
+    return PAPER_ESC
+
+
+def main(argv: list[str] | None = None) -> int:
+    started = time.monotonic()
+    args = parse_args(argv)
+    logging.basicConfig(level=args.log_level, stream=sys.stderr,
+                        format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    cfg = load_monitor_config(args.config)
+    model_path = args.model or cfg.model_path
+    classifier = Classifier(model_path, threads=cfg.inference.threads)
+    esc = choose_esc(classifier, args.vehicle or cfg.vehicle_path)
+    pipeline = Pipeline(classifier, cfg, esc)
+    tlog_speed = cfg.link.tlog_speed if args.tlog_speed is None else args.tlog_speed
+    link = Link(args.connect, cfg.link.component_id, tlog_speed)
+    events = EventWriter(args.events or cfg.events_path or None)
+    daemon = Daemon(cfg, link, pipeline, events, Notifier())
+
+    def on_signal(signum, _frame):
+        log.info("signal %d: stopping", signum)
+        daemon.stop.set()
+
+    signal.signal(signal.SIGTERM, on_signal)
+    signal.signal(signal.SIGINT, on_signal)
+    log.info("start-up took %.3f s", time.monotonic() - started)
+    try:
+        return daemon.run()
+    finally:
+        link.close()
+        if args.report:
+            daemon.write_report(args.report)

@@ -1,0 +1,175 @@
+"""The MAVLink link: open any pymavlink URL, read messages with their arrival time, send ours.
+
+What we send is limited by construction to HEARTBEAT, STATUSTEXT,
+NAMED_VALUE_FLOAT and COMMAND_LONG(MAV_CMD_SET_MESSAGE_INTERVAL): there is no
+method here that could send anything that changes the flight.
+
+URLs: ``udpin:HOST:PORT``, ``udpout:HOST:PORT``, ``tcp:HOST:PORT``, a serial
+device with its baud rate (``/dev/ttyAMA0,921600``), or a ``.tlog`` file
+(played at its recorded pace times ``tlog_speed``; 0 = as fast as it reads).
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import select
+import time
+from typing import Any
+
+os.environ.setdefault("MAVLINK20", "1")  # ESC_STATUS (id 291) exists only in MAVLink 2 frames
+
+from pymavlink import mavutil  # noqa: E402
+
+from monitor.errors import ConfigError  # noqa: E402
+
+log = logging.getLogger("propwatch.monitor.link")
+
+MAV_CMD_SET_MESSAGE_INTERVAL = 511
+MAV_TYPE_ONBOARD_CONTROLLER = 18
+MAV_AUTOPILOT_INVALID = 8
+MAV_STATE_ACTIVE = 4
+NAMED_VALUE_MAX_CHARS = 10
+LOG_SUFFIXES = (".tlog", ".mavlink")
+
+
+def split_serial(url: str) -> tuple[str, int | None]:
+    """``/dev/ttyAMA0,921600`` -> (device, baud); anything else -> (url, None)."""
+    if "," in url and ":" not in url.split(",", 1)[0]:
+        device, baud = url.rsplit(",", 1)
+        try:
+            return device, int(baud)
+        except ValueError:
+            raise ConfigError(f"--connect {url}: baud rate {baud!r} is not an integer") from None
+    return url, None
+
+
+class Link:
+    def __init__(self, url: str, component_id: int, tlog_speed: float = 1.0):
+        self.url = url
+        self.component_id = component_id
+        self.is_log = url.lower().endswith(LOG_SUFFIXES)
+        self.tlog_speed = tlog_speed
+        self.conn: Any = None
+        self.bytes_in = 0
+        self._pace: tuple[float, float] | None = None  # (first log time, monotonic start)
+        self.eof = False
+        self._pending: Any = None
+        self.open()
+
+    # -- connection ------------------------------------------------------------
+    def open(self) -> None:
+        device, baud = split_serial(self.url)
+        if self.is_log and not os.path.isfile(device):
+            raise ConfigError(f"--connect {self.url}: log file not found")
+        try:
+            self.conn = mavutil.mavlink_connection(
+                device, baud=baud or 115200, source_system=1, source_component=self.component_id,
+                dialect="common", robust_parsing=True, autoreconnect=device.startswith("tcp:"))
+        except (OSError, ValueError) as exc:
+            raise ConfigError(f"--connect {self.url}: cannot open: {exc}") from exc
+        if not self.is_log:
+            self.conn.mav.robust_parsing = True
+        log.info("link open: %s", self.url)
+
+    def reopen(self) -> None:
+        self.close()
+        self.open()
+
+    def close(self) -> None:
+        if self.conn is not None:
+            try:
+                self.conn.close()
+            except OSError:
+                pass
+            self.conn = None
+
+    def set_system_id(self, system_id: int) -> None:
+        """We speak as a component of the vehicle we monitor."""
+        self.conn.mav.srcSystem = system_id
+        self.conn.mav.srcComponent = self.component_id
+
+    # -- reading ---------------------------------------------------------------
+    def read(self, timeout_s: float) -> list[tuple[Any, float]]:
+        """Messages available within ``timeout_s``, each with its arrival time (perf_counter)."""
+        if self.is_log:
+            return self._read_log(timeout_s)
+        fd = self.conn.fd
+        if fd is None:
+            time.sleep(timeout_s)
+            return []
+        ready, _, _ = select.select([fd], [], [], timeout_s)
+        if not ready:
+            return []
+        data = self.conn.recv(4096)
+        received = time.perf_counter()
+        if not data:
+            return []
+        self.bytes_in += len(data)
+        if self.conn.first_byte:
+            self.conn.auto_mavlink_version(data)
+        try:
+            msgs = self.conn.mav.parse_buffer(data) or []
+        except Exception as exc:  # noqa: BLE001 - pymavlink raises MAVError and struct errors on garbage
+            log.debug("parse error: %s", exc)
+            return [(_BadData(str(exc)), received)]
+        return [(m, received) for m in msgs]
+
+    def _read_log(self, timeout_s: float) -> list[tuple[Any, float]]:
+        if self._pending is None:
+            if self.eof:
+                time.sleep(timeout_s)
+                return []
+            try:
+                m = self.conn.recv_msg()
+            except Exception as exc:  # noqa: BLE001 - a corrupt log must not kill the reader
+                return [(_BadData(str(exc)), time.perf_counter())]
+            if m is None:
+                self.eof = True
+                return []
+            self._pending = m
+        m = self._pending
+        if self.tlog_speed > 0:
+            t_log = float(getattr(m, "_timestamp", 0.0))
+            if self._pace is None:
+                self._pace = (t_log, time.monotonic())
+            delay = self._pace[1] + (t_log - self._pace[0]) / self.tlog_speed - time.monotonic()
+            if delay > 0:
+                time.sleep(min(delay, timeout_s))
+                if delay > timeout_s:
+                    return []
+        self._pending = None
+        return [(m, time.perf_counter())]
+
+    # -- sending (the complete list of what we ever send) ---------------------
+    def _send(self, msg: Any) -> None:
+        if self.is_log:
+            return
+        try:
+            self.conn.mav.send(msg)
+        except OSError as exc:
+            log.warning("send failed: %s", exc)
+
+    def send_heartbeat(self) -> None:
+        self._send(self.conn.mav.heartbeat_encode(MAV_TYPE_ONBOARD_CONTROLLER, MAV_AUTOPILOT_INVALID, 0, 0, MAV_STATE_ACTIVE))
+
+    def send_statustext(self, text: str, severity: int) -> None:
+        self._send(self.conn.mav.statustext_encode(severity, text[:50].encode("ascii", "replace")))
+
+    def send_named_value_float(self, time_boot_ms: int, name: str, value: float) -> None:
+        self._send(self.conn.mav.named_value_float_encode(int(time_boot_ms) & 0xFFFFFFFF, name[:NAMED_VALUE_MAX_CHARS].encode(), float(value)))
+
+    def request_message_interval(self, target_system: int, target_component: int, message_id: int, rate_hz: float) -> None:
+        interval_us = int(round(1e6 / rate_hz))
+        self._send(self.conn.mav.command_long_encode(target_system, target_component, MAV_CMD_SET_MESSAGE_INTERVAL, 0,
+                                                     float(message_id), float(interval_us), 0, 0, 0, 0, 0))
+
+
+class _BadData:
+    """Stands for bytes that did not parse, so the caller can count and report them."""
+
+    def __init__(self, reason: str):
+        self.reason = reason
+
+    def get_type(self) -> str:
+        return "BAD_DATA"

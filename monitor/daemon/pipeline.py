@@ -1,0 +1,190 @@
+"""The streaming core: MAVLink messages in, per-step fault probabilities out.
+
+    msg -> MavlinkDecoder -> StreamingHold (20 Hz boot-clock grid)
+        -> features (monitor.features, as in training) -> 100-step ring -> Classifier
+
+Public API (also used by ``propwatch diagnose``'s parity test):
+
+    p = Pipeline(classifier, config, esc_curve)
+    for msg in messages:
+        for step in p.feed(msg):      # StepResult per grid instant made final
+            ...
+    tail = p.flush()                  # end of a log: emit the remaining instants
+
+A step is classified only when it ends a window of ``window`` consecutive
+steps that are all airborne (armed, and IN_AIR when the landed state is used)
+and all finite. Anything else (a gap, NaN, disarm, reboot) empties the ring:
+no window ever spans invented or missing data. The first classification comes
+at the first full window, then every ``every_k_steps``.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from monitor import mavlink_decode as md
+from monitor.daemon.config import MonitorConfig
+from monitor.daemon.resampler import GridStep, StreamingHold, StreamSpec
+from monitor.esc import EscCurve
+from monitor.features import compute_features
+from monitor.model import Classifier
+from monitor.resample import US_PER_S, period_us
+
+
+@dataclass(frozen=True)
+class StepResult:
+    timestamp_us: int
+    airborne: bool
+    valid: bool  # airborne and every feature finite
+    buffered: int  # consecutive valid steps in the ring (capped at the window)
+    battery_v: float
+    fault_probability: np.ndarray | None = None  # (4,) when classified at this step
+    label_probability: np.ndarray | None = None  # (16,)
+    latency_s: float | None = None  # from the message that completed the step to its classification
+
+    @property
+    def time_boot_ms(self) -> int:
+        return self.timestamp_us // 1000
+
+
+def _us(seconds: float) -> int:
+    return int(round(seconds * US_PER_S))
+
+
+class Pipeline:
+    def __init__(self, classifier: Classifier, config: MonitorConfig, esc: EscCurve):
+        self.classifier = classifier
+        self.config = config
+        self.esc = esc
+        r, inf = config.resample, config.inference
+        classifier.check_compatible(classifier.info.features, r.rate_hz, inf.window)
+        self.features = classifier.info.features
+        self.window = inf.window
+        self.decoder = md.MavlinkDecoder(
+            system_id=config.link.system_id or None,
+            component_id=config.link.autopilot_component_id,
+            battery_id=config.input.battery_id,
+        )
+        fast, state = _us(r.max_gap_s), _us(r.state_max_age_s)
+        self.hold = StreamingHold(period_us(r.rate_hz), {
+            "attitude": StreamSpec(6, fast, True),
+            "motor": StreamSpec(4, fast, True),
+            "armed": StreamSpec(1, state, False),
+            "landed": StreamSpec(1, state, False),
+            "battery": StreamSpec(1, _us(r.battery_max_age_s), False),
+        }, reorder_us=_us(r.reorder_s))
+        self._channels = np.asarray(config.input.motor_outputs, dtype=np.int64)
+        self._source = {"servo": "SERVO_OUTPUT_RAW", "actuator": "ACTUATOR_OUTPUT_STATUS"}.get(config.input.motor_source)
+        self.seen_landed = config.input.landed_state == "required"
+        self.stats = {"steps": 0, "valid_steps": 0, "classified": 0, "resets": 0, "skipped_steps": 0,
+                      "clock_resets": 0, "motor_msgs_unmapped": 0}
+        # Ring of features, stored twice so any window is one contiguous slice.
+        self._ring = np.zeros((2 * self.window, len(self.features)), dtype=np.float32)
+        self._head = 0
+        self._count = 0
+        self._since_inference = 0
+
+    # -- input -----------------------------------------------------------------------
+    def feed(self, msg: Any, received_s: float | None = None) -> list[StepResult]:
+        """Decode one pymavlink message; return the steps it made final (maybe classified)."""
+        received_s = time.perf_counter() if received_s is None else received_s
+        out: list[StepResult] = []
+        for sample in self.decoder.decode(msg):
+            out += self.feed_sample(sample, received_s)
+        return out
+
+    def feed_sample(self, s: md.Sample, received_s: float) -> list[StepResult]:
+        if isinstance(s, md.ClockReset):
+            self.stats["clock_resets"] += 1
+            self.hold.reset()
+            self._clear()
+            return []
+        if s.timestamp_us is None:
+            return []  # before the boot clock is known: nothing to place it on
+        if isinstance(s, md.Attitude):
+            vals = (s.roll_rad, s.pitch_rad, s.yaw_rad, s.roll_rate_rad_s, s.pitch_rate_rad_s, s.yaw_rate_rad_s)
+            return self._push("attitude", s.timestamp_us, vals, received_s)
+        if isinstance(s, md.ActuatorOutputs) and s.source == self._source:
+            rpm = self._map(s.first_channel, s.values_us)
+            return [] if rpm is None else self._push("motor", s.timestamp_us, self.esc.cmd_to_rpm(rpm), received_s)
+        if isinstance(s, md.EscRpm) and self.config.input.motor_source == "esc":
+            rpm = self._map(s.first_index + 1, s.rpm)
+            return [] if rpm is None else self._push("motor", s.timestamp_us, rpm, received_s)
+        if isinstance(s, md.Heartbeat):
+            return self._push("armed", s.timestamp_us, (1.0 if s.armed else 0.0,), received_s)
+        if isinstance(s, md.LandedState):
+            if self.config.input.landed_state != "ignore":
+                self.seen_landed = True
+            return self._push("landed", s.timestamp_us, (float(s.landed_state),), received_s)
+        if isinstance(s, md.Battery):
+            return self._push("battery", s.timestamp_us, (s.voltage_v,), received_s)
+        return []
+
+    def flush(self) -> list[StepResult]:
+        return [self._step(g, time.perf_counter()) for g in self.hold.flush()]
+
+    def _map(self, first: int, values: tuple[float, ...]) -> np.ndarray | None:
+        idx = self._channels - first
+        if idx.min() < 0 or idx.max() >= len(values):
+            self.stats["motor_msgs_unmapped"] += 1
+            return None
+        return np.asarray(values, dtype=np.float64)[idx]
+
+    def _push(self, stream: str, t_us: int, values, received_s: float) -> list[StepResult]:
+        return [self._step(g, received_s) for g in self.hold.push(stream, t_us, values)]
+
+    # -- one grid step -------------------------------------------------------------------
+    def _clear(self) -> None:
+        if self._count:
+            self.stats["resets"] += 1
+        self._count = 0
+        self._since_inference = 0
+
+    def _airborne(self, v: dict[str, np.ndarray]) -> bool:
+        if not v["armed"][0] == 1.0:  # NaN (stale heartbeat) is not armed
+            return False
+        if self.seen_landed and self.config.input.landed_state != "ignore":
+            return bool(md.is_flying(v["landed"][0])) if math.isfinite(v["landed"][0]) else False
+        return True
+
+    def _step(self, g: GridStep, received_s: float) -> StepResult:
+        self.stats["steps"] += 1
+        if g.skipped_before:
+            self.stats["skipped_steps"] += g.skipped_before
+            self._clear()
+        v = g.values
+        airborne = self._airborne(v)
+        att = v["attitude"]
+        signals = {
+            "motor_rpm": v["motor"][None, :],
+            "roll_rad": att[0:1], "pitch_rad": att[1:2], "yaw_rad": att[2:3],
+            "roll_rate_rad_s": att[3:4], "pitch_rate_rad_s": att[4:5], "yaw_rate_rad_s": att[5:6],
+        }
+        feats = compute_features(signals, self.features)[0]
+        valid = airborne and bool(np.isfinite(feats).all())
+        battery_v = float(v["battery"][0])
+        if not valid:
+            self._clear()
+            return StepResult(g.timestamp_us, airborne, False, 0, battery_v)
+        self.stats["valid_steps"] += 1
+        w = self.window
+        self._ring[self._head] = feats
+        self._ring[self._head + w] = feats
+        self._head = (self._head + 1) % w
+        self._count = min(self._count + 1, w)
+        if self._count < w:
+            return StepResult(g.timestamp_us, True, True, self._count, battery_v)
+        self._since_inference -= 1
+        if self._since_inference > 0:
+            return StepResult(g.timestamp_us, True, True, w, battery_v)
+        self._since_inference = self.config.inference.every_k_steps
+        window = self._ring[self._head:self._head + w]  # oldest first
+        labels, faults = self.classifier.predict(window[None])
+        self.stats["classified"] += 1
+        return StepResult(g.timestamp_us, True, True, w, battery_v, faults[0].astype(np.float64),
+                          labels[0].astype(np.float64), time.perf_counter() - received_s)

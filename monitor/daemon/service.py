@@ -1,0 +1,231 @@
+"""The daemon's loop: link in, pipeline, alerts out, heartbeats, rate checks, watchdog.
+
+State that lives across loop turns is kept here (link health, stream rates,
+pending stream requests); the per-step work is in ``pipeline``, the alert
+rule in ``alerts``, the socket in ``link``.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import math
+import threading
+import time
+from collections import Counter
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from monitor import mavlink_decode as md
+from monitor.daemon.alerts import AlertRule, EventWriter, RateLimiter
+from monitor.daemon.config import MonitorConfig
+from monitor.daemon.link import Link
+from monitor.daemon.pipeline import Pipeline
+from monitor.daemon.sdnotify import Notifier
+
+log = logging.getLogger("propwatch.monitor")
+
+READ_TIMEOUT_S = 0.02
+BAD_DATA_LOG_PERIOD_S = 5.0
+MOTOR_STREAM = {"servo": "SERVO_OUTPUT_RAW", "actuator": "ACTUATOR_OUTPUT_STATUS", "esc": "ESC_STATUS"}
+LANDED_RATE_HZ = 2.0  # EXTENDED_SYS_STATE: a state, not a signal
+
+
+@dataclass
+class Counters:
+    messages: int = 0
+    bad_data: int = 0
+    alerts: int = 0
+    statustexts: int = 0
+    statustexts_suppressed: int = 0
+    stream_requests: int = 0
+    acks: Counter = field(default_factory=Counter)
+    latencies_s: list = field(default_factory=list)
+
+
+class Daemon:
+    def __init__(self, config: MonitorConfig, link: Link, pipeline: Pipeline, events: EventWriter,
+                 notifier: Notifier | None = None):
+        self.cfg = config
+        self.link = link
+        self.pipeline = pipeline
+        self.events = events
+        self.notifier = notifier or Notifier({})
+        self.rule = AlertRule(config.alerts)
+        self.statustext_limit = RateLimiter(config.alerts.statustext_min_interval_s)
+        self.stop = threading.Event()
+        self.counters = Counters()
+        self._rates: Counter = Counter()
+        self._rate_window_start = time.monotonic()
+        self._last_autopilot_hb: float | None = None
+        self._link_up = False
+        self._system_id: int | None = None
+        self._next_hb = 0.0
+        self._next_request = 0.0
+        self._next_watchdog = 0.0
+        self._next_bad_log = 0.0
+        self._bad_since_log = 0
+        self._slow: set[str] = set(self.fast_streams())
+
+    def fast_streams(self) -> tuple[str, ...]:
+        return ("ATTITUDE", MOTOR_STREAM[self.cfg.input.motor_source])
+
+    # -- main loop ---------------------------------------------------------------------
+    def run(self) -> int:
+        self.notifier.ready(f"monitoring {self.link.url}")
+        log.info("ready: model %s, %d features, window %d at %.0f Hz, link %s", self.pipeline.classifier.path,
+                 len(self.pipeline.features), self.pipeline.window, self.cfg.resample.rate_hz, self.link.url)
+        while not self.stop.is_set():
+            try:
+                batch = self.link.read(READ_TIMEOUT_S)
+            except OSError as exc:
+                log.error("link error on %s: %s; reopening in 1 s", self.link.url, exc)
+                self.stop.wait(1.0)
+                self._try_reopen()
+                continue
+            for msg, received in batch:
+                self.handle(msg, received)
+            self.tick(time.monotonic())
+            if self.link.is_log and self.link.eof:
+                for step in self.pipeline.flush():
+                    self._on_step(step)
+                log.info("end of log %s", self.link.url)
+                break
+        self.notifier.stopping()
+        self.events.close()
+        self.summary()
+        return 0
+
+    def _try_reopen(self) -> None:
+        try:
+            self.link.reopen()
+        except Exception as exc:  # noqa: BLE001 - keep trying; systemd restarts us only on exit
+            log.error("cannot reopen %s: %s", self.link.url, exc)
+
+    def handle(self, msg, received_s: float) -> None:
+        kind = msg.get_type()
+        self.counters.messages += 1
+        if kind == "BAD_DATA":
+            self.counters.bad_data += 1
+            self._bad_since_log += 1
+            return
+        steps = self.pipeline.feed(msg, received_s)
+        dec = self.pipeline.decoder
+        if dec.system_id is not None and self._system_id is None:
+            self._system_id = dec.system_id
+            self.link.set_system_id(dec.system_id)
+            log.info("autopilot: system %d component %d", dec.system_id, dec.component_id)
+        if self._system_id is not None and msg.get_srcSystem() == self._system_id \
+                and msg.get_srcComponent() == dec.component_id:
+            self._rates[kind] += 1
+            if kind == "HEARTBEAT":
+                self._last_autopilot_hb = time.monotonic()
+                if not self._link_up:
+                    self._link_up = True
+                    log.info("link up: autopilot heartbeat received")
+            elif kind == "COMMAND_ACK" and msg.command == 511:
+                self.counters.acks[int(msg.result)] += 1
+                if msg.result != 0:
+                    log.warning("stream-rate request refused by the autopilot (MAV_RESULT %d)", msg.result)
+        for step in steps:
+            self._on_step(step)
+
+    def _on_step(self, step) -> None:
+        if not step.valid:
+            self.rule.reset()
+            return
+        if step.fault_probability is None:
+            return
+        if step.latency_s is not None:
+            self.counters.latencies_s.append(step.latency_s)
+        p = step.fault_probability
+        if self.cfg.alerts.named_value_float:
+            for i, v in enumerate(p):
+                self.link.send_named_value_float(step.time_boot_ms, f"PWF{i + 1}", float(v))
+        alert = self.rule.update(step.time_boot_ms, p, step.label_probability)
+        if alert is None:
+            return
+        self.counters.alerts += 1
+        text = alert.statustext()
+        log.warning("ALERT t=%d ms: %s (label %d, p=%s)", alert.time_boot_ms, text, alert.label,
+                    np.array2string(np.asarray(alert.fault_probability), precision=3))
+        self.events.write(alert)
+        if self.statustext_limit.allow():
+            self.counters.statustexts += 1
+            self.link.send_statustext(text, alert.severity)
+        else:
+            self.counters.statustexts_suppressed += 1
+
+    # -- periodic work -------------------------------------------------------------------
+    def tick(self, now: float) -> None:
+        link = self.cfg.link
+        talking = self._system_id is not None and not self.link.is_log  # a log cannot hear us
+        if talking and now >= self._next_hb:
+            self.link.send_heartbeat()
+            self._next_hb = now + 1.0 / link.heartbeat_rate_hz
+        if link.request_streams and talking and self._slow and now >= self._next_request:
+            self._request_streams(sorted(self._slow))
+            self._next_request = now + link.request_retry_s
+        if self._link_up and self._last_autopilot_hb is not None and now - self._last_autopilot_hb > link.link_timeout_s:
+            self._link_up = False
+            log.warning("link lost: no autopilot heartbeat for %.1f s", now - self._last_autopilot_hb)
+        if now - self._rate_window_start >= link.rate_check_period_s:
+            self._check_rates(now)
+        if self.notifier.watchdog_s and now >= self._next_watchdog:
+            self.notifier.watchdog()
+            self._next_watchdog = now + self.notifier.watchdog_s / 2
+        if self._bad_since_log and now >= self._next_bad_log:
+            log.warning("%d unparseable packets/bytes dropped (%d in total)", self._bad_since_log, self.counters.bad_data)
+            self._bad_since_log = 0
+            self._next_bad_log = now + BAD_DATA_LOG_PERIOD_S
+
+    def _request_streams(self, names: list[str]) -> None:
+        sysid, comp = self._system_id, self.pipeline.decoder.component_id
+        for name in names:
+            self.link.request_message_interval(sysid, comp, md.STREAM_IDS[name], self.cfg.link.stream_rate_hz)
+            self.counters.stream_requests += 1
+        if self.cfg.input.landed_state != "ignore" and "ATTITUDE" in names:
+            self.link.request_message_interval(sysid, comp, md.STREAM_IDS["EXTENDED_SYS_STATE"], LANDED_RATE_HZ)
+            self.counters.stream_requests += 1
+        log.info("requested %s at %.0f Hz (MAV_CMD_SET_MESSAGE_INTERVAL)", ", ".join(names), self.cfg.link.stream_rate_hz)
+
+    def _check_rates(self, now: float) -> None:
+        span = now - self._rate_window_start
+        need = self.cfg.link.min_rate_fraction * self.cfg.resample.rate_hz
+        slow = set()
+        if self._system_id is not None:
+            for name in self.fast_streams():
+                hz = self._rates[name] / span
+                if hz < need:
+                    slow.add(name)
+                    what = "missing" if hz == 0 else f"at {hz:.1f} Hz"
+                    log.warning("stream %s %s (need >= %.0f Hz)", name, what, need)
+        self._slow = slow
+        self._rates.clear()
+        self._rate_window_start = now
+
+    # -- reporting -----------------------------------------------------------------------
+    def report(self) -> dict:
+        lat = np.asarray(self.counters.latencies_s, dtype=np.float64) * 1e3
+        pct = (lambda q: float(np.percentile(lat, q))) if len(lat) else (lambda q: math.nan)
+        c = self.counters
+        return {
+            "messages": c.messages, "bad_data": c.bad_data, "alerts": c.alerts,
+            "statustexts": c.statustexts, "statustexts_suppressed": c.statustexts_suppressed,
+            "stream_requests": c.stream_requests, "acks": {str(k): v for k, v in c.acks.items()},
+            "pipeline": dict(self.pipeline.stats), "late_samples": self.pipeline.hold.late,
+            "ignored": {f"{s}/{k}": n for (s, k), n in self.pipeline.decoder.ignored.items()},
+            "undecodable": dict(self.pipeline.decoder.undecodable),
+            "latency_ms": {"n": int(len(lat)), "p50": pct(50), "p99": pct(99), "max": float(lat.max()) if len(lat) else math.nan},
+        }
+
+    def summary(self) -> None:
+        r = self.report()
+        log.info("stopped: %d messages, %d steps (%d valid, %d classified), %d alerts, %d bad packets",
+                 r["messages"], r["pipeline"]["steps"], r["pipeline"]["valid_steps"], r["pipeline"]["classified"],
+                 r["alerts"], r["bad_data"])
+
+    def write_report(self, path: str | Path) -> None:
+        Path(path).write_text(json.dumps(self.report(), indent=2, default=float) + "\n", encoding="utf-8")
