@@ -46,6 +46,7 @@ class StepResult:
     fault_probability: np.ndarray | None = None  # (4,) when classified at this step
     label_probability: np.ndarray | None = None  # (16,)
     latency_s: float | None = None  # from the message that completed the step to its classification
+    reason: str = ""  # why an invalid step is invalid
 
     @property
     def time_boot_ms(self) -> int:
@@ -152,6 +153,12 @@ class Pipeline:
             return bool(md.is_flying(v["landed"][0])) if math.isfinite(v["landed"][0]) else False
         return True
 
+    def _why(self, v: dict[str, np.ndarray], airborne: bool) -> str:
+        if not airborne:
+            return "not armed" if v["armed"][0] != 1.0 else "not in the air"
+        bad = [k for k in ("attitude", "motor") if not np.isfinite(v[k]).all()]
+        return f"{' and '.join(bad) or 'features'} missing, stale or NaN"
+
     def _step(self, g: GridStep, received_s: float) -> StepResult:
         self.stats["steps"] += 1
         if g.skipped_before:
@@ -170,7 +177,7 @@ class Pipeline:
         battery_v = float(v["battery"][0])
         if not valid:
             self._clear()
-            return StepResult(g.timestamp_us, airborne, False, 0, battery_v)
+            return StepResult(g.timestamp_us, airborne, False, 0, battery_v, reason=self._why(v, airborne))
         self.stats["valid_steps"] += 1
         w = self.window
         self._ring[self._head] = feats

@@ -67,6 +67,8 @@ class Daemon:
         self._next_watchdog = 0.0
         self._next_bad_log = 0.0
         self._bad_since_log = 0
+        self._classifying_state = False
+        self._state_log_limit = RateLimiter(2.0)
         self._slow: set[str] = set(self.fast_streams())
 
     def fast_streams(self) -> tuple[str, ...]:
@@ -133,6 +135,12 @@ class Daemon:
             self._on_step(step)
 
     def _on_step(self, step) -> None:
+        if step.valid != self._classifying_state:
+            self._classifying_state = step.valid
+            if step.valid:
+                log.info("t=%d ms: buffering (classification after %d valid steps)", step.time_boot_ms, self.pipeline.window)
+            elif self._state_log_limit.allow():  # NaN flapping must not flood the journal
+                log.info("t=%d ms: not classifying: %s", step.time_boot_ms, step.reason)
         if not step.valid:
             self.rule.reset()
             return
