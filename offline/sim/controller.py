@@ -1,0 +1,280 @@
+"""PX4-like multicopter cascade, batched over flights.
+
+    position P -> velocity PID (limits, anti-windup) -> thrust vector + attitude setpoint
+    (``MulticopterPositionControl``, run at ``position_rate_hz``)
+    -> quaternion attitude P -> body-rate PID -> quad-X allocation with desaturation
+    (``MulticopterAttitudeControl`` / ``MulticopterRateControl`` / control allocation,
+    run at ``control_rate_hz``) -> rotor speed command -> PWM through the inverse ESC fit.
+
+Gains are PX4 defaults (v1.14 parameter reference) and keep PX4's names and
+units. The rate loop works in PX4's normalised torque (-1..1); this module
+turns it into N m with the vehicle's own authority: normalised torque 1 is
+every rotor's thrust swinging by half its maximum, which is how PX4's
+control allocation scales a symmetric quad's effectiveness matrix.
+
+Deliberate simplifications, each PX4-flavoured: no jerk-limited trajectory
+generator (the velocity setpoint is slew-limited by MPC_ACC_HOR /
+MPC_ACC_UP_MAX / MPC_ACC_DOWN_MAX instead); the hover thrust estimator is
+taken as converged (the controller knows mass + payload, not the faults);
+the attitude setpoint is tilt-then-yaw rather than PX4's body-z/yaw
+construction (equal for small tilts); no yaw-weight decoupling.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from monitor.errors import ConfigError
+from monitor.vehicle import VehicleConfig
+from offline.sim.dynamics import GRAVITY_M_S2
+from offline.sim.quat import QUAT_CONJ_MUL
+
+
+@dataclass(frozen=True)
+class ControllerConfig:
+    """PX4 parameters (names lower-cased, units in the name where PX4 has one)."""
+
+    mpc_xy_p: float = 0.95  # MPC_XY_P, 1/s
+    mpc_z_p: float = 1.0  # MPC_Z_P, 1/s
+    mpc_xy_vel_p_acc: float = 1.8  # MPC_XY_VEL_P_ACC, 1/s
+    mpc_xy_vel_i_acc: float = 0.4  # MPC_XY_VEL_I_ACC, 1/s^2
+    mpc_xy_vel_d_acc: float = 0.2  # MPC_XY_VEL_D_ACC
+    mpc_z_vel_p_acc: float = 4.0  # MPC_Z_VEL_P_ACC
+    mpc_z_vel_i_acc: float = 2.0  # MPC_Z_VEL_I_ACC
+    mpc_z_vel_d_acc: float = 0.0  # MPC_Z_VEL_D_ACC
+    mpc_xy_cruise_m_s: float = 5.0  # MPC_XY_CRUISE (mission speed)
+    mpc_z_vel_max_up_m_s: float = 3.0  # MPC_Z_VEL_MAX_UP
+    mpc_z_vel_max_dn_m_s: float = 1.5  # MPC_Z_VEL_MAX_DN
+    mpc_acc_hor_m_s2: float = 3.0  # MPC_ACC_HOR
+    mpc_acc_up_max_m_s2: float = 4.0  # MPC_ACC_UP_MAX
+    mpc_acc_down_max_m_s2: float = 3.0  # MPC_ACC_DOWN_MAX
+    mpc_tiltmax_air_deg: float = 45.0  # MPC_TILTMAX_AIR
+    mpc_thr_min: float = 0.12  # MPC_THR_MIN, fraction of full collective thrust
+    mpc_thr_max: float = 1.0  # MPC_THR_MAX
+    mpc_yawrauto_max_deg_s: float = 45.0  # MPC_YAWRAUTO_MAX
+    mpc_yaw_mode_heading_min_m: float = 2.0  # MPC_YAW_MODE 0 (face the waypoint) only beyond this horizontal distance
+    nav_acc_rad_m: float = 0.4  # NAV_ACC_RAD; PX4's 2 m default is tightened so every waypoint is visited within 0.5 m
+    mc_roll_p: float = 6.5  # MC_ROLL_P, 1/s
+    mc_pitch_p: float = 6.5  # MC_PITCH_P
+    mc_yaw_p: float = 2.8  # MC_YAW_P
+    mc_rollrate_max_deg_s: float = 220.0  # MC_ROLLRATE_MAX
+    mc_pitchrate_max_deg_s: float = 220.0  # MC_PITCHRATE_MAX
+    mc_yawrate_max_deg_s: float = 200.0  # MC_YAWRATE_MAX
+    mc_rollrate_p: float = 0.15  # MC_ROLLRATE_P, normalised torque per rad/s
+    mc_rollrate_i: float = 0.2  # MC_ROLLRATE_I
+    mc_rollrate_d: float = 0.003  # MC_ROLLRATE_D
+    mc_pitchrate_p: float = 0.15  # MC_PITCHRATE_P
+    mc_pitchrate_i: float = 0.2  # MC_PITCHRATE_I
+    mc_pitchrate_d: float = 0.003  # MC_PITCHRATE_D
+    mc_yawrate_p: float = 0.2  # MC_YAWRATE_P
+    mc_yawrate_i: float = 0.1  # MC_YAWRATE_I
+    mc_yawrate_d: float = 0.0  # MC_YAWRATE_D
+    mc_rr_int_lim: float = 0.3  # MC_RR_INT_LIM (and MC_PR_INT_LIM)
+    mc_yr_int_lim: float = 0.3  # MC_YR_INT_LIM
+
+    def __post_init__(self) -> None:
+        for name, value in self.__dict__.items():
+            if not math.isfinite(value) or value < 0:
+                raise ConfigError(f"controller.{name}: must be a finite number >= 0, got {value}")
+        if not 0 < self.mpc_tiltmax_air_deg < 90:
+            raise ConfigError("controller.mpc_tiltmax_air_deg: must be in (0, 90)")
+        if not self.mpc_thr_min < self.mpc_thr_max <= 1:
+            raise ConfigError("controller.mpc_thr_max: must be above mpc_thr_min and at most 1")
+
+
+@dataclass
+class ControllerState:
+    """Integrators, filters and setpoints of B flights (updated in place)."""
+
+    waypoint_index: np.ndarray  # (B,) int, index of the waypoint being flown to
+    waypoints_reached: np.ndarray  # (B,) int, waypoints reached so far (counts repeats)
+    vel_sp_ned_m_s: np.ndarray  # (B, 3) slew-limited velocity setpoint
+    vel_int_ned_m_s2: np.ndarray  # (B, 3) velocity integrator (acceleration)
+    vel_prev_ned_m_s: np.ndarray  # (B, 3) for the derivative on measurement
+    yaw_sp_rad: np.ndarray  # (B,)
+    q_sp: np.ndarray  # (B, 4) attitude setpoint
+    thrust_sp_n: np.ndarray  # (B,) collective thrust setpoint
+    rate_int: np.ndarray  # (B, 3) rate integrator (normalised torque)
+    rate_prev_rad_s: np.ndarray  # (B, 3)
+
+
+class Controller:
+    def __init__(self, cfg: ControllerConfig, vehicle: VehicleConfig, mass_kg: np.ndarray,
+                 position_dt_s: float, control_dt_s: float):
+        self.cfg = cfg
+        self.vehicle = vehicle
+        self.mass_kg = np.asarray(mass_kg, dtype=np.float64).reshape(-1)
+        self.pos_dt = float(position_dt_s)
+        self.ctrl_dt = float(control_dt_s)
+        kf, ktau = vehicle.kf_n_per_rad_s2, vehicle.ktau_nm_per_rad_s2
+        self.kf = kf
+        self.rotor_thrust_max_n = kf * vehicle.omega_max_rad_s**2
+        self.rotor_thrust_min_n = kf * vehicle.omega_min_rad_s**2
+        # Nominal geometry: the controller does not know the calibration terms (CG offset...).
+        pos = np.array(vehicle.rotor_positions_frd_m)
+        alloc = np.vstack([np.ones(4), -pos[:, 1], pos[:, 0], vehicle.spin_sign * (ktau / kf)])
+        self.mix = np.linalg.inv(alloc)  # [T, Mx, My, Mz] -> per-rotor thrust
+        half = 0.5 * self.rotor_thrust_max_n
+        self.torque_authority_nm = np.abs(alloc[1:]).sum(axis=1) * half
+        self.rate_p = np.array([cfg.mc_rollrate_p, cfg.mc_pitchrate_p, cfg.mc_yawrate_p])
+        self.rate_i = np.array([cfg.mc_rollrate_i, cfg.mc_pitchrate_i, cfg.mc_yawrate_i])
+        self.rate_d = np.array([cfg.mc_rollrate_d, cfg.mc_pitchrate_d, cfg.mc_yawrate_d])
+        self.rate_int_lim = np.array([cfg.mc_rr_int_lim, cfg.mc_rr_int_lim, cfg.mc_yr_int_lim])
+        self.att_p = np.array([cfg.mc_roll_p, cfg.mc_pitch_p, cfg.mc_yaw_p])
+        self.rate_max = np.radians([cfg.mc_rollrate_max_deg_s, cfg.mc_pitchrate_max_deg_s, cfg.mc_yawrate_max_deg_s])
+        self.vel_p = np.array([cfg.mpc_xy_vel_p_acc, cfg.mpc_xy_vel_p_acc, cfg.mpc_z_vel_p_acc])
+        self.vel_i = np.array([cfg.mpc_xy_vel_i_acc, cfg.mpc_xy_vel_i_acc, cfg.mpc_z_vel_i_acc])
+        self.vel_d = np.array([cfg.mpc_xy_vel_d_acc, cfg.mpc_xy_vel_d_acc, cfg.mpc_z_vel_d_acc])
+        self.tan_tilt_max = math.tan(math.radians(cfg.mpc_tiltmax_air_deg))
+        self.thrust_max_n = 4 * self.rotor_thrust_max_n * cfg.mpc_thr_max
+        self.thrust_min_n = 4 * self.rotor_thrust_max_n * cfg.mpc_thr_min
+        # Anti-windup: the velocity integrator never asks for more than these accelerations.
+        self.vel_int_lim = np.array([cfg.mpc_acc_hor_m_s2, cfg.mpc_acc_hor_m_s2, GRAVITY_M_S2])
+        self.acc_axes = np.arange(len(self.mass_kg))
+        # Folded constants and work buffers for the fast inner loop.
+        self.inv_kf = 1.0 / kf
+        self.rotor_thrust_span_n = self.rotor_thrust_max_n - self.rotor_thrust_min_n
+        self.mix_rp = (self.mix[:, 1:3] * self.torque_authority_nm[:2]).T  # (2, 4) normalised roll/pitch -> N
+        self.mix_yaw = self.mix[:, 3] * self.torque_authority_nm[2]  # (4,) normalised yaw -> N
+        self.yaw_spread = float(self.mix_yaw.max() - self.mix_yaw.min())
+        self.att_2p = 2.0 * self.att_p
+        self.rate_i_dt = self.rate_i * self.ctrl_dt
+        self.rate_d_per_dt = self.rate_d / self.ctrl_dt
+        n = len(self.mass_kg)
+        self._qq = np.empty((n, 4, 4))
+        self._q4 = np.empty((n, 4))
+
+    def initial_state(self, n: int, yaw_rad: float = 0.0) -> ControllerState:
+        q = np.zeros((n, 4))
+        q[:, 0], q[:, 3] = math.cos(yaw_rad / 2), math.sin(yaw_rad / 2)
+        return ControllerState(
+            waypoint_index=np.zeros(n, dtype=np.int64),
+            waypoints_reached=np.zeros(n, dtype=np.int64),
+            vel_sp_ned_m_s=np.zeros((n, 3)),
+            vel_int_ned_m_s2=np.zeros((n, 3)),
+            vel_prev_ned_m_s=np.zeros((n, 3)),
+            yaw_sp_rad=np.full(n, yaw_rad),
+            q_sp=q,
+            thrust_sp_n=self.mass_kg * GRAVITY_M_S2,
+            rate_int=np.zeros((n, 3)),
+            rate_prev_rad_s=np.zeros((n, 3)),
+        )
+
+    # -- position and velocity (MulticopterPositionControl) ------------------------------------
+    def update_position(self, c: ControllerState, pos_ned_m: np.ndarray, vel_ned_m_s: np.ndarray,
+                        waypoints_ned_m: np.ndarray) -> np.ndarray:
+        """Advance the mission, run the position/velocity loops; sets q_sp and thrust_sp_n.
+
+        Returns the waypoint error (target - position), (B, 3).
+        """
+        cfg, dt, rows = self.cfg, self.pos_dt, self.acc_axes
+        target = waypoints_ned_m[rows, c.waypoint_index]
+        err = target - pos_ned_m
+        reached = np.einsum("ij,ij->i", err, err) < cfg.nav_acc_rad_m**2
+        if reached.any():
+            c.waypoints_reached += reached
+            c.waypoint_index = (c.waypoint_index + reached) % waypoints_ned_m.shape[1]
+            target = waypoints_ned_m[rows, c.waypoint_index]
+            err = target - pos_ned_m
+
+        # Position P with PX4's speed limits (horizontal norm, separate up/down).
+        vel_sp = err * np.array([cfg.mpc_xy_p, cfg.mpc_xy_p, cfg.mpc_z_p])
+        hnorm = np.hypot(vel_sp[:, 0], vel_sp[:, 1])
+        vel_sp[:, :2] *= (cfg.mpc_xy_cruise_m_s / np.maximum(hnorm, cfg.mpc_xy_cruise_m_s))[:, None]
+        np.clip(vel_sp[:, 2], -cfg.mpc_z_vel_max_up_m_s, cfg.mpc_z_vel_max_dn_m_s, out=vel_sp[:, 2])
+        # Slew-limit the setpoint (stands in for PX4's jerk-limited trajectory).
+        dv = vel_sp - c.vel_sp_ned_m_s
+        dh = np.hypot(dv[:, 0], dv[:, 1])
+        dmax = cfg.mpc_acc_hor_m_s2 * dt
+        dv[:, :2] *= (dmax / np.maximum(dh, dmax))[:, None]
+        np.clip(dv[:, 2], -cfg.mpc_acc_up_max_m_s2 * dt, cfg.mpc_acc_down_max_m_s2 * dt, out=dv[:, 2])
+        c.vel_sp_ned_m_s += dv
+        acc_ff = dv / dt
+
+        # Velocity PID (derivative on the measurement, as PX4), integrator clamped.
+        verr = c.vel_sp_ned_m_s - vel_ned_m_s
+        c.vel_int_ned_m_s2 += self.vel_i * verr * dt
+        np.clip(c.vel_int_ned_m_s2, -self.vel_int_lim, self.vel_int_lim, out=c.vel_int_ned_m_s2)
+        acc_sp = acc_ff + self.vel_p * verr + c.vel_int_ned_m_s2 - self.vel_d * (vel_ned_m_s - c.vel_prev_ned_m_s) / dt
+        c.vel_prev_ned_m_s[:] = vel_ned_m_s
+
+        # Thrust vector (NED) with vertical priority: clamp collective, then limit the tilt.
+        f = acc_sp * self.mass_kg[:, None]
+        f[:, 2] -= self.mass_kg * GRAVITY_M_S2
+        np.clip(f[:, 2], -self.thrust_max_n, -self.thrust_min_n, out=f[:, 2])
+        fh = np.hypot(f[:, 0], f[:, 1])
+        fh_max = np.minimum(-f[:, 2] * self.tan_tilt_max, np.sqrt(np.maximum(self.thrust_max_n**2 - f[:, 2] ** 2, 0.0)))
+        f[:, :2] *= (fh_max / (np.maximum(fh, fh_max) + 1e-12))[:, None]
+        thrust = np.sqrt(np.einsum("ij,ij->i", f, f))
+        c.thrust_sp_n = thrust
+
+        # Yaw setpoint: face the waypoint (MPC_YAW_MODE 0), rate-limited by MPC_YAWRAUTO_MAX.
+        far = np.hypot(err[:, 0], err[:, 1]) > cfg.mpc_yaw_mode_heading_min_m
+        yaw_target = np.where(far, np.arctan2(err[:, 1], err[:, 0]), c.yaw_sp_rad)
+        dyaw = (yaw_target - c.yaw_sp_rad + math.pi) % (2 * math.pi) - math.pi
+        step = math.radians(cfg.mpc_yawrauto_max_deg_s) * dt
+        c.yaw_sp_rad = (c.yaw_sp_rad + np.clip(dyaw, -step, step) + math.pi) % (2 * math.pi) - math.pi
+
+        # Attitude setpoint: tilt body z onto -f, then yaw. q_tilt takes e_z to z_b = -f/|f|.
+        zb = f / -thrust[:, None]
+        qt = np.stack((1.0 + zb[:, 2], -zb[:, 1], zb[:, 0]), axis=1)
+        qt /= np.sqrt(np.einsum("ij,ij->i", qt, qt))[:, None]
+        cy, sy = np.cos(c.yaw_sp_rad / 2), np.sin(c.yaw_sp_rad / 2)
+        # (tw, tx, ty, 0) ⊗ (cy, 0, 0, sy)
+        tw, tx, ty = qt[:, 0], qt[:, 1], qt[:, 2]
+        c.q_sp = np.stack((tw * cy, tx * cy + ty * sy, ty * cy - tx * sy, tw * sy), axis=1)
+        return err
+
+    # -- attitude, rates and allocation (MulticopterAttitudeControl/RateControl) ---------------
+    def update_attitude(self, c: ControllerState, q: np.ndarray, gyro_frd_rad_s: np.ndarray) -> np.ndarray:
+        """Returns the commanded rotor speed (B, 4) in rad/s."""
+        n = len(q)
+        # q_err = conj(q) ⊗ q_sp; rate setpoint = P * 2 sign(w) vec(q_err) (PX4 AttitudeControl).
+        np.multiply(q[:, :, None], c.q_sp[:, None, :], out=self._qq)
+        qe = np.matmul(self._qq.reshape(n, 16), QUAT_CONJ_MUL, out=self._q4)
+        rate_sp = qe[:, 1:] * np.copysign(self.att_2p, qe[:, :1])
+        np.maximum(rate_sp, -self.rate_max, out=rate_sp)
+        np.minimum(rate_sp, self.rate_max, out=rate_sp)
+
+        # Rate PID in normalised torque, derivative on the measurement (PX4 RateControl).
+        rerr = rate_sp
+        rerr -= gyro_frd_rad_s
+        integ = c.rate_int
+        integ += self.rate_i_dt * rerr
+        np.maximum(integ, -self.rate_int_lim, out=integ)
+        np.minimum(integ, self.rate_int_lim, out=integ)
+        u = self.rate_p * rerr
+        u += integ
+        u -= self.rate_d_per_dt * (gyro_frd_rad_s - c.rate_prev_rad_s)
+        c.rate_prev_rad_s[:] = gyro_frd_rad_s
+        np.maximum(u, -1.0, out=u)
+        np.minimum(u, 1.0, out=u)
+        return self.allocate(c.thrust_sp_n, u)
+
+    def allocate(self, thrust_n: np.ndarray, torque_norm: np.ndarray) -> np.ndarray:
+        """Quad-X allocation with PX4-style desaturation -> commanded rotor speed (B, 4).
+
+        ``torque_norm`` is PX4's normalised torque. Roll/pitch differential is
+        scaled down only if it alone exceeds the rotors' range; yaw gets what
+        is left; then the collective moves (down or up, airmode-like) so that
+        every rotor fits.
+        """
+        lo, span = self.rotor_thrust_min_n, self.rotor_thrust_span_n
+        rp = torque_norm[:, :2] @ self.mix_rp
+        yw = torque_norm[:, 2:3] * self.mix_yaw
+        rp_spread = rp.max(axis=1) - rp.min(axis=1)
+        rp *= (span / np.maximum(rp_spread, span))[:, None]
+        room = span - np.minimum(rp_spread, span)
+        y_spread = np.abs(torque_norm[:, 2]) * self.yaw_spread
+        yw *= (room / (np.maximum(y_spread, room) + 1e-12))[:, None]
+        rp += yw
+        coll = 0.25 * thrust_n
+        np.maximum(coll, lo - rp.min(axis=1), out=coll)
+        np.minimum(coll, lo + span - rp.max(axis=1), out=coll)
+        rp += coll[:, None]
+        np.maximum(rp, lo, out=rp)
+        rp *= self.inv_kf
+        return np.sqrt(rp, out=rp)

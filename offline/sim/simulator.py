@@ -1,0 +1,200 @@
+"""``simulate``: fly B quadrotors through their waypoints at once and log them.
+
+Three explicit rates, checked to divide: physics (rigid body, motors,
+propeller model), control (attitude + rate loops and the ESC command, as
+PX4's rate controller), position (PX4's position/velocity controller), and
+the log rate. Every flight starts hovering at ``SimConfig.start_ned_m``.
+
+Randomness (sensor noise) is per flight: with an integer ``seed`` flight i
+draws from ``SeedSequence([seed, i])``; with one seed per flight, flight i
+draws from ``SeedSequence([seeds[i], 0])``. So a single flight with seed s
+equals flight 0 of a batch with seed s, and a batch given per-flight seeds
+equals those flights run one at a time.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from monitor.errors import ConfigError
+from monitor.vehicle import VehicleConfig
+from offline.sim.battery import Battery
+from offline.sim.controller import Controller, ControllerConfig
+from offline.sim.dynamics import Dynamics, VehicleState
+from offline.sim.log import BOOT_OFFSET_US, FlightLog
+from offline.sim.mission import START_NED_M
+from offline.sim.quat import quat_to_euler
+
+Vec3 = tuple[float, float, float]
+NOISE_CHUNK_S = 1.0  # gyro noise is drawn per flight in blocks of this much flight time
+
+
+@dataclass(frozen=True)
+class SimConfig:
+    # 400 Hz: above PX4 SIH's 250 Hz (SIH_LOOP_PERIOD 4000 us) and a multiple of the 20 Hz log.
+    physics_rate_hz: int = 400
+    control_rate_hz: int = 200  # PX4's rate loop runs at the gyro rate, >= 200 Hz on most boards
+    position_rate_hz: int = 50  # PX4 MulticopterPositionControl runs at the estimator rate (~50 Hz)
+    log_rate_hz: int = 20  # the paper samples every 0.05 s
+    duration_s: float = 80.0  # the paper's flights are 80 s
+    # Sensor noise, 0 = off. Gyro: white noise on the filtered gyro the rate loop and the log see
+    # (a few mrad/s, typical of PX4 logs of a well-damped quad). Attitude: estimator error on the
+    # logged Euler angles (EKF2 attitude is good to ~1 mrad in steady flight).
+    gyro_noise_std_rad_s: float = 0.003
+    attitude_noise_std_rad: float = 0.001
+    start_ned_m: Vec3 = (float(START_NED_M[0]), float(START_NED_M[1]), float(START_NED_M[2]))
+    controller: ControllerConfig = field(default_factory=ControllerConfig)
+
+    def __post_init__(self) -> None:
+        for name in ("physics_rate_hz", "control_rate_hz", "position_rate_hz", "log_rate_hz"):
+            if getattr(self, name) <= 0:
+                raise ConfigError(f"{name}: must be a positive integer, got {getattr(self, name)}")
+        if self.physics_rate_hz < 250:
+            raise ConfigError(f"physics_rate_hz: must be at least 250 Hz, got {self.physics_rate_hz}")
+        for name, outer in (("control_rate_hz", self.physics_rate_hz), ("position_rate_hz", self.control_rate_hz),
+                            ("log_rate_hz", self.physics_rate_hz)):
+            if outer % getattr(self, name):
+                raise ConfigError(f"{name}: {getattr(self, name)} Hz must divide {outer} Hz")
+        if not (self.duration_s > 0 and math.isfinite(self.duration_s)):
+            raise ConfigError(f"duration_s: must be positive, got {self.duration_s}")
+        n = self.duration_s * self.log_rate_hz
+        if abs(n - round(n)) > 1e-9:
+            raise ConfigError(f"duration_s: {self.duration_s} s is not a whole number of log periods at {self.log_rate_hz} Hz")
+        for name in ("gyro_noise_std_rad_s", "attitude_noise_std_rad"):
+            if not getattr(self, name) >= 0:
+                raise ConfigError(f"{name}: must be >= 0, got {getattr(self, name)}")
+
+    @property
+    def n_log_samples(self) -> int:
+        return int(round(self.duration_s * self.log_rate_hz))
+
+    @property
+    def n_physics_steps(self) -> int:
+        return self.n_log_samples * (self.physics_rate_hz // self.log_rate_hz)
+
+
+def flight_seed_sequences(seed, n: int) -> list[np.random.SeedSequence]:
+    if np.ndim(seed) == 0:
+        return [np.random.SeedSequence([int(seed), i]) for i in range(n)]
+    seeds = np.asarray(seed).reshape(-1)
+    if len(seeds) != n:
+        raise ValueError(f"seed: got {len(seeds)} per-flight seeds for {n} flights")
+    return [np.random.SeedSequence([int(s), 0]) for s in seeds]
+
+
+def _per_flight(value, n: int, name: str) -> np.ndarray:
+    arr = np.broadcast_to(np.asarray(value, dtype=np.float64), (n,)).copy() if np.ndim(value) <= 1 else None
+    if arr is None or not np.all(np.isfinite(arr)):
+        raise ValueError(f"{name}: expected a number or one finite number per flight")
+    return arr
+
+
+def simulate(vehicle: VehicleConfig, waypoints_ned_m: np.ndarray, propellers, sim: SimConfig = SimConfig(), *,
+             payload_kg: np.ndarray | float = 0.0, seed=0, progress: bool = False) -> FlightLog:
+    """Simulate B flights through ``waypoints_ned_m`` (B, N, 3); see the module doc for seeds."""
+    wps = np.asarray(waypoints_ned_m, dtype=np.float64)
+    if wps.ndim != 3 or wps.shape[2] != 3 or wps.shape[1] < 1 or not np.all(np.isfinite(wps)):
+        raise ValueError(f"waypoints_ned_m: expected finite (B, N, 3), got shape {wps.shape}")
+    n = wps.shape[0]
+    payload = _per_flight(payload_kg, n, "payload_kg")
+    if np.any(payload < 0):
+        raise ValueError("payload_kg: must be >= 0")
+    mass = vehicle.mass_kg + payload
+
+    k_ctrl = sim.physics_rate_hz // sim.control_rate_hz
+    k_pos = sim.physics_rate_hz // sim.position_rate_hz
+    k_log = sim.physics_rate_hz // sim.log_rate_hz
+    dt = 1.0 / sim.physics_rate_hz
+    dyn = Dynamics(vehicle, mass, dt)
+    ctrl = Controller(sim.controller, vehicle, mass, 1.0 / sim.position_rate_hz, 1.0 / sim.control_rate_hz)
+    esc = vehicle.esc
+    battery = Battery(vehicle, n)
+
+    hover = np.sqrt(mass * 9.80665 / (4 * vehicle.kf_n_per_rad_s2))[:, None] * np.ones(4)
+    state = VehicleState.hover(n, sim.start_ned_m, hover)
+    cstate = ctrl.initial_state(n)
+    propellers.reset(state.omega_rad_s.copy())
+    rows = np.arange(n)
+
+    seqs = [s.spawn(2) for s in flight_seed_sequences(seed, n)]
+    gyro_rngs = [np.random.default_rng(s[0]) for s in seqs]
+    att_rngs = [np.random.default_rng(s[1]) for s in seqs]
+    gyro_bias = np.array(vehicle.gyro_bias_frd_rad_s, dtype=np.float64)
+    chunk = max(1, int(round(NOISE_CHUNK_S * sim.control_rate_hz)))
+    gyro_noise = np.zeros((n, chunk, 3))
+    noise_on = sim.gyro_noise_std_rad_s > 0
+
+    T = sim.n_log_samples
+    log = {k: np.empty((n, T, d)) for k, d in (("pos_ned_m", 3), ("vel_ned_m_s", 3), ("q_world_body", 4),
+                                                 ("rates_frd_rad_s", 3), ("accel_frd_m_s2", 3),
+                                                 ("motor_omega_rad_s", 4), ("thrust_n", 4), ("torque_nm", 4),
+                                                 ("pwm_us", 4), ("waypoint_error_ned_m", 3))}
+    battery_v = np.empty((n, T))
+    wp_index = np.empty((n, T), dtype=np.int64)
+
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=T, unit="log", desc=f"simulate {n} flight(s)", leave=False)
+
+    # The ESC turns PWM into speed through its fit; the command is the speed the controller
+    # asks for, inside the ESC's range. PWM itself (its inverse) is only needed for the log.
+    omega_lo = float(esc.cmd_to_omega_rad_s(esc.cmd_min))
+    omega_hi = float(esc.cmd_to_omega_rad_s(esc.cmd_max))
+    omega_cmd = hover.copy()
+    omega_target = dyn.motor_target(omega_cmd)
+    gyro = gyro_bias + state.rates_frd_rad_s
+    j_ctrl = 0
+    for k in range(sim.n_physics_steps):
+        if k % k_pos == 0:
+            ctrl.update_position(cstate, state.pos_ned_m, state.vel_ned_m_s, wps)
+        if k % k_ctrl == 0:
+            gyro = state.rates_frd_rad_s + gyro_bias
+            if noise_on:
+                jc = j_ctrl % chunk
+                if jc == 0:
+                    for i, g in enumerate(gyro_rngs):
+                        gyro_noise[i] = g.standard_normal((chunk, 3))
+                    gyro_noise *= sim.gyro_noise_std_rad_s
+                gyro += gyro_noise[:, jc]
+            j_ctrl += 1
+            omega_cmd = ctrl.update_attitude(cstate, state.q_world_body, gyro)
+            np.maximum(omega_cmd, omega_lo, out=omega_cmd)
+            np.minimum(omega_cmd, omega_hi, out=omega_cmd)
+            omega_target = dyn.motor_target(omega_cmd)
+        thrust, torque = dyn.step(state, omega_target, propellers)
+        if (k + 1) % k_log == 0:
+            j = (k + 1) // k_log - 1
+            log["pos_ned_m"][:, j] = state.pos_ned_m
+            log["vel_ned_m_s"][:, j] = state.vel_ned_m_s
+            log["q_world_body"][:, j] = state.q_world_body
+            log["rates_frd_rad_s"][:, j] = gyro  # what the gyro last reported
+            log["accel_frd_m_s2"][:, j] = dyn.force_body_n * dyn.inv_mass
+            log["motor_omega_rad_s"][:, j] = state.omega_rad_s
+            log["thrust_n"][:, j] = thrust
+            log["torque_nm"][:, j] = torque
+            log["pwm_us"][:, j] = esc.omega_rad_s_to_cmd(omega_cmd)
+            log["waypoint_error_ned_m"][:, j] = wps[rows, cstate.waypoint_index] - state.pos_ned_m
+            wp_index[:, j] = cstate.waypoint_index
+            battery_v[:, j] = battery.update(np.einsum("ij,ij->i", torque, state.omega_rad_s), 1.0 / sim.log_rate_hz)
+            if bar is not None:
+                bar.update(1)
+    if bar is not None:
+        bar.close()
+
+    roll, pitch, yaw = quat_to_euler(log["q_world_body"])
+    if sim.attitude_noise_std_rad > 0:
+        att_noise = np.stack([g.standard_normal((T, 3)) for g in att_rngs]) * sim.attitude_noise_std_rad
+        roll, pitch = roll + att_noise[..., 0], pitch + att_noise[..., 1]
+        yaw = (yaw + att_noise[..., 2] + math.pi) % (2 * math.pi) - math.pi
+    time_s = np.arange(1, T + 1) / sim.log_rate_hz
+    timestamp_us = BOOT_OFFSET_US + np.round(np.arange(1, T + 1) * (1e6 / sim.log_rate_hz)).astype(np.int64)
+    return FlightLog(
+        time_s=time_s, timestamp_us=timestamp_us, roll_rad=roll, pitch_rad=pitch, yaw_rad=yaw,
+        motor_rpm=esc.cmd_to_rpm(log["pwm_us"]), battery_v=battery_v, waypoint_index=wp_index,
+        log_rate_hz=float(sim.log_rate_hz), **log,
+    )
