@@ -41,7 +41,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--motor-efficiency-spread", type=float, default=0.0, help="+- fraction per rotor per variant")
     p.add_argument("--cg-offset", type=float, default=0.0, help="max horizontal CG offset, m, per variant")
     p.add_argument("--variants", type=int, default=1, help="vehicle variants carrying the randomised terms")
-    p.add_argument("--no-sensor-noise", action="store_true")
+    p.add_argument("--sensor-noise", type=float, default=1.0, help="scale of the simulator's gyro/attitude noise (0 = off)")
     p.add_argument("--vehicle", type=Path, default=DEFAULT_VEHICLE)
     p.add_argument("--seed", type=int, default=0)
     return p
@@ -51,7 +51,7 @@ def specs_from_args(a: argparse.Namespace) -> list[DatasetSpec]:
     faults = [f.strip() for f in a.fault.split(",") if f.strip()]
     common = dict(flights_per_label=a.flights_per_label, duration_s=a.duration, propellers=a.propellers,
                   wind_max_m_s=a.wind, motor_efficiency_spread=a.motor_efficiency_spread, cg_offset_max_m=a.cg_offset,
-                  vehicle_variants=a.variants, sensor_noise=not a.no_sensor_noise)
+                  vehicle_variants=a.variants, sensor_noise_scale=a.sensor_noise)
     specs = []
     sets = [s.strip() for s in a.sets.split(",") if s.strip()]
     unknown = [s for s in sets if s not in PRESETS]

@@ -41,7 +41,7 @@ class DatasetSpec:
     motor_efficiency_spread: float = 0.0  # +- fraction per rotor per variant
     cg_offset_max_m: float = 0.0  # +- per horizontal axis per variant
     vehicle_variants: int = 1  # the simulator takes one vehicle per call; variants carry the randomised terms
-    sensor_noise: bool = True
+    sensor_noise_scale: float = 1.0  # times the simulator's default gyro and attitude noise; 0 = off
     seed: int = 0
     chunk_flights: int = 64  # flights per simulator call (memory)
 
@@ -101,19 +101,19 @@ def routes(spec: DatasetSpec, n_flights: int, seed: int) -> tuple[np.ndarray, tu
 
 def sim_config(spec: DatasetSpec):
     """The simulator's config with this spec's duration and noise (only keys the simulator has)."""
-    from offline.sim import SimConfig
+    from offline.sim.simulator import SimConfig
 
-    names = {f.name for f in dataclasses.fields(SimConfig)}
-    kw = {k: v for k, v in (("duration_s", spec.duration_s), ("sensor_noise", spec.sensor_noise),
-                             ("log_rate_hz", SAMPLE_RATE_HZ)) if k in names}
-    return SimConfig(**kw)
+    base = SimConfig()
+    return dataclasses.replace(base, duration_s=spec.duration_s, log_rate_hz=int(SAMPLE_RATE_HZ),
+                               gyro_noise_std_rad_s=base.gyro_noise_std_rad_s * spec.sensor_noise_scale,
+                               attitude_noise_std_rad=base.attitude_noise_std_rad * spec.sensor_noise_scale)
 
 
 def simulate_flights(vehicle: VehicleConfig, waypoints: np.ndarray, conditions: np.ndarray, payload_kg: np.ndarray,
                      spec: DatasetSpec, seed: int, propellers=None):
     """One simulator call; returns the FlightLog. ``propellers`` overrides the condition-built model (onset runs)."""
     from offline.propellers import build_propellers
-    from offline.sim import simulate
+    from offline.sim.simulator import simulate
 
     if propellers is None:
         propellers = build_propellers(vehicle, conditions, kind=spec.propellers, rng_seed=seed)

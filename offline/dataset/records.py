@@ -99,7 +99,8 @@ class FaultDataset:
                              f"but {where} was trained for {vehicle_name!r}")
         if abs(float(sample_rate_hz) - self.sample_rate_hz) > 1e-9:
             raise ModelError(f"data set {self.name!r} is sampled at {self.sample_rate_hz} Hz, {where} expects {sample_rate_hz} Hz")
-        compute_features({k: v[:1, :1] for k, v in self.signals.items()}, features)  # raises on unknown names
+        if len(features):
+            compute_features({k: v[:1, :1] for k, v in self.signals.items()}, features)  # raises on unknown names
 
 
 def concat(datasets: Sequence[FaultDataset], name: str) -> FaultDataset:

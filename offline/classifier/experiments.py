@@ -1,0 +1,105 @@
+"""Reproduce the paper's table and the shift ablation: train each configuration, score A, B, C (bent and cracked).
+
+    python -m offline.classifier.experiments --data out/data --out out/experiments [--only paper,random,...]
+
+Data sets come from ``propwatch dataset`` (A/B/C presets per fault, and a
+shifted training set R). A data set that is part of a run's training data is
+scored on its held-out flights only; every other one on all its flights.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+
+from monitor.features import PAPER_FEATURES
+from offline.classifier.evaluate import evaluate_dataset, format_table
+from offline.classifier.train import TrainConfig, predict_probabilities, save_checkpoint, train
+from offline.dataset.records import FaultDataset, concat, load_dataset
+
+# Relative RPM replaces absolute RPM (payload moves every rotor alike); yaw enters as sin/cos so
+# the heading of a route is not a feature; the mean RPM is kept so the net can still see load.
+SHIFT_FEATURES = ("rpm_rel_1", "rpm_rel_2", "rpm_rel_3", "rpm_rel_4", "rpm_mean", "roll_rad", "pitch_rad",
+                  "yaw_sin", "yaw_cos", "roll_rate_rad_s", "pitch_rate_rad_s", "yaw_rate_rad_s")
+NO_LOAD_FEATURES = tuple(f for f in SHIFT_FEATURES if f != "rpm_mean")
+
+# name -> (training data sets, config changes). Each row adds one change to the row above it.
+EXPERIMENTS: dict[str, tuple[tuple[str, ...], dict]] = {
+    "paper-bent": (("A-bent",), {}),
+    "paper-cracked": (("A-cracked",), {}),
+    "random": (("R-mixed",), {}),
+    "random+rel": (("R-mixed",), {"features": SHIFT_FEATURES}),
+    "random+rel+multilabel": (("R-mixed",), {"features": SHIFT_FEATURES, "head": "multilabel4"}),
+    "random+rel-load+multilabel": (("R-mixed",), {"features": NO_LOAD_FEATURES, "head": "multilabel4"}),
+}
+EVAL_SETS = ("A-bent", "B-bent", "C-bent", "A-cracked", "B-cracked", "C-cracked")
+
+
+def pooled(parts: list[FaultDataset]) -> tuple[FaultDataset, np.ndarray]:
+    """The training data and each part's first flight index in it."""
+    offsets = np.cumsum([0] + [p.n_flights for p in parts])[:-1]
+    return (parts[0] if len(parts) == 1 else concat(parts, "+".join(p.name for p in parts))), offsets
+
+
+def run_one(name: str, data: Path, out: Path, base: TrainConfig, hop: int, cache: dict) -> dict:
+    sets, changes = EXPERIMENTS[name]
+    parts = [cache.setdefault(s, load_dataset(data / f"{s}.npz")) for s in sets]
+    ds, offsets = pooled(parts)
+    cfg = dataclasses.replace(base, **changes)
+    t0 = time.time()
+    m = train(ds, cfg, log=lambda msg: print(f"  [{name}] {msg}", flush=True))
+    train_s = time.time() - t0
+    save_checkpoint(out / f"{name}.pt", m)
+    test = np.array(m.test_flights)
+    results = []
+    for e in EVAL_SETS:
+        ev = cache.setdefault(e, load_dataset(data / f"{e}.npz"))
+        flights, label = None, e
+        if e in sets:  # only its held-out flights
+            k = sets.index(e)
+            mine = test[(test >= offsets[k]) & (test < offsets[k] + ev.n_flights)] - offsets[k]
+            flights, label = mine, f"{e} (test split)"
+        results.append(evaluate_dataset(lambda w: predict_probabilities(m, w), ev, cfg.features, cfg.window, hop, flights, label))
+    print(format_table(results), flush=True)
+    return {"name": name, "train_sets": list(sets), "config": {**dataclasses.asdict(cfg), "features": list(cfg.features)},
+            "train_seconds": train_s, "history": m.history,
+            "results": [{k: v for k, v in r.to_dict().items() if k != "confusion"} for r in results]}
+
+
+def ablation_table(rows: list[dict]) -> str:
+    head = "| run | " + " | ".join(EVAL_SETS) + " |"
+    lines = [head, "|" + "---|" * (len(EVAL_SETS) + 1)]
+    for r in rows:
+        acc = {x["name"].split(" ")[0]: x["accuracy"] for x in r["results"]}
+        lines.append(f"| {r['name']} | " + " | ".join(f"{100 * acc[e]:.2f}" for e in EVAL_SETS) + " |")
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(prog="python -m offline.classifier.experiments", description=__doc__)
+    p.add_argument("--data", type=Path, default=Path("out/data"))
+    p.add_argument("--out", type=Path, default=Path("out/experiments"))
+    p.add_argument("--only", default=",".join(EXPERIMENTS))
+    p.add_argument("--hop", type=int, default=10, help="evaluation window hop")
+    p.add_argument("--epochs", type=int, default=TrainConfig.epochs)
+    p.add_argument("--train-stride", type=int, default=TrainConfig.train_stride)
+    p.add_argument("--channels", type=int, default=TrainConfig.channels)
+    a = p.parse_args(argv)
+    a.out.mkdir(parents=True, exist_ok=True)
+    base = TrainConfig(epochs=a.epochs, train_stride=a.train_stride, channels=a.channels, features=PAPER_FEATURES)
+    cache: dict = {}
+    rows = []
+    for name in [n.strip() for n in a.only.split(",") if n.strip()]:
+        rows.append(run_one(name, a.data, a.out, base, a.hop, cache))
+        (a.out / f"{name}.json").write_text(json.dumps(rows[-1], indent=2) + "\n", encoding="utf-8")
+    print(ablation_table(rows))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
