@@ -123,7 +123,8 @@ def airborne_mask(raw: RawFlight, grid: np.ndarray, motor_cmd: np.ndarray, rate_
         mask &= _hold_flag(raw.armed, grid) == 1.0
     if raw.landed is not None and len(raw.landed):
         mask &= _hold_flag(raw.landed, grid) == 0.0
-    if raw.height_m is not None and len(raw.height_m):
+    if raw.height_m is not None and len(raw.height_m) and not (raw.landed is not None and len(raw.landed)):
+        # Height only where the autopilot's own land detector is not logged: it knows better.
         h = hold(raw.height_m.t_us, raw.height_m.values, grid, MAX_AGE_US)
         mask &= h > raw.min_height_m
     return _drop_short(mask, int(round(MIN_SEGMENT_S * rate_hz)))
@@ -177,7 +178,8 @@ def to_flight_table(raw: RawFlight, esc: EscCurve | None = None, rate_hz: float 
                     "stream_rates_hz": {n: getattr(raw, n).rate_hz() for n in ("motor_cmd", "attitude_rad", "rates_rad_s")}}
     if raw.esc_rpm is not None and len(raw.esc_rpm):
         extras["esc_rpm"] = held(raw.esc_rpm, 4)
-    if raw.height_m is not None and len(raw.height_m):
+    if raw.height_m is not None and len(raw.height_m) and not (raw.landed is not None and len(raw.landed)):
+        # Height only where the autopilot's own land detector is not logged: it knows better.
         extras["height_m"] = held(raw.height_m, None)
     opt = {n: (held(getattr(raw, n), 3) if getattr(raw, n) is not None and len(getattr(raw, n)) else None)
            for n in ("accel_frd_m_s2", "vel_ned_m_s", "pos_ned_m")}

@@ -1,0 +1,1 @@
+"""``propwatch diagnose``: recorded flight logs -> per-propeller fault verdicts."""

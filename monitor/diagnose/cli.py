@@ -1,0 +1,125 @@
+"""``propwatch diagnose LOG [LOG...] [--json] [--report DIR]``.
+
+Output with ``--json`` (stdout), for one LOG::
+
+    {"log": PATH,
+     "verdict": {"label": N, "faulty_propellers": [...], "fault_probability": [p1, p2, p3, p4]} | null,
+     "windows": n, "warnings": [...], "reason": null | "why there is no verdict",
+     "propellers": [{"propeller": 1, "name": "M1", "fault_probability": p, "faulty": bool}, ...],
+     "label_probability": [16 values] | null,
+     "airborne_segments": [{"start_s", "stop_s", "steps"}, ...],
+     "timeline": {"t_s": [...], "fault_probability": [[p1..p4], ...], "label": [...]},
+     "hop_steps": k}
+
+For several LOGs: ``{"results": [one object as above per LOG, in order]}``;
+a log that cannot be read appears as ``{"log": PATH, "error": "..."}``.
+Propellers are in PX4 order; ``name`` is the vehicle's own numbering.
+
+Exit code: 0 every log got a verdict; 1 some log got no verdict (the reason
+says why: outside the model's envelope, no airborne flight, ...); 2 some log
+could not be read (unknown format, missing messages) or bad arguments.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+from monitor.diagnose.engine import Diagnosis, diagnose_table
+from monitor.errors import ModelError, PropwatchError
+from monitor.esc import EscCurve
+from monitor.logs import read_log
+from monitor.model import Classifier
+from monitor.vehicle import DEFAULT_VEHICLE, REPO_ROOT, load_vehicle
+
+DEFAULT_MODEL = REPO_ROOT / "models" / "classifier.onnx"
+
+
+def parse_args(argv: list[str] | None) -> argparse.Namespace:
+    p = argparse.ArgumentParser(prog="propwatch diagnose", description=__doc__,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("logs", nargs="+", metavar="LOG", help=".tlog, .ulg, DataFlash .bin, or CSV (with --format)")
+    p.add_argument("--format", dest="fmt", default=None,
+                   help="log format: tlog, ulog, dataflash, or a CSV mapping name from monitor/formats.yaml (e.g. crazypad)")
+    p.add_argument("--model", default=str(DEFAULT_MODEL), help="classifier ONNX file (default: models/classifier.onnx)")
+    p.add_argument("--vehicle", default=None,
+                   help="vehicle YAML whose ESC curve converts motor commands to RPM "
+                        "(default: the model's metadata vehicle.esc, else models/vehicle.yaml)")
+    p.add_argument("--hop", type=int, default=10, help="classify one window every HOP grid steps (default 10 = 0.5 s)")
+    p.add_argument("--json", action="store_true", help="print JSON to stdout")
+    p.add_argument("--report", metavar="DIR", default=None, help="write PNG + HTML reports into DIR")
+    return p.parse_args(argv)
+
+
+def resolve_esc(clf: Classifier, vehicle_path: str | None) -> EscCurve:
+    """--vehicle, else the model's own ESC curve, else the default vehicle's."""
+    if vehicle_path:
+        return load_vehicle(vehicle_path).esc
+    esc = (clf.info.metadata.get("vehicle") or {}).get("esc")
+    if isinstance(esc, dict):
+        try:
+            return EscCurve(**esc)
+        except TypeError as exc:
+            raise ModelError(f"{clf.path}: metadata vehicle.esc is not an ESC curve: {exc}") from exc
+    return load_vehicle(DEFAULT_VEHICLE).esc
+
+
+def diagnose_file(path: str, clf: Classifier, esc: EscCurve, fmt: str | None, hop: int):
+    table = read_log(path, fmt=fmt, esc=esc, rate_hz=clf.info.sample_rate_hz)
+    return table, diagnose_table(table, clf, hop=hop)
+
+
+def format_text(d: Diagnosis) -> str:
+    lines = [f"== {d.source}"]
+    if d.verdict is None:
+        lines.append(f"no verdict: {d.reason}")
+    else:
+        faulty = d.verdict["faulty_propellers"]
+        lines.append(f"verdict: label {d.verdict['label']} ("
+                     + ("no faulty propeller" if not faulty else "faulty propeller(s) " + ", ".join(
+                         d.propellers[i - 1]["name"] for i in faulty)) + f"), from {d.windows} windows")
+        for p in d.propellers:
+            lines.append(f"  propeller {p['propeller']} ({p['name']}): P(faulty) = {p['fault_probability']:.3f}"
+                         + ("  <- FAULTY" if p["faulty"] else ""))
+    for s in d.segments:
+        lines.append(f"  airborne {s['start_s']:.1f}-{s['stop_s']:.1f} s ({s['steps']} steps)")
+    lines += [f"  warning: {w}" for w in d.warnings]
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parse_args(argv)
+    if args.hop < 1:
+        print("propwatch diagnose: --hop must be >= 1", file=sys.stderr)
+        return 2
+    clf = Classifier(args.model)
+    esc = resolve_esc(clf, args.vehicle)
+    results, code = [], 0
+    for path in args.logs:
+        try:
+            table, d = diagnose_file(path, clf, esc, args.fmt, args.hop)
+        except PropwatchError as exc:
+            results.append({"log": path, "error": str(exc)})
+            print(f"propwatch diagnose: error: {exc}", file=sys.stderr)
+            code = 2
+            continue
+        if d.verdict is None:
+            code = max(code, 1)
+        if args.report:
+            from monitor.diagnose.report import write_report
+
+            write_report(d, table, Path(args.report))
+        results.append(d.to_json())
+        if not args.json:
+            print(format_text(d))
+    if args.json:
+        out = results[0] if len(results) == 1 else {"results": results}
+        json.dump(out, sys.stdout, allow_nan=False)
+        sys.stdout.write("\n")
+    return code
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,162 @@
+"""Diagnosis of one flight table: windows -> classifier -> verdict, timeline, warnings.
+
+The features and windows are the daemon's (``monitor.features``,
+``monitor.model``); what is added here is the choice of windows (only ones
+lying wholly inside an airborne segment, with every value measured), the
+aggregation into a verdict, and the checks that the log fits the model:
+missing signals, rates, and whether the vehicle flies inside the model's
+envelope (its mean RPM against the RPM the model was trained on).
+
+Verdict: the label with the highest mean probability over the windows used;
+``faulty_propellers`` are that label's propellers; ``fault_probability[i]``
+is the mean over windows of the model's P(propeller i faulty).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from monitor.errors import ModelError
+from monitor.features import compute_features, sliding_windows, valid_windows
+from monitor.flight import FlightTable
+from monitor.labels import LABEL_TABLE
+from monitor.model import Classifier
+from monitor.resample import US_PER_S
+
+# Mean airborne RPM against the mean the model saw in training (its normaliser):
+# beyond WARN the model extrapolates, beyond REFUSE it would be guessing.
+RPM_RATIO_WARN = (0.85, 1.15)
+RPM_RATIO_REFUSE = (0.6, 1.6)
+# The paper's flights are gentle; beyond this attitude the model has not been trained.
+LARGE_ATTITUDE_RAD = np.deg2rad(45.0)
+RPM_FEATURES = ("rpm_1", "rpm_2", "rpm_3", "rpm_4", "rpm_mean")
+SIGNAL_OF_FEATURE = {"yaw_sin": "yaw_rad", "yaw_cos": "yaw_rad"}
+
+
+@dataclass
+class Diagnosis:
+    source: str
+    verdict: dict | None  # {"label", "faulty_propellers", "fault_probability"} or None
+    windows: int
+    warnings: list[str]
+    reason: str | None = None  # why there is no verdict
+    propellers: list[dict] = field(default_factory=list)
+    label_probability: list[float] | None = None
+    segments: list[dict] = field(default_factory=list)
+    timeline: dict = field(default_factory=dict)
+    hop_steps: int = 1
+
+    def to_json(self) -> dict:
+        return {
+            "log": self.source,
+            "verdict": self.verdict,
+            "windows": self.windows,
+            "warnings": list(self.warnings),
+            "reason": self.reason,
+            "propellers": self.propellers,
+            "label_probability": self.label_probability,
+            "airborne_segments": self.segments,
+            "timeline": self.timeline,
+            "hop_steps": self.hop_steps,
+        }
+
+
+def window_ends(table: FlightTable, feats: np.ndarray, window: int, hop: int) -> np.ndarray:
+    """Indices of the last step of each usable window: all airborne, all finite."""
+    wins = sliding_windows(feats, window, hop)
+    if len(wins) == 0:
+        return np.empty(0, dtype=np.int64)
+    ends = np.arange(len(wins)) * hop + window - 1
+    air = np.concatenate([[0], np.cumsum(table.airborne.astype(np.int64))])
+    all_air = air[ends + 1] - air[ends + 1 - window] == window
+    return ends[all_air & valid_windows(wins)]
+
+
+def _t_s(table: FlightTable, i) -> np.ndarray:
+    return (np.asarray(table.timestamp_us)[i] - table.timestamp_us[0]) / US_PER_S
+
+
+def envelope_checks(table: FlightTable, clf: Classifier) -> tuple[list[str], str | None]:
+    """(warnings, refusal reason or None) for a log the model may not fit."""
+    warnings: list[str] = []
+    air = table.airborne
+    if not air.any():
+        return warnings, "no airborne flight found (armed, throttle above idle, off the ground)"
+    sig = table.signals()
+    for f in clf.info.features:
+        name = "motor_rpm" if f.startswith("rpm") else SIGNAL_OF_FEATURE.get(f, f)
+        v = sig[name][air]
+        if not np.isfinite(v).any():
+            what = "motor RPM (commands not logged or in another unit than the model's ESC curve)" \
+                if name == "motor_rpm" else name
+            return warnings, f"{what} unknown during flight: the model needs it for feature {f}"
+    norm = clf.info.metadata.get("normalization", {})
+    idx = [i for i, f in enumerate(clf.info.features) if f in RPM_FEATURES]
+    if idx and "mean" in norm:
+        trained = float(np.mean([norm["mean"][i] for i in idx]))
+        flown = float(np.nanmedian(np.nanmean(table.motor_rpm[air], axis=1)))
+        ratio = flown / trained if trained > 0 else np.inf
+        msg = (f"vehicle outside the model's envelope: median airborne mean RPM {flown:.0f} vs {trained:.0f} "
+               f"in the model's training data (x{ratio:.2f})")
+        if not RPM_RATIO_REFUSE[0] <= ratio <= RPM_RATIO_REFUSE[1]:
+            return warnings, msg
+        if not RPM_RATIO_WARN[0] <= ratio <= RPM_RATIO_WARN[1]:
+            warnings.append(msg + ": the verdict is an extrapolation")
+    tilt = np.maximum(np.abs(table.roll_rad[air]), np.abs(table.pitch_rad[air]))
+    big = float(np.mean(np.nan_to_num(tilt) > LARGE_ATTITUDE_RAD))
+    if big > 0.01:
+        warnings.append(f"{100 * big:.1f} % of the airborne time has roll or pitch beyond 45 deg "
+                        "(aggressive flight, flip or crash): outside the model's training")
+    return warnings, None
+
+
+def diagnose_table(table: FlightTable, clf: Classifier, hop: int = 1, batch: int = 4096) -> Diagnosis:
+    """Classify every usable window of ``table`` (one every ``hop`` steps) and aggregate."""
+    if hop < 1:
+        raise ValueError("hop must be >= 1")
+    info = clf.info
+    if abs(table.rate_hz - info.sample_rate_hz) > 1e-9:
+        raise ModelError(f"{table.source}: table at {table.rate_hz} Hz but the model expects {info.sample_rate_hz} Hz")
+    warnings = list(table.warnings)
+    env_warn, refusal = envelope_checks(table, clf)
+    warnings += env_warn
+    segs = [{"start_s": float(_t_s(table, a)), "stop_s": float(_t_s(table, b - 1)) + 1.0 / table.rate_hz,
+             "steps": int(b - a)} for a, b in table.airborne_segments()]
+    d = Diagnosis(table.source, None, 0, warnings, refusal, segments=segs, hop_steps=hop)
+    if refusal:
+        return d
+    feats = compute_features(table.signals(), info.features)
+    ends = window_ends(table, feats, info.window, hop)
+    if len(ends) == 0:
+        longest = max((s["steps"] for s in segs), default=0)
+        d.reason = (f"no usable window: {info.window} consecutive airborne steps with every signal measured are needed "
+                    f"({info.window / table.rate_hz:g} s); longest airborne segment has {longest} steps")
+        return d
+    labels, faults = predict_at(clf, feats, ends, info.window, batch)
+    mean_labels = labels.mean(axis=0)
+    label = int(np.argmax(mean_labels)) + 1
+    p = faults.mean(axis=0)
+    d.windows = len(ends)
+    d.verdict = {"label": label, "faulty_propellers": list(LABEL_TABLE[label]),
+                 "fault_probability": [float(x) for x in p]}
+    d.label_probability = [float(x) for x in mean_labels]
+    d.propellers = [{"propeller": i + 1, "name": table.motor_names[i], "fault_probability": float(p[i]),
+                     "faulty": (i + 1) in LABEL_TABLE[label]} for i in range(4)]
+    d.timeline = {"t_s": [float(x) for x in _t_s(table, ends)],
+                  "fault_probability": np.round(faults, 5).tolist(),
+                  "label": (np.argmax(labels, axis=1) + 1).tolist()}
+    return d
+
+
+def predict_at(clf: Classifier, feats: np.ndarray, ends: np.ndarray, window: int, batch: int):
+    """Classifier outputs for the windows ending at ``ends`` (batched to bound memory)."""
+    starts = ends - window + 1
+    out_l, out_f = [], []
+    for i in range(0, len(ends), batch):
+        idx = starts[i:i + batch, None] + np.arange(window)[None, :]
+        lab, fau = clf.predict(feats[idx])
+        out_l.append(lab)
+        out_f.append(fau)
+    return np.concatenate(out_l).astype(np.float64), np.concatenate(out_f).astype(np.float64)
