@@ -23,6 +23,8 @@ from offline.dataset.generate import DatasetSpec, from_log, routes, simulate_fli
 from offline.dataset.onset import SwitchedPropellers
 from offline.dataset.records import FaultDataset
 
+DAEMON_ALERTS = AlertConfig()  # the daemon's defaults: what the shipped monitor does
+
 
 @dataclass(frozen=True)
 class ShiftFlights:
@@ -97,7 +99,7 @@ def flight_fault_probabilities(predict: Predictor, ds: FaultDataset, features, w
 
 
 def false_alarms_per_hour(predict: Predictor, healthy: FaultDataset, features, window: int,
-                          config: AlertConfig = AlertConfig()) -> dict:
+                          config: AlertConfig = DAEMON_ALERTS) -> dict:
     probs = flight_fault_probabilities(predict, healthy, features, window)
     alarms = sum(len(replay_alerts(p, healthy.sample_rate_hz, window, config)) for p in probs)
     classified_s = sum(len(p) for p in probs) / healthy.sample_rate_hz
@@ -107,7 +109,7 @@ def false_alarms_per_hour(predict: Predictor, healthy: FaultDataset, features, w
 
 
 def detection_times(predict: Predictor, onset: FaultDataset, features, window: int,
-                    config: AlertConfig = AlertConfig()) -> dict:
+                    config: AlertConfig = DAEMON_ALERTS) -> dict:
     """Seconds from fault onset to the first alert, and to the first alert naming only truly faulty propellers."""
     probs = flight_fault_probabilities(predict, onset, features, window)
     rate = onset.sample_rate_hz

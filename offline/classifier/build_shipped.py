@@ -1,0 +1,118 @@
+"""Build the shipped classifier: ``models/classifier.onnx`` + card + manifest (``make classifier``).
+
+    python -m offline.classifier.build_shipped --out models [--data out/shipped-data] [--reuse]
+
+1. Simulate the training set R (random routes, payload 0..0.6 kg, wind, bent
+   and cracked mixed) and the paper's evaluation sets A, B, C for each fault.
+2. Train the improved CNN (relative-RPM features, one output per propeller).
+3. Export ONNX, then score it with onnxruntime (what the monitor runs): the
+   paper's table, false alarms per healthy flight-hour and detection time
+   after an in-flight onset, with the daemon's alert rule.
+4. Write the model card and manifest beside the model.
+Not run by tests: several minutes on 2 cores.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import time
+from pathlib import Path
+
+from monitor.config import to_mapping
+from monitor.model import Classifier
+from monitor.vehicle import DEFAULT_VEHICLE, load_vehicle
+from offline.classifier.card import write_card
+from offline.classifier.evaluate import evaluate_dataset, format_table
+from offline.classifier.experiments import SHIFT_FEATURES
+from offline.classifier.export import export_onnx
+from offline.classifier.onboard import DAEMON_ALERTS, ShiftFlights, detection_times, false_alarms_per_hour, simulate_onset
+from offline.classifier.train import TrainConfig, train
+from offline.dataset.generate import PRESETS, DatasetSpec, generate
+from offline.dataset.records import load_dataset, save_dataset
+from offline.manifest import make_manifest, write_manifest
+from offline.propellers import MODELS_DIR
+
+SHIPPED = TrainConfig(features=SHIFT_FEATURES, head="multilabel4", epochs=6, train_stride=16, seed=0)
+
+
+def propeller_kind() -> str:
+    """The paper's LSTM propellers when their weights are built, else the analytic fault signatures."""
+    return "lstm" if any(Path(MODELS_DIR).glob("*.npz")) else "quadratic"
+
+
+def data_specs(kind: str, flights_per_label: int, eval_flights_per_label: int) -> list[DatasetSpec]:
+    specs = [DatasetSpec("R-mixed", fault="mixed", waypoints=("random",), payload_kg=(0.0, 0.6), wind_max_m_s=3.0,
+                         vehicle_variants=8, flights_per_label=flights_per_label, propellers=kind, seed=7)]
+    for i, fault in enumerate(("bent", "cracked")):
+        for j, s in enumerate(("A", "B", "C")):
+            specs.append(DatasetSpec(f"{s}-{fault}", fault=fault, flights_per_label=eval_flights_per_label, propellers=kind,
+                                     seed=100 * i + j, **PRESETS[s]))
+    return specs
+
+
+def obtain(spec: DatasetSpec, vehicle, data_dir: Path, reuse: bool):
+    path = data_dir / f"{spec.name}.npz"
+    if reuse and path.is_file():
+        ds = load_dataset(path)
+        if ds.manifest.get("config") == to_mapping(spec):
+            return ds
+        print(f"{path}: made with another spec, regenerating")
+    ds = generate(spec, vehicle)
+    save_dataset(path, ds)
+    write_manifest(data_dir / f"{spec.name}.manifest.json", ds.manifest)
+    return ds
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(prog="python -m offline.classifier.build_shipped", description=__doc__,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--out", type=Path, default=Path("models"))
+    p.add_argument("--data", type=Path, default=Path("out/shipped-data"))
+    p.add_argument("--reuse", action="store_true", help="reuse data sets in --data made with the same spec")
+    p.add_argument("--flights-per-label", type=int, default=20, help="training set R")
+    p.add_argument("--eval-flights-per-label", type=int, default=5)
+    p.add_argument("--epochs", type=int, default=SHIPPED.epochs)
+    p.add_argument("--hop", type=int, default=2, help="evaluation window hop")
+    p.add_argument("--onboard-flights", type=int, default=32)
+    p.add_argument("--vehicle", type=Path, default=DEFAULT_VEHICLE)
+    a = p.parse_args(argv)
+    t0 = time.time()
+    vehicle = load_vehicle(a.vehicle)
+    kind = propeller_kind()
+    specs = data_specs(kind, a.flights_per_label, a.eval_flights_per_label)
+    data = {s.name: obtain(s, vehicle, a.data, a.reuse) for s in specs}
+    cfg = dataclasses.replace(SHIPPED, epochs=a.epochs, test_fraction=0.1)
+    m = train(data["R-mixed"], cfg)
+    m.training_manifest = {"train_config": {**dataclasses.asdict(cfg), "features": list(cfg.features)},
+                           "data": data["R-mixed"].manifest, "propellers": kind}
+    onnx_path = export_onnx(m, a.out / "classifier.onnx")
+    clf = Classifier(onnx_path)
+    results = []
+    for name, ds in data.items():
+        if name == "R-mixed":
+            results.append(evaluate_dataset(clf.predict, ds, cfg.features, cfg.window, a.hop, m.test_flights, "R-mixed (test split)"))
+        else:
+            ds.check_model(clf.info.metadata["vehicle"]["name"], clf.info.sample_rate_hz, clf.info.features)
+            results.append(evaluate_dataset(clf.predict, ds, cfg.features, cfg.window, a.hop))
+    print(format_table(results))
+    onboard_cfg = ShiftFlights(n_flights=a.onboard_flights, propellers=kind)
+    alarms = false_alarms_per_hour(clf.predict, simulate_onset(vehicle, onboard_cfg, healthy=True), cfg.features, cfg.window)
+    detect = detection_times(clf.predict, simulate_onset(vehicle, onboard_cfg, healthy=False), cfg.features, cfg.window)
+    print(json.dumps({"false_alarms": alarms, "detection": detect}, indent=1))
+    figures = {"results": [{k: v for k, v in r.to_dict().items() if k != "confusion"} for r in results],
+               "hop": a.hop, "false_alarms": alarms, "detection": detect, "alert_rule": dataclasses.asdict(DAEMON_ALERTS),
+               "onboard_flights": dataclasses.asdict(onboard_cfg)}
+    manifest = make_manifest("classifier", {"train": m.training_manifest["train_config"], "propellers": kind,
+                                            "data_specs": [to_mapping(s) for s in specs]}, cfg.seed,
+                             model=str(onnx_path), history=m.history, figures=figures,
+                             build_seconds=round(time.time() - t0, 1))
+    write_manifest(a.out / "classifier.manifest.json", manifest)
+    write_card(a.out / "classifier.card.md", manifest, results)
+    print(f"wrote {onnx_path}, classifier.card.md, classifier.manifest.json in {time.time() - t0:.0f} s")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,77 @@
+"""The shipped model's card: data, metrics beside the paper, onboard figures and limits, from its manifest."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from offline.classifier.evaluate import Result, format_table
+
+
+def write_card(path: str | Path, manifest: dict, results: list[Result], ablation: str = "") -> Path:
+    cfg = manifest["config"]
+    train = cfg["train"]
+    fig = manifest["figures"]
+    fa, det = fig["false_alarms"], fig["detection"]
+    rule = fig["alert_rule"]
+    spec = next(s for s in cfg["data_specs"] if s["name"] == "R-mixed")
+    lines = [
+        "# propwatch classifier card (`models/classifier.onnx`)",
+        "",
+        f"Built by `make classifier` (`python -m offline.classifier.build_shipped`) at git {manifest['git_revision']}, "
+        f"{manifest['created_utc']}; seed {manifest['seed']}. Full provenance: `classifier.manifest.json`.",
+        "",
+        "## What it does",
+        f"- Input: `features` (N, {train['window']}, {len(train['features'])}) raw float32 at 20 Hz, in this order: "
+        + ", ".join(f"`{f}`" for f in train["features"]) + ". The graph normalises (statistics in the metadata).",
+        "- Outputs: `fault_probability` (N, 4), one sigmoid per propeller (PX4 order 1..4); `label_probability` (N, 16) "
+        "is the product of the four Bernoullis over the paper's label masks.",
+        f"- Network: the paper's CNN (3x3 kernels, {train['channels']} channels doubling over {train['blocks']} blocks, "
+        f"2x2 max-pool after each, dense {train['dense']}), head `{train['head']}`.",
+        "",
+        "## Training data",
+        f"- {16 * spec['flights_per_label']} simulated {spec['duration_s']:.0f} s flights ({spec['flights_per_label']} per label), "
+        f"random 5-waypoint routes, payload {spec['payload_kg'][0]}..{spec['payload_kg'][1]} kg on the 1.5 kg quad, "
+        f"steady wind up to {spec['wind_max_m_s']} m/s over {spec['vehicle_variants']} vehicle variants, "
+        "each faulty propeller bent or cracked at random.",
+        f"- Propeller models: `{cfg['propellers']}`"
+        + (" (analytic fault signatures of `offline/propellers/faults.py`: the LSTM weights were not built when this model was trained)."
+           if cfg["propellers"] == "quadratic" else " (the paper's stacked LSTMs)."),
+        f"- Split: whole flights held out ({train['test_fraction']:.0%} per label); no window shares a sample across the split. "
+        f"Training windows: every {train['train_stride']}th start per epoch, {train['epochs']} epochs.",
+        "- The paper's routes A and B and its 1.95 kg payload are never in training: A, B and C below are all unseen flights.",
+        "",
+        f"## Accuracy (window-level, hop {fig['hop']}), beside the paper",
+        format_table(results),
+        "",
+        "Precision/recall are fault-vs-normal (label 1 vs any other), positive = fault, as in the paper.",
+        "",
+        "## Onboard figures (daemon alert rule: "
+        f"P >= {rule['threshold']} for {rule['consecutive']} windows, refractory {rule['refractory_s']} s)",
+        f"- False alarms: {fa['alarms']} in {fa['classified_hours']:.2f} h of healthy shifted flights "
+        f"({fa['flights']} flights) = **{fa['alarms_per_hour']:.2f} per flight-hour**; "
+        f"{100 * fa['windows_over_threshold']:.3f} % of (window, propeller) scores were over the threshold.",
+        f"- Detection after an in-flight onset ({det['flights']} flights, onset at 30..50 s, random fault set): "
+        f"first alert in {100 * det['first_alert']['detected']:.0f} % of flights, median {_s(det['first_alert']['median_s'])}, "
+        f"p90 {_s(det['first_alert']['p90_s'])}; first alert naming only truly faulty propellers in "
+        f"{100 * det['first_correct_alert']['detected']:.0f} %, median {_s(det['first_correct_alert']['median_s'])}. "
+        f"Alerts before onset: {det['alerts_before_onset']}.",
+        "",
+    ]
+    if ablation:
+        lines += ["## Ablation (accuracy %, window hop in the experiments run)", ablation, ""]
+    lines += [
+        "## Limits",
+        "- Simulation only: no real bent or cracked propeller flight exists to test on (see ../shared/data/README.md).",
+        "- One vehicle (`paper-quad-1.5kg`); a data set or log from another vehicle is refused by name.",
+        "- Needs 100 consecutive valid 20 Hz samples (5 s) before the first decision, so detection takes seconds, not milliseconds.",
+        "- Calibration terms (motor efficiency, CG offset) were not randomised here: a real airframe's imbalance can look like a fault;"
+        " calibrate the vehicle first (issue 7).",
+        "",
+    ]
+    path = Path(path)
+    path.write_text("\n".join(lines), encoding="utf-8")
+    return path
+
+
+def _s(v) -> str:
+    return "—" if v is None else f"{v:.1f} s"
