@@ -1,0 +1,251 @@
+"""The daemon as a subprocess: against the replay stub over UDP loopback, on .tlog files, and on bad input.
+
+Synthetic PX4 streams and the toy ONNX model come from ``test_daemon_helpers``;
+every run is bounded in time and uses 127.0.0.1 only.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import random
+import signal
+import socket
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import pytest
+from pymavlink.dialects.v20 import common as mavlink
+from test_daemon_helpers import synth_flight, toy_model, write_tlog
+
+REPO = Path(__file__).resolve().parent.parent
+PY = sys.executable
+TAKEOFF_BOOT_MS = 102_000  # synth_flight: boot clock starts at 100 s, IN_AIR from 2 s
+
+
+def free_udp_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+class Proc:
+    """A subprocess whose stderr is collected by a thread, so the test can wait for a line."""
+
+    def __init__(self, args: list[str], env: dict | None = None):
+        self.p = subprocess.Popen(args, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                                  env={**os.environ, **(env or {})})
+        self.lines: list[str] = []
+        self._t = threading.Thread(target=self._read, daemon=True)
+        self._t.start()
+
+    def _read(self) -> None:
+        for line in self.p.stdout:
+            self.lines.append(line.rstrip("\n"))
+
+    @property
+    def text(self) -> str:
+        return "\n".join(self.lines)
+
+    def wait_for(self, needle: str, timeout_s: float = 20.0) -> bool:
+        end = time.monotonic() + timeout_s
+        while time.monotonic() < end:
+            if needle in self.text:
+                return True
+            if self.p.poll() is not None:
+                self._t.join(2)
+                return needle in self.text
+            time.sleep(0.05)
+        return False
+
+    def stop(self, timeout_s: float = 10.0) -> int:
+        if self.p.poll() is None:
+            self.p.send_signal(signal.SIGTERM)
+        try:
+            rc = self.p.wait(timeout_s)
+        except subprocess.TimeoutExpired:
+            self.p.kill()
+            rc = self.p.wait(5)
+        self._t.join(2)
+        return rc
+
+
+def monitor_cmd(*args: str) -> list[str]:
+    return [PY, "-m", "monitor", *args]
+
+
+@pytest.fixture(scope="module")
+def model(tmp_path_factory) -> Path:
+    return toy_model(tmp_path_factory.mktemp("model") / "toy.onnx")
+
+
+def write_config(path: Path, text: str) -> Path:
+    path.write_text(text)
+    return path
+
+
+def fly_over_udp(tmp_path, model, frames, speed, config_text="", extra=()):
+    """Daemon on udpin, replay stub on udpout; returns (daemon, replay, events, requests, received, report)."""
+    port = free_udp_port()
+    tlog = write_tlog(tmp_path / "flight.tlog", frames)
+    cfg = write_config(tmp_path / "monitor.yaml", config_text or "alerts:\n  refractory_s: 60\n")
+    paths = {k: tmp_path / f"{k}.jsonl" for k in ("events", "requests", "received")}
+    report = tmp_path / "report.json"
+    d = Proc(monitor_cmd("--connect", f"udpin:127.0.0.1:{port}", "--config", str(cfg), "--model", str(model),
+                         "--events", str(paths["events"]), "--report", str(report), *extra))
+    assert d.wait_for("ready:"), d.text
+    r = Proc([PY, "-m", "monitor.cli", "replay", str(tlog), "--connect", f"udpout:127.0.0.1:{port}", "--speed", str(speed),
+              "--requests", str(paths["requests"]), "--received", str(paths["received"]), "--linger", "1.5"])
+    assert r.p.wait(120) == 0, r.text
+    rc = d.stop()
+    assert rc == 0, d.text
+    assert "Traceback" not in d.text and "stopped:" in d.text, d.text
+
+    def jsonl(p):
+        return [json.loads(x) for x in p.read_text().splitlines()] if p.exists() else []
+
+    return d, r, jsonl(paths["events"]), jsonl(paths["requests"]), jsonl(paths["received"]), json.loads(report.read_text())
+
+
+def test_faulty_propeller_alert_over_udp_against_the_replay_stub(tmp_path, model):
+    d, _, events, requests, received, report = fly_over_udp(tmp_path, model, synth_flight(14.0, faulty=(3,)), speed=5)
+    assert events, d.text
+    first = events[0]
+    assert first["faulty_propellers"] == [3] and first["label"] == 4
+    assert set(first) >= {"time_boot_ms", "label", "faulty_propellers", "probabilities"}
+    assert 0 < first["time_boot_ms"] - TAKEOFF_BOOT_MS <= 10_000  # within 10 s of flight time
+    assert all(e["faulty_propellers"] == [3] for e in events)
+    # A good MAVLink component: heartbeats as an onboard controller on the autopilot's system, compid 191.
+    hb = [m for m in received if m["mavpackettype"] == "HEARTBEAT"]
+    assert hb and all(m["_from"] == [1, 191] and m["type"] == 18 for m in hb)
+    texts = [m for m in received if m["mavpackettype"] == "STATUSTEXT"]
+    assert texts and texts[0]["text"].startswith("PROP 3 FAULT p=") and texts[0]["severity"] in (2, 4)
+    assert all(len(t["text"]) <= 50 for t in texts)
+    # Only stream-rate requests, at >= 20 Hz for the fast streams, each acknowledged.
+    cmds = [m for m in received if m["mavpackettype"] == "COMMAND_LONG"]
+    assert cmds and all(m["command"] == 511 for m in cmds)
+    fast = {r["message_id"]: r["interval_us"] for r in requests if r["message_id"] in (30, 36)}
+    assert set(fast) == {30, 36} and max(fast.values()) <= 50_000
+    assert all(r["from"] == [1, 191] and r["result"] == 0 for r in requests)
+    assert report["acks"].get("0", 0) == len(requests)
+    assert {m["mavpackettype"] for m in received} <= {"HEARTBEAT", "STATUSTEXT", "COMMAND_LONG", "NAMED_VALUE_FLOAT"}
+    assert report["ignored"].get("255/190", 0) > 0  # the ground station's heartbeats
+
+
+def test_healthy_flight_raises_no_alert_and_no_requests_when_switched_off(tmp_path, model):
+    cfg = "link:\n  request_streams: false\nalerts:\n  named_value_float: true\n"
+    d, _, events, requests, received, report = fly_over_udp(tmp_path, model, synth_flight(30.0, seed=7), 10, cfg)
+    assert events == [] and report["alerts"] == 0
+    assert report["pipeline"]["classified"] > 300  # it did classify the flight
+    assert not [m for m in received if m["mavpackettype"] in ("COMMAND_LONG", "STATUSTEXT")]
+    assert requests == []
+    nvf = [m for m in received if m["mavpackettype"] == "NAMED_VALUE_FLOAT"]
+    assert {m["name"] for m in nvf} == {"PWF1", "PWF2", "PWF3", "PWF4"} and max(m["value"] for m in nvf) < 0.8
+
+
+def test_link_drop_and_return_and_a_stream_that_stops(tmp_path, model):
+    frames = synth_flight(9.0, faulty=(2,), hole_s=(2.0, 4.5))
+    servo = mavlink.MAVLink(None)
+    # SERVO_OUTPUT_RAW (id 36) stops for good at 6.5 s of flight.
+    cut = frames[0][0] + 6.5
+    frames = [(t, f) for t, f in frames if not (t > cut and servo.decode(bytearray(f)).get_type() == "SERVO_OUTPUT_RAW")]
+    cfg = "link:\n  link_timeout_s: 1.0\n  rate_check_period_s: 1.0\n"
+    d, *_, report = fly_over_udp(tmp_path, model, frames, speed=1.5, config_text=cfg)
+    text = d.text
+    assert "link lost" in text and text.count("link up") >= 2, text
+    assert "stream SERVO_OUTPUT_RAW missing" in text, text
+    assert "motor missing, stale or NaN" in text, text
+    assert report["pipeline"]["classified"] == 0  # never 100 clean steps in a row: nothing invented
+
+
+def test_runs_without_torch_on_a_tlog(tmp_path, model):
+    tlog = write_tlog(tmp_path / "f.tlog", synth_flight(10.0, faulty=(1,)))
+    events = tmp_path / "ev.jsonl"
+    code = ("import sys; sys.modules['torch'] = None\n"
+            "from monitor.cli import main\n"
+            f"rc = main(['monitor', '--connect', {str(tlog)!r}, '--model', {str(model)!r}, '--tlog-speed', '0',"
+            f" '--events', {str(events)!r}])\n"
+            "assert 'offline' not in sys.modules and sys.modules['torch'] is None\n"
+            "sys.exit(rc)\n")
+    p = subprocess.run([PY, "-c", code], cwd=REPO, capture_output=True, text=True, timeout=120)
+    assert p.returncode == 0, p.stderr
+    ev = [json.loads(x) for x in events.read_text().splitlines()]
+    assert ev and ev[0]["faulty_propellers"] == [1]
+
+
+def test_garbage_corrupt_and_truncated_packets_and_nan_in_a_tlog(tmp_path, model):
+    rng = random.Random(3)
+    frames = synth_flight(14.0, faulty=(4,), nan_window_s=(3.0, 3.4))
+    bad = []
+    for i in range(50, len(frames), 97):
+        kind = i % 3
+        if kind == 0:
+            bad.append((i, bytes(rng.randrange(256) for _ in range(rng.randrange(1, 60)))))  # random bytes
+        elif kind == 1:
+            t, f = frames[i - 1]
+            frames[i - 1] = (t, f[:-3] + bytes([f[-3] ^ 0xFF]) + f[-2:])  # payload flipped: CRC fails
+        else:
+            t, f = frames[i - 1]
+            frames[i - 1] = (t, f[: len(f) // 2])  # truncated
+    tlog = write_tlog(tmp_path / "bad.tlog", frames, garbage=bad)
+    report = tmp_path / "r.json"
+    p = subprocess.run(monitor_cmd("--connect", str(tlog), "--model", str(model), "--tlog-speed", "0",
+                                   "--events", str(tmp_path / "ev.jsonl"), "--report", str(report)),
+                       cwd=REPO, capture_output=True, text=True, timeout=120)
+    assert p.returncode == 0 and "Traceback" not in p.stderr, p.stderr
+    assert "attitude missing, stale or NaN" in p.stderr
+    ev = [json.loads(x) for x in (tmp_path / "ev.jsonl").read_text().splitlines()]
+    assert ev and all(e["faulty_propellers"] == [4] for e in ev)
+    r = json.loads(report.read_text())
+    assert r["pipeline"]["resets"] >= 1
+
+
+def test_random_bytes_on_the_udp_port_do_not_crash_it(tmp_path, model):
+    port = free_udp_port()
+    d = Proc(monitor_cmd("--connect", f"udpin:127.0.0.1:{port}", "--model", str(model)))
+    assert d.wait_for("ready:"), d.text
+    rng = random.Random(1)
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        for _ in range(300):
+            payload = bytes(rng.randrange(256) for _ in range(rng.randrange(1, 300)))
+            if rng.random() < 0.3:
+                payload = b"\xfd" + payload  # looks like the start of a MAVLink 2 frame
+            s.sendto(payload, ("127.0.0.1", port))
+    assert d.wait_for("unparseable", 10.0), d.text
+    assert d.p.poll() is None  # still running
+    assert d.stop() == 0 and "Traceback" not in d.text
+
+
+@pytest.mark.parametrize("case,expect", [
+    ("missing", "model file not found"),
+    ("text", "not a loadable ONNX model"),
+    ("no_meta", "not a propwatch model"),
+])
+def test_wrong_or_missing_model_is_one_clear_line(tmp_path, case, expect):
+    path = tmp_path / "m.onnx"
+    if case == "text":
+        path.write_text("not a model")
+    elif case == "no_meta":
+        import onnx
+
+        m = onnx.load(str(toy_model(tmp_path / "src.onnx")))
+        del m.metadata_props[:]
+        onnx.save(m, str(path))
+    p = subprocess.run(monitor_cmd("--connect", "udpin:127.0.0.1:9", "--model", str(path)),
+                       cwd=REPO, capture_output=True, text=True, timeout=60)
+    assert p.returncode == 2 and expect in p.stderr and str(path) in p.stderr and "Traceback" not in p.stderr, p.stderr
+
+
+@pytest.mark.parametrize("text,expect", [
+    ("alerts:\n  treshold: 0.9\n", "treshold"),
+    ("link: [1, 2\n", "invalid YAML"),
+    ("input:\n  motor_source: pwm\n", "input.motor_source"),
+])
+def test_bad_config_is_one_clear_line(tmp_path, model, text, expect):
+    cfg = write_config(tmp_path / "bad.yaml", text)
+    p = subprocess.run(monitor_cmd("--connect", "udpin:127.0.0.1:9", "--config", str(cfg), "--model", str(model)),
+                       cwd=REPO, capture_output=True, text=True, timeout=60)
+    assert p.returncode == 2 and expect in p.stderr and str(cfg) in p.stderr and "Traceback" not in p.stderr, p.stderr
