@@ -33,6 +33,12 @@ from offline.sim.dynamics import GRAVITY_M_S2
 from offline.sim.quat import QUAT_CONJ_MUL
 
 
+def _clip_(x: np.ndarray, lo, hi) -> np.ndarray:
+    """In-place clip; np.clip's Python wrapper costs more than the work on small arrays."""
+    np.maximum(x, lo, out=x)
+    return np.minimum(x, hi, out=x)
+
+
 @dataclass(frozen=True)
 class ControllerConfig:
     """PX4 parameters (names lower-cased, units in the name where PX4 has one)."""
@@ -184,27 +190,27 @@ class Controller:
         vel_sp = err * np.array([cfg.mpc_xy_p, cfg.mpc_xy_p, cfg.mpc_z_p])
         hnorm = np.hypot(vel_sp[:, 0], vel_sp[:, 1])
         vel_sp[:, :2] *= (cfg.mpc_xy_cruise_m_s / np.maximum(hnorm, cfg.mpc_xy_cruise_m_s))[:, None]
-        np.clip(vel_sp[:, 2], -cfg.mpc_z_vel_max_up_m_s, cfg.mpc_z_vel_max_dn_m_s, out=vel_sp[:, 2])
+        _clip_(vel_sp[:, 2], -cfg.mpc_z_vel_max_up_m_s, cfg.mpc_z_vel_max_dn_m_s)
         # Slew-limit the setpoint (stands in for PX4's jerk-limited trajectory).
         dv = vel_sp - c.vel_sp_ned_m_s
         dh = np.hypot(dv[:, 0], dv[:, 1])
         dmax = cfg.mpc_acc_hor_m_s2 * dt
         dv[:, :2] *= (dmax / np.maximum(dh, dmax))[:, None]
-        np.clip(dv[:, 2], -cfg.mpc_acc_up_max_m_s2 * dt, cfg.mpc_acc_down_max_m_s2 * dt, out=dv[:, 2])
+        _clip_(dv[:, 2], -cfg.mpc_acc_up_max_m_s2 * dt, cfg.mpc_acc_down_max_m_s2 * dt)
         c.vel_sp_ned_m_s += dv
         acc_ff = dv / dt
 
         # Velocity PID (derivative on the measurement, as PX4), integrator clamped.
         verr = c.vel_sp_ned_m_s - vel_ned_m_s
         c.vel_int_ned_m_s2 += self.vel_i * verr * dt
-        np.clip(c.vel_int_ned_m_s2, -self.vel_int_lim, self.vel_int_lim, out=c.vel_int_ned_m_s2)
+        _clip_(c.vel_int_ned_m_s2, -self.vel_int_lim, self.vel_int_lim)
         acc_sp = acc_ff + self.vel_p * verr + c.vel_int_ned_m_s2 - self.vel_d * (vel_ned_m_s - c.vel_prev_ned_m_s) / dt
         c.vel_prev_ned_m_s[:] = vel_ned_m_s
 
         # Thrust vector (NED) with vertical priority: clamp collective, then limit the tilt.
         f = acc_sp * self.mass_kg[:, None]
         f[:, 2] -= self.mass_kg * GRAVITY_M_S2
-        np.clip(f[:, 2], -self.thrust_max_n, -self.thrust_min_n, out=f[:, 2])
+        _clip_(f[:, 2], -self.thrust_max_n, -self.thrust_min_n)
         fh = np.hypot(f[:, 0], f[:, 1])
         fh_max = np.minimum(-f[:, 2] * self.tan_tilt_max, np.sqrt(np.maximum(self.thrust_max_n**2 - f[:, 2] ** 2, 0.0)))
         f[:, :2] *= (fh_max / (np.maximum(fh, fh_max) + 1e-12))[:, None]
@@ -216,16 +222,20 @@ class Controller:
         yaw_target = np.where(far, np.arctan2(err[:, 1], err[:, 0]), c.yaw_sp_rad)
         dyaw = (yaw_target - c.yaw_sp_rad + math.pi) % (2 * math.pi) - math.pi
         step = math.radians(cfg.mpc_yawrauto_max_deg_s) * dt
-        c.yaw_sp_rad = (c.yaw_sp_rad + np.clip(dyaw, -step, step) + math.pi) % (2 * math.pi) - math.pi
+        c.yaw_sp_rad = (c.yaw_sp_rad + _clip_(dyaw, -step, step) + math.pi) % (2 * math.pi) - math.pi
 
         # Attitude setpoint: tilt body z onto -f, then yaw. q_tilt takes e_z to z_b = -f/|f|.
         zb = f / -thrust[:, None]
-        qt = np.stack((1.0 + zb[:, 2], -zb[:, 1], zb[:, 0]), axis=1)
-        qt /= np.sqrt(np.einsum("ij,ij->i", qt, qt))[:, None]
-        cy, sy = np.cos(c.yaw_sp_rad / 2), np.sin(c.yaw_sp_rad / 2)
-        # (tw, tx, ty, 0) ⊗ (cy, 0, 0, sy)
-        tw, tx, ty = qt[:, 0], qt[:, 1], qt[:, 2]
-        c.q_sp = np.stack((tw * cy, tx * cy + ty * sy, ty * cy - tx * sy, tw * sy), axis=1)
+        # q_tilt = normalise(1 + zb_z, -zb_y, zb_x, 0), then q_sp = q_tilt ⊗ (cos(yaw/2), 0, 0, sin(yaw/2)).
+        tw = 1.0 + zb[:, 2]
+        inv = 1.0 / np.sqrt(tw * tw + zb[:, 0] * zb[:, 0] + zb[:, 1] * zb[:, 1])
+        cy, sy = np.cos(0.5 * c.yaw_sp_rad) * inv, np.sin(0.5 * c.yaw_sp_rad) * inv
+        tx, ty = -zb[:, 1], zb[:, 0]
+        qs = c.q_sp
+        qs[:, 0] = tw * cy
+        qs[:, 1] = tx * cy + ty * sy
+        qs[:, 2] = ty * cy - tx * sy
+        qs[:, 3] = tw * sy
         return err
 
     # -- attitude, rates and allocation (MulticopterAttitudeControl/RateControl) ---------------
@@ -236,22 +246,19 @@ class Controller:
         np.multiply(q[:, :, None], c.q_sp[:, None, :], out=self._qq)
         qe = np.matmul(self._qq.reshape(n, 16), QUAT_CONJ_MUL, out=self._q4)
         rate_sp = qe[:, 1:] * np.copysign(self.att_2p, qe[:, :1])
-        np.maximum(rate_sp, -self.rate_max, out=rate_sp)
-        np.minimum(rate_sp, self.rate_max, out=rate_sp)
+        _clip_(rate_sp, -self.rate_max, self.rate_max)
 
         # Rate PID in normalised torque, derivative on the measurement (PX4 RateControl).
         rerr = rate_sp
         rerr -= gyro_frd_rad_s
         integ = c.rate_int
         integ += self.rate_i_dt * rerr
-        np.maximum(integ, -self.rate_int_lim, out=integ)
-        np.minimum(integ, self.rate_int_lim, out=integ)
+        _clip_(integ, -self.rate_int_lim, self.rate_int_lim)
         u = self.rate_p * rerr
         u += integ
         u -= self.rate_d_per_dt * (gyro_frd_rad_s - c.rate_prev_rad_s)
         c.rate_prev_rad_s[:] = gyro_frd_rad_s
-        np.maximum(u, -1.0, out=u)
-        np.minimum(u, 1.0, out=u)
+        _clip_(u, -1.0, 1.0)
         return self.allocate(c.thrust_sp_n, u)
 
     def allocate(self, thrust_n: np.ndarray, torque_norm: np.ndarray) -> np.ndarray:
@@ -265,15 +272,15 @@ class Controller:
         lo, span = self.rotor_thrust_min_n, self.rotor_thrust_span_n
         rp = torque_norm[:, :2] @ self.mix_rp
         yw = torque_norm[:, 2:3] * self.mix_yaw
-        rp_spread = rp.max(axis=1) - rp.min(axis=1)
+        rp_spread = np.maximum.reduce(rp, axis=1) - np.minimum.reduce(rp, axis=1)
         rp *= (span / np.maximum(rp_spread, span))[:, None]
         room = span - np.minimum(rp_spread, span)
         y_spread = np.abs(torque_norm[:, 2]) * self.yaw_spread
         yw *= (room / (np.maximum(y_spread, room) + 1e-12))[:, None]
         rp += yw
         coll = 0.25 * thrust_n
-        np.maximum(coll, lo - rp.min(axis=1), out=coll)
-        np.minimum(coll, lo + span - rp.max(axis=1), out=coll)
+        np.maximum(coll, lo - np.minimum.reduce(rp, axis=1), out=coll)
+        np.minimum(coll, lo + span - np.maximum.reduce(rp, axis=1), out=coll)
         rp += coll[:, None]
         np.maximum(rp, lo, out=rp)
         rp *= self.inv_kf

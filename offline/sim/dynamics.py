@@ -29,7 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from monitor.vehicle import VehicleConfig
-from offline.sim.quat import BODY_Z, QUAT_MUL_PURE, rotate_body_to_world, rotate_world_to_body
+from offline.sim.quat import BODY_Z_AND_QDOT, rotate_body_to_world, rotate_world_to_body
 
 GRAVITY_M_S2 = 9.80665  # standard gravity (ISO 80000-3), PX4 CONSTANTS_ONE_G
 
@@ -68,14 +68,15 @@ class Dynamics:
         inertia = np.array(vehicle.inertia_diag_kg_m2, dtype=np.float64)
         ixx, iyy, izz = inertia
         arms = np.array(vehicle.rotor_positions_frd_m, dtype=np.float64) - np.array(vehicle.cg_offset_frd_m)
-        # Thrust T along -z at (x, y, z) gives the moment (x, y, z) x (0, 0, -T) = (-y T, x T, 0); the
-        # drag torque's yaw moment is spin_sign * torque (a CCW rotor yaws the nose right, +z FRD).
-        # Both are divided by the inertia here, so the matmuls give angular acceleration directly.
-        self.thrust_to_wdot = np.zeros((4, 3))
-        self.thrust_to_wdot[:, 0] = -arms[:, 1] / ixx
-        self.thrust_to_wdot[:, 1] = arms[:, 0] / iyy
-        self.torque_to_wdot = np.zeros((4, 3))
-        self.torque_to_wdot[:, 2] = vehicle.spin_sign / izz
+        # [thrust (4), drag torque (4)] @ wrench_map = [total thrust, I^-1 M]. Thrust T along -z at
+        # (x, y, z) gives the moment (x, y, z) x (0, 0, -T) = (-y T, x T, 0); the drag torque's yaw
+        # moment is spin_sign * torque (a CCW rotor yaws the nose right, +z FRD).
+        wm = np.zeros((8, 4))
+        wm[:4, 0] = 1.0
+        wm[:4, 1] = -arms[:, 1] / ixx
+        wm[:4, 2] = arms[:, 0] / iyy
+        wm[4:, 3] = np.asarray(vehicle.spin_sign) / izz
+        self.wrench_map = wm
         # Euler's equations for a diagonal inertia: wdot_i += k_i w_j w_k (i, j, k cyclic).
         gyro = np.zeros((3, 3, 3))
         gyro[1, 2, 0] = (iyy - izz) / ixx
@@ -88,14 +89,16 @@ class Dynamics:
         self.wind_ned_m_s = np.array(vehicle.wind_ned_m_s, dtype=np.float64)
         self.has_drag = bool(np.any(self.drag > 0))
         self.gravity_dt = np.array([0.0, 0.0, GRAVITY_M_S2 * dt])
-        self.half_dt_quat_map = 0.5 * dt * QUAT_MUL_PURE
+        # vec(q outer [q, w]) @ zq_map = [-dt R[:, 2], dt/2 q ⊗ (0, w)].
+        self.zq_map = BODY_Z_AND_QDOT * np.array([-dt] * 3 + [0.5 * dt] * 4)
         # Preallocated work buffers.
-        self._qq = np.empty((n, 4, 4))
-        self._qw = np.empty((n, 4, 3))
+        self._forces = np.empty((n, 8))
+        self._wrench = np.empty((n, 4))
+        self._qw = np.empty((n, 7))
+        self._qqw = np.empty((n, 4, 7))
+        self._zq = np.empty((n, 7))
         self._ww = np.empty((n, 3, 3))
-        self._v3 = np.empty((n, 3))
         self._w3 = np.empty((n, 3))
-        self._q4 = np.empty((n, 4))
         self.force_body_n = np.zeros((n, 3))  # last non-gravity force, body FRD (for the IMU)
 
     def motor_target(self, omega_cmd_rad_s: np.ndarray) -> np.ndarray:
@@ -109,34 +112,39 @@ class Dynamics:
         om += self.motor_alpha * (omega_target_rad_s - om)
         thrust, torque = propellers(om, dt)
         q, w, v = s.q_world_body, s.rates_frd_rad_s, s.vel_ned_m_s
+        f = self._forces
+        f[:, :4] = thrust
+        f[:, 4:] = torque
+        wr = np.matmul(f, self.wrench_map, out=self._wrench)  # [total thrust, I^-1 M]
+        self.force_body_n[:, 2] = -wr[:, 0]
+
+        # One outer product serves the body z axis (thrust direction) and the quaternion rate.
+        qw = self._qw
+        qw[:, :4] = q
+        qw[:, 4:] = w
+        np.multiply(q[:, :, None], qw[:, None, :], out=self._qqw)
+        zq = np.matmul(self._qqw.reshape(n, 28), self.zq_map, out=self._zq)
 
         # Linear: dv = dt (R f_body / m + g).
-        total = thrust.sum(axis=1, keepdims=True)
         if self.has_drag:
             f_body = self.force_body_n
-            f_body[:] = 0.0
-            f_body[:, 2:3] = -total
+            f_body[:, :2] = 0.0
             f_body -= self.drag * rotate_world_to_body(q, v - self.wind_ned_m_s)
             dv = rotate_body_to_world(q, f_body) * (self.inv_mass * dt)
         else:
-            self.force_body_n[:, 2:3] = -total
-            np.multiply(q[:, :, None], q[:, None, :], out=self._qq)
-            dv = np.matmul(self._qq.reshape(n, 16), BODY_Z, out=self._v3)
-            dv *= total * self.inv_mass * -dt
+            dv = zq[:, :3] * (wr[:, :1] * self.inv_mass)
         dv += self.gravity_dt
 
         # Angular: dw = dt (I^-1 M - I^-1 (w x I w)).
         np.multiply(w[:, :, None], w[:, None, :], out=self._ww)
         dw = np.matmul(self._ww.reshape(n, 9), self.gyro_map, out=self._w3)
-        dw += thrust @ self.thrust_to_wdot
-        dw += torque @ self.torque_to_wdot
+        dw += wr[:, 1:]
         dw *= dt
         w += dw
         v += dv
         s.pos_ned_m += dt * v
 
-        # q += dt/2 q ⊗ (0, w), renormalised.
-        np.multiply(q[:, :, None], w[:, None, :], out=self._qw)
-        q += np.matmul(self._qw.reshape(n, 12), self.half_dt_quat_map, out=self._q4)
+        # q += dt/2 q ⊗ (0, w) (with the rates before this step), renormalised.
+        q += zq[:, 3:]
         q /= np.sqrt(np.einsum("ij,ij->i", q, q))[:, None]
         return thrust, torque

@@ -37,7 +37,8 @@ class FlightLog:
     torque_nm: np.ndarray  # (B, T, 4) drag-torque magnitude
     pwm_us: np.ndarray  # (B, T, 4) ESC command sent by the controller
     motor_rpm: np.ndarray  # (B, T, 4) target RPM = ESC fit of pwm_us (monitor.esc)
-    battery_v: np.ndarray  # (B, T)
+    battery_v: np.ndarray  # (B, T) loaded pack voltage
+    battery_current_a: np.ndarray  # (B, T)
     waypoint_error_ned_m: np.ndarray  # (B, T, 3) target waypoint - position
     waypoint_index: np.ndarray  # (B, T) int, waypoint being flown to
     log_rate_hz: float = 20.0

@@ -98,3 +98,14 @@ def _body_z_tensor() -> np.ndarray:
 
 
 BODY_Z = _body_z_tensor()
+
+
+def _z_and_dq_map() -> np.ndarray:
+    """(28, 7): vec(q outer [q, w]) @ map = [body z axis (3), q ⊗ (0, w) (4)] in one matmul."""
+    m = np.zeros((4, 7, 7))
+    m[:, :4, :3] = BODY_Z.reshape(4, 4, 3)
+    m[:, 4:, 3:] = QUAT_MUL_PURE.reshape(4, 3, 4)
+    return m.reshape(28, 7)
+
+
+BODY_Z_AND_QDOT = _z_and_dq_map()

@@ -133,6 +133,7 @@ def simulate(vehicle: VehicleConfig, waypoints_ned_m: np.ndarray, propellers, si
                                                  ("motor_omega_rad_s", 4), ("thrust_n", 4), ("torque_nm", 4),
                                                  ("pwm_us", 4), ("waypoint_error_ned_m", 3))}
     battery_v = np.empty((n, T))
+    battery_a = np.empty((n, T))
     wp_index = np.empty((n, T), dtype=np.int64)
 
     bar = None
@@ -181,6 +182,7 @@ def simulate(vehicle: VehicleConfig, waypoints_ned_m: np.ndarray, propellers, si
             log["waypoint_error_ned_m"][:, j] = wps[rows, cstate.waypoint_index] - state.pos_ned_m
             wp_index[:, j] = cstate.waypoint_index
             battery_v[:, j] = battery.update(np.einsum("ij,ij->i", torque, state.omega_rad_s), 1.0 / sim.log_rate_hz)
+            battery_a[:, j] = battery.current_a
             if bar is not None:
                 bar.update(1)
     if bar is not None:
@@ -195,6 +197,6 @@ def simulate(vehicle: VehicleConfig, waypoints_ned_m: np.ndarray, propellers, si
     timestamp_us = BOOT_OFFSET_US + np.round(np.arange(1, T + 1) * (1e6 / sim.log_rate_hz)).astype(np.int64)
     return FlightLog(
         time_s=time_s, timestamp_us=timestamp_us, roll_rad=roll, pitch_rad=pitch, yaw_rad=yaw,
-        motor_rpm=esc.cmd_to_rpm(log["pwm_us"]), battery_v=battery_v, waypoint_index=wp_index,
+        motor_rpm=esc.cmd_to_rpm(log["pwm_us"]), battery_v=battery_v, battery_current_a=battery_a, waypoint_index=wp_index,
         log_rate_hz=float(sim.log_rate_hz), **log,
     )
