@@ -63,7 +63,7 @@ def read_dataflash(path: str | Path) -> RawFlight:
                 t = _time_us(msg, names, last_us)
                 last_us = max(last_us, t)
                 _collect(typ, {n: getattr(msg, n) for n in names}, t, rows)
-            leftover = int(m.data_len - m.offset)
+            leftover = _cut_off_bytes(path.read_bytes(), {k: f.len for k, f in m.formats.items()})
             m.close()
     except LogFormatError:
         raise
@@ -75,7 +75,7 @@ def read_dataflash(path: str | Path) -> RawFlight:
     if skipped:
         warnings.append(f"{path.name}: corrupted data skipped ({len(skipped)} place(s), first: {skipped[0].strip()})")
     if leftover > 0:
-        warnings.append(f"{path.name}: log ends in a truncated message ({leftover} bytes unread): read up to the damage")
+        warnings.append(f"{path.name}: last message cut off {leftover} bytes short (truncated log): read up to the damage")
     if not rows["cmd"]:
         raise LogFormatError(f"{path}: no RCOU messages (motor outputs): cannot diagnose")
     if not rows["att"]:
@@ -118,6 +118,27 @@ def read_dataflash(path: str | Path) -> RawFlight:
         pos_ned_m=None if ekf is None else Stream(ekf.t_us, ekf.values[:, 3:]),
         warnings=warnings,
     )
+
+
+TAIL_BYTES = 2048
+
+
+def _cut_off_bytes(data: bytes, lengths: dict[int, int]) -> int:
+    """Bytes missing from a final message cut off by the end of the file (0: it ends cleanly).
+
+    DFReader stops silently at a cut-off message. From the first header in the
+    last 2 KiB that chains header to header, walk to the end of the file.
+    """
+    n = len(data)
+    for c in range(max(0, n - TAIL_BYTES), n - 2):
+        p = c
+        while p + 3 <= n and data[p] == 0xA3 and data[p + 1] == 0x95 and data[p + 2] in lengths:
+            p += lengths[data[p + 2]]
+        if p >= n:
+            return p - n
+        if p > c and p + 3 > n:
+            return 1  # a header fragment at the very end
+    return 0
 
 
 def _events(s: Stream | None) -> Stream | None:

@@ -11,6 +11,9 @@ ULog timestamps are µs on the boot clock already.
 
 from __future__ import annotations
 
+import contextlib
+import io
+import struct
 from pathlib import Path
 
 import numpy as np
@@ -32,6 +35,23 @@ def _pyulog():
     return ULog
 
 
+ULOG_HEADER_BYTES = 16
+MSG_HEADER = struct.Struct("<HB")
+
+
+def _cut_off_bytes(path: Path) -> int:
+    """Bytes of a final message that runs past the end of the file (0 if it ends cleanly).
+
+    pyulog stops silently at a cut-off message; walking the message headers tells.
+    """
+    data = path.read_bytes()
+    off, n = ULOG_HEADER_BYTES, len(data)
+    while off + MSG_HEADER.size <= n:
+        size, _ = MSG_HEADER.unpack_from(data, off)
+        off += MSG_HEADER.size + size
+    return max(0, off - n) if off > n else (n - off)
+
+
 def _topic(ulog, name: str) -> dict | None:
     sets = [d for d in ulog.data_list if d.name == name]
     if not sets:
@@ -50,13 +70,18 @@ def read_ulog(path: str | Path) -> RawFlight:
     if not path.is_file():
         raise LogFormatError(f"{path}: no such file")
     ULog = _pyulog()
+    chatter = io.StringIO()
     try:
-        ulog = ULog(str(path), TOPICS)
+        with contextlib.redirect_stdout(chatter):  # pyulog prints its corruption notices
+            ulog = ULog(str(path), TOPICS)
     except Exception as exc:  # pyulog raises plain exceptions on bad headers
         raise LogFormatError(f"{path}: not a readable ULog file: {exc}") from exc
     warnings = []
     if getattr(ulog, "file_corruption", False):
-        warnings.append(f"{path.name}: ULog file is corrupted or truncated: read up to the damage")
+        warnings.append(f"{path.name}: ULog file is corrupted: damaged data skipped")
+    cut = _cut_off_bytes(path)
+    if cut:
+        warnings.append(f"{path.name}: last message cut off ({cut} bytes; truncated log): read up to the damage")
 
     def need(name: str, fields: list[str]) -> Stream:
         d = _topic(ulog, name)

@@ -1,0 +1,64 @@
+"""The DataFlash reader on the real ArduCopter log171.bin (facts from its README)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from monitor.errors import LogFormatError
+from monitor.esc import PAPER_ESC
+from monitor.logs import detect_format, read_log, read_raw, to_flight_table
+
+LOG171 = Path(__file__).resolve().parents[2] / "shared" / "data" / "ardupilot_log171" / "log171.bin"
+pytestmark = [pytest.mark.realdata,
+              pytest.mark.skipif(not LOG171.is_file(), reason=f"real ArduPilot log not found at {LOG171}")]
+
+
+@pytest.fixture(scope="module")
+def raw():
+    return read_raw(LOG171)
+
+
+def test_streams_units_and_rates(raw):
+    assert detect_format(LOG171) == "dataflash"
+    assert 48 < raw.motor_cmd.rate_hz() < 52  # RCOU ~49 Hz
+    assert 9 < raw.attitude_rad.rate_hz() < 11  # ATT/RATE 10 Hz
+    cmd = raw.motor_cmd.values
+    assert cmd.min() == 1000 and 1790 < cmd.max() < 1860  # README: 1000 disarmed, up to 1792-1853
+    yaw = raw.attitude_rad.values[:, 2]
+    assert yaw.min() >= -np.pi and yaw.max() < np.pi  # 0..360 deg wrapped
+    # README: |roll| > 60 deg from t ~ 239 s (the flip); degrees were converted once.
+    roll = raw.attitude_rad.values[:, 0]
+    first = raw.attitude_rad.t_us[np.flatnonzero(np.abs(roll) > np.deg2rad(60))[0]] / 1e6
+    assert 238 < first < 240
+    assert np.abs(roll[raw.attitude_rad.t_us < 230e6]).max() < np.deg2rad(60)
+    assert 14.0 < raw.battery_v.values[0] < 17.0  # 4S pack; CURR.Volt was centivolts
+    assert np.abs(np.median(raw.accel_frd_m_s2.values[:, 2]) + 9.8) < 0.5  # FRD specific force at rest
+
+
+def test_airborne_matches_the_armed_flight(raw):
+    table = to_flight_table(raw, esc=PAPER_ESC)
+    seg = table.airborne_segments()
+    start_s = table.timestamp_us[seg[0][0]] / 1e6
+    assert 82 < start_s < 85  # README: armed flight from t = 83 s
+    assert table.timestamp_us[seg[-1][1] - 1] / 1e6 < 254.1
+    assert any("below the model's 20 Hz" in w for w in table.warnings)  # ATT at 10 Hz
+
+
+def test_truncated_dataflash_reads_up_to_the_cut(tmp_path):
+    data = LOG171.read_bytes()
+    cut = tmp_path / "cut.bin"
+    cut.write_bytes(data[: len(data) // 2 + 5])
+    raw = read_raw(cut)
+    assert any("truncated" in w for w in raw.warnings)
+    assert 100 < raw.motor_cmd.t_us[-1] / 1e6 < 200
+
+
+def test_dataflash_without_motor_outputs_is_an_error(tmp_path):
+    data = LOG171.read_bytes()
+    cut = tmp_path / "head.bin"
+    cut.write_bytes(data[:3000])  # formats and parameters only
+    with pytest.raises(LogFormatError, match="RCOU"):
+        read_log(cut, esc=PAPER_ESC)

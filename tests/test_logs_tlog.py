@@ -1,0 +1,97 @@
+"""The tlog reader: round trip through pymavlink, damage handling, missing messages."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from test_diagnose_fixtures import flight_profile, write_tlog
+
+from monitor.errors import LogFormatError
+from monitor.esc import PAPER_ESC
+from monitor.logs import detect_format, read_log, read_raw
+from monitor.logs.tlog import iter_frames
+
+
+def test_round_trip_values_on_the_grid(tmp_path):
+    path = write_tlog(tmp_path / "f.tlog", duration_s=20.0, faulty=2, rate_hz=50.0)
+    t_us, pwm, att, _, landed = flight_profile(20.0, 50.0, 2)
+    table = read_log(path, esc=PAPER_ESC)
+    assert detect_format(path) == "tlog"
+    # Grid instants are multiples of 50 ms on the boot clock; samples at 20 ms land exactly on every other grid point.
+    assert np.all(table.timestamp_us % 50_000 == 0)
+    idx = np.searchsorted(t_us, table.timestamp_us, side="right") - 1
+    expect_pwm = np.round(pwm[idx])  # SERVO_OUTPUT_RAW carries whole µs
+    np.testing.assert_array_equal(table.motor_cmd, expect_pwm)
+    np.testing.assert_allclose(table.motor_rpm, PAPER_ESC.cmd_to_rpm(expect_pwm))
+    np.testing.assert_allclose(table.roll_rad, att[idx, 0], atol=1e-6)  # float32 on the wire
+    np.testing.assert_allclose(table.yaw_rate_rad_s, att[idx, 5], atol=1e-6)
+    # Airborne = armed and IN_AIR (EXTENDED_SYS_STATE at 1 Hz, held): 2 s .. 18 s, to within the 1 s message period.
+    seg = table.airborne_segments()
+    assert len(seg) == 1
+    t0 = (table.timestamp_us[seg[0][0]] - t_us[0]) / 1e6
+    t1 = (table.timestamp_us[seg[0][1] - 1] - t_us[0]) / 1e6
+    assert 2.0 <= t0 <= 3.05 and 17.0 <= t1 < 18.0
+    assert table.warnings == ()
+    assert table.pos_ned_m is not None and table.battery_v[seg[0][0]] == pytest.approx(16.0)
+
+
+def test_ground_station_messages_are_ignored(tmp_path):
+    path = write_tlog(tmp_path / "f.tlog", duration_s=8.0)
+    raw = read_raw(path)
+    # The GCS heartbeat says "not armed"; the autopilot's says armed: only the autopilot's count.
+    assert np.all(raw.armed.values == 1.0)
+
+
+def test_truncated_log_is_read_up_to_the_cut(tmp_path):
+    full = write_tlog(tmp_path / "full.tlog", duration_s=20.0)
+    data = full.read_bytes()
+    cut = tmp_path / "cut.tlog"
+    cut.write_bytes(data[: len(data) // 2 + 7])  # mid-frame
+    whole, part = read_raw(full), read_raw(cut)
+    assert any("truncated" in w for w in part.warnings)
+    n = len(part.attitude_rad)
+    assert 0.45 * len(whole.attitude_rad) < n < 0.55 * len(whole.attitude_rad)
+    np.testing.assert_array_equal(part.attitude_rad.values, whole.attitude_rad.values[:n])
+
+
+def test_corrupted_bytes_are_skipped_and_reading_goes_on(tmp_path):
+    full = write_tlog(tmp_path / "full.tlog", duration_s=20.0)
+    data = bytearray(full.read_bytes())
+    mid = len(data) // 3
+    data[mid:mid + 300] = bytes(range(256)) + bytes(44)  # garbage over several frames
+    bad = tmp_path / "bad.tlog"
+    bad.write_bytes(bytes(data))
+    whole, part = read_raw(full), read_raw(bad)
+    assert any("corrupted" in w for w in part.warnings)
+    # Frames after the damage are still read: the last attitude sample is the same.
+    assert part.attitude_rad.t_us[-1] == whole.attitude_rad.t_us[-1]
+    assert len(whole.attitude_rad) - 10 < len(part.attitude_rad) < len(whole.attitude_rad)
+
+
+def test_frame_walk_skips_unwanted_ids_without_decoding(tmp_path):
+    path = write_tlog(tmp_path / "f.tlog", duration_s=4.0)
+    ids = [fr[7] | fr[8] << 8 for _, fr in iter_frames(path.read_bytes(), wanted=frozenset({30}))]
+    assert ids and set(ids) == {30}  # ATTITUDE only
+
+
+def test_missing_motor_outputs_is_a_clear_error(tmp_path):
+    import struct
+
+    from pymavlink.dialects.v20 import common
+
+    mav = common.MAVLink(None, srcSystem=1, srcComponent=1)
+    out = bytearray()
+    for i in range(50):
+        for msg in (mav.heartbeat_encode(2, 12, 129, 0, 4), mav.attitude_encode(i * 100, 0, 0, 0, 0, 0, 0)):
+            out += struct.pack(">Q", i * 100_000) + msg.pack(mav)
+    path = tmp_path / "nomotor.tlog"
+    path.write_bytes(bytes(out))
+    with pytest.raises(LogFormatError, match="motor outputs"):
+        read_raw(path)
+
+
+def test_unknown_format_is_a_clear_error(tmp_path):
+    path = tmp_path / "x.log"
+    path.write_bytes(b"this is not a flight log at all\n" * 10)
+    with pytest.raises(LogFormatError, match="unknown log format"):
+        read_raw(path)
