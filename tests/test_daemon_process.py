@@ -249,3 +249,31 @@ def test_bad_config_is_one_clear_line(tmp_path, model, text, expect):
     p = subprocess.run(monitor_cmd("--connect", "udpin:127.0.0.1:9", "--config", str(cfg), "--model", str(model)),
                        cwd=REPO, capture_output=True, text=True, timeout=60)
     assert p.returncode == 2 and expect in p.stderr and str(cfg) in p.stderr and "Traceback" not in p.stderr, p.stderr
+
+
+def test_systemd_notify_watchdog_and_clean_sigterm(tmp_path, model):
+    """Under systemd (Type=notify, WatchdogSec): READY=1, WATCHDOG=1 from the loop, STOPPING=1 and exit 0 on SIGTERM."""
+    sock_path = str(tmp_path / "notify.sock")
+    srv = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
+    srv.bind(sock_path)
+    srv.settimeout(10.0)
+    port = free_udp_port()
+    d = Proc(monitor_cmd("--connect", f"udpin:127.0.0.1:{port}", "--model", str(model)),
+             env={"NOTIFY_SOCKET": sock_path, "WATCHDOG_USEC": "400000"})
+    try:
+        got = []
+        while not any(m.startswith(b"WATCHDOG=1") for m in got) or len(got) < 3:
+            got.append(srv.recv(256))
+        assert got[0].startswith(b"READY=1") and got.count(b"WATCHDOG=1") >= 2
+    finally:
+        rc = d.stop()
+    assert rc == 0 and "signal 15: stopping" in d.text and "stopped:" in d.text, d.text
+    rest = []
+    srv.settimeout(0.5)
+    try:
+        while True:
+            rest.append(srv.recv(256))
+    except TimeoutError:
+        pass
+    srv.close()
+    assert b"STOPPING=1" in rest
