@@ -1,0 +1,126 @@
+"""``propwatch train-propellers``: virtual load cell -> one stacked LSTM per condition -> models/propellers.
+
+    propwatch train-propellers --out models/propellers [--seed S] [--epochs N] [--vehicle models/vehicle.yaml]
+    propwatch train-propellers --fit-stand FILE.csv [FILE.csv ...] [--json]
+
+The first form reproduces the shipped weights (``<condition>.npz``) and writes
+``manifest.json`` (load-cell and training config, seed, git revision, the
+test-split MAPE table beside the paper's figures and a kF·ω² fit). The second
+reads real RCbenchmark/Tyto exports and prints the ESC->RPM, kF and kτ fits.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import sys
+from pathlib import Path
+
+from monitor.errors import PropwatchError
+from monitor.vehicle import DEFAULT_VEHICLE, load_vehicle
+from offline.propellers import CONDITIONS, MODELS_DIR
+from offline.propellers.thrust_stand import fit_esc_to_rpm, fit_kf, fit_ktau, read_thrust_stand_csv
+
+# Tong et al., Sec. V-A: test-set mean error of their LSTMs, percent.
+PAPER_MAPE_PCT = {"normal": {"torque": 2.29, "thrust": 0.613}, "bent": {"torque": 1.37, "thrust": 0.689},
+                  "cracked": {"torque": 2.47, "thrust": 4.27}}
+
+
+def fit_stand_files(paths: list[str]) -> list[dict]:
+    """One row per file: what could be fitted, with R² and RMSE; files without RPM say so."""
+    rows = []
+    for p in paths:
+        run = read_thrust_stand_csv(p)
+        row: dict = {"file": str(p), "rows": int(run.time_s.size), "has_torque": run.torque_nm is not None}
+        try:
+            esc, kf = fit_esc_to_rpm(run), fit_kf(run)
+        except PropwatchError as exc:
+            row["skipped"] = str(exc)
+            rows.append(row)
+            continue
+        row["esc_to_rpm"] = dataclasses.asdict(esc)
+        row["kf_n_per_rad_s2"] = dataclasses.asdict(kf)
+        if run.torque_nm is not None:
+            row["ktau_nm_per_rad_s2"] = dataclasses.asdict(fit_ktau(run))
+        rows.append(row)
+    return rows
+
+
+def _print_fits(rows: list[dict]) -> None:
+    for r in rows:
+        name = Path(r["file"]).name
+        if "skipped" in r:
+            print(f"{name}: skipped ({r['skipped'].split(': ', 1)[-1]})")
+            continue
+        e, k = r["esc_to_rpm"], r["kf_n_per_rad_s2"]
+        line = (f"{name}: rpm = {e['coefficients'][0]:.4g}·esc² + {e['coefficients'][1]:.4g}·esc + {e['coefficients'][2]:.5g}"
+                f" (R² {e['r2']:.4f}, RMSE {e['rmse']:.0f} RPM); kF {k['coefficients'][0]:.4g} (R² {k['r2']:.4f}, RMSE {k['rmse']:.3g} N)")
+        if "ktau_nm_per_rad_s2" in r:
+            q = r["ktau_nm_per_rad_s2"]
+            line += f"; kτ {q['coefficients'][0]:.4g} (R² {q['r2']:.3f}, RMSE {q['rmse']:.2g} N·m)"
+        print(line)
+
+
+def train_all(out_dir: Path, vehicle_path: Path, seed: int, epochs: int | None) -> dict:
+    import torch
+
+    from offline.manifest import make_manifest, write_manifest
+    from offline.propellers.loadcell import LoadCellConfig, run_load_cell
+    from offline.propellers.lstm_train import TrainConfig, config_dict, evaluate, reload_as_shipped, train_condition
+
+    torch.set_num_threads(1)
+    vehicle = load_vehicle(vehicle_path)
+    cell_cfg = LoadCellConfig(seed=seed)
+    train_cfg = TrainConfig(seed=seed) if epochs is None else TrainConfig(seed=seed, max_epochs=epochs)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    metrics, histories = {}, {}
+    for condition in CONDITIONS:
+        s, y = run_load_cell(vehicle, condition, cell_cfg).normalised(vehicle)
+        model, history = train_condition(s, y, condition, cell_cfg.sample_period_s, train_cfg)
+        model = reload_as_shipped(model, out_dir / f"{condition}.npz")
+        metrics[condition] = {**evaluate(model, s, y, train_cfg),
+                              **{f"paper_{k}_mape_pct": v for k, v in PAPER_MAPE_PCT[condition].items()}}
+        histories[condition] = history
+        m = metrics[condition]
+        print(f"{condition:8s} thrust MAPE {m['lstm_thrust_mape_pct']:.3f} % (paper {m['paper_thrust_mape_pct']}, "
+              f"kF·ω² {m['quadratic_thrust_mape_pct']:.3f})  torque MAPE {m['lstm_torque_mape_pct']:.3f} % "
+              f"(paper {m['paper_torque_mape_pct']}, kτ·ω² {m['quadratic_torque_mape_pct']:.3f})  "
+              f"epochs {len(history['epochs'])}", flush=True)
+    manifest = make_manifest(
+        "propeller-lstm", {"load_cell": dataclasses.asdict(cell_cfg), "training": config_dict(train_cfg),
+                           "vehicle": str(vehicle_path), "vehicle_kf_n_per_rad_s2": vehicle.kf_n_per_rad_s2,
+                           "vehicle_ktau_nm_per_rad_s2": vehicle.ktau_nm_per_rad_s2,
+                           "vehicle_omega_max_rad_s": vehicle.omega_max_rad_s},
+        seed, files=[f"{c}.npz" for c in CONDITIONS], metrics=metrics, training_history=histories,
+        units="input omega/omega_max; outputs thrust/(kF·omega_max²), torque/(kτ·omega_max²)",
+        mape_note=f"test = last {train_cfg.test_fraction:.0%} of each sweep, samples whose measured value is "
+                  f">= {train_cfg.mape_min_fraction:.0%} of full scale; LSTM run statefully over the whole sweep")
+    write_manifest(out_dir / "manifest.json", manifest)
+    return manifest
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="propwatch train-propellers", description=__doc__.split("\n")[0])
+    ap.add_argument("--out", type=Path, default=MODELS_DIR, help="output folder (default models/propellers)")
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--epochs", type=int, default=None, help="maximum epochs per condition (default: the TrainConfig's)")
+    ap.add_argument("--vehicle", type=Path, default=DEFAULT_VEHICLE, help="vehicle YAML the load cell is built around")
+    ap.add_argument("--fit-stand", nargs="+", metavar="CSV", help="only fit real thrust-stand exports and print the fits")
+    ap.add_argument("--json", action="store_true", help="with --fit-stand: print JSON")
+    args = ap.parse_args(argv)
+    if args.fit_stand:
+        rows = fit_stand_files(args.fit_stand)
+        if args.json:
+            json.dump(rows, sys.stdout, indent=2)
+            print()
+        else:
+            _print_fits(rows)
+        return 0
+    train_all(args.out, args.vehicle, args.seed, args.epochs)
+    print(f"wrote {args.out}/{{{','.join(CONDITIONS)}}}.npz and manifest.json")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
