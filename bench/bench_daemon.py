@@ -1,0 +1,146 @@
+"""Benchmark of the onboard monitor daemon: a replayed flight over UDP loopback, as on the vehicle.
+
+    python bench/bench_daemon.py                      # 10-minute flight at real pace (the issue's measure)
+    python bench/bench_daemon.py --minutes 1 --speed 10   # quick run (6 s)
+
+Two processes, as deployed: ``propwatch replay`` plays the flight as PX4 would
+(udpout) and ``propwatch monitor`` listens (udpin) and classifies at every
+20 Hz step. Printed figures, with the issue's targets:
+
+- end-to-end latency, from the arrival of the message that completes a grid
+  step (its socket read, before parsing) to that step's classification, p50 and p99
+  (target p99 <= 5 ms); measured inside the daemon (``--report``);
+- CPU share of the daemon process over the replay, from /proc (target <= 5 % of one core);
+- peak RSS of the daemon from /proc (target <= 150 MB);
+- start-up, from spawning the daemon to its "ready" line (target <= 2 s).
+
+The flight is the synthetic PX4 stream of ``tests/test_daemon_helpers.py``
+(HEARTBEAT, EXTENDED_SYS_STATE, ATTITUDE 50 Hz, SERVO_OUTPUT_RAW and
+ESC_STATUS 25 Hz, battery, a GCS on system 255), or ``--tlog`` any recorded
+or simulated flight. The model is ``models/classifier.onnx`` when present,
+else the tests' toy model (same input shape, 100 x 10); ``--model`` picks one.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(REPO / "tests"))
+TARGETS = {"latency_p99_ms": 5.0, "cpu_percent": 5.0, "rss_mb": 150.0, "startup_s": 2.0}
+CLK_TCK = os.sysconf("SC_CLK_TCK")
+
+
+def free_udp_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def cpu_seconds(pid: int) -> float:
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / CLK_TCK  # utime + stime
+
+
+def rss_mb(pid: int) -> float:
+    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+        if line.startswith("VmRSS:"):
+            return int(line.split()[1]) / 1024.0
+    return float("nan")
+
+
+def build_inputs(args, work: Path) -> tuple[Path, Path]:
+    model = Path(args.model) if args.model else REPO / "models" / "classifier.onnx"
+    if not model.is_file():
+        from test_daemon_helpers import toy_model
+
+        model = toy_model(work / "toy.onnx")
+    if args.tlog:
+        return model, Path(args.tlog)
+    from test_daemon_helpers import synth_flight, write_tlog
+
+    return model, write_tlog(work / "flight.tlog", synth_flight(args.minutes * 60.0, faulty=(3,), seed=args.seed))
+
+
+def run(args) -> dict:
+    with tempfile.TemporaryDirectory() as tmp:
+        work = Path(tmp)
+        model, tlog = build_inputs(args, work)
+        port = free_udp_port()
+        report = work / "report.json"
+        cmd = [sys.executable, "-m", "monitor", "--connect", f"udpin:127.0.0.1:{port}", "--model", str(model),
+               "--report", str(report), "--events", str(work / "events.jsonl")]
+        t_spawn = time.monotonic()
+        d = subprocess.Popen(cmd, cwd=REPO, stderr=subprocess.PIPE, text=True)
+        ready = threading.Event()
+        lines: list[str] = []
+
+        def read():
+            for line in d.stderr:
+                lines.append(line)
+                if "ready:" in line:
+                    ready.set()
+
+        threading.Thread(target=read, daemon=True).start()
+        if not ready.wait(30):
+            d.kill()
+            raise SystemExit("daemon did not become ready:\n" + "".join(lines))
+        startup_s = time.monotonic() - t_spawn
+        cpu0, t0, rss_peak = cpu_seconds(d.pid), time.monotonic(), rss_mb(d.pid)
+        linger_s = 0.5
+        r = subprocess.Popen([sys.executable, "-m", "monitor.cli", "replay", str(tlog), "--connect", f"udpout:127.0.0.1:{port}",
+                              "--speed", str(args.speed), "--linger", str(linger_s), "--log-level", "WARNING"], cwd=REPO)
+        while r.poll() is None:
+            time.sleep(0.2)
+            rss_peak = max(rss_peak, rss_mb(d.pid))
+        cpu1, t1 = cpu_seconds(d.pid), time.monotonic()
+        d.send_signal(signal.SIGTERM)
+        d.wait(30)
+        rep = json.loads(report.read_text())
+    lat = rep["latency_ms"]
+    return {
+        "ran": {"replay_wall_s": round(t1 - t0 - linger_s, 1), "speed": args.speed,
+                "flight_minutes": round((t1 - t0 - linger_s) * args.speed / 60.0, 2), "model": str(model),
+                "tlog": str(args.tlog or "synthetic"), "messages": rep["messages"], "classified_steps": rep["pipeline"]["classified"]},
+        "latency_p50_ms": round(lat["p50"], 3), "latency_p99_ms": round(lat["p99"], 3), "latency_max_ms": round(lat["max"], 3),
+        "cpu_percent": round(100.0 * (cpu1 - cpu0) / (t1 - t0), 2),
+        "rss_mb": round(rss_peak, 1),
+        "startup_s": round(startup_s, 3),
+        "alerts": rep["alerts"],
+    }
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--minutes", type=float, default=10.0, help="flight length (synthetic flight)")
+    p.add_argument("--speed", type=float, default=1.0, help="replay speed; 1 = real pace (CPU share is only meaningful at 1)")
+    p.add_argument("--tlog", help="replay this .tlog instead of a synthetic flight")
+    p.add_argument("--model", help="ONNX model (default models/classifier.onnx, else the tests' toy model)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--json", action="store_true")
+    args = p.parse_args(argv)
+    res = run(args)
+    if args.json:
+        print(json.dumps(res, indent=2))
+        return 0
+    print(f"ran: {json.dumps(res['ran'])}")
+    for key, target in TARGETS.items():
+        ok = res[key] <= target
+        print(f"{key:16s} {res[key]:10.3f}   target <= {target:<6g} {'ok' if ok else 'OVER'}")
+    print(f"{'latency_p50_ms':16s} {res['latency_p50_ms']:10.3f}")
+    print(f"{'latency_max_ms':16s} {res['latency_max_ms']:10.3f}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
