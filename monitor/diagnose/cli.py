@@ -7,13 +7,14 @@ Output with ``--json`` (stdout), for one LOG::
      "windows": n, "warnings": [...], "reason": null | "why there is no verdict",
      "propellers": [{"propeller": 1, "name": "M1", "fault_probability": p, "faulty": bool}, ...],
      "label_probability": [16 values] | null,
-     "airborne_segments": [{"start_s", "stop_s", "steps"}, ...],
-     "timeline": {"t_s": [...], "fault_probability": [[p1..p4], ...], "label": [...]},
+     "airborne_segments": [{"start_boot_s", "stop_boot_s", "steps"}, ...],
+     "timeline": {"t_boot_s": [...], "fault_probability": [[p1..p4], ...], "label": [...]},
      "hop_steps": k}
 
 For several LOGs: ``{"results": [one object as above per LOG, in order]}``;
 a log that cannot be read appears as ``{"log": PATH, "error": "..."}``.
-Propellers are in PX4 order; ``name`` is the vehicle's own numbering.
+Propellers are in PX4 order; ``name`` is the vehicle's own numbering. Times are
+seconds on the autopilot's boot clock; a timeline point is the end of its window.
 
 Exit code: 0 every log got a verdict; 1 some log got no verdict (the reason
 says why: outside the model's envelope, no airborne flight, ...); 2 some log
@@ -27,12 +28,13 @@ import json
 import sys
 from pathlib import Path
 
+from monitor.daemon.cli import choose_esc
 from monitor.diagnose.engine import Diagnosis, diagnose_table
-from monitor.errors import ModelError, PropwatchError
+from monitor.errors import PropwatchError
 from monitor.esc import EscCurve
 from monitor.logs import read_log
 from monitor.model import Classifier
-from monitor.vehicle import DEFAULT_VEHICLE, REPO_ROOT, load_vehicle
+from monitor.vehicle import REPO_ROOT
 
 DEFAULT_MODEL = REPO_ROOT / "models" / "classifier.onnx"
 
@@ -46,29 +48,16 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument("--model", default=str(DEFAULT_MODEL), help="classifier ONNX file (default: models/classifier.onnx)")
     p.add_argument("--vehicle", default=None,
                    help="vehicle YAML whose ESC curve converts motor commands to RPM "
-                        "(default: the model's metadata vehicle.esc, else models/vehicle.yaml)")
+                        "(default: the model's metadata vehicle.esc, else the paper's fit = models/vehicle.yaml)")
     p.add_argument("--hop", type=int, default=10, help="classify one window every HOP grid steps (default 10 = 0.5 s)")
     p.add_argument("--json", action="store_true", help="print JSON to stdout")
     p.add_argument("--report", metavar="DIR", default=None, help="write PNG + HTML reports into DIR")
     return p.parse_args(argv)
 
 
-def resolve_esc(clf: Classifier, vehicle_path: str | None) -> EscCurve:
-    """--vehicle, else the model's own ESC curve, else the default vehicle's."""
-    if vehicle_path:
-        return load_vehicle(vehicle_path).esc
-    esc = (clf.info.metadata.get("vehicle") or {}).get("esc")
-    if isinstance(esc, dict):
-        try:
-            return EscCurve(**esc)
-        except TypeError as exc:
-            raise ModelError(f"{clf.path}: metadata vehicle.esc is not an ESC curve: {exc}") from exc
-    return load_vehicle(DEFAULT_VEHICLE).esc
-
-
 def diagnose_file(path: str, clf: Classifier, esc: EscCurve, fmt: str | None, hop: int):
     table = read_log(path, fmt=fmt, esc=esc, rate_hz=clf.info.sample_rate_hz)
-    return table, diagnose_table(table, clf, hop=hop)
+    return table, diagnose_table(table, clf, hop=hop, esc=esc)
 
 
 def format_text(d: Diagnosis) -> str:
@@ -84,7 +73,7 @@ def format_text(d: Diagnosis) -> str:
             lines.append(f"  propeller {p['propeller']} ({p['name']}): P(faulty) = {p['fault_probability']:.3f}"
                          + ("  <- FAULTY" if p["faulty"] else ""))
     for s in d.segments:
-        lines.append(f"  airborne {s['start_s']:.1f}-{s['stop_s']:.1f} s ({s['steps']} steps)")
+        lines.append(f"  airborne {s['start_boot_s']:.1f}-{s['stop_boot_s']:.1f} s boot time ({s['steps']} steps)")
     lines += [f"  warning: {w}" for w in d.warnings]
     return "\n".join(lines)
 
@@ -95,7 +84,8 @@ def main(argv: list[str] | None = None) -> int:
         print("propwatch diagnose: --hop must be >= 1", file=sys.stderr)
         return 2
     clf = Classifier(args.model)
-    esc = resolve_esc(clf, args.vehicle)
+    # The daemon's rule, so both convert commands identically: --vehicle, else the model's own ESC curve.
+    esc = choose_esc(clf, args.vehicle or "")
     results, code = [], 0
     for path in args.logs:
         try:

@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from monitor.errors import ModelError
+from monitor.esc import EscCurve
 from monitor.features import compute_features, sliding_windows, valid_windows
 from monitor.flight import FlightTable
 from monitor.labels import LABEL_TABLE
@@ -75,12 +76,17 @@ def window_ends(table: FlightTable, feats: np.ndarray, window: int, hop: int) ->
 
 
 def _t_s(table: FlightTable, i) -> np.ndarray:
-    return (np.asarray(table.timestamp_us)[i] - table.timestamp_us[0]) / US_PER_S
+    """Seconds on the autopilot's boot clock (the times its own tools show)."""
+    return np.asarray(table.timestamp_us)[i] / US_PER_S
 
 
-def envelope_checks(table: FlightTable, clf: Classifier) -> tuple[list[str], str | None]:
+def envelope_checks(table: FlightTable, clf: Classifier, esc: EscCurve | None = None) -> tuple[list[str], str | None]:
     """(warnings, refusal reason or None) for a log the model may not fit."""
     warnings: list[str] = []
+    unit = table.extras.get("motor_cmd_unit")
+    if esc is not None and unit is not None and unit != esc.cmd_unit:
+        return warnings, (f"vehicle outside the model's envelope: its motor commands are in '{unit}' but the model's "
+                          f"ESC curve takes '{esc.cmd_unit}' (another class of vehicle); use a model trained for it")
     air = table.airborne
     if not air.any():
         return warnings, "no airborne flight found (armed, throttle above idle, off the ground)"
@@ -112,17 +118,21 @@ def envelope_checks(table: FlightTable, clf: Classifier) -> tuple[list[str], str
     return warnings, None
 
 
-def diagnose_table(table: FlightTable, clf: Classifier, hop: int = 1, batch: int = 4096) -> Diagnosis:
-    """Classify every usable window of ``table`` (one every ``hop`` steps) and aggregate."""
+def diagnose_table(table: FlightTable, clf: Classifier, hop: int = 1, batch: int = 4096,
+                   esc: EscCurve | None = None) -> Diagnosis:
+    """Classify every usable window of ``table`` (one every ``hop`` steps) and aggregate.
+
+    ``esc``: the curve the table's RPM came from, to refuse a log of another vehicle class.
+    """
     if hop < 1:
         raise ValueError("hop must be >= 1")
     info = clf.info
     if abs(table.rate_hz - info.sample_rate_hz) > 1e-9:
         raise ModelError(f"{table.source}: table at {table.rate_hz} Hz but the model expects {info.sample_rate_hz} Hz")
     warnings = list(table.warnings)
-    env_warn, refusal = envelope_checks(table, clf)
+    env_warn, refusal = envelope_checks(table, clf, esc)
     warnings += env_warn
-    segs = [{"start_s": float(_t_s(table, a)), "stop_s": float(_t_s(table, b - 1)) + 1.0 / table.rate_hz,
+    segs = [{"start_boot_s": float(_t_s(table, a)), "stop_boot_s": float(_t_s(table, b - 1)) + 1.0 / table.rate_hz,
              "steps": int(b - a)} for a, b in table.airborne_segments()]
     d = Diagnosis(table.source, None, 0, warnings, refusal, segments=segs, hop_steps=hop)
     if refusal:
@@ -144,7 +154,7 @@ def diagnose_table(table: FlightTable, clf: Classifier, hop: int = 1, batch: int
     d.label_probability = [float(x) for x in mean_labels]
     d.propellers = [{"propeller": i + 1, "name": table.motor_names[i], "fault_probability": float(p[i]),
                      "faulty": (i + 1) in LABEL_TABLE[label]} for i in range(4)]
-    d.timeline = {"t_s": [float(x) for x in _t_s(table, ends)],
+    d.timeline = {"t_boot_s": [float(x) for x in _t_s(table, ends)],
                   "fault_probability": np.round(faults, 5).tolist(),
                   "label": (np.argmax(labels, axis=1) + 1).tolist()}
     return d

@@ -30,13 +30,13 @@ def plot(d: Diagnosis, table: FlightTable, png: Path) -> None:
         import matplotlib.pyplot as plt
     except ImportError as exc:
         raise PropwatchError("--report needs matplotlib (pip install 'propwatch[logs]')") from exc
-    t = (table.timestamp_us - table.timestamp_us[0]) / US_PER_S
+    t = table.timestamp_us / US_PER_S
     fig, ax = plt.subplots(4, 1, figsize=(11, 10), sharex=True)
     names = table.motor_names
     if d.timeline:
         tl = np.asarray(d.timeline["fault_probability"])
         for i in range(4):
-            ax[0].plot(d.timeline["t_s"], tl[:, i], ".-", ms=2, lw=0.8, label=f"propeller {i + 1} ({names[i]})")
+            ax[0].plot(d.timeline["t_boot_s"], tl[:, i], ".-", ms=2, lw=0.8, label=f"propeller {i + 1} ({names[i]})")
     ax[0].set_ylim(-0.02, 1.02)
     ax[0].set_ylabel("P(faulty)")
     ax[0].legend(loc="upper right", fontsize=8)
@@ -56,11 +56,11 @@ def plot(d: Diagnosis, table: FlightTable, png: Path) -> None:
     for name, lab in (("roll_rate_rad_s", "roll rate"), ("pitch_rate_rad_s", "pitch rate"), ("yaw_rate_rad_s", "yaw rate")):
         ax[3].plot(t, np.rad2deg(getattr(table, name)), lw=0.7, label=lab)
     ax[3].set_ylabel("body rate (deg/s)")
-    ax[3].set_xlabel("time since log start (s)")
+    ax[3].set_xlabel("autopilot boot time (s)")
     ax[3].legend(loc="upper right", fontsize=8)
     for a in ax:
         for s in d.segments:
-            a.axvspan(s["start_s"], s["stop_s"], color="tab:green", alpha=0.08, lw=0)
+            a.axvspan(s["start_boot_s"], s["stop_boot_s"], color="tab:green", alpha=0.08, lw=0)
         a.grid(alpha=0.3)
     fig.tight_layout()
     fig.savefig(png, dpi=90)
@@ -75,7 +75,8 @@ def page(d: Diagnosis, png_name: str) -> str:
                f"<p><b>Label {d.verdict['label']}</b>, faulty propellers: {d.verdict['faulty_propellers'] or 'none'}"
                f" ({d.windows} windows)</p><table border=1 cellpadding=4><tr><th>propeller (PX4)</th><th>name</th>"
                f"<th>P(faulty)</th><th>verdict</th></tr>{rows}</table>")
-    segs = "".join(f"<li>{s['start_s']:.1f} - {s['stop_s']:.1f} s ({s['steps']} steps)</li>" for s in d.segments)
+    segs = "".join(f"<li>{s['start_boot_s']:.1f} - {s['stop_boot_s']:.1f} s boot time ({s['steps']} steps)</li>"
+                   for s in d.segments)
     warns = "".join(f"<li>{e(w)}</li>" for w in d.warnings) or "<li>none</li>"
     return (f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>propwatch: {e(Path(d.source).name)}</title></head>"
             f"<body><h1>propwatch diagnosis</h1><p>{e(d.source)}</p>{verdict}"

@@ -1,0 +1,133 @@
+"""``propwatch diagnose``: verdicts on synthetic faulty logs, JSON contract, reports,
+refusals outside the model's envelope, errors, and the real logs."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+from test_diagnose_fixtures import HOVER_PWM_US, build_model, write_tlog
+
+from monitor.cli import main as propwatch
+from monitor.diagnose.cli import main as diagnose
+from monitor.esc import PAPER_ESC
+
+DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
+LOG171 = DATA / "ardupilot_log171" / "log171.bin"
+CRAZYPAD_HEALTHY = DATA / "crazypad" / "motor" / "normal_flight" / "E8_log00.csv.gz"
+
+
+@pytest.fixture(scope="module")
+def model(tmp_path_factory):
+    return build_model(tmp_path_factory.mktemp("model") / "fixture.onnx")
+
+
+@pytest.fixture(scope="module")
+def logs(tmp_path_factory):
+    d = tmp_path_factory.mktemp("logs")
+    return {k: write_tlog(d / f"f{k}.tlog", duration_s=25.0, faulty=k or None, seed=k) for k in range(5)}
+
+
+def run(capsys, *argv) -> tuple[int, dict]:
+    code = diagnose([str(a) for a in argv])
+    out = capsys.readouterr().out
+    return code, json.loads(out) if "--json" in argv else out
+
+
+@pytest.mark.parametrize("faulty", [0, 1, 2, 3, 4])
+def test_verdict_names_the_faulty_propeller(capsys, model, logs, faulty):
+    code, res = run(capsys, logs[faulty], "--model", model, "--json")
+    assert code == 0
+    v = res["verdict"]
+    assert v["label"] == faulty + 1  # label 1 = no fault, 2..5 = propeller 1..4 alone
+    assert v["faulty_propellers"] == ([faulty] if faulty else [])
+    p = v["fault_probability"]
+    assert len(p) == 4 and all(0.0 <= x <= 1.0 for x in p)
+    if faulty:
+        assert p[faulty - 1] == max(p) and p[faulty - 1] > 0.5
+    # 21 s airborne (IN_AIR 2..23 s, at 1 Hz landed-state resolution), windows of 5 s every 10 steps.
+    assert 25 <= res["windows"] <= 33
+    assert len(res["timeline"]["t_boot_s"]) == res["windows"] == len(res["timeline"]["fault_probability"])
+    assert len(res["airborne_segments"]) == 1 and res["warnings"] == []
+
+
+def test_text_output_and_hop(capsys, model, logs):
+    code, out = run(capsys, logs[2], "--model", model)
+    assert code == 0 and "label 3" in out and "FAULTY" in out and "airborne" in out
+    _, every = run(capsys, logs[2], "--model", model, "--json", "--hop", "1")
+    _, sparse = run(capsys, logs[2], "--model", model, "--json", "--hop", "10")
+    assert (every["windows"] - 1) // 10 + 1 == sparse["windows"]
+
+
+def test_several_logs_one_result_each_and_errors_do_not_stop_the_rest(capsys, model, logs, tmp_path):
+    junk = tmp_path / "junk.bin"
+    junk.write_bytes(b"\x00\x01garbage" * 100)
+    code, res = run(capsys, logs[1], junk, logs[4], "--model", model, "--json")
+    assert code == 2  # one log could not be read
+    r = res["results"]
+    assert [x["log"] for x in r] == [str(logs[1]), str(junk), str(logs[4])]
+    assert r[0]["verdict"]["label"] == 2 and r[2]["verdict"]["label"] == 5
+    assert "unknown log format" in r[1]["error"]
+
+
+def test_report_writes_png_and_html(capsys, model, logs, tmp_path):
+    pytest.importorskip("matplotlib")
+    out = tmp_path / "report"
+    code, _ = run(capsys, logs[3], "--model", model, "--report", out)
+    assert code == 0
+    html = (out / "f3.tlog.html").read_text()
+    png = out / "f3.tlog.png"
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and png.stat().st_size > 10_000
+    assert "Label 4" in html and "f3.tlog.png" in html and "Airborne segments used" in html
+
+
+def test_outside_envelope_is_refused_not_classified(capsys, logs, tmp_path):
+    # A model trained around 2000 RPM must not classify a vehicle hovering near 7100 RPM (1500 µs).
+    far = build_model(tmp_path / "far.onnx", trained_rpm=2000.0)
+    code, res = run(capsys, logs[1], "--model", far, "--json")
+    assert code == 1 and res["verdict"] is None and res["windows"] == 0
+    assert "outside the model's envelope" in res["reason"]
+    # Moderately off (x1.3): classified, with a warning.
+    near = build_model(tmp_path / "near.onnx", trained_rpm=float(PAPER_ESC.cmd_to_rpm(HOVER_PWM_US)) / 1.3)
+    code, res = run(capsys, logs[1], "--model", near, "--json")
+    assert code == 0 and res["verdict"]["label"] == 2
+    assert any("outside the model's envelope" in w for w in res["warnings"])
+
+
+def test_errors_exit_non_zero_through_propwatch(capsys, model, tmp_path):
+    assert propwatch(["diagnose", str(tmp_path / "missing.tlog"), "--model", str(model)]) == 2
+    assert "No such file" in capsys.readouterr().err
+    csv = tmp_path / "x.csv"
+    csv.write_text("a,b\n1,2\n")
+    assert propwatch(["diagnose", str(csv), "--model", str(model)]) == 2
+    assert "--format" in capsys.readouterr().err
+    assert propwatch(["diagnose", str(csv), "--model", str(tmp_path / "none.onnx")]) == 2
+    assert "model file not found" in capsys.readouterr().err
+
+
+@pytest.mark.realdata
+@pytest.mark.skipif(not LOG171.is_file(), reason=f"real ArduPilot log not found at {LOG171}")
+def test_log171_gets_a_verdict_or_a_reason(capsys, model):
+    code, res = run(capsys, LOG171, "--model", model, "--json")
+    assert code in (0, 1)
+    assert (res["verdict"] is not None) != (res["reason"] is not None)
+    assert any("9.9 Hz" in w for w in res["warnings"])  # ATT/RATE at 10 Hz, below the 20 Hz grid
+    assert any("beyond 45 deg" in w for w in res["warnings"])  # the flip at the end
+    if res["verdict"] is not None:
+        assert res["windows"] > 100
+
+
+@pytest.mark.realdata
+@pytest.mark.skipif(not CRAZYPAD_HEALTHY.is_file(), reason=f"CrazyPAD data not found at {CRAZYPAD_HEALTHY}")
+def test_crazypad_with_a_px4_model_is_outside_the_envelope(capsys, model, tmp_path):
+    code, res = run(capsys, CRAZYPAD_HEALTHY, "--format", "crazypad", "--model", model, "--json")
+    assert code == 1 and res["verdict"] is None
+    assert "outside the model's envelope" in res["reason"] and "'cf16'" in res["reason"]
+    assert any("'cf16'" in w for w in res["warnings"])
+    # With a Crazyflie ESC curve the RPM is known, but pitch and body rates are not logged in this config.
+    cf = build_model(tmp_path / "cf.onnx", esc={"a_rpm_per_cmd2": 0.0, "b_rpm_per_cmd": 0.2685, "c_rpm": 4070.3,
+                                                  "cmd_min": 0.0, "cmd_max": 65535.0, "cmd_unit": "cf16"},
+                     trained_rpm=15000.0)
+    code, res = run(capsys, CRAZYPAD_HEALTHY, "--format", "crazypad", "--model", cf, "--json")
+    assert code == 1 and "pitch_rad unknown during flight" in res["reason"]
