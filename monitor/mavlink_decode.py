@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import math
 import struct
+import sys
 from collections import Counter
 from dataclasses import dataclass
 from typing import Any
@@ -118,6 +119,16 @@ class ClockReset:
 Sample = Attitude | ActuatorOutputs | EscRpm | Battery | Heartbeat | LandedState | ClockReset
 
 
+def _register_esc_in_loaded_dialects() -> None:
+    """Teach the dialects already imported to parse ESC_STATUS (cheap: importing every dialect costs ~1 s).
+
+    A dialect imported later yields UNKNOWN_291, which ``decode`` still reads.
+    """
+    for name, mod in list(sys.modules.items()):
+        if name.startswith("pymavlink.dialects.v") and hasattr(mod, "mavlink_map"):
+            mavlink_esc.register(mod)
+
+
 def is_flying(landed_state: int) -> bool:
     """In the air for classification: IN_AIR only (take-off and landing transients are not in training)."""
     return landed_state == MAV_LANDED_STATE_IN_AIR
@@ -144,7 +155,7 @@ class MavlinkDecoder:
         self.component_id = component_id
         self.battery_id = battery_id
         self.reboot_jump_us = reboot_jump_us
-        mavlink_esc.register()  # so every pymavlink parser yields ESC_STATUS, not UNKNOWN_291
+        _register_esc_in_loaded_dialects()
         self.clock_us: int | None = None
         self.ignored: Counter = Counter()  # (system, component) -> messages ignored
         self.undecodable: Counter = Counter()  # message type -> count

@@ -339,3 +339,17 @@ def test_sd_notify_speaks_the_systemd_protocol(tmp_path):
     srv.close()
     off = Notifier({})
     assert not off.enabled and not off.ready() and off.watchdog_s is None
+
+
+def test_esc_status_decodes_even_from_a_parser_that_calls_it_unknown_291():
+    from monitor import mavlink_esc
+
+    ap = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
+    frame = mavlink_esc.encode_esc_status(ap, 123_456_789, [5000, 5100, 5200, 5300], index=0)
+    unknown = mavlink.MAVLink_unknown(291, bytearray(frame))  # what a stock pymavlink 2.4.50 yields
+    d = md.MavlinkDecoder(system_id=1)
+    (e,) = d.decode(unknown)
+    assert e == md.EscRpm(123_456_789, 0, (5000.0, 5100.0, 5200.0, 5300.0))
+    other = mavlink.MAVLink(None, srcSystem=2, srcComponent=1)
+    stranger = mavlink.MAVLink_unknown(291, bytearray(mavlink_esc.encode_esc_status(other, 1, [1, 2, 3, 4])))
+    assert d.decode(stranger) == [] and d.ignored[(2, 1)] == 1  # the ids come from the frame

@@ -18,6 +18,7 @@ import time
 from typing import Any
 
 os.environ.setdefault("MAVLINK20", "1")  # ESC_STATUS (id 291) exists only in MAVLink 2 frames
+os.environ.setdefault("MAVLINK_DIALECT", "common")  # mavutil's default 'all' costs ~1 s of start-up
 
 from pymavlink import mavutil  # noqa: E402
 
