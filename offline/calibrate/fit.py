@@ -1,0 +1,288 @@
+"""Fit candidate terms by weighted least squares and pick them by held-out BIC.
+
+Held-out data: every segment is cut into alternating blocks of ``BLOCK_S``
+seconds; even blocks fit the parameters, odd blocks score them. Alternating
+blocks (rather than first half / second half) keep both sets spanning the same
+flight phases, so one short log still gives a fair held-out score.
+
+Score: a Gaussian likelihood per residual signal with its variance profiled
+out, ``BIC = sum_s n_s/c_s * log(RSS_s/n_s) + k * log(n_fit/c)``, on held-out
+residuals. ``c_s`` is the integrated autocorrelation time of signal s in the
+nominal model's residuals: the filters (and any slow model error) make
+neighbouring samples far from independent, and counting them as independent
+would let a term win on noise.
+Selection is greedy forward: add the term that lowers the held-out BIC most,
+refit all chosen terms jointly, stop when no identifiable term lowers it by
+``MIN_DELTA_BIC`` (Kass-Raftery "very strong").
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from monitor.vehicle import VehicleConfig
+from offline.calibrate.physics import SpeedScale, angular_accel, residuals, rotor_forces
+from offline.calibrate.prepare import Segment
+from offline.calibrate.terms import Term, apply_terms, stacked
+
+BLOCK_S = 5.0
+MAX_LAG = 40  # samples (2 s at 20 Hz) for the autocorrelation time
+MIN_DELTA_BIC = 10.0
+# Effect-size floor. At 20 Hz the logged command is a snapshot of a signal
+# that moves at the controller's rate, so the predicted moments carry noise the
+# measured motion does not; least squares then shrinks any pure gain (inertia
+# comes out ~10 % high, errors-in-variables). That bias is systematic, so with
+# enough data it passes any BIC threshold: inertia is refused when the bias
+# (``_gain_bias``) exceeds INERTIA_MAX_BIAS, and any term must also cut the
+# pooled held-out RMS by MIN_RMS_REDUCTION (real effects of the sizes a vehicle
+# has, e.g. a 30 ms motor lag, cut it by 3 % or more; fitted noise by < 1 %).
+MIN_RMS_REDUCTION = 0.02
+INERTIA_MAX_BIAS = 0.05  # relative bias above which an inertia fit is not reported
+
+
+@dataclass
+class Data:
+    """Segments plus their fit / held-out masks."""
+
+    segments: list[Segment]
+    fit_masks: list[np.ndarray]
+    held_masks: list[np.ndarray]
+    corr_time: dict[str, float] = field(default_factory=dict)  # samples per independent sample, per signal
+
+    @classmethod
+    def split(cls, segments: list[Segment]) -> Data:
+        fit, held = [], []
+        for s in segments:
+            block = np.floor(s.time_s / BLOCK_S).astype(int) % 2
+            fit.append(s.valid & (block == 0))
+            held.append(s.valid & (block == 1))
+        return cls(segments, fit, held)
+
+    @property
+    def n_fit(self) -> int:
+        return int(sum(m.sum() for m in self.fit_masks))
+
+    def residuals(self, vehicle: VehicleConfig, speed_scale: SpeedScale = None) -> list[dict[str, np.ndarray]]:
+        return [residuals(s, vehicle, speed_scale) for s in self.segments]
+
+
+def _pooled(res: list[dict[str, np.ndarray]], masks: list[np.ndarray]) -> dict[str, np.ndarray]:
+    out: dict[str, list[np.ndarray]] = {}
+    for r, m in zip(res, masks):
+        for name, v in r.items():
+            out.setdefault(name, []).append(v[m])
+    return {k: np.concatenate(v) for k, v in out.items()}
+
+
+def rms_by_signal(res: list[dict[str, np.ndarray]], masks: list[np.ndarray]) -> dict[str, float]:
+    return {k: float(np.sqrt(np.mean(v**2))) if len(v) else float("nan") for k, v in _pooled(res, masks).items()}
+
+
+def noise_floor(signal: str) -> float:
+    """Sensor-level resolution of a residual signal; keeps a noiseless simulated channel from dominating."""
+    if signal.endswith("_rad_s2"):
+        return 0.01
+    if signal.endswith("_m_s2"):
+        return 0.01
+    return 0.0005
+
+
+def correlation_time(res: list[dict[str, np.ndarray]], masks: list[np.ndarray]) -> dict[str, float]:
+    """Integrated autocorrelation time per signal (1 = white), summed until the correlation first drops below 0."""
+    out = {}
+    for name in res[0]:
+        num = np.zeros(MAX_LAG + 1)
+        cnt = np.zeros(MAX_LAG + 1)
+        for r, m in zip(res, masks):
+            v = np.where(m, r[name], np.nan)
+            v = v - np.nanmean(v) if np.any(m) else v
+            for lag in range(MAX_LAG + 1):
+                prod = v[lag:] * v[:len(v) - lag]
+                ok = np.isfinite(prod)
+                num[lag] += prod[ok].sum()
+                cnt[lag] += ok.sum()
+        if num[0] <= 0:
+            out[name] = 1.0
+            continue
+        rho = (num / np.maximum(cnt, 1)) / (num[0] / max(cnt[0], 1))
+        stop = np.flatnonzero(rho[1:] <= 0)
+        last = int(stop[0]) + 1 if len(stop) else MAX_LAG + 1
+        out[name] = float(max(1.0, 1.0 + 2.0 * rho[1:last].sum()))
+    return out
+
+
+def bic(res: list[dict[str, np.ndarray]], masks: list[np.ndarray], k: int, n_fit: int, corr_time: dict[str, float]) -> float:
+    total = 0.0
+    for name, v in _pooled(res, masks).items():
+        n = len(v)
+        if n:
+            total += n / corr_time.get(name, 1.0) * np.log(float(np.mean(v**2)) + noise_floor(name) ** 2)
+    c = float(np.median(list(corr_time.values()))) if corr_time else 1.0
+    return float(total + k * np.log(max(n_fit / c, 2.0)))
+
+
+def relative_rms(rms: dict[str, float], base: dict[str, float]) -> float:
+    """Held-out RMS of a model relative to a base model, pooled over signals (each floored at its noise level)."""
+    ratios = [(rms[s] ** 2 + noise_floor(s) ** 2) / (base[s] ** 2 + noise_floor(s) ** 2) for s in base if s in rms]
+    return float(np.sqrt(np.mean(ratios)))
+
+
+def combined_rms(rms: dict[str, float], sigma: dict[str, float]) -> float:
+    """One number per model: RMS of the residuals in units of the nominal model's per-signal RMS."""
+    return float(np.sqrt(np.mean([(rms[s] / sigma[s]) ** 2 for s in sigma if s in rms])))
+
+
+@dataclass
+class TermFit:
+    terms: list[Term]
+    x: np.ndarray
+    std: np.ndarray
+    vehicle: VehicleConfig
+    residuals: list[dict[str, np.ndarray]]
+    bic: float
+    held_rms: dict[str, float]
+    identifiable: dict[str, bool] = field(default_factory=dict)
+    reasons: dict[str, str] = field(default_factory=dict)
+
+    def params(self, term: Term) -> dict[str, float]:
+        i = self._offset(term)
+        return {p: float(self.x[i + j]) for j, p in enumerate(term.params)}
+
+    def stds(self, term: Term) -> dict[str, float]:
+        i = self._offset(term)
+        return {p: float(self.std[i + j]) for j, p in enumerate(term.params)}
+
+    def _offset(self, term: Term) -> int:
+        i = 0
+        for t in self.terms:
+            if t.name == term.name:
+                return i
+            i += len(t.params)
+        raise KeyError(term.name)
+
+
+def fit_terms(data: Data, nominal: VehicleConfig, terms: list[Term], x0: np.ndarray, sigma: dict[str, float]) -> TermFit:
+    """Jointly fit ``terms`` on the fit blocks; score on the held-out blocks."""
+    scale = stacked(nominal, terms, "scale")
+    lo, hi = stacked(nominal, terms, "lower"), stacked(nominal, terms, "upper")
+    x0 = np.clip(x0, lo + 1e-9 * scale, hi - 1e-9 * scale)
+    names = list(sigma)
+
+    def vec(x: np.ndarray) -> np.ndarray:
+        res = data.residuals(apply_terms(nominal, terms, x))
+        parts = [r[s][m] / sigma[s] for r, m in zip(res, data.fit_masks) for s in names if s in r]
+        return np.concatenate(parts)
+
+    sol = least_squares(lambda z: vec(x0 + z * scale), np.zeros(len(x0)), bounds=((lo - x0) / scale, (hi - x0) / scale),
+                        method="trf", x_scale=1.0, max_nfev=60 * max(len(x0), 1), diff_step=1e-3)
+    x = x0 + sol.x * scale
+    J = sol.jac
+    dof = max(len(sol.fun) - len(x), 1)
+    s2 = 2.0 * sol.cost / dof
+    try:
+        cov_z = np.linalg.inv(J.T @ J) * s2 * float(np.median(list(data.corr_time.values()) or [1.0]))
+        std = np.sqrt(np.maximum(np.diag(cov_z), 0.0)) * scale
+    except np.linalg.LinAlgError:
+        std = np.full(len(x), np.inf)
+    vehicle = apply_terms(nominal, terms, x)
+    res = data.residuals(vehicle)
+    fit = TermFit(terms, x, std, vehicle, res, bic(res, data.held_masks, len(x), data.n_fit, data.corr_time),
+                  rms_by_signal(res, data.held_masks))
+    eiv = _gain_bias(data, vehicle) if any(t.name == "inertia" for t in terms) else None
+    for t in terms:
+        if t.name == "inertia" and eiv is not None and np.any(eiv > INERTIA_MAX_BIAS):
+            fit.identifiable[t.name] = False
+            fit.reasons[t.name] = (
+                "not identifiable: the predicted angular acceleration is too noisy at this log rate "
+                f"(errors-in-variables would bias the inertia by about {', '.join(f'{100 * b:.0f} %' for b in eiv)} "
+                "on roll, pitch, yaw); log the motor outputs faster or fly more aggressively")
+            continue
+        s, sc = fit.stds(t), t.scale(nominal)
+        bad = [p for j, p in enumerate(t.params) if not np.isfinite(s[p]) or s[p] > sc[j]]
+        fit.identifiable[t.name] = not bad
+        if bad:
+            fit.reasons[t.name] = ("not identifiable: standard error of " + ", ".join(
+                f"{p} {s[p]:.3g} > resolution {sc[t.params.index(p)]:.3g}" for p in bad)
+                + " (too short or too little excitation for this term)")
+    return fit
+
+
+def _gain_bias(data: Data, vehicle: VehicleConfig) -> np.ndarray:
+    """Per axis, the relative bias a least-squares gain (inertia) fit would carry: 1 - rho^2.
+
+    The measured side (gyro) is nearly noise-free; the predicted side carries
+    the command-snapshot noise, so the fitted gain shrinks by about rho^2.
+    """
+    meas, pred = [], []
+    for s, m in zip(data.segments, data.fit_masks):
+        f, tau = rotor_forces(s, vehicle)
+        a, b = angular_accel(s, vehicle, f, tau)
+        meas.append(a[m])
+        pred.append(b[m])
+    a, b = np.concatenate(meas), np.concatenate(pred)
+    rho2 = np.array([np.corrcoef(a[:, i], b[:, i])[0, 1] ** 2 if np.std(b[:, i]) > 0 else 0.0 for i in range(3)])
+    return 1.0 - rho2
+
+
+@dataclass
+class Step:
+    """One round of forward selection: every remaining candidate tried on top of ``base``."""
+
+    base_bic: float
+    trials: dict[str, TermFit]
+    chosen: str | None
+    confidence: float
+
+
+@dataclass
+class Selection:
+    nominal_residuals: list[dict[str, np.ndarray]]
+    nominal_bic: float
+    sigma: dict[str, float]
+    steps: list[Step]
+    final: TermFit | None
+
+    @property
+    def chosen(self) -> list[str]:
+        return [s.chosen for s in self.steps if s.chosen]
+
+
+def select_terms(data: Data, nominal: VehicleConfig, candidates: list[Term]) -> Selection:
+    res0 = data.residuals(nominal)
+    data.corr_time = correlation_time(res0, data.fit_masks)
+    sigma = {k: max(v, noise_floor(k)) for k, v in rms_by_signal(res0, data.fit_masks).items()}
+    nominal_sigma = dict(sigma)
+    base_bic = bic(res0, data.held_masks, 0, data.n_fit, data.corr_time)
+    base_rms = rms_by_signal(res0, data.held_masks)
+    nominal_bic = base_bic
+    chosen: list[Term] = []
+    x_cur = np.zeros(0)
+    current: TermFit | None = None
+    steps: list[Step] = []
+    remaining = list(candidates)
+    while remaining:
+        trials = {t.name: fit_terms(data, nominal, chosen + [t], np.concatenate([x_cur, t.get(nominal)]), sigma)
+                  for t in remaining}
+        ok = {n: f for n, f in trials.items() if all(f.identifiable.values())}
+        best = min(ok, key=lambda n: ok[n].bic) if ok else None
+        worth = (best is not None and base_bic - ok[best].bic > MIN_DELTA_BIC
+                 and relative_rms(ok[best].held_rms, base_rms) < 1.0 - MIN_RMS_REDUCTION)
+        conf = 0.0
+        if worth:
+            scores = np.array([base_bic] + [f.bic for f in ok.values()])
+            w = np.exp(-(scores - scores.min()) / 2.0)
+            conf = float(np.exp(-(ok[best].bic - scores.min()) / 2.0) / w.sum())
+        steps.append(Step(base_bic, trials, best if worth else None, conf))
+        if not worth:
+            break
+        current = ok[best]
+        chosen.append(next(t for t in remaining if t.name == best))
+        remaining = [t for t in remaining if t.name != best]
+        x_cur = current.x
+        base_bic, base_rms = current.bic, current.held_rms
+        # Reweight by what is left: the next term competes against the current model's residual.
+        sigma = {k: max(v, noise_floor(k)) for k, v in rms_by_signal(current.residuals, data.fit_masks).items()}
+    return Selection(res0, nominal_bic, nominal_sigma, steps, current)
