@@ -1,0 +1,67 @@
+"""Simulator real-time factor with LSTM propellers against analytic ones, in the same run.
+
+    .venv/bin/python bench/bench_propellers.py [--batch 256] [--duration-s 10] [--threads 1]
+
+Prints, per propeller kind: wall time, aggregate real-time factor
+(flights x simulated seconds / wall seconds) and the propeller model's own
+cost per physics step. Conditions are a fixed random mix (seed 0) of normal,
+bent and cracked rotors. Issue 3's target: >= 500x aggregate at batch 256 on
+one core with LSTM propellers.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--batch", type=int, default=256)
+    ap.add_argument("--duration-s", type=float, default=10.0)
+    ap.add_argument("--threads", type=int, default=1, help="BLAS threads (set before numpy loads)")
+    args = ap.parse_args(argv)
+    for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+        os.environ[var] = str(args.threads)
+
+    import numpy as np
+
+    from monitor.vehicle import DEFAULT_VEHICLE, load_vehicle
+    from offline.propellers import build_propellers
+    from offline.sim.mission import random_waypoints
+    from offline.sim.propeller import QuadraticPropeller
+    from offline.sim.simulator import SimConfig, simulate
+
+    vehicle = load_vehicle(DEFAULT_VEHICLE)
+    cfg = SimConfig(duration_s=args.duration_s)
+    cond = np.random.default_rng(0).integers(0, 3, (args.batch, 4))
+    wps = random_waypoints(args.batch, 5, seed=0)
+    kinds = {
+        "sim QuadraticPropeller": lambda: QuadraticPropeller.for_vehicle(vehicle),
+        "quadratic (fault signatures)": lambda: build_propellers(vehicle, cond, kind="quadratic", rng_seed=0),
+        "lstm": lambda: build_propellers(vehicle, cond, kind="lstm", rng_seed=0),
+    }
+    print(f"batch {args.batch}, {args.duration_s} s simulated, physics {cfg.physics_rate_hz} Hz, threads {args.threads}")
+    omega = np.full((args.batch, 4), vehicle.hover_omega_rad_s)
+    dt = 1.0 / cfg.physics_rate_hz
+    for name, make in kinds.items():
+        prop = make()
+        prop.reset(omega)
+        n_calls = 2000
+        t0 = time.perf_counter()
+        for _ in range(n_calls):
+            prop(omega, dt)
+        per_call_us = (time.perf_counter() - t0) / n_calls * 1e6
+        t0 = time.perf_counter()
+        simulate(vehicle, wps, make(), cfg, seed=0)
+        wall = time.perf_counter() - t0
+        rtf = args.batch * args.duration_s / wall
+        print(f"{name:30s} wall {wall:7.2f} s   real-time factor {rtf:8.0f}x aggregate   "
+              f"propeller step {per_call_us:7.1f} us/call (batch {args.batch})", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
