@@ -146,12 +146,14 @@ class Controller:
         self.mix_rp = (self.mix[:, 1:3] * self.torque_authority_nm[:2]).T  # (2, 4) normalised roll/pitch -> N
         self.mix_yaw = self.mix[:, 3] * self.torque_authority_nm[2]  # (4,) normalised yaw -> N
         self.yaw_spread = float(self.mix_yaw.max() - self.mix_yaw.min())
+        self.mix_torque = np.vstack([self.mix_rp, self.mix_yaw])  # (3, 4) normalised torque -> N per rotor
         self.att_2p = 2.0 * self.att_p
         self.rate_i_dt = self.rate_i * self.ctrl_dt
         self.rate_d_per_dt = self.rate_d / self.ctrl_dt
         n = len(self.mass_kg)
         self._qq = np.empty((n, 4, 4))
         self._q4 = np.empty((n, 4))
+        self._r4 = np.empty((n, 4))
 
     def initial_state(self, n: int, yaw_rad: float = 0.0) -> ControllerState:
         q = np.zeros((n, 4))
@@ -262,12 +264,28 @@ class Controller:
         return self.allocate(c.thrust_sp_n, u)
 
     def allocate(self, thrust_n: np.ndarray, torque_norm: np.ndarray) -> np.ndarray:
-        """Quad-X allocation with PX4-style desaturation -> commanded rotor speed (B, 4).
+        """Quad-X allocation -> commanded rotor speed (B, 4), desaturating only where needed.
 
-        ``torque_norm`` is PX4's normalised torque. Roll/pitch differential is
-        scaled down only if it alone exceeds the rotors' range; yaw gets what
-        is left; then the collective moves (down or up, airmode-like) so that
-        every rotor fits.
+        ``torque_norm`` is PX4's normalised torque. A flight whose rotors all
+        fit their range gets the plain mix; the others are desaturated (PX4
+        style, see ``_desaturate``). Deciding per flight keeps a batch equal to
+        its flights run one at a time, and skips the work when nothing saturates.
+        """
+        lo, hi = self.rotor_thrust_min_n, self.rotor_thrust_max_n
+        cmd = np.matmul(torque_norm, self.mix_torque, out=self._r4)
+        cmd += (0.25 * thrust_n)[:, None]
+        fits = (np.minimum.reduce(cmd, axis=1) >= lo) & (np.maximum.reduce(cmd, axis=1) <= hi)
+        if not fits.all():
+            cmd = np.where(fits[:, None], cmd, self._desaturate(thrust_n, torque_norm))
+        cmd *= self.inv_kf
+        return np.sqrt(cmd, out=cmd)
+
+    def _desaturate(self, thrust_n: np.ndarray, torque_norm: np.ndarray) -> np.ndarray:
+        """Per-rotor thrust (B, 4) that fits the rotors' range, keeping roll/pitch authority.
+
+        As PX4's control allocation: the roll/pitch differential is scaled down
+        only if it alone exceeds the range; yaw gets the room that is left; then
+        the collective moves (down, or up as in airmode) so every rotor fits.
         """
         lo, span = self.rotor_thrust_min_n, self.rotor_thrust_span_n
         rp = torque_norm[:, :2] @ self.mix_rp
@@ -276,12 +294,10 @@ class Controller:
         rp *= (span / np.maximum(rp_spread, span))[:, None]
         room = span - np.minimum(rp_spread, span)
         y_spread = np.abs(torque_norm[:, 2]) * self.yaw_spread
-        yw *= (room / (np.maximum(y_spread, room) + 1e-12))[:, None]
+        yw *= (room / np.maximum(np.maximum(y_spread, room), 1e-12))[:, None]
         rp += yw
         coll = 0.25 * thrust_n
         np.maximum(coll, lo - np.minimum.reduce(rp, axis=1), out=coll)
         np.minimum(coll, lo + span - np.maximum.reduce(rp, axis=1), out=coll)
         rp += coll[:, None]
-        np.maximum(rp, lo, out=rp)
-        rp *= self.inv_kf
-        return np.sqrt(rp, out=rp)
+        return np.maximum(rp, lo, out=rp)

@@ -2,8 +2,9 @@
 
 World NED, body FRD, quaternion scalar-first rotating body into world. One
 ``step`` advances every flight by ``dt_s`` with semi-implicit (symplectic)
-Euler: rates and velocity first, then attitude and position with the new
-values, which keeps a hovering vehicle's energy from drifting.
+Euler: velocity first, then position with the new velocity, which keeps a
+hovering vehicle's energy from drifting; the attitude advances with the rates
+at the start of the step and is renormalised every step.
 
 Every calibration term of ``VehicleConfig`` acts here:
 - ``motor_time_constant_s``: first-order lag of rotor speed towards its target,
