@@ -277,3 +277,26 @@ def test_systemd_notify_watchdog_and_clean_sigterm(tmp_path, model):
         pass
     srv.close()
     assert b"STOPPING=1" in rest
+
+
+def test_tcp_link_that_is_not_there_yet_then_comes_and_goes(tmp_path, model):
+    """tcp: the daemon starts before its peer, connects when it appears, and survives it closing."""
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    # 20 s of flight: what is sent before the daemon's next connection attempt (<= 1 s) is lost, as with PX4.
+    tlog = write_tlog(tmp_path / "f.tlog", synth_flight(20.0, faulty=(2,)))
+    events = tmp_path / "ev.jsonl"
+    d = Proc(monitor_cmd("--connect", f"tcp:127.0.0.1:{port}", "--model", str(model), "--events", str(events)))
+    try:
+        assert d.wait_for("cannot open"), d.text
+        r = subprocess.run([PY, "-m", "monitor.cli", "replay", str(tlog), "--connect", f"tcpin:127.0.0.1:{port}",
+                            "--speed", "5", "--linger", "0.5"], cwd=REPO, capture_output=True, text=True, timeout=60)
+        assert r.returncode == 0, r.stderr
+        assert d.wait_for("connection closed by the peer"), d.text
+        assert d.p.poll() is None
+    finally:
+        rc = d.stop()
+    assert rc == 0 and "Traceback" not in d.text, d.text
+    ev = [json.loads(x) for x in events.read_text().splitlines()]
+    assert ev and ev[0]["faulty_propellers"] == [2]

@@ -15,6 +15,7 @@ import logging
 import os
 import select
 import time
+from collections.abc import Callable
 from typing import Any
 
 os.environ.setdefault("MAVLINK20", "1")  # ESC_STATUS (id 291) exists only in MAVLink 2 frames
@@ -32,6 +33,7 @@ MAV_AUTOPILOT_INVALID = 8
 MAV_STATE_ACTIVE = 4
 NAMED_VALUE_MAX_CHARS = 10
 LOG_SUFFIXES = (".tlog", ".mavlink")
+REOPEN_PERIOD_S = 1.0
 
 
 def split_serial(url: str) -> tuple[str, int | None]:
@@ -50,43 +52,63 @@ class Link:
         self.url = url
         self.component_id = component_id
         self.is_log = url.lower().endswith(LOG_SUFFIXES)
+        self.is_tcp = url.startswith("tcp:")
         self.tlog_speed = tlog_speed
         self.conn: Any = None
         self.bytes_in = 0
         self._pace: tuple[float, float] | None = None  # (first log time, monotonic start)
         self.eof = False
         self._pending: Any = None
-        self.open()
+        self._system_id: int | None = None
+        self._next_open = 0.0
+        self._open_failures = 0
+        if self.is_log:
+            self.open()
+        else:
+            self._try_open()
 
     # -- connection ------------------------------------------------------------
     def open(self) -> None:
+        """Open once, without blocking retries: a live link that is not there yet is retried by ``read``."""
         device, baud = split_serial(self.url)
         if self.is_log and not os.path.isfile(device):
             raise ConfigError(f"--connect {self.url}: log file not found")
         try:
             self.conn = mavutil.mavlink_connection(
-                device, baud=baud or 115200, source_system=1, source_component=self.component_id,
-                dialect="common", robust_parsing=True, autoreconnect=device.startswith("tcp:"))
-        except (OSError, ValueError) as exc:
-            raise ConfigError(f"--connect {self.url}: cannot open: {exc}") from exc
+                device, baud=baud or 115200, source_system=self._system_id or 1, source_component=self.component_id,
+                dialect="common", robust_parsing=True, autoreconnect=False, retries=0)
+        except ValueError as exc:
+            raise ConfigError(f"--connect {self.url}: {exc}") from exc
         if not self.is_log:
             self.conn.mav.robust_parsing = True
         log.info("link open: %s", self.url)
 
-    def reopen(self) -> None:
-        self.close()
-        self.open()
+    def _try_open(self) -> None:
+        try:
+            self.open()
+            self._open_failures = 0
+        except OSError as exc:  # no peer yet, serial device absent: keep trying, the loop stays alive
+            self.conn = None
+            self._next_open = time.monotonic() + REOPEN_PERIOD_S
+            if self._open_failures % 60 == 0:  # once a minute is enough for the journal
+                log.error("cannot open %s: %s; retrying every %.0f s", self.url, exc, REOPEN_PERIOD_S)
+            self._open_failures += 1
 
     def close(self) -> None:
+        """Close; a live link reopens on a later ``read`` after ``REOPEN_PERIOD_S``."""
         if self.conn is not None:
             try:
                 self.conn.close()
-            except OSError:
+            except (OSError, AttributeError):  # pymavlink's TCP close fails on a socket already gone
                 pass
             self.conn = None
+            self._next_open = time.monotonic() + REOPEN_PERIOD_S
 
     def set_system_id(self, system_id: int) -> None:
         """We speak as a component of the vehicle we monitor."""
+        self._system_id = system_id
+        if self.conn is None:
+            return
         self.conn.mav.srcSystem = system_id
         self.conn.mav.srcComponent = self.component_id
 
@@ -95,6 +117,11 @@ class Link:
         """Messages available within ``timeout_s``, each with its arrival time (perf_counter)."""
         if self.is_log:
             return self._read_log(timeout_s)
+        if self.conn is None and time.monotonic() >= self._next_open:
+            self._try_open()
+        if self.conn is None:
+            time.sleep(timeout_s)
+            return []
         fd = self.conn.fd
         if fd is None:
             time.sleep(timeout_s)
@@ -105,6 +132,8 @@ class Link:
         data = self.conn.recv(4096)
         received = time.perf_counter()
         if not data:
+            if self.is_tcp:  # readable and empty: the peer closed the connection
+                raise ConnectionError(f"{self.url}: connection closed by the peer")
             return []
         self.bytes_in += len(data)
         if self.conn.first_byte:
@@ -143,27 +172,29 @@ class Link:
         return [(m, time.perf_counter())]
 
     # -- sending (the complete list of what we ever send) ---------------------
-    def _send(self, msg: Any) -> None:
-        if self.is_log:
+    def _send(self, encode: Callable[[Any], Any]) -> None:
+        """``encode(mav)`` builds the message; nothing is sent to a log or while the link is down."""
+        if self.is_log or self.conn is None:
             return
         try:
-            self.conn.mav.send(msg)
+            self.conn.mav.send(encode(self.conn.mav))
         except OSError as exc:
             log.warning("send failed: %s", exc)
 
     def send_heartbeat(self) -> None:
-        self._send(self.conn.mav.heartbeat_encode(MAV_TYPE_ONBOARD_CONTROLLER, MAV_AUTOPILOT_INVALID, 0, 0, MAV_STATE_ACTIVE))
+        self._send(lambda mav: mav.heartbeat_encode(MAV_TYPE_ONBOARD_CONTROLLER, MAV_AUTOPILOT_INVALID, 0, 0, MAV_STATE_ACTIVE))
 
     def send_statustext(self, text: str, severity: int) -> None:
-        self._send(self.conn.mav.statustext_encode(severity, text[:50].encode("ascii", "replace")))
+        self._send(lambda mav: mav.statustext_encode(severity, text[:50].encode("ascii", "replace")))
 
     def send_named_value_float(self, time_boot_ms: int, name: str, value: float) -> None:
-        self._send(self.conn.mav.named_value_float_encode(int(time_boot_ms) & 0xFFFFFFFF, name[:NAMED_VALUE_MAX_CHARS].encode(), float(value)))
+        self._send(lambda mav: mav.named_value_float_encode(int(time_boot_ms) & 0xFFFFFFFF, name[:NAMED_VALUE_MAX_CHARS].encode(),
+                                                            float(value)))
 
     def request_message_interval(self, target_system: int, target_component: int, message_id: int, rate_hz: float) -> None:
         interval_us = int(round(1e6 / rate_hz))
-        self._send(self.conn.mav.command_long_encode(target_system, target_component, MAV_CMD_SET_MESSAGE_INTERVAL, 0,
-                                                     float(message_id), float(interval_us), 0, 0, 0, 0, 0))
+        self._send(lambda mav: mav.command_long_encode(target_system, target_component, MAV_CMD_SET_MESSAGE_INTERVAL, 0,
+                                                       float(message_id), float(interval_us), 0, 0, 0, 0, 0))
 
 
 class _BadData:

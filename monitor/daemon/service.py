@@ -82,10 +82,9 @@ class Daemon:
         while not self.stop.is_set():
             try:
                 batch = self.link.read(READ_TIMEOUT_S)
-            except OSError as exc:
-                log.error("link error on %s: %s; reopening in 1 s", self.link.url, exc)
-                self.stop.wait(1.0)
-                self._try_reopen()
+            except OSError as exc:  # serial unplugged, TCP peer gone: the link reopens itself
+                log.error("link error on %s: %s; reopening", self.link.url, exc)
+                self.link.close()
                 continue
             for msg, received in batch:
                 self.handle(msg, received)
@@ -99,12 +98,6 @@ class Daemon:
         self.events.close()
         self.summary()
         return 0
-
-    def _try_reopen(self) -> None:
-        try:
-            self.link.reopen()
-        except Exception as exc:  # noqa: BLE001 - keep trying; systemd restarts us only on exit
-            log.error("cannot reopen %s: %s", self.link.url, exc)
 
     def handle(self, msg, received_s: float) -> None:
         kind = msg.get_type()
@@ -203,7 +196,7 @@ class Daemon:
         span = now - self._rate_window_start
         need = self.cfg.link.min_rate_fraction * self.cfg.resample.rate_hz
         slow = set()
-        if self._system_id is not None:
+        if self._system_id is not None and self._link_up:  # a link that is down is reported as such, not as slow streams
             for name in self.fast_streams():
                 hz = self._rates[name] / span
                 if hz < need:
