@@ -300,3 +300,41 @@ def test_tcp_link_that_is_not_there_yet_then_comes_and_goes(tmp_path, model):
     assert rc == 0 and "Traceback" not in d.text, d.text
     ev = [json.loads(x) for x in events.read_text().splitlines()]
     assert ev and ev[0]["faulty_propellers"] == [2]
+
+
+def test_serial_device_with_baud_rate(tmp_path, model):
+    """``/dev/...,921600`` through pyserial, on a pseudo-terminal standing in for the autopilot's UART."""
+    import select
+    import tty
+
+    master, slave = os.openpty()
+    tty.setraw(slave)
+    dev = os.ttyname(slave)
+    events = tmp_path / "ev.jsonl"
+    d = Proc(monitor_cmd("--connect", f"{dev},921600", "--model", str(model), "--events", str(events)))
+    heard = b""
+    try:
+        assert d.wait_for("ready:"), d.text
+        frames = synth_flight(10.0, faulty=(1,))
+        t0_log, t0 = frames[0][0], time.monotonic()
+        for t, f in frames:
+            while time.monotonic() < t0 + (t - t0_log) / 5.0:  # 5x the recorded pace
+                if select.select([master], [], [], 0.005)[0]:
+                    heard += os.read(master, 4096)
+            os.write(master, f)
+        end = time.monotonic() + 1.0
+        while time.monotonic() < end:
+            if select.select([master], [], [], 0.05)[0]:
+                heard += os.read(master, 4096)
+    finally:
+        rc = d.stop()
+        os.close(master)
+        os.close(slave)
+    assert rc == 0 and "Traceback" not in d.text, d.text
+    ev = [json.loads(x) for x in events.read_text().splitlines()]
+    assert ev and ev[0]["faulty_propellers"] == [1]
+    p = mavlink.MAVLink(None)
+    p.robust_parsing = True
+    back = [m for m in (p.parse_buffer(heard) or []) if m.get_type() != "BAD_DATA"]
+    assert any(m.get_type() == "HEARTBEAT" and m.type == 18 and m.get_srcComponent() == 191 for m in back)
+    assert any(m.get_type() == "STATUSTEXT" and m.text.startswith("PROP 1 FAULT") for m in back)
