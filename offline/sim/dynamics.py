@@ -30,7 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from monitor.vehicle import VehicleConfig
-from offline.sim.quat import BODY_Z_AND_QDOT, rotate_body_to_world, rotate_world_to_body
+from offline.sim.quat import rotate_body_to_world, rotate_world_to_body, state_products_map
 
 GRAVITY_M_S2 = 9.80665  # standard gravity (ISO 80000-3), PX4 CONSTANTS_ONE_G
 
@@ -90,17 +90,22 @@ class Dynamics:
         self.wind_ned_m_s = np.array(vehicle.wind_ned_m_s, dtype=np.float64)
         self.has_drag = bool(np.any(self.drag > 0))
         self.gravity_dt = np.array([0.0, 0.0, GRAVITY_M_S2 * dt])
-        # vec(q outer [q, w]) @ zq_map = [-dt R[:, 2], dt/2 q ⊗ (0, w)].
-        self.zq_map = BODY_Z_AND_QDOT * np.array([-dt] * 3 + [0.5 * dt] * 4)
+        # All products of the state with itself that a step needs, as one bilinear map.
+        self.products_map = state_products_map(dt, self.gyro_map)
         # Preallocated work buffers.
         self._forces = np.empty((n, 8))
         self._wrench = np.empty((n, 4))
-        self._qw = np.empty((n, 7))
-        self._qqw = np.empty((n, 4, 7))
-        self._zq = np.empty((n, 7))
-        self._ww = np.empty((n, 3, 3))
-        self._w3 = np.empty((n, 3))
-        self.force_body_n = np.zeros((n, 3))  # last non-gravity force, body FRD (for the IMU)
+        self._x = np.empty((n, 7))
+        self._xx = np.empty((n, 7, 7))
+        self._prod = np.empty((n, 10))
+        self.force_body_n = np.zeros((n, 3))  # non-gravity force of the last step with drag, body FRD
+        self.last_total_thrust_n = np.zeros(n)
+
+    def specific_force_frd_m_s2(self) -> np.ndarray:
+        """What an IMU at the CG measures after the last step: non-gravity force / mass, body FRD."""
+        if not self.has_drag:
+            self.force_body_n[:, 2] = -self.last_total_thrust_n
+        return self.force_body_n * self.inv_mass
 
     def motor_target(self, omega_cmd_rad_s: np.ndarray) -> np.ndarray:
         """Speed each rotor settles at for a commanded speed (per-motor efficiency)."""
@@ -117,35 +122,35 @@ class Dynamics:
         f[:, :4] = thrust
         f[:, 4:] = torque
         wr = np.matmul(f, self.wrench_map, out=self._wrench)  # [total thrust, I^-1 M]
-        self.force_body_n[:, 2] = -wr[:, 0]
 
-        # One outer product serves the body z axis (thrust direction) and the quaternion rate.
-        qw = self._qw
-        qw[:, :4] = q
-        qw[:, 4:] = w
-        np.multiply(q[:, :, None], qw[:, None, :], out=self._qqw)
-        zq = np.matmul(self._qqw.reshape(n, 28), self.zq_map, out=self._zq)
+        # One outer product of x = [q, w] gives the thrust direction, the quaternion rate and the
+        # gyroscopic term: prod = [-dt R[:, 2], dt/2 q ⊗ (0, w), -dt I^-1 (w x I w)].
+        x = self._x
+        x[:, :4] = q
+        x[:, 4:] = w
+        np.multiply(x[:, :, None], x[:, None, :], out=self._xx)
+        prod = np.matmul(self._xx.reshape(n, 49), self.products_map, out=self._prod)
 
         # Linear: dv = dt (R f_body / m + g).
         if self.has_drag:
             f_body = self.force_body_n
             f_body[:, :2] = 0.0
+            f_body[:, 2] = -wr[:, 0]
             f_body -= self.drag * rotate_world_to_body(q, v - self.wind_ned_m_s)
             dv = rotate_body_to_world(q, f_body) * (self.inv_mass * dt)
         else:
-            dv = zq[:, :3] * (wr[:, :1] * self.inv_mass)
+            dv = prod[:, :3] * (wr[:, :1] * self.inv_mass)
         dv += self.gravity_dt
 
-        # Angular: dw = dt (I^-1 M - I^-1 (w x I w)).
-        np.multiply(w[:, :, None], w[:, None, :], out=self._ww)
-        dw = np.matmul(self._ww.reshape(n, 9), self.gyro_map, out=self._w3)
-        dw += wr[:, 1:]
-        dw *= dt
+        # Angular: dw = dt I^-1 M + gyroscopic term.
+        dw = prod[:, 7:]
+        dw += dt * wr[:, 1:]
         w += dw
         v += dv
         s.pos_ned_m += dt * v
 
-        # q += dt/2 q ⊗ (0, w) (with the rates before this step), renormalised.
-        q += zq[:, 3:]
+        # q += dt/2 q ⊗ (0, w) (with the rates at the start of the step), renormalised.
+        q += prod[:, 3:7]
         q /= np.sqrt(np.einsum("ij,ij->i", q, q))[:, None]
+        self.last_total_thrust_n = wr[:, 0]
         return thrust, torque

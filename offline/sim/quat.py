@@ -100,12 +100,11 @@ def _body_z_tensor() -> np.ndarray:
 BODY_Z = _body_z_tensor()
 
 
-def _z_and_dq_map() -> np.ndarray:
-    """(28, 7): vec(q outer [q, w]) @ map = [body z axis (3), q ⊗ (0, w) (4)] in one matmul."""
-    m = np.zeros((4, 7, 7))
-    m[:, :4, :3] = BODY_Z.reshape(4, 4, 3)
-    m[:, 4:, 3:] = QUAT_MUL_PURE.reshape(4, 3, 4)
-    return m.reshape(28, 7)
-
-
-BODY_Z_AND_QDOT = _z_and_dq_map()
+def state_products_map(dt_s: float, gyro_map: np.ndarray) -> np.ndarray:
+    """(49, 10): vec(x outer x) @ map, x = [q (4), w (3)], gives in one matmul
+    [-dt R[:, 2] (3), dt/2 q ⊗ (0, w) (4), dt gyro_map(w outer w) (3)]."""
+    m = np.zeros((7, 7, 10))
+    m[:4, :4, :3] = -dt_s * BODY_Z.reshape(4, 4, 3)
+    m[:4, 4:, 3:7] = 0.5 * dt_s * QUAT_MUL_PURE.reshape(4, 3, 4)
+    m[4:, 4:, 7:] = dt_s * gyro_map.reshape(3, 3, 3)
+    return m.reshape(49, 10)

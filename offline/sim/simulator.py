@@ -174,7 +174,7 @@ def simulate(vehicle: VehicleConfig, waypoints_ned_m: np.ndarray, propellers, si
             log["vel_ned_m_s"][:, j] = state.vel_ned_m_s
             log["q_world_body"][:, j] = state.q_world_body
             log["rates_frd_rad_s"][:, j] = gyro  # what the gyro last reported
-            log["accel_frd_m_s2"][:, j] = dyn.force_body_n * dyn.inv_mass
+            log["accel_frd_m_s2"][:, j] = dyn.specific_force_frd_m_s2()
             log["motor_omega_rad_s"][:, j] = state.omega_rad_s
             log["thrust_n"][:, j] = thrust
             log["torque_nm"][:, j] = torque
