@@ -1,0 +1,81 @@
+"""End to end: simulated PX4 flights (``propwatch simulate --format tlog``) replayed over UDP to the
+daemon running the shipped classifier (``models/classifier.onnx``).
+
+- a single bent or cracked propeller: an alert names that propeller within 10 s of flight time;
+- a full (80 s) healthy flight: no alert.
+
+Skipped until the shipped classifier exists (issue 4, ``make classifier``). The
+flights are simulated here (tmp dir), never committed.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+from pathlib import Path
+
+import pytest
+from test_daemon_process import PY, REPO, fly_over_udp
+
+from monitor.replay import read_tlog
+
+CLASSIFIER = REPO / "models" / "classifier.onnx"
+pytestmark = [
+    pytest.mark.slow,
+    pytest.mark.skipif(not CLASSIFIER.is_file(), reason="models/classifier.onnx not built yet (issue 4: make classifier)"),
+]
+FLIGHTS = {  # name: (label, fault, duration_s, seed); label 4 = propeller 3 alone, 3 = propeller 2 alone
+    "bent_3": (4, "bent", 30.0, 11),
+    "cracked_2": (3, "cracked", 30.0, 12),
+    "healthy": (1, None, 80.0, 13),
+}
+
+
+@pytest.fixture(scope="module")
+def flights(tmp_path_factory):
+    out = {}
+    for name, (label, fault, duration, seed) in FLIGHTS.items():
+        d = tmp_path_factory.mktemp(name)
+        cmd = [PY, "-m", "monitor.cli", "simulate", "--out", str(d), "--flights", "1", "--label", str(label),
+               "--format", "tlog", "--duration-s", str(duration), "--seed", str(seed)]
+        if fault:
+            cmd += ["--fault", fault]
+        p = subprocess.run(cmd, cwd=REPO, capture_output=True, text=True, timeout=300)
+        if p.returncode != 0:
+            pytest.skip(f"propwatch simulate is not available: {p.stderr.strip()[-300:]}")
+        truth = json.loads((d / "sidecar.json").read_text())["flights"][0]
+        out[name] = (d / truth["file"], tuple(truth["faulty_propellers"]))
+    return out
+
+
+def frames_of(tlog: Path):
+    frames = read_tlog(tlog)
+    return [(t, buf) for t, buf, _ in frames], frames
+
+
+def first_boot_ms(frames) -> int:
+    return min(int(m.time_boot_ms) for _, _, m in frames if m.get_type() == "ATTITUDE")
+
+
+@pytest.mark.parametrize("name", ["bent_3", "cracked_2"])
+def test_single_faulty_propeller_named_within_10_s(tmp_path, flights, name):
+    tlog, faulty = flights[name]
+    assert len(faulty) == 1
+    raw, frames = frames_of(tlog)
+    d, _, events, _, received, report = fly_over_udp(tmp_path, CLASSIFIER, raw, speed=10)
+    assert events, f"no alert for {name}:\n{d.text[-2000:]}"
+    first = events[0]
+    assert first["faulty_propellers"] == list(faulty), first
+    assert first["time_boot_ms"] - first_boot_ms(frames) <= 10_000, first
+    texts = [m["text"] for m in received if m["mavpackettype"] == "STATUSTEXT"]
+    assert texts and texts[0].startswith(f"PROP {faulty[0]} FAULT")
+
+
+def test_full_healthy_flight_raises_no_alert(tmp_path, flights):
+    tlog, faulty = flights["healthy"]
+    assert faulty == ()
+    raw, _ = frames_of(tlog)
+    d, _, events, _, received, report = fly_over_udp(tmp_path, CLASSIFIER, raw, speed=20)
+    assert report["pipeline"]["classified"] > 1000, d.text[-2000:]  # it did watch the flight
+    assert events == [], events
+    assert not [m for m in received if m["mavpackettype"] == "STATUSTEXT"]
