@@ -91,11 +91,23 @@ def _write(fh, log: FlightLog, i: int, wall_boot_us: int, battery_full_v: float,
     slow_period_us = int(round(1e6 / SLOW_RATE_HZ))
     for j, t in enumerate(ts):
         t = int(t)
-        if next_hb is None or t >= next_hb:
+        # HEARTBEAT first (a reader learns the autopilot's system id from it), then the time-stamped
+        # messages, then the untimed ones, so a reader's boot clock is set before they arrive.
+        heartbeat_due = next_hb is None or t >= next_hb
+        if heartbeat_due:
             emit(t, mav.heartbeat_encode(mavlink2.MAV_TYPE_QUADROTOR, mavlink2.MAV_AUTOPILOT_PX4, BASE_MODE_ARMED_AUTO,
                                          PX4_CUSTOM_MODE_AUTO_MISSION, mavlink2.MAV_STATE_ACTIVE, 3))
-            emit(t, mav.extended_sys_state_encode(mavlink2.MAV_VTOL_STATE_UNDEFINED, mavlink2.MAV_LANDED_STATE_IN_AIR))
             next_hb = (t // 1_000_000 + 1) * 1_000_000
+        t_ms = t // 1000
+        emit(t, mav.attitude_encode(t_ms, float(log.roll_rad[i, j]), float(log.pitch_rad[i, j]), float(log.yaw_rad[i, j]),
+                                    float(rates[j, 0]), float(rates[j, 1]), float(rates[j, 2])))
+        emit(t, mav.local_position_ned_encode(t_ms, *map(float, pos[j]), *map(float, vel[j])))
+        emit(t, mav.highres_imu_encode(t, *map(float, acc[j]), *map(float, rates[j]), *map(float, mag[j]),
+                                       float(pressure[j]), 0.0, float(alt[j]), 25.0, 0x1FFF, 0))
+        emit(t, mav.servo_output_raw_encode(t & 0xFFFFFFFF, 0, *map(int, pwm[j]), 0, 0, 0, 0))
+        emit_bytes(t, encode_esc_status(mav, t, esc_rpm[j], [esc_volt[j]] * 4, [float(amp[j]) / 4] * 4))
+        if heartbeat_due:
+            emit(t, mav.extended_sys_state_encode(mavlink2.MAV_VTOL_STATE_UNDEFINED, mavlink2.MAV_LANDED_STATE_IN_AIR))
         if next_slow is None or t >= next_slow:
             mv = int(round(volt[j] * 1000))
             ca = int(round(amp[j] * 100))
@@ -105,11 +117,3 @@ def _write(fh, log: FlightLog, i: int, wall_boot_us: int, battery_full_v: float,
                                               cells, ca, int(round(consumed_mah[j])), -1, int(remaining[j]), 0,
                                               mavlink2.MAV_BATTERY_CHARGE_STATE_OK, [0, 0, 0, 0], 0, 0))
             next_slow = (t // slow_period_us + 1) * slow_period_us
-        t_ms = t // 1000
-        emit(t, mav.attitude_encode(t_ms, float(log.roll_rad[i, j]), float(log.pitch_rad[i, j]), float(log.yaw_rad[i, j]),
-                                    float(rates[j, 0]), float(rates[j, 1]), float(rates[j, 2])))
-        emit(t, mav.local_position_ned_encode(t_ms, *map(float, pos[j]), *map(float, vel[j])))
-        emit(t, mav.highres_imu_encode(t, *map(float, acc[j]), *map(float, rates[j]), *map(float, mag[j]),
-                                       float(pressure[j]), 0.0, float(alt[j]), 25.0, 0x1FFF, 0))
-        emit(t, mav.servo_output_raw_encode(t & 0xFFFFFFFF, 0, *map(int, pwm[j]), 0, 0, 0, 0))
-        emit_bytes(t, encode_esc_status(mav, t, esc_rpm[j], [esc_volt[j]] * 4, [float(amp[j]) / 4] * 4))
