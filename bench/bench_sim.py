@@ -77,6 +77,16 @@ def time_rotorpy(duration_s: float, t_step_s: float = 0.005) -> dict:
             "final_error_m": float(np.linalg.norm(state["x"]))}
 
 
+def numpy_call_us() -> float:
+    """Cost of one small numpy call here and now: the unit a simulator step is made of."""
+    a, b = np.ones((1, 4)), np.ones((1, 4))
+    n = 20000
+    t0 = time.process_time()
+    for _ in range(n):
+        np.multiply(a, b, out=a)
+    return (time.process_time() - t0) / n * 1e6
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--quick", action="store_true", help="short flights (smoke test of the script)")
@@ -99,15 +109,22 @@ def main(argv=None) -> int:
     out["peak_memory_bytes_per_flight"] = [round(x) for x in per]
     out["peak_memory_duration_s"] = mem_dur
     out["rotorpy"] = time_rotorpy(2.0 if args.quick else 10.0)
+    out["numpy_call_us"] = round(numpy_call_us(), 3)
+    if "error" not in out["rotorpy"]:
+        # Same machine, same moment: the ratio survives a loaded machine better than either figure.
+        for key in ("batch_1", f"batch_{big}"):
+            out[key]["x_rotorpy_cpu"] = round(out[key]["rtf_cpu"] / out["rotorpy"]["rtf_cpu"], 1)
     if args.json:
         print(json.dumps(out, indent=2))
         return 0
+    print(f"numpy reference: one small ufunc call = {out['numpy_call_us']:.2f} us of CPU (about 0.5 us on an idle core)")
     print(f"propwatch simulator, physics {sim.physics_rate_hz} Hz / control {sim.control_rate_hz} Hz / "
           f"position {sim.position_rate_hz} Hz / log {sim.log_rate_hz} Hz, one thread")
     for key in ("batch_1", f"batch_{big}"):
         r = out[key]
         print(f"  {r['flights']:4d} x {r['duration_s']:.0f} s flights: wall {r['wall_s']:7.2f} s  cpu {r['cpu_s']:7.2f} s  "
-              f"real-time factor {r['rtf_wall']:8.1f} (wall)  {r['rtf_cpu']:8.1f} (cpu)")
+              f"real-time factor {r['rtf_wall']:8.1f} (wall)  {r['rtf_cpu']:8.1f} (cpu)"
+              + (f"  = {r['x_rotorpy_cpu']:.0f} x RotorPy" if "x_rotorpy_cpu" in r else ""))
     print(f"  peak traced memory over {mem_dur:.0f} s flights:")
     for n, b in zip(sizes, per):
         print(f"    batch {n:4d}: {out['peak_memory'][f'batch_{n}'] / 2**20:8.2f} MiB  ({b / 2**10:7.1f} KiB per flight)")
