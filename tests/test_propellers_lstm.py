@@ -60,7 +60,7 @@ def test_shipped_models_beat_the_paper_on_the_test_split(condition):
     assert m["lstm_thrust_mape_pct"] <= PAPER_MAPE_PCT[condition]["thrust"]
     assert m["lstm_torque_mape_pct"] <= PAPER_MAPE_PCT[condition]["torque"]
     # The recorded figures are the ones these weights give.
-    assert m["lstm_thrust_mape_pct"] == pytest.approx(MANIFEST["metrics"][condition]["lstm_thrust_mape_pct"], rel=1e-6)
+    assert m["lstm_thrust_mape_pct"] == pytest.approx(MANIFEST["metrics"][condition]["lstm_thrust_mape_pct"], rel=1e-4)
     if condition != "normal":  # a damaged blade is not kF·ω²: the LSTM must beat the quadratic fit
         assert m["lstm_thrust_mape_pct"] < 0.5 * m["quadratic_thrust_mape_pct"]
 

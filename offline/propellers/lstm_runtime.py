@@ -39,11 +39,23 @@ from monitor.vehicle import VehicleConfig
 from offline.propellers.faults import CONDITIONS, FaultSignature
 from offline.propellers.vibration import FaultVibration
 
-State = list[tuple[np.ndarray, np.ndarray]]  # per layer: (h, c), each (N, H)
+State = list[tuple[np.ndarray, np.ndarray]]  # per layer: (h, c), each (H, N): rotors along the fast axis
 
 
-def _sigmoid(x: np.ndarray) -> np.ndarray:
-    return 0.5 * (1.0 + np.tanh(0.5 * x))  # stable for any x, and one ufunc
+def _fast_layer(w_ih: np.ndarray, w_hh: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Rewrite one layer so that a step costs one matmul and one tanh over all gates.
+
+    sigmoid(z) = (1 + tanh(z/2)) / 2: halving the i, f, o rows of the weights
+    lets a single tanh serve all four gates. Rows are reordered (i, f, o, g) and
+    the state is stored (H, N), so each gate is a contiguous block of rows.
+    float32: the state needs no more.
+    """
+    hsz = w_hh.shape[1]
+    i, f, g, o = (np.arange(k * hsz, (k + 1) * hsz) for k in range(4))  # torch's gate order
+    rows = np.concatenate([i, f, o, g])  # sigmoid gates first, contiguous
+    half = np.r_[np.full(3 * hsz, 0.5), np.ones(hsz)]
+    return ((w_ih[rows] * half[:, None]).astype(np.float32), (w_hh[rows] * half[:, None]).astype(np.float32),
+            (b[rows] * half)[:, None].astype(np.float32))
 
 
 @dataclass(frozen=True)
@@ -64,23 +76,43 @@ class StackedLstm:
     def hidden_sizes(self) -> tuple[int, ...]:
         return tuple(w_hh.shape[1] for _, w_hh, _ in self.lstm)
 
+    def __post_init__(self) -> None:
+        (w0, b0), (w1, b1) = self.dense
+        fast = tuple(_fast_layer(*layer) for layer in self.lstm)
+        object.__setattr__(self, "_fast", fast)
+        object.__setattr__(self, "_dense_fast", (w0.astype(np.float32), b0[:, None].astype(np.float32),
+                                                 (w1 * self.output_std[:, None]).astype(np.float32),
+                                                 (b1 * self.output_std + self.output_mean)[:, None].astype(np.float32)))
+
     def zero_state(self, n: int) -> State:
-        return [(np.zeros((n, h)), np.zeros((n, h))) for h in self.hidden_sizes]
+        return [(np.zeros((h, n), np.float32), np.zeros((h, n), np.float32)) for h in self.hidden_sizes]
 
     def step(self, s: np.ndarray, state: State) -> tuple[np.ndarray, State]:
         """One sample for N rotors: ``s`` (N,) normalised speed -> ((N, 2) normalised thrust, torque), new state."""
-        x = ((np.asarray(s, dtype=np.float64) - self.input_mean) / self.input_std)[:, None]
+        x = ((np.asarray(s, dtype=np.float32) - np.float32(self.input_mean)) / np.float32(self.input_std))[None, :]
         new_state: State = []
-        for (w_ih, w_hh, b), (h, c) in zip(self.lstm, state):
-            z = x @ w_ih.T + h @ w_hh.T + b
-            i, f, g, o = np.split(z, 4, axis=1)
-            c = _sigmoid(f) * c + _sigmoid(i) * np.tanh(g)
-            h = _sigmoid(o) * np.tanh(c)
+        for (w_ih, w_hh, b), (h, c) in zip(self._fast, state):
+            hs = h.shape[0]
+            z = w_hh @ h
+            z += w_ih @ x if x.shape[0] > 1 else w_ih * x
+            z += b
+            np.tanh(z, out=z)
+            gates = z[: 3 * hs]  # i, f, o were pre-halved: sigmoid = (1 + tanh) / 2
+            gates += 1.0
+            gates *= 0.5
+            c = c * z[hs:2 * hs]  # forget
+            c += z[:hs] * z[3 * hs:]  # input * candidate
+            h = np.tanh(c)
+            h *= z[2 * hs:3 * hs]  # output
             new_state.append((h, c))
             x = h
-        (w0, b0), (w1, b1) = self.dense
-        y = np.tanh(x @ w0.T + b0) @ w1.T + b1
-        return self.output_mean + self.output_std * y, new_state
+        w0, b0, w1, b1 = self._dense_fast
+        d = w0 @ x
+        d += b0
+        np.tanh(d, out=d)
+        y = w1 @ d
+        y += b1
+        return y.T.astype(np.float64), new_state
 
     def run(self, s_seq: np.ndarray, state: State | None = None) -> tuple[np.ndarray, State]:
         """Step through ``s_seq`` (N, T); returns outputs (N, T, 2) and the final state."""
@@ -163,13 +195,11 @@ class LstmPropeller:
         self._groups = [(m, idx) for m, idx in self._groups if idx.size]
         self.sample_period_s = next(iter(models.values())).sample_period_s
         self._states: list[State] = [m.zero_state(idx.size) for m, idx in self._groups]
-        self._delta = np.zeros(self.conditions.shape + (2,))  # held departure from kF·ω², kτ·ω²
+        self._delta_thrust = np.zeros(self.conditions.shape)  # held departure from kF·ω²
+        self._delta_torque = np.zeros(self.conditions.shape)  # ... and from kτ·ω²
         self._clock_s = 0.0
         vib = FaultVibration(self.conditions, signatures, vehicle.omega_max_rad_s, rng)
         self._vibration = vib if (vibration and vib.active) else None
-
-    def _quadratic(self, omega: np.ndarray) -> np.ndarray:
-        return np.square(omega)[..., None] * np.array([self.kf, self.ktau])
 
     def _set_delta(self, omega: np.ndarray, steady: bool) -> None:
         s_flat = (omega / self.omega_max_rad_s).reshape(-1)
@@ -179,7 +209,9 @@ class LstmPropeller:
                 y[idx], self._states[g] = model.steady_state(s_flat[idx])
             else:
                 y[idx], self._states[g] = model.step(s_flat[idx], self._states[g])
-        self._delta = (y * self._scale).reshape(self._delta.shape) - self._quadratic(omega)
+        w2 = np.square(omega)
+        self._delta_thrust = (y[:, 0] * self._scale[0]).reshape(w2.shape) - self.kf * w2
+        self._delta_torque = (y[:, 1] * self._scale[1]).reshape(w2.shape) - self.ktau * w2
 
     def reset(self, omega_rad_s: np.ndarray) -> None:
         omega = np.maximum(np.asarray(omega_rad_s, dtype=np.float64), 0.0)
@@ -194,8 +226,9 @@ class LstmPropeller:
         if self._clock_s >= self.sample_period_s - 1e-9:
             self._clock_s -= self.sample_period_s
             self._set_delta(omega, steady=False)
-        out = self._quadratic(omega) + self._delta
-        thrust, torque = out[..., 0], out[..., 1]
+        w2 = np.square(omega)
+        thrust = self.kf * w2 + self._delta_thrust
+        torque = self.ktau * w2 + self._delta_torque
         if self._vibration is not None:
             ft, fq = self._vibration.step(omega, dt_s)
             thrust, torque = thrust * ft, torque * fq

@@ -28,20 +28,21 @@ class QuadraticFaultPropeller:
         self.kf = vehicle.kf_n_per_rad_s2
         self.ktau = vehicle.ktau_nm_per_rad_s2
         self.omega_max_rad_s = vehicle.omega_max_rad_s
-        self._t_lo = _per_rotor(signatures, cond, "thrust_loss_low")
-        self._t_span = _per_rotor(signatures, cond, "thrust_loss_high") - self._t_lo
-        self._q_lo = _per_rotor(signatures, cond, "torque_gain_low")
-        self._q_span = _per_rotor(signatures, cond, "torque_gain_high") - self._q_lo
+        # thrust = ω²·(a + b·ω²): the signatures' s² terms folded into per-rotor coefficients once.
+        t_lo = _per_rotor(signatures, cond, "thrust_loss_low")
+        q_lo = _per_rotor(signatures, cond, "torque_gain_low")
+        inv_w2 = 1.0 / self.omega_max_rad_s**2
+        self._t_a = self.kf * (1.0 - t_lo)
+        self._t_b = -self.kf * (_per_rotor(signatures, cond, "thrust_loss_high") - t_lo) * inv_w2
+        self._q_a = self.ktau * (1.0 + q_lo)
+        self._q_b = self.ktau * (_per_rotor(signatures, cond, "torque_gain_high") - q_lo) * inv_w2
         vib = FaultVibration(cond, signatures, vehicle.omega_max_rad_s, rng)
         self._vibration = vib if (vibration and vib.active) else None
 
     def mean(self, omega_rad_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Steady thrust and torque without vibration (what a load cell averages to)."""
         w2 = np.square(omega_rad_s)
-        s2 = w2 / self.omega_max_rad_s**2
-        thrust = self.kf * w2 * (1.0 - self._t_lo - self._t_span * s2)
-        torque = self.ktau * w2 * (1.0 + self._q_lo + self._q_span * s2)
-        return thrust, torque
+        return w2 * (self._t_a + self._t_b * w2), w2 * (self._q_a + self._q_b * w2)
 
     def reset(self, omega_rad_s: np.ndarray) -> None:
         if self._vibration is not None:
