@@ -117,7 +117,7 @@ def main(argv=None) -> int:
     if args.json:
         print(json.dumps(out, indent=2))
         return 0
-    print(f"numpy reference: one small ufunc call = {out['numpy_call_us']:.2f} us of CPU (about 0.5 us on an idle core)")
+    print(f"numpy reference: one small ufunc call = {out['numpy_call_us']:.2f} us of CPU (scales every figure below; compare runs by it)")
     print(f"propwatch simulator, physics {sim.physics_rate_hz} Hz / control {sim.control_rate_hz} Hz / "
           f"position {sim.position_rate_hz} Hz / log {sim.log_rate_hz} Hz, one thread")
     for key in ("batch_1", f"batch_{big}"):
