@@ -12,7 +12,6 @@ import numpy as np
 
 from offline.propellers.faults import FaultSignature
 
-
 NOISE_BLOCK_STEPS = 256  # flutter noise is drawn for this many steps at once (one RNG call, not one per step)
 WRAP_EVERY_STEPS = 256  # blade angles wrapped to [0, 2π) this often: < 800 rad, so the float32 sine errs < 1e-4
 
