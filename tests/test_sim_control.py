@@ -133,3 +133,26 @@ def test_log_timing_and_shapes(vehicle):
     assert table.airborne.all() and len(table) == 40
     np.testing.assert_array_equal(table.motor_cmd, log.pwm_us[1])
     np.testing.assert_array_equal(table.pos_ned_m, log.pos_ned_m[1])
+
+
+def test_bad_propeller_model_and_divergence_fail_by_name(vehicle):
+    from monitor.errors import ModelError
+
+    class Flat:
+        def reset(self, omega_rad_s):
+            pass
+
+        def __call__(self, omega_rad_s, dt_s):
+            return np.ones(4), np.ones(4)  # forgot the batch axis
+
+    with pytest.raises(ModelError, match="thrust_n has shape"):
+        simulate(vehicle, hover_waypoints(2), Flat(), dataclasses.replace(QUIET, duration_s=1.0))
+
+    class Explodes(QuadraticPropeller):
+        def __call__(self, omega_rad_s, dt_s):
+            t, q = super().__call__(omega_rad_s, dt_s)
+            return t * np.array([[1.0], [np.nan]]), q
+
+    with pytest.raises(ModelError, match=r"flight\(s\) \[1\] diverged"):
+        simulate(vehicle, hover_waypoints(2), Explodes(vehicle.kf_n_per_rad_s2, vehicle.ktau_nm_per_rad_s2),
+                 dataclasses.replace(QUIET, duration_s=1.0))

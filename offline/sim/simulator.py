@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from monitor.errors import ConfigError
+from monitor.errors import ConfigError, ModelError
 from monitor.vehicle import VehicleConfig
 from offline.sim.battery import Battery
 from offline.sim.controller import Controller, ControllerConfig
@@ -90,6 +90,23 @@ def _per_flight(value, n: int, name: str) -> np.ndarray:
     if arr is None or not np.all(np.isfinite(arr)):
         raise ValueError(f"{name}: expected a number or one finite number per flight")
     return arr
+
+
+def _checked(propellers, shape: tuple[int, int]):
+    """``propellers`` that fails by name on wrong output shapes; used for the first step only,
+    so a stateful model sees exactly the calls it would see without the check."""
+
+    def call(omega_rad_s: np.ndarray, dt_s: float):
+        out = propellers(omega_rad_s, dt_s)
+        if not (isinstance(out, tuple) and len(out) == 2):
+            raise ModelError(f"propeller model {type(propellers).__name__}: must return (thrust_n, torque_nm)")
+        for name, arr in zip(("thrust_n", "torque_nm"), out):
+            if np.shape(arr) != shape:
+                raise ModelError(f"propeller model {type(propellers).__name__}: {name} has shape {np.shape(arr)}, "
+                                 f"expected {shape}")
+        return out
+
+    return call
 
 
 def simulate(vehicle: VehicleConfig, waypoints_ned_m: np.ndarray, propellers, sim: SimConfig = SimConfig(), *,
@@ -167,7 +184,7 @@ def simulate(vehicle: VehicleConfig, waypoints_ned_m: np.ndarray, propellers, si
             np.maximum(omega_cmd, omega_lo, out=omega_cmd)
             np.minimum(omega_cmd, omega_hi, out=omega_cmd)
             omega_target = dyn.motor_target(omega_cmd)
-        thrust, torque = dyn.step(state, omega_target, propellers)
+        thrust, torque = dyn.step(state, omega_target, propellers if k else _checked(propellers, (n, 4)))
         if (k + 1) % k_log == 0:
             j = (k + 1) // k_log - 1
             log["pos_ned_m"][:, j] = state.pos_ned_m
@@ -187,6 +204,11 @@ def simulate(vehicle: VehicleConfig, waypoints_ned_m: np.ndarray, propellers, si
                 bar.update(1)
     if bar is not None:
         bar.close()
+
+    bad = ~np.all(np.isfinite(log["pos_ned_m"]), axis=(1, 2))
+    if bad.any():
+        raise ModelError(f"simulate: flight(s) {np.flatnonzero(bad).tolist()} diverged (non-finite state); "
+                         "check the propeller model and the vehicle terms")
 
     roll, pitch, yaw = quat_to_euler(log["q_world_body"])
     if sim.attitude_noise_std_rad > 0:
