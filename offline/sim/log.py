@@ -12,6 +12,7 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
+from monitor.features import SIGNALS
 from monitor.flight import FlightTable
 
 BOOT_OFFSET_US = 5_000_000  # the flight starts 5 s after the autopilot booted
@@ -61,16 +62,10 @@ class FlightLog:
         return FlightLog(log_rate_hz=self.log_rate_hz, **kw)
 
     def signals(self) -> dict[str, np.ndarray]:
-        """Canonical signals for ``monitor.features`` (leading axis B, time next)."""
-        return {
-            "motor_rpm": self.motor_rpm,
-            "roll_rad": self.roll_rad,
-            "pitch_rad": self.pitch_rad,
-            "yaw_rad": self.yaw_rad,
-            "roll_rate_rad_s": self.rates_frd_rad_s[..., 0],
-            "pitch_rate_rad_s": self.rates_frd_rad_s[..., 1],
-            "yaw_rate_rad_s": self.rates_frd_rad_s[..., 2],
-        }
+        """Canonical signals for ``monitor.features`` (leading axis B, time next), named by ``SIGNALS``."""
+        rates = self.rates_frd_rad_s
+        values = (self.motor_rpm, self.roll_rad, self.pitch_rad, self.yaw_rad, rates[..., 0], rates[..., 1], rates[..., 2])
+        return dict(zip(SIGNALS, values, strict=True))
 
     def to_flight_table(self, i: int, source: str = "sim") -> FlightTable:
         """Flight ``i`` as the canonical ``FlightTable`` (airborne throughout: flights start in hover)."""
