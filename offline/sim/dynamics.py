@@ -25,7 +25,7 @@ preallocated buffers: products of quaternions and rates are bilinear maps
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -37,25 +37,32 @@ GRAVITY_M_S2 = 9.80665  # standard gravity (ISO 80000-3), PX4 CONSTANTS_ONE_G
 
 @dataclass
 class VehicleState:
-    """Mutable state of B flights; the arrays are updated in place."""
+    """Mutable state of B flights, updated in place.
 
-    pos_ned_m: np.ndarray  # (B, 3)
-    vel_ned_m_s: np.ndarray  # (B, 3)
-    q_world_body: np.ndarray  # (B, 4)
-    rates_frd_rad_s: np.ndarray  # (B, 3) true body rates
+    Position, velocity, attitude and rates live side by side in ``packed`` (B, 13) and the
+    named fields are views of it, so one step can update attitude and rates in one operation.
+    """
+
+    packed: np.ndarray  # (B, 13): pos_ned_m (3), vel_ned_m_s (3), q_world_body (4), rates_frd_rad_s (3)
     omega_rad_s: np.ndarray  # (B, 4) actual rotor speeds
+    pos_ned_m: np.ndarray = field(init=False, repr=False)  # (B, 3)
+    vel_ned_m_s: np.ndarray = field(init=False, repr=False)  # (B, 3)
+    q_world_body: np.ndarray = field(init=False, repr=False)  # (B, 4)
+    rates_frd_rad_s: np.ndarray = field(init=False, repr=False)  # (B, 3) true body rates
+
+    def __post_init__(self) -> None:
+        p = self.packed
+        if p.ndim != 2 or p.shape[1] != 13:
+            raise ValueError(f"VehicleState.packed: expected (B, 13), got {p.shape}")
+        self.pos_ned_m, self.vel_ned_m_s = p[:, 0:3], p[:, 3:6]
+        self.q_world_body, self.rates_frd_rad_s = p[:, 6:10], p[:, 10:13]
 
     @classmethod
     def hover(cls, n: int, pos_ned_m, omega_rad_s: np.ndarray, yaw_rad: float = 0.0) -> VehicleState:
-        q = np.zeros((n, 4))
-        q[:, 0], q[:, 3] = math.cos(yaw_rad / 2), math.sin(yaw_rad / 2)
-        return cls(
-            pos_ned_m=np.broadcast_to(np.asarray(pos_ned_m, dtype=np.float64), (n, 3)).copy(),
-            vel_ned_m_s=np.zeros((n, 3)),
-            q_world_body=q,
-            rates_frd_rad_s=np.zeros((n, 3)),
-            omega_rad_s=np.broadcast_to(np.asarray(omega_rad_s, dtype=np.float64), (n, 4)).copy(),
-        )
+        packed = np.zeros((n, 13))
+        packed[:, 0:3] = np.asarray(pos_ned_m, dtype=np.float64)
+        packed[:, 6], packed[:, 9] = math.cos(yaw_rad / 2), math.sin(yaw_rad / 2)
+        return cls(packed, np.broadcast_to(np.asarray(omega_rad_s, dtype=np.float64), (n, 4)).copy())
 
 
 class Dynamics:
@@ -66,38 +73,38 @@ class Dynamics:
         self.mass_kg = np.asarray(mass_kg, dtype=np.float64).reshape(-1)
         n = len(self.mass_kg)
         self.inv_mass = (1.0 / self.mass_kg)[:, None]
-        inertia = np.array(vehicle.inertia_diag_kg_m2, dtype=np.float64)
-        ixx, iyy, izz = inertia
+        ixx, iyy, izz = np.array(vehicle.inertia_diag_kg_m2, dtype=np.float64)
         arms = np.array(vehicle.rotor_positions_frd_m, dtype=np.float64) - np.array(vehicle.cg_offset_frd_m)
-        # [thrust (4), drag torque (4)] @ wrench_map = [total thrust, I^-1 M]. Thrust T along -z at
-        # (x, y, z) gives the moment (x, y, z) x (0, 0, -T) = (-y T, x T, 0); the drag torque's yaw
-        # moment is spin_sign * torque (a CCW rotor yaws the nose right, +z FRD).
-        wm = np.zeros((8, 4))
-        wm[:4, 0] = 1.0
-        wm[:4, 1] = -arms[:, 1] / ixx
-        wm[:4, 2] = arms[:, 0] / iyy
-        wm[4:, 3] = np.asarray(vehicle.spin_sign) / izz
-        self.wrench_map = wm
         # Euler's equations for a diagonal inertia: wdot_i += k_i w_j w_k (i, j, k cyclic).
         gyro = np.zeros((3, 3, 3))
         gyro[1, 2, 0] = (iyy - izz) / ixx
         gyro[2, 0, 1] = (izz - ixx) / iyy
         gyro[0, 1, 2] = (ixx - iyy) / izz
-        self.gyro_map = gyro.reshape(9, 3)
+        # One matmul per step: features [vec(x outer x) (49), thrust (4), drag torque (4)], x = [q, w],
+        # map to [dq (4), dw (3), -dt R[:, 2] (3), total thrust (1)]. A thrust T along -z at
+        # (x, y, z) from the CG gives the moment (x, y, z) x (0, 0, -T) = (-y T, x T, 0); a drag
+        # torque's yaw moment is spin_sign * torque (a CCW rotor yaws the nose right, +z FRD).
+        products = state_products_map(dt, gyro.reshape(9, 3))  # (49, 10): [-dt z (3), dq (4), gyro dw (3)]
+        m = np.zeros((57, 11))
+        m[:49, 0:4] = products[:, 3:7]
+        m[:49, 4:7] = products[:, 7:10]
+        m[:49, 7:10] = products[:, 0:3]
+        m[49:53, 4] = -dt * arms[:, 1] / ixx
+        m[49:53, 5] = dt * arms[:, 0] / iyy
+        m[49:53, 10] = 1.0
+        m[53:57, 6] = dt * np.asarray(vehicle.spin_sign) / izz
+        self.step_map = m
         self.motor_alpha = 1.0 - math.exp(-dt / vehicle.motor_time_constant_s)
         self.efficiency = np.array(vehicle.motor_efficiency, dtype=np.float64)
         self.drag = np.array(vehicle.linear_drag_n_per_m_s, dtype=np.float64)
         self.wind_ned_m_s = np.array(vehicle.wind_ned_m_s, dtype=np.float64)
         self.has_drag = bool(np.any(self.drag > 0))
         self.gravity_dt = np.array([0.0, 0.0, GRAVITY_M_S2 * dt])
-        # All products of the state with itself that a step needs, as one bilinear map.
-        self.products_map = state_products_map(dt, self.gyro_map)
-        # Preallocated work buffers.
-        self._forces = np.empty((n, 8))
-        self._wrench = np.empty((n, 4))
-        self._x = np.empty((n, 7))
-        self._xx = np.empty((n, 7, 7))
-        self._prod = np.empty((n, 10))
+        # Preallocated work buffers; the outer product is written straight into the features.
+        self._features = np.zeros((n, 57))
+        self._outer = self._features[:, :49].reshape(n, 7, 7)
+        assert np.shares_memory(self._outer, self._features)
+        self._out = np.empty((n, 11))
         self.force_body_n = np.zeros((n, 3))  # non-gravity force of the last step with drag, body FRD
         self.last_total_thrust_n = np.zeros(n)
 
@@ -113,44 +120,35 @@ class Dynamics:
 
     def step(self, s: VehicleState, omega_target_rad_s: np.ndarray, propellers) -> tuple[np.ndarray, np.ndarray]:
         """Advance ``s`` by dt in place; returns this step's (thrust_n, torque_nm)."""
-        dt, n = self.dt_s, len(self.mass_kg)
+        dt = self.dt_s
         om = s.omega_rad_s
         om += self.motor_alpha * (omega_target_rad_s - om)
         thrust, torque = propellers(om, dt)
-        q, w, v = s.q_world_body, s.rates_frd_rad_s, s.vel_ned_m_s
-        f = self._forces
-        f[:, :4] = thrust
-        f[:, 4:] = torque
-        wr = np.matmul(f, self.wrench_map, out=self._wrench)  # [total thrust, I^-1 M]
+        f = self._features
+        f[:, 49:53] = thrust
+        f[:, 53:57] = torque
+        p = s.packed
+        x = p[:, 6:13]  # [q, w]
+        np.multiply(x[:, :, None], x[:, None, :], out=self._outer)
+        out = np.matmul(f, self.step_map, out=self._out)
+        self.last_total_thrust_n = out[:, 10]
 
-        # One outer product of x = [q, w] gives the thrust direction, the quaternion rate and the
-        # gyroscopic term: prod = [-dt R[:, 2], dt/2 q ⊗ (0, w), -dt I^-1 (w x I w)].
-        x = self._x
-        x[:, :4] = q
-        x[:, 4:] = w
-        np.multiply(x[:, :, None], x[:, None, :], out=self._xx)
-        prod = np.matmul(self._xx.reshape(n, 49), self.products_map, out=self._prod)
-
-        # Linear: dv = dt (R f_body / m + g).
+        # Linear, with the attitude at the start of the step: dv = dt (R f_body / m + g).
         if self.has_drag:
+            q, v = s.q_world_body, s.vel_ned_m_s
             f_body = self.force_body_n
             f_body[:, :2] = 0.0
-            f_body[:, 2] = -wr[:, 0]
+            f_body[:, 2] = -out[:, 10]
             f_body -= self.drag * rotate_world_to_body(q, v - self.wind_ned_m_s)
             dv = rotate_body_to_world(q, f_body) * (self.inv_mass * dt)
         else:
-            dv = prod[:, :3] * (wr[:, :1] * self.inv_mass)
+            dv = out[:, 7:10] * (out[:, 10:11] * self.inv_mass)
         dv += self.gravity_dt
 
-        # Angular: dw = dt I^-1 M + gyroscopic term.
-        dw = prod[:, 7:]
-        dw += dt * wr[:, 1:]
-        w += dw
+        p[:, 6:13] += out[:, :7]  # attitude and rates, explicit Euler from the start-of-step values
+        v = s.vel_ned_m_s
         v += dv
-        s.pos_ned_m += dt * v
-
-        # q += dt/2 q ⊗ (0, w) (with the rates at the start of the step), renormalised.
-        q += prod[:, 3:7]
+        s.pos_ned_m += dt * v  # semi-implicit: the new velocity moves the vehicle
+        q = s.q_world_body
         q /= np.sqrt(np.einsum("ij,ij->i", q, q))[:, None]
-        self.last_total_thrust_n = wr[:, 0]
         return thrust, torque
