@@ -130,6 +130,7 @@ class Controller:
         self.rate_d = np.array([cfg.mc_rollrate_d, cfg.mc_pitchrate_d, cfg.mc_yawrate_d])
         self.rate_int_lim = np.array([cfg.mc_rr_int_lim, cfg.mc_rr_int_lim, cfg.mc_yr_int_lim])
         self.att_p = np.array([cfg.mc_roll_p, cfg.mc_pitch_p, cfg.mc_yaw_p])
+        self.pos_p = np.array([cfg.mpc_xy_p, cfg.mpc_xy_p, cfg.mpc_z_p])
         self.rate_max = np.radians([cfg.mc_rollrate_max_deg_s, cfg.mc_pitchrate_max_deg_s, cfg.mc_yawrate_max_deg_s])
         self.vel_p = np.array([cfg.mpc_xy_vel_p_acc, cfg.mpc_xy_vel_p_acc, cfg.mpc_z_vel_p_acc])
         self.vel_i = np.array([cfg.mpc_xy_vel_i_acc, cfg.mpc_xy_vel_i_acc, cfg.mpc_z_vel_i_acc])
@@ -189,7 +190,7 @@ class Controller:
             err = target - pos_ned_m
 
         # Position P with PX4's speed limits (horizontal norm, separate up/down).
-        vel_sp = err * np.array([cfg.mpc_xy_p, cfg.mpc_xy_p, cfg.mpc_z_p])
+        vel_sp = err * self.pos_p
         hnorm = np.hypot(vel_sp[:, 0], vel_sp[:, 1])
         vel_sp[:, :2] *= (cfg.mpc_xy_cruise_m_s / np.maximum(hnorm, cfg.mpc_xy_cruise_m_s))[:, None]
         _clip_(vel_sp[:, 2], -cfg.mpc_z_vel_max_up_m_s, cfg.mpc_z_vel_max_dn_m_s)
