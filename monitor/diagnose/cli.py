@@ -56,7 +56,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
 
 
 def diagnose_file(path: str, clf: Classifier, esc: EscCurve, fmt: str | None, hop: int):
-    table = read_log(path, fmt=fmt, esc=esc, rate_hz=clf.info.sample_rate_hz)
+    table = read_log(path, fmt=fmt, esc=esc, rate_hz=clf.info.sample_rate_hz, extras=False)
     return table, diagnose_table(table, clf, hop=hop, esc=esc)
 
 

@@ -43,13 +43,17 @@ def detect_format(path: str | Path) -> str:
     raise LogFormatError(f"{path}: unknown log format (expected .tlog, .ulg, DataFlash .bin, or CSV with --format)")
 
 
-def read_raw(path: str | Path, fmt: str | None = None) -> RawFlight:
-    """Decode a log into streams. ``fmt``: None (detect), a binary format name, or a CSV mapping name."""
+def read_raw(path: str | Path, fmt: str | None = None, extras: bool = True) -> RawFlight:
+    """Decode a log into streams. ``fmt``: None (detect), a binary format name, or a CSV mapping name.
+
+    ``extras=False`` lets a reader skip what only calibration uses (ESC telemetry,
+    position, accelerometer) where that saves time (tlogs).
+    """
     fmt = fmt or detect_format(path)
     if fmt == "tlog":
         from monitor.logs.tlog import read_tlog
 
-        return read_tlog(path)
+        return read_tlog(path, extras=extras)
     if fmt == "ulog":
         from monitor.logs.ulog import read_ulog
 
@@ -63,9 +67,10 @@ def read_raw(path: str | Path, fmt: str | None = None) -> RawFlight:
     return read_csv(path, fmt)
 
 
-def read_log(path: str | Path, fmt: str | None = None, esc: EscCurve | None = None, rate_hz: float = 20.0) -> FlightTable:
+def read_log(path: str | Path, fmt: str | None = None, esc: EscCurve | None = None, rate_hz: float = 20.0,
+             extras: bool = True) -> FlightTable:
     """Read any supported log onto the ``rate_hz`` grid; RPM from ``esc`` when its unit matches."""
-    return to_flight_table(read_raw(path, fmt), esc=esc, rate_hz=rate_hz)
+    return to_flight_table(read_raw(path, fmt, extras), esc=esc, rate_hz=rate_hz)
 
 
 __all__ = ["BINARY_FORMATS", "RawFlight", "Stream", "detect_format", "read_log", "read_raw", "to_flight_table"]

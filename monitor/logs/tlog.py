@@ -28,8 +28,10 @@ V2_OVERHEAD = 12  # magic, len, incompat, compat, seq, sys, comp, msgid(3), crc(
 V2_SIGNATURE = 13
 MAVLINK_IFLAG_SIGNED = 0x01
 HEARTBEAT_ID, LOCAL_POSITION_NED_ID, HIGHRES_IMU_ID = 0, 32, 105
-# ids the shared decoder handles, plus the extras read here for calibration
-WANTED_IDS = frozenset(set(md.STREAM_IDS.values()) | {HEARTBEAT_ID, LOCAL_POSITION_NED_ID, HIGHRES_IMU_ID})
+# What a diagnosis needs: the ids the shared decoder handles, less ESC telemetry.
+CORE_IDS = frozenset((set(md.STREAM_IDS.values()) | {HEARTBEAT_ID}) - {md.ESC_STATUS_ID})
+# Plus what calibration reads: ESC RPM, position/velocity, accelerometer.
+WANTED_IDS = CORE_IDS | {md.ESC_STATUS_ID, LOCAL_POSITION_NED_ID, HIGHRES_IMU_ID}
 # A receive time further than this from the previous one is a false frame start.
 MAX_TS_JUMP_US = 3_600_000_000
 
@@ -116,7 +118,8 @@ def _stream(items) -> Stream | None:
     return Stream.build([i[0] for i in items], [i[1] for i in items])
 
 
-def read_tlog(path: str | Path, system_id: int | None = None) -> RawFlight:
+def read_tlog(path: str | Path, system_id: int | None = None, extras: bool = True) -> RawFlight:
+    """``extras=False`` skips ESC telemetry, position and IMU frames (a diagnosis does not use them)."""
     path = Path(path)
     if not path.is_file():
         raise LogFormatError(f"{path}: no such file")
@@ -124,25 +127,24 @@ def read_tlog(path: str | Path, system_id: int | None = None) -> RawFlight:
     mav = _mavlink()
     dec = md.MavlinkDecoder(system_id=system_id)
     col = _Collector()
-    frames = iter_frames(buf)
-    bad_crc = 0
-    skipped, truncated = 0, False
+    frames = iter_frames(buf, WANTED_IDS if extras else CORE_IDS)
+    bad_crc, skipped, truncated = 0, 0, False
     try:
-        off, frame = next(frames)
+        _, frame = next(frames)
         while True:
             try:
                 msg = mav.decode(bytearray(frame))
             except Exception:  # pymavlink raises MAVError on a CRC or length mismatch
                 bad_crc += 1
-                off, frame = frames.send(False)
+                _, frame = frames.send(False)
                 continue
             for s in dec.decode(msg):
                 col.add(s)
-            _extras(msg, dec, col)
-            off, frame = frames.send(True)
+            if extras:
+                _extras(msg, dec, col)
+            _, frame = frames.send(True)
     except StopIteration as stop:
-        if stop.value:
-            skipped, truncated = stop.value
+        skipped, truncated = stop.value or (0, False)
     warnings = []
     if skipped or bad_crc:
         warnings.append(f"{path.name}: corrupted data skipped ({skipped} bytes, {bad_crc} frames failing their CRC)")
