@@ -110,7 +110,7 @@ def run(args) -> dict:
     lat = rep["latency_ms"]
     return {
         "ran": {"replay_wall_s": round(t1 - t0 - linger_s, 1), "speed": args.speed,
-                "flight_minutes": round((t1 - t0 - linger_s) * args.speed / 60.0, 2), "model": str(model),
+                "flight_minutes": args.minutes if not args.tlog else "see tlog", "model": str(model),
                 "tlog": str(args.tlog or "synthetic"), "messages": rep["messages"], "classified_steps": rep["pipeline"]["classified"]},
         "latency_p50_ms": round(lat["p50"], 3), "latency_p99_ms": round(lat["p99"], 3), "latency_max_ms": round(lat["max"], 3),
         "cpu_percent": round(100.0 * (cpu1 - cpu0) / (t1 - t0), 2),

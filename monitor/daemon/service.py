@@ -27,7 +27,7 @@ from monitor.daemon.sdnotify import Notifier
 
 log = logging.getLogger("propwatch.monitor")
 
-READ_TIMEOUT_S = 0.02
+READ_TIMEOUT_S = 0.1  # select() returns at once when data comes; this only paces idle housekeeping
 BAD_DATA_LOG_PERIOD_S = 5.0
 MOTOR_STREAM = {"servo": "SERVO_OUTPUT_RAW", "actuator": "ACTUATOR_OUTPUT_STATUS", "esc": "ESC_STATUS"}
 LANDED_RATE_HZ = 2.0  # EXTENDED_SYS_STATE: a state, not a signal
