@@ -92,3 +92,20 @@ def test_sim_config_round_trips_through_a_mapping():
     cfg = SimConfig(physics_rate_hz=800, control_rate_hz=400)
     back, _ = from_mapping(SimConfig, to_mapping(cfg))
     assert back == cfg
+
+
+def test_simulate_rejects_bad_inputs_by_name():
+    import numpy as np
+
+    from offline.sim.propeller import QuadraticPropeller
+    from offline.sim.simulator import simulate
+
+    v = load_vehicle(DEFAULT_VEHICLE)
+    prop = QuadraticPropeller.for_vehicle(v)
+    sim = SimConfig(duration_s=0.1)
+    with pytest.raises(ConfigError, match="waypoints_ned_m"):
+        simulate(v, np.zeros((2, 3)), prop, sim)
+    with pytest.raises(ConfigError, match="payload_kg"):
+        simulate(v, np.zeros((2, 1, 3)), prop, sim, payload_kg=[0.1, -0.2])
+    with pytest.raises(ConfigError, match="seed"):
+        simulate(v, np.zeros((2, 1, 3)), prop, sim, seed=[1, 2, 3])

@@ -23,7 +23,7 @@ from monitor.errors import ConfigError, ModelError
 from monitor.vehicle import VehicleConfig
 from offline.sim.battery import Battery
 from offline.sim.controller import Controller, ControllerConfig
-from offline.sim.dynamics import Dynamics, VehicleState
+from offline.sim.dynamics import GRAVITY_M_S2, Dynamics, VehicleState
 from offline.sim.log import BOOT_OFFSET_US, FlightLog
 from offline.sim.mission import START_NED_M
 from offline.sim.quat import quat_to_euler
@@ -81,14 +81,14 @@ def flight_seed_sequences(seed, n: int) -> list[np.random.SeedSequence]:
         return [np.random.SeedSequence([int(seed), i]) for i in range(n)]
     seeds = np.asarray(seed).reshape(-1)
     if len(seeds) != n:
-        raise ValueError(f"seed: got {len(seeds)} per-flight seeds for {n} flights")
+        raise ConfigError(f"seed: got {len(seeds)} per-flight seeds for {n} flights")
     return [np.random.SeedSequence([int(s), 0]) for s in seeds]
 
 
 def _per_flight(value, n: int, name: str) -> np.ndarray:
     arr = np.broadcast_to(np.asarray(value, dtype=np.float64), (n,)).copy() if np.ndim(value) <= 1 else None
     if arr is None or not np.all(np.isfinite(arr)):
-        raise ValueError(f"{name}: expected a number or one finite number per flight")
+        raise ConfigError(f"{name}: expected a number or one finite number per flight")
     return arr
 
 
@@ -114,11 +114,11 @@ def simulate(vehicle: VehicleConfig, waypoints_ned_m: np.ndarray, propellers, si
     """Simulate B flights through ``waypoints_ned_m`` (B, N, 3); see the module doc for seeds."""
     wps = np.asarray(waypoints_ned_m, dtype=np.float64)
     if wps.ndim != 3 or wps.shape[2] != 3 or wps.shape[1] < 1 or not np.all(np.isfinite(wps)):
-        raise ValueError(f"waypoints_ned_m: expected finite (B, N, 3), got shape {wps.shape}")
+        raise ConfigError(f"waypoints_ned_m: expected finite (B, N, 3), got shape {wps.shape}")
     n = wps.shape[0]
     payload = _per_flight(payload_kg, n, "payload_kg")
     if np.any(payload < 0):
-        raise ValueError("payload_kg: must be >= 0")
+        raise ConfigError("payload_kg: must be >= 0")
     mass = vehicle.mass_kg + payload
 
     k_ctrl = sim.physics_rate_hz // sim.control_rate_hz
@@ -130,7 +130,7 @@ def simulate(vehicle: VehicleConfig, waypoints_ned_m: np.ndarray, propellers, si
     esc = vehicle.esc
     battery = Battery(vehicle, n)
 
-    hover = np.sqrt(mass * 9.80665 / (4 * vehicle.kf_n_per_rad_s2))[:, None] * np.ones(4)
+    hover = np.sqrt(mass * GRAVITY_M_S2 / (4 * vehicle.kf_n_per_rad_s2))[:, None] * np.ones(4)
     state = VehicleState.hover(n, sim.start_ned_m, hover)
     cstate = ctrl.initial_state(n)
     propellers.reset(state.omega_rad_s.copy())
