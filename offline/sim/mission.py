@@ -12,6 +12,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from monitor.errors import ConfigError
+
 START_NED_M = np.array([0.0, 0.0, -10.0])
 # Box for random waypoints (NED, m): +-15 m around the start, 4..16 m altitude.
 DEFAULT_BOX_NED_M = ((-15.0, 15.0), (-15.0, 15.0), (-16.0, -4.0))
@@ -27,7 +29,7 @@ def random_waypoints(n_flights: int, n_waypoints: int = 5, seed: int = 0,
     """
     box = np.asarray(box_ned_m, dtype=np.float64)
     if box.shape != (3, 2) or np.any(box[:, 1] < box[:, 0]):
-        raise ValueError(f"box_ned_m must be three (lo, hi) pairs, got {box_ned_m!r}")
+        raise ConfigError(f"box_ned_m: must be three (lo, hi) pairs, got {box_ned_m!r}")
     out = np.empty((n_flights, n_waypoints, 3))
     for i in range(n_flights):
         rng = np.random.default_rng([seed, i])
@@ -38,5 +40,5 @@ def random_waypoints(n_flights: int, n_waypoints: int = 5, seed: int = 0,
 def waypoint_set(name: str, n_waypoints: int = 5) -> np.ndarray:
     """The fixed route named ``name`` ("A" or "B"), shape (n_waypoints, 3)."""
     if name not in _NAMED_SEEDS:
-        raise ValueError(f"unknown waypoint set {name!r}; known: {sorted(_NAMED_SEEDS)}")
+        raise ConfigError(f"waypoint set: unknown {name!r}; known: {sorted(_NAMED_SEEDS)}")
     return random_waypoints(1, n_waypoints, seed=_NAMED_SEEDS[name])[0]
