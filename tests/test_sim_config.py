@@ -109,3 +109,21 @@ def test_simulate_rejects_bad_inputs_by_name():
         simulate(v, np.zeros((2, 1, 3)), prop, sim, payload_kg=[0.1, -0.2])
     with pytest.raises(ConfigError, match="seed"):
         simulate(v, np.zeros((2, 1, 3)), prop, sim, seed=[1, 2, 3])
+
+
+def test_missions_are_deterministic_inside_the_box_and_distinct():
+    import numpy as np
+
+    from offline.sim.mission import DEFAULT_BOX_NED_M, random_waypoints, waypoint_set
+
+    a, b = waypoint_set("A"), waypoint_set("B")
+    assert a.shape == b.shape == (5, 3)
+    np.testing.assert_array_equal(a, waypoint_set("A"))
+    assert np.linalg.norm(a - b, axis=1).min() > 1.0
+    w = random_waypoints(50, 5, seed=3)
+    box = np.array(DEFAULT_BOX_NED_M)
+    assert np.all(w >= box[:, 0]) and np.all(w <= box[:, 1])
+    np.testing.assert_array_equal(random_waypoints(10, 5, seed=3), w[:10])  # more flights extend, never reshuffle
+    assert not np.array_equal(random_waypoints(10, 5, seed=4), w[:10])
+    with pytest.raises(ConfigError, match="waypoint set"):
+        waypoint_set("C")
