@@ -353,3 +353,21 @@ def test_esc_status_decodes_even_from_a_parser_that_calls_it_unknown_291():
     other = mavlink.MAVLink(None, srcSystem=2, srcComponent=1)
     stranger = mavlink.MAVLink_unknown(291, bytearray(mavlink_esc.encode_esc_status(other, 1, [1, 2, 3, 4])))
     assert d.decode(stranger) == [] and d.ignored[(2, 1)] == 1  # the ids come from the frame
+
+
+def test_actuator_output_status_uses_the_active_bitmask():
+    d = md.MavlinkDecoder(system_id=1)
+    values = [1500.0, 1510.0, 1520.0, 1530.0] + [0.0] * 28
+    (o,) = d.decode(msg(mavlink.MAVLink_actuator_output_status_message(2_000_000, 0b0111, values)))
+    assert o.source == "ACTUATOR_OUTPUT_STATUS" and o.timestamp_us == 2_000_000 and o.first_channel == 1
+    assert o.values_us[:3] == (1500.0, 1510.0, 1520.0) and math.isnan(o.values_us[3])  # output 4 not active
+
+
+def test_servo_port_1_carries_outputs_9_to_16(toy):
+    frames = synth_flight(9.0, faulty=(2,), servo_port=1)
+    cfg = monitor_config_from_mapping({"input": {"motor_outputs": [9, 10, 11, 12]}})
+    _, steps = run_pipeline(toy, parse_all(frames), cfg)
+    probs = np.array([s.fault_probability for s in steps if s.fault_probability is not None])
+    assert len(probs) and probs[:, 1].min() > 0.9
+    p, steps = run_pipeline(toy, parse_all(frames))  # outputs 1..4 are not in these messages
+    assert not any(s.fault_probability is not None for s in steps) and p.stats["motor_msgs_unmapped"] > 100

@@ -338,3 +338,23 @@ def test_serial_device_with_baud_rate(tmp_path, model):
     back = [m for m in (p.parse_buffer(heard) or []) if m.get_type() != "BAD_DATA"]
     assert any(m.get_type() == "HEARTBEAT" and m.type == 18 and m.get_srcComponent() == 191 for m in back)
     assert any(m.get_type() == "STATUSTEXT" and m.text.startswith("PROP 1 FAULT") for m in back)
+
+
+def test_udpout_daemon_announces_itself_to_a_listening_autopilot(tmp_path, model):
+    """With udpout the daemon speaks first (heartbeat), so an autopilot listening on udpin can answer."""
+    port = free_udp_port()
+    tlog = write_tlog(tmp_path / "f.tlog", synth_flight(20.0, faulty=(4,)))
+    received = tmp_path / "received.jsonl"
+    events = tmp_path / "ev.jsonl"
+    r = Proc([PY, "-m", "monitor.cli", "replay", str(tlog), "--connect", f"udpin:127.0.0.1:{port}", "--speed", "5",
+              "--linger", "1.0", "--received", str(received)])
+    d = Proc(monitor_cmd("--connect", f"udpout:127.0.0.1:{port}", "--model", str(model), "--events", str(events)))
+    try:
+        assert r.p.wait(60) == 0, r.text
+    finally:
+        rc = d.stop()
+    assert rc == 0 and "Traceback" not in d.text, d.text
+    got = [json.loads(x) for x in received.read_text().splitlines()]
+    assert any(m["mavpackettype"] == "HEARTBEAT" and m["_from"] == [1, 191] for m in got)
+    ev = [json.loads(x) for x in events.read_text().splitlines()]
+    assert ev and ev[0]["faulty_propellers"] == [4]

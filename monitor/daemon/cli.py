@@ -69,7 +69,7 @@ def main(argv: list[str] | None = None) -> int:
     esc = choose_esc(classifier, args.vehicle or cfg.vehicle_path)
     pipeline = Pipeline(classifier, cfg, esc)
     tlog_speed = cfg.link.tlog_speed if args.tlog_speed is None else args.tlog_speed
-    link = Link(args.connect, cfg.link.component_id, tlog_speed)
+    link = Link(args.connect, cfg.link.component_id, tlog_speed, cfg.link.system_id or None)
     events = EventWriter(args.events or cfg.events_path or None)
     daemon = Daemon(cfg, link, pipeline, events, Notifier())
 

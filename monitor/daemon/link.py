@@ -48,18 +48,19 @@ def split_serial(url: str) -> tuple[str, int | None]:
 
 
 class Link:
-    def __init__(self, url: str, component_id: int, tlog_speed: float = 1.0):
+    def __init__(self, url: str, component_id: int, tlog_speed: float = 1.0, system_id: int | None = None):
         self.url = url
         self.component_id = component_id
         self.is_log = url.lower().endswith(LOG_SUFFIXES)
         self.is_tcp = url.startswith("tcp:")
+        self.is_udpout = url.startswith("udpout:")
         self.tlog_speed = tlog_speed
         self.conn: Any = None
         self.bytes_in = 0
         self._pace: tuple[float, float] | None = None  # (first log time, monotonic start)
         self.eof = False
         self._pending: Any = None
-        self._system_id: int | None = None
+        self._system_id = system_id
         self._next_open = 0.0
         self._open_failures = 0
         if self.is_log:

@@ -163,7 +163,10 @@ class Daemon:
     def tick(self, now: float) -> None:
         link = self.cfg.link
         talking = self._system_id is not None and not self.link.is_log  # a log cannot hear us
-        if talking and now >= self._next_hb:
+        # Over udpout the autopilot learns our address from what we send: heartbeat before we know
+        # its system id (as the configured one, else PX4's default 1), or neither side ever speaks.
+        announce = talking or self.link.is_udpout
+        if announce and now >= self._next_hb:
             self.link.send_heartbeat()
             self._next_hb = now + 1.0 / link.heartbeat_rate_hz
         if link.request_streams and talking and self._slow and now >= self._next_request:
