@@ -125,3 +125,16 @@ def test_virtual_load_cell_round_trip_and_kf(tmp_path):
     esc = vehicle.esc
     assert fit_esc_to_rpm(back).r2 > 0.99
     assert np.polyval([a, b, c], 1500.0) == pytest.approx(esc.cmd_to_rpm(1500.0), rel=0.03)
+
+
+@pytest.mark.realdata
+@needs_dantonio
+def test_load_cell_noise_defaults_not_below_a_real_stand():
+    """The virtual stand is no quieter than a real RCbenchmark 1580 ramp sampled every ~25 ms."""
+    from offline.propellers.thrust_stand import noise_at_rest
+
+    run = read_thrust_stand_csv(DANTONIO / "StepsTest20230615_2023-06-15_174003.csv")
+    assert np.mean(np.diff(run.time_s)) == pytest.approx(0.025, abs=0.003)  # the paper's sample period
+    thrust_std_n, torque_std_nm = noise_at_rest(run)
+    assert 0 < thrust_std_n <= LoadCellConfig().thrust_noise_n
+    assert 0 < torque_std_nm <= LoadCellConfig().torque_noise_nm

@@ -20,7 +20,7 @@ from pathlib import Path
 from monitor.errors import PropwatchError
 from monitor.vehicle import DEFAULT_VEHICLE, load_vehicle
 from offline.propellers import CONDITIONS, MODELS_DIR
-from offline.propellers.thrust_stand import fit_esc_to_rpm, fit_kf, fit_ktau, read_thrust_stand_csv
+from offline.propellers.thrust_stand import fit_esc_to_rpm, fit_kf, fit_ktau, noise_at_rest, read_thrust_stand_csv
 
 # Tong et al., Sec. V-A: test-set mean error of their LSTMs, percent.
 PAPER_MAPE_PCT = {"normal": {"torque": 2.29, "thrust": 0.613}, "bent": {"torque": 1.37, "thrust": 0.689},
@@ -33,6 +33,10 @@ def fit_stand_files(paths: list[str]) -> list[dict]:
     for p in paths:
         run = read_thrust_stand_csv(p)
         row: dict = {"file": str(p), "rows": int(run.time_s.size), "has_torque": run.torque_nm is not None}
+        try:
+            row["noise_at_rest_thrust_n"], row["noise_at_rest_torque_nm"] = noise_at_rest(run)
+        except PropwatchError:
+            pass  # a steps test has no rest segment
         try:
             esc, kf = fit_esc_to_rpm(run), fit_kf(run)
         except PropwatchError as exc:
@@ -50,6 +54,10 @@ def fit_stand_files(paths: list[str]) -> list[dict]:
 def _print_fits(rows: list[dict]) -> None:
     for r in rows:
         name = Path(r["file"]).name
+        if "noise_at_rest_thrust_n" in r:
+            q = r["noise_at_rest_torque_nm"]
+            print(f"{name}: noise at rest: thrust {r['noise_at_rest_thrust_n']:.3g} N"
+                  + ("" if q is None else f", torque {q:.3g} N·m"))
         if "skipped" in r:
             print(f"{name}: skipped ({r['skipped'].split(': ', 1)[-1]})")
             continue
@@ -60,6 +68,17 @@ def _print_fits(rows: list[dict]) -> None:
             q = r["ktau_nm_per_rad_s2"]
             line += f"; kτ {q['coefficients'][0]:.4g} (R² {q['r2']:.3f}, RMSE {q['rmse']:.2g} N·m)"
         print(line)
+
+
+def metrics_markdown(metrics: dict) -> str:
+    """The test-split MAPE table beside the paper's figures and the kF·ω² / kτ·ω² fit."""
+    lines = ["| condition | thrust LSTM | thrust paper | thrust kF·ω² | torque LSTM | torque paper | torque kτ·ω² |",
+             "|---|---|---|---|---|---|---|"]
+    for c, m in metrics.items():
+        lines.append(f"| {c} | {m['lstm_thrust_mape_pct']:.3f} % | {m['paper_thrust_mape_pct']} % | "
+                     f"{m['quadratic_thrust_mape_pct']:.3f} % | {m['lstm_torque_mape_pct']:.3f} % | "
+                     f"{m['paper_torque_mape_pct']} % | {m['quadratic_torque_mape_pct']:.3f} % |")
+    return "\n".join(lines) + "\n"
 
 
 def train_all(out_dir: Path, vehicle_path: Path, seed: int, epochs: int | None) -> dict:
@@ -97,6 +116,9 @@ def train_all(out_dir: Path, vehicle_path: Path, seed: int, epochs: int | None) 
         mape_note=f"test = last {train_cfg.test_fraction:.0%} of each sweep, samples whose measured value is "
                   f">= {train_cfg.mape_min_fraction:.0%} of full scale; LSTM run statefully over the whole sweep")
     write_manifest(out_dir / "manifest.json", manifest)
+    (out_dir / "metrics.md").write_text(
+        f"# Propeller LSTMs: test-split MAPE (seed {seed})\n\n{manifest['mape_note']}.\n\n"
+        + metrics_markdown(metrics), encoding="utf-8")
     return manifest
 
 
@@ -118,7 +140,7 @@ def main(argv: list[str] | None = None) -> int:
             _print_fits(rows)
         return 0
     train_all(args.out, args.vehicle, args.seed, args.epochs)
-    print(f"wrote {args.out}/{{{','.join(CONDITIONS)}}}.npz and manifest.json")
+    print(f"wrote {args.out}/{{{','.join(CONDITIONS)}}}.npz, manifest.json and metrics.md")
     return 0
 
 

@@ -20,9 +20,12 @@ frequency of up to 183 Hz):
   full-size errors), plus white sensor noise. RPM is an optical count over the
   period (the mean speed) with its own noise.
 
-Noise defaults: thrust 0.01 N (1 gf) and torque 0.3 mN·m standard deviation,
-the order of an RCbenchmark 1580's resolution after averaging (its 5 kgf cell
-and 2 N·m torque cells, datasheet ±0.5 % accuracy); RPM 5 RPM.
+Noise defaults: thrust 0.01 N (1 gf) and torque 0.3 mN·m standard deviation;
+RPM 5 RPM. A real RCbenchmark 1580 ramp sampled every 23.5 ms
+(../shared/data/thrust_rcbench1580_dantonio, StepsTest20230615) reads
+0.0038 N and 0.078 mN·m at rest (``thrust_stand.noise_at_rest``); the defaults
+are 2.5x and 4x that, for the vibration a 10-inch propeller adds at speed
+(a test keeps them at or above the real floor).
 
 Everything is relative to the vehicle, so ``normalised()`` gives the speed as
 a fraction of ``omega_max`` and forces as fractions of ``kF·omega_max²``,

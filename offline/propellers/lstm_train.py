@@ -11,9 +11,9 @@ schedule.
 One deviation, for speed and for the simulator: the network is trained on
 windows of ``window_steps`` past samples and scored at *every* position after
 ``burn_in_steps`` rather than only the last one. Each scored output is still a
-prediction from a window of past RPM, the model sees the same data ~24 times
-fewer passes, and it learns to be right whatever the length of its history --
-which is what lets the simulator step it statefully
+prediction from a window of past RPM; one window gives 24 training targets
+instead of 1; and the model learns to be right whatever the length of its
+history -- which is what lets the simulator step it statefully
 (``tests/test_propellers_lstm.py`` checks stateful = windowed).
 """
 

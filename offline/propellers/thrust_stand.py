@@ -214,3 +214,15 @@ def fit_ktau(run: ThrustStandRun) -> Fit:
         raise LogFormatError(f"{run.path}: column 'Torque': this stand has no torque channel")
     m = _spinning(run) & np.isfinite(run.torque_nm)
     return _fit_through_origin(run.path, "Torque", run.omega_rad_s[m], np.abs(run.torque_nm[m]))
+
+
+def noise_at_rest(run: ThrustStandRun, esc_below_us: float = 1060.0) -> tuple[float, float | None]:
+    """Standard deviation of thrust (N) and torque (N·m) while the motor is stopped: the stand's noise floor.
+
+    Used to check the virtual load cell's sensor-noise defaults against a real stand.
+    """
+    m = run.esc_us <= esc_below_us
+    if m.sum() < 10:
+        raise LogFormatError(f"{run.path}: column 'ESC signal': fewer than 10 rows at or below {esc_below_us} µs")
+    torque = None if run.torque_nm is None else float(np.std(run.torque_nm[m]))
+    return float(np.std(run.thrust_n[m])), torque
