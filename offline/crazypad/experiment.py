@@ -136,15 +136,16 @@ def write_vehicle(cal: SteadyCalibration, sources: dict[str, str], path: Path) -
     return path
 
 
-def diagnose_real(model_path: Path, real: list[RealFlight]) -> list[dict]:
+def diagnose_real(model_paths: dict[str, Path], real: list[RealFlight]) -> list[dict]:
+    """Every non-calibration flight through ``diagnose_table`` with the model of its airframe (key) or "*"."""
     from monitor.diagnose.engine import diagnose_table
 
-    clf = Classifier(model_path)
+    clfs = {k: Classifier(p) for k, p in model_paths.items()}
     rows = []
     for r in real:
         if r.flight.role == "calibration":
             continue
-        d = diagnose_table(r.table, clf, hop=1)
+        d = diagnose_table(r.table, clfs.get(r.flight.airframe) or clfs["*"], hop=1)
         truth = truth_label(r.flight)
         pred = d.verdict["label"] if d.verdict else None
         rows.append({"file": r.flight.file, "group": r.flight.group, "airframe": r.flight.airframe,
@@ -188,24 +189,37 @@ def _props(label: int) -> tuple[int, ...]:
     return LABEL_TABLE[label]
 
 
+VARIANTS = {
+    "nominal": "trained on the nominal simulation (one model)",
+    "calibrated": "trained on the calibrated simulation, both airframes (one model, shipped)",
+    "calibrated_own": "trained on the calibrated simulation of the flight's own airframe (one model per airframe)",
+}
+
+
 def format_markdown(report: dict) -> str:
-    t_nom, t_cal = report["table"]["nominal"], report["table"]["calibrated"]
-    lines = ["| condition (real CrazyPAD, motor logs) | flights | accuracy, trained on nominal sim | accuracy, trained on calibrated sim "
-             "| called faulty (nominal / calibrated) |", "|---|---|---|---|---|"]
-    for name in t_cal:
-        a, b = t_nom.get(name, {}), t_cal[name]
-        lines.append(f"| {name} | {b['flights']} | {100 * a.get('accuracy', float('nan')):.1f} % | {100 * b['accuracy']:.1f} % "
-                     f"| {100 * a.get('called_faulty', float('nan')):.0f} % / {100 * b['called_faulty']:.0f} % |")
-    lines.append(f"| paper (Tong et al., real flights) | | | {100 * PAPER_REAL_ACCURACY:.2f} % | |")
+    t = report["table"]
+    head = "| condition (real CrazyPAD motor logs) | flights | " + " | ".join(f"accuracy: {k}" for k in t) + \
+        " | called faulty: " + " / ".join(t) + " |"
+    lines = [head, "|" + "---|" * (3 + len(t))]
+    first = next(iter(t.values()))
+    for name in first:
+        cells = [f"{100 * t[k].get(name, {}).get('accuracy', float('nan')):.1f} %" for k in t]
+        faulty = " / ".join(f"{100 * t[k].get(name, {}).get('called_faulty', float('nan')):.0f} %" for k in t)
+        lines.append(f"| {name} | {first[name]['flights']} | " + " | ".join(cells) + f" | {faulty} |")
+    lines.append("| paper (Tong et al., real flights, calibrated) | | " + " | ".join("" for _ in t)
+                 + f" {100 * PAPER_REAL_ACCURACY:.2f} % | |")
+    lines += ["", *(f"- {k}: {VARIANTS.get(k, k)}" for k in t)]
     return "\n".join(lines)
 
 
-def run(out: Path, root: Path = DEFAULT_ROOT, vehicle_path: Path | None = None, recipe: Recipe = Recipe(flights_per_label=16),
+DEFAULT_RECIPE = Recipe(flights_per_label=20)
+
+
+def run(out: Path, root: Path = DEFAULT_ROOT, vehicle_path: Path | None = None, recipe: Recipe = DEFAULT_RECIPE,
         epochs: int = 8, log=print) -> dict:
+    from monitor.vehicle import REPO_ROOT
     from offline.classifier.export import export_onnx
     from offline.classifier.train import TrainConfig, train
-
-    from monitor.vehicle import REPO_ROOT
 
     vehicle_path = vehicle_path or REPO_ROOT / "models" / "crazyflie.yaml"
     loaded = load_vehicle_with_sources(vehicle_path)
@@ -222,24 +236,31 @@ def run(out: Path, root: Path = DEFAULT_ROOT, vehicle_path: Path | None = None, 
     log("simulator gain: " + json.dumps({k: {kk: round(vv, 4) for kk, vv in v.items() if kk.startswith("share_rms")}
                                          for k, v in sim_gain.items()}))
     cfg = TrainConfig(features=FEATURES, window=WINDOW, epochs=epochs, train_stride=4, test_fraction=0.2, seed=recipe.seed)
-    models, results = {}, {}
-    for kind, vehicles in (("nominal", [nominal]), ("calibrated", [cals[af].calibrated for af in AIRFRAMES])):
+    trainings = [("nominal", [nominal]), ("calibrated", [cals[af].calibrated for af in AIRFRAMES])]
+    trainings += [(f"calibrated-{af}", [cals[af].calibrated]) for af in AIRFRAMES]
+    paths, sims = {}, {}
+    for kind, vehicles in trainings:
         log(f"simulating the {kind} training set")
         ds = training_set(vehicles, recipe, f"crazypad-{kind}")
         log(f"training on {ds.n_flights} simulated flights ({kind})")
-        m = train(ds, cfg, log=log)
-        models[kind] = export_onnx(m, out / f"crazyflie-classifier-{kind}.onnx",
-                                   extra_metadata={"crazypad": {"trained_on": kind, "window_s": WINDOW / 20.0,
-                                                                "signals": "motor commands only (shares of the mean)"}})
-        results[kind] = diagnose_real(models[kind], real)
+        m = train(ds, cfg, log=lambda s: None)
+        log(f"{kind}: final train accuracy {100 * m.history[-1]['train_accuracy']:.1f} % (simulated windows)")
+        sims[kind] = {"flights": ds.n_flights, "history": m.history, "sim_test_flights": m.test_flights}
+        paths[kind] = export_onnx(m, out / f"crazyflie-classifier-{kind}.onnx", extra_metadata={"crazypad": {
+            "trained_on": kind, "window_s": WINDOW / 20.0, "signals": "motor commands only (shares of the mean)",
+            "airframes": [af for af in AIRFRAMES if kind in ("calibrated", f"calibrated-{af}")]}})
+    results = {"nominal": diagnose_real({"*": paths["nominal"]}, real),
+               "calibrated": diagnose_real({"*": paths["calibrated"]}, real),
+               "calibrated_own": diagnose_real({af: paths[f"calibrated-{af}"] for af in AIRFRAMES}, real)}
     report = {
         "split": {role: sorted(r.flight.file for r in real if r.flight.role == role) if role != "evaluation"
                   else len([r for r in real if r.flight.role == role]) for role in ("calibration", "holdout", "evaluation")},
         "features": list(FEATURES), "window_steps": WINDOW, "rate_hz": 20.0,
         "recipe": dataclasses.asdict(recipe), "epochs": epochs, "mission": dataclasses.asdict(CRAZYPAD),
-        "calibration": {af: c.to_dict() for af, c in cals.items()}, "simulator_gain": sim_gain,
+        "calibration": {af: c.to_dict() for af, c in cals.items()}, "simulator_gain": sim_gain, "training": sims,
         "table": {k: table_by_group(v) for k, v in results.items()},
         "flights": results, "paper_real_accuracy": PAPER_REAL_ACCURACY,
+        "models": {k: str(p) for k, p in paths.items()},
     }
     report["markdown"] = format_markdown(report)
     write_manifest(out / "crazypad-report.json", make_manifest("crazypad-experiment", {"root": str(root)}, recipe.seed,
