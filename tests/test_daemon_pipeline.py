@@ -371,3 +371,22 @@ def test_servo_port_1_carries_outputs_9_to_16(toy):
     assert len(probs) and probs[:, 1].min() > 0.9
     p, steps = run_pipeline(toy, parse_all(frames))  # outputs 1..4 are not in these messages
     assert not any(s.fault_probability is not None for s in steps) and p.stats["motor_msgs_unmapped"] > 100
+
+
+def test_statustext_rate_limit_merges_and_never_drops_an_alert():
+    from monitor.daemon.alerts import StatusTextQueue
+
+    clock = FakeClock()
+    rule = AlertRule(AlertConfig(consecutive=1, critical_threshold=0.95), clock)
+    q = StatusTextQueue(5.0, 0.95, clock)
+    lp = np.eye(16)[1]
+    q.add(rule.update(1, np.array([0.9, 0.0, 0.0, 0.0]), lp))
+    assert q.due() == ("PROP 1 FAULT p=0.90", 4)  # WARNING
+    clock.t += 1.0
+    q.add(rule.update(2, np.array([0.0, 0.0, 0.97, 0.0]), lp))
+    clock.t += 1.0
+    q.add(rule.update(3, np.array([0.0, 0.85, 0.97, 0.0]), lp))
+    assert q.due() is None  # too soon: held
+    clock.t += 3.0
+    assert q.due() == ("PROP 2,3 FAULT p=0.85,0.97", 2)  # merged, CRITICAL
+    assert q.due() is None

@@ -34,10 +34,7 @@ class Alert:
     critical: bool
 
     def statustext(self) -> str:
-        """E.g. ``PROP 3 FAULT p=0.97``; several: ``PROP 1,3 FAULT p=0.91,0.97``; <= 50 chars."""
-        props = ",".join(str(p) for p in self.faulty_propellers)
-        probs = ",".join(f"{self.fault_probability[p - 1]:.2f}" for p in self.faulty_propellers)
-        return f"PROP {props} FAULT p={probs}"[:STATUSTEXT_MAX_CHARS]
+        return statustext({p: self.fault_probability[p - 1] for p in self.faulty_propellers})
 
     @property
     def severity(self) -> int:
@@ -52,6 +49,35 @@ class Alert:
             "label_probabilities": [round(p, 4) for p in self.label_probability],
             "severity": "CRITICAL" if self.critical else "WARNING",
         }
+
+
+def statustext(probability_by_prop: dict[int, float]) -> str:
+    """E.g. ``PROP 3 FAULT p=0.97``; several: ``PROP 1,3 FAULT p=0.91,0.97``; <= 50 chars."""
+    props = sorted(probability_by_prop)
+    text = f"PROP {','.join(map(str, props))} FAULT p={','.join(f'{probability_by_prop[p]:.2f}' for p in props)}"
+    return text[:STATUSTEXT_MAX_CHARS]
+
+
+class StatusTextQueue:
+    """Rate-limited STATUSTEXT that never drops an alert: what arrives too soon is merged and sent later."""
+
+    def __init__(self, min_interval_s: float, critical_threshold: float, clock: Callable[[], float] = time.monotonic):
+        self.limit = RateLimiter(min_interval_s, clock)
+        self.critical_threshold = critical_threshold
+        self._pending: dict[int, float] = {}
+
+    def add(self, alert: Alert) -> None:
+        for p in alert.faulty_propellers:
+            self._pending[p] = max(self._pending.get(p, 0.0), alert.fault_probability[p - 1])
+
+    def due(self) -> tuple[str, int] | None:
+        """(text, severity) to send now, or None (nothing pending, or too soon)."""
+        if not self._pending or not self.limit.allow():
+            return None
+        worst = max(self._pending.values())
+        text = statustext(self._pending)
+        self._pending = {}
+        return text, (MAV_SEVERITY_CRITICAL if worst >= self.critical_threshold else MAV_SEVERITY_WARNING)
 
 
 class AlertRule:

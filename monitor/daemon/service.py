@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from monitor import mavlink_decode as md
-from monitor.daemon.alerts import AlertRule, EventWriter, RateLimiter
+from monitor.daemon.alerts import AlertRule, EventWriter, RateLimiter, StatusTextQueue
 from monitor.daemon.config import MonitorConfig
 from monitor.daemon.link import Link
 from monitor.daemon.pipeline import Pipeline
@@ -39,7 +39,6 @@ class Counters:
     bad_data: int = 0
     alerts: int = 0
     statustexts: int = 0
-    statustexts_suppressed: int = 0
     stream_requests: int = 0
     acks: Counter = field(default_factory=Counter)
     latencies_s: list = field(default_factory=list)
@@ -54,7 +53,7 @@ class Daemon:
         self.events = events
         self.notifier = notifier or Notifier({})
         self.rule = AlertRule(config.alerts)
-        self.statustext_limit = RateLimiter(config.alerts.statustext_min_interval_s)
+        self.statustexts = StatusTextQueue(config.alerts.statustext_min_interval_s, config.alerts.critical_threshold)
         self.stop = threading.Event()
         self.counters = Counters()
         self._rates: Counter = Counter()
@@ -153,11 +152,14 @@ class Daemon:
         log.warning("ALERT t=%d ms: %s (label %d, p=%s)", alert.time_boot_ms, text, alert.label,
                     np.array2string(np.asarray(alert.fault_probability), precision=3))
         self.events.write(alert)
-        if self.statustext_limit.allow():
+        self.statustexts.add(alert)
+        self._send_statustext()
+
+    def _send_statustext(self) -> None:
+        due = self.statustexts.due()
+        if due is not None:
             self.counters.statustexts += 1
-            self.link.send_statustext(text, alert.severity)
-        else:
-            self.counters.statustexts_suppressed += 1
+            self.link.send_statustext(*due)
 
     # -- periodic work -------------------------------------------------------------------
     def tick(self, now: float) -> None:
@@ -180,6 +182,7 @@ class Daemon:
         if self.notifier.watchdog_s and now >= self._next_watchdog:
             self.notifier.watchdog()
             self._next_watchdog = now + self.notifier.watchdog_s / 2
+        self._send_statustext()  # alerts held back by the rate limit
         if self._bad_since_log and now >= self._next_bad_log:
             log.warning("%d unparseable packets/bytes dropped (%d in total)", self._bad_since_log, self.counters.bad_data)
             self._bad_since_log = 0
@@ -217,7 +220,7 @@ class Daemon:
         c = self.counters
         return {
             "messages": c.messages, "bad_data": c.bad_data, "alerts": c.alerts,
-            "statustexts": c.statustexts, "statustexts_suppressed": c.statustexts_suppressed,
+            "statustexts": c.statustexts,
             "stream_requests": c.stream_requests, "acks": {str(k): v for k, v in c.acks.items()},
             "pipeline": dict(self.pipeline.stats), "late_samples": self.pipeline.hold.late,
             "ignored": {f"{s}/{k}": n for (s, k), n in self.pipeline.decoder.ignored.items()},
