@@ -131,3 +131,15 @@ def test_crazypad_with_a_px4_model_is_outside_the_envelope(capsys, model, tmp_pa
                      trained_rpm=15000.0)
     code, res = run(capsys, CRAZYPAD_HEALTHY, "--format", "crazypad", "--model", cf, "--json")
     assert code == 1 and "pitch_rad unknown during flight" in res["reason"]
+
+
+def test_reports_of_same_named_logs_do_not_overwrite(capsys, model, tmp_path):
+    pytest.importorskip("matplotlib")
+    a = write_tlog((tmp_path / "a").mkdir() or tmp_path / "a" / "E8_log00.tlog", duration_s=12.0, faulty=1)
+    b = write_tlog((tmp_path / "b").mkdir() or tmp_path / "b" / "E8_log00.tlog", duration_s=12.0, faulty=4)
+    out = tmp_path / "report"
+    for _ in range(2):  # a second run overwrites its own reports, never the other log's
+        run(capsys, a, b, "--model", model, "--report", out)
+    pages = sorted(p.name for p in out.glob("*.html"))
+    assert pages == ["E8_log00.tlog-2.html", "E8_log00.tlog.html"]
+    assert str(a) in (out / "E8_log00.tlog.html").read_text() and str(b) in (out / "E8_log00.tlog-2.html").read_text()

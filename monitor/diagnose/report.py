@@ -17,9 +17,16 @@ from monitor.flight import FlightTable
 from monitor.resample import US_PER_S
 
 
-def _stem(source: str) -> str:
-    name = Path(source).name
-    return re.sub(r"[^A-Za-z0-9_.-]", "_", name) or "log"
+def _stem(source: str, out_dir: Path) -> str:
+    """A file name for this log's report; CrazyPAD-like trees reuse names (E8_log00) in many folders."""
+    p = Path(source)
+    base = re.sub(r"[^A-Za-z0-9_.-]", "_", p.name) or "log"
+    stem, k = base, 1
+    while (out_dir / f"{stem}.html").exists() and (out_dir / f"{stem}.html").read_text(encoding="utf-8").find(
+            html.escape(str(source)) + "<") < 0:
+        k += 1
+        stem = f"{base}-{k}"
+    return stem
 
 
 def plot(d: Diagnosis, table: FlightTable, png: Path) -> None:
@@ -88,7 +95,7 @@ def page(d: Diagnosis, png_name: str) -> str:
 def write_report(d: Diagnosis, table: FlightTable, out_dir: Path) -> Path:
     """Write ``<log>.png`` and ``<log>.html`` into ``out_dir``; return the HTML path."""
     out_dir.mkdir(parents=True, exist_ok=True)
-    stem = _stem(d.source)
+    stem = _stem(d.source, out_dir)
     png = out_dir / f"{stem}.png"
     plot(d, table, png)
     page_path = out_dir / f"{stem}.html"
