@@ -10,7 +10,10 @@ frequency of up to 183 Hz):
   ``leg_min_s``..``leg_max_s``, so the test 20 % sees ramp rates the training
   part also saw but not the same sequence;
 - the motor: target speed from the vehicle's ESC curve (``monitor.esc``),
-  followed with the vehicle's first-order motor time constant;
+  followed with the vehicle's first-order motor time constant. The same curve
+  serves every condition: the LSTM maps *measured* RPM to forces, so what a
+  heavier-loaded damaged blade does to the ESC->RPM map never enters it (in
+  flight the speed controller closes that loop);
 - the propeller: ``kF·ω²`` and ``kτ·ω²`` of the vehicle (the normal propeller is
   the vehicle's), times the condition's mean signature, times its 1P ripple
   (blade angle integrated from ω) and flutter (Ornstein-Uhlenbeck noise);
