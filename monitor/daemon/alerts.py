@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from monitor.daemon.config import AlertConfig
+from monitor.errors import ConfigError
 from monitor.labels import N_PROPS
 
 STATUSTEXT_MAX_CHARS = 50
@@ -130,8 +131,11 @@ class EventWriter:
         self.path = Path(path) if path else None
         self._fh = None
         if self.path is not None:
-            self.path.parent.mkdir(parents=True, exist_ok=True)
-            self._fh = self.path.open("a", encoding="utf-8")
+            try:
+                self.path.parent.mkdir(parents=True, exist_ok=True)
+                self._fh = self.path.open("a", encoding="utf-8")
+            except OSError as exc:
+                raise ConfigError(f"{self.path}: cannot open the events file: {exc.strerror or exc}") from exc
 
     def write(self, alert: Alert) -> None:
         if self._fh is not None:
