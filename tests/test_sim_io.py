@@ -133,3 +133,20 @@ def test_cli_rejects_bad_arguments(tmp_path, capsys):
     assert propwatch(["simulate", "--out", str(tmp_path / "y"), "--duration-s", "0.01", "--propellers", "quadratic"]) == 2
     assert "duration_s" in capsys.readouterr().err
     assert not (tmp_path / "y" / "sidecar.json").exists()
+
+
+def test_select_and_concatenate_are_inverse(log50):
+    from offline.sim.log import FlightLog
+
+    parts = [log50.select(1), log50.select([0])]
+    joined = FlightLog.concatenate(parts)
+    assert len(joined) == 2 and joined.log_rate_hz == log50.log_rate_hz
+    for name in log50.array_fields():
+        a = getattr(log50, name)
+        b = getattr(joined, name)
+        if name in ("time_s", "timestamp_us"):
+            np.testing.assert_array_equal(a, b)
+        else:
+            np.testing.assert_array_equal(b, a[[1, 0]], err_msg=name)
+    with pytest.raises(ValueError, match="length or rate"):
+        FlightLog.concatenate([log50, dataclasses.replace(log50, log_rate_hz=20.0)])
