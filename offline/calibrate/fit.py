@@ -30,6 +30,7 @@ from offline.calibrate.terms import Term, apply_terms, stacked
 
 BLOCK_S = 5.0
 MAX_LAG = 40  # samples (2 s at 20 Hz) for the autocorrelation time
+REWEIGHT_PASSES = 2
 MIN_DELTA_BIC = 10.0
 # Effect-size floor. At 20 Hz the logged command is a snapshot of a signal
 # that moves at the controller's rate, so the predicted moments carry noise the
@@ -171,14 +172,23 @@ def fit_terms(data: Data, nominal: VehicleConfig, terms: list[Term], x0: np.ndar
     x0 = np.clip(x0, lo + 1e-9 * scale, hi - 1e-9 * scale)
     names = list(sigma)
 
-    def vec(x: np.ndarray) -> np.ndarray:
+    def vec(x: np.ndarray, w: dict[str, float]) -> np.ndarray:
         res = data.residuals(apply_terms(nominal, terms, x))
-        parts = [r[s][m] / sigma[s] for r, m in zip(res, data.fit_masks) for s in names if s in r]
+        parts = [r[s][m] / w[s] for r, m in zip(res, data.fit_masks) for s in names if s in r]
         return np.concatenate(parts)
 
-    sol = least_squares(lambda z: vec(x0 + z * scale), np.zeros(len(x0)), bounds=((lo - x0) / scale, (hi - x0) / scale),
-                        method="trf", x_scale=1.0, max_nfev=60 * max(len(x0), 1), diff_step=1e-3)
-    x = x0 + sol.x * scale
+    # Iteratively reweighted: each signal weighted by the RMS the current fit leaves in it (the
+    # profile likelihood's weights). Weights from the nominal residual alone would let a signal the
+    # nominal model got badly wrong count for little once it is fixed, and bias the joint fit.
+    w = dict(sigma)
+    for _ in range(REWEIGHT_PASSES):
+        sol = least_squares(lambda z, w=w: vec(x0 + z * scale, w), np.zeros(len(x0)),
+                            bounds=((lo - x0) / scale, (hi - x0) / scale), method="trf", x_scale=1.0,
+                            max_nfev=60 * max(len(x0), 1), diff_step=1e-3)
+        x0 = np.clip(x0 + sol.x * scale, lo + 1e-9 * scale, hi - 1e-9 * scale)
+        res = data.residuals(apply_terms(nominal, terms, x0))
+        w = {k: max(v, noise_floor(k)) for k, v in rms_by_signal(res, data.fit_masks).items()}
+    x = x0
     J = sol.jac
     dof = max(len(sol.fun) - len(x), 1)
     s2 = 2.0 * sol.cost / dof

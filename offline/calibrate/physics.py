@@ -32,7 +32,7 @@ from scipy.signal import lfilter, lfilter_zi
 
 from monitor.esc import RAD_S_PER_RPM
 from monitor.vehicle import VehicleConfig
-from offline.calibrate.prepare import Segment, cumtrapz, euler_rates, sg_deriv, sg_smooth
+from offline.calibrate.prepare import FINE, SG_WINDOW, SG_WINDOW_TRANSLATION, Segment, cumtrapz, euler_rates, sg_deriv, sg_smooth
 
 G_M_S2 = 9.80665
 G_NED = np.array([0.0, 0.0, G_M_S2])
@@ -47,10 +47,11 @@ KIN_SIGNALS = ("roll_kin_rad_s", "pitch_kin_rad_s", "yaw_kin_rad_s")
 SpeedScale = Callable[[np.ndarray], np.ndarray] | None
 
 
-def target_omega_rad_s(seg: Segment, vehicle: VehicleConfig) -> np.ndarray:
+def target_omega_rad_s(seg: Segment, vehicle: VehicleConfig, fine: bool = False) -> np.ndarray:
+    """ESC target speed from the logged command (or the logged RPM when there is no command)."""
     if np.all(np.isnan(seg.motor_cmd)):
-        return seg.motor_rpm * RAD_S_PER_RPM
-    return vehicle.esc.cmd_to_omega_rad_s(seg.motor_cmd)
+        return (seg.motor_rpm_fine if fine else seg.motor_rpm) * RAD_S_PER_RPM
+    return vehicle.esc.cmd_to_omega_rad_s(seg.motor_cmd_fine if fine else seg.motor_cmd)
 
 
 def first_order_lag(u: np.ndarray, tau_s: float, dt_s: float) -> np.ndarray:
@@ -69,10 +70,10 @@ def first_order_lag(u: np.ndarray, tau_s: float, dt_s: float) -> np.ndarray:
 
 
 def rotor_forces(seg: Segment, vehicle: VehicleConfig, speed_scale: SpeedScale = None) -> tuple[np.ndarray, np.ndarray]:
-    """Per-rotor thrust (N) and drag torque magnitude (N m), each (T, 4)."""
-    w_cmd = target_omega_rad_s(seg, vehicle)
+    """Per-rotor thrust (N) and drag torque magnitude (N m) on the fine grid, each (T_fine, 4)."""
+    w_cmd = target_omega_rad_s(seg, vehicle, fine=True)
     e = np.asarray(vehicle.motor_efficiency) if speed_scale is None else speed_scale(w_cmd)
-    w = first_order_lag(e * w_cmd, vehicle.motor_time_constant_s, seg.dt_s)
+    w = first_order_lag(e * w_cmd, vehicle.motor_time_constant_s, seg.dt_fine_s)
     w2 = np.maximum(w, 0.0) ** 2
     return vehicle.kf_n_per_rad_s2 * w2, vehicle.ktau_nm_per_rad_s2 * w2
 
@@ -87,23 +88,29 @@ def body_moments(f: np.ndarray, tau: np.ndarray, vehicle: VehicleConfig) -> np.n
 
 
 def specific_force_body(seg: Segment, f: np.ndarray, vehicle: VehicleConfig) -> np.ndarray:
-    """(T, 3) what an IMU at the CG reads: (thrust + drag) / mass."""
-    force = np.zeros((seg.n, 3))
+    """(T_fine, 3) what an IMU at the CG reads: (thrust + drag) / mass."""
+    force = np.zeros((len(f), 3))
     force[:, 2] = -f.sum(axis=1)
     drag = np.asarray(vehicle.linear_drag_n_per_m_s)
-    if seg.vel_ned_m_s is not None and np.any(drag > 0):
-        v_air_ned = seg.vel_ned_m_s - np.asarray(vehicle.wind_ned_m_s)
-        v_air_body = np.einsum("tji,tj->ti", seg.R_world_body, v_air_ned)
+    if seg.vel_ned_fine_m_s is not None and np.any(drag > 0):
+        v_air_ned = seg.vel_ned_fine_m_s - np.asarray(vehicle.wind_ned_m_s)
+        v_air_body = np.einsum("tji,tj->ti", seg.R_world_body_fine, v_air_ned)
         force -= drag * v_air_body
     return force / vehicle.mass_kg
 
 
+def integrated(seg: Segment, x_fine: np.ndarray, window: int = SG_WINDOW) -> np.ndarray:
+    """Trapezoid integral on the fine grid, read back at the log instants and SG-differentiated like the measurement."""
+    return sg_deriv(cumtrapz(x_fine, seg.dt_fine_s)[::FINE], seg.dt_s, window)
+
+
 def angular_accel(seg: Segment, vehicle: VehicleConfig, f: np.ndarray, tau: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(measured, predicted) filtered angular acceleration, each (T, 3)."""
-    omega = seg.rates_rad_s - np.asarray(vehicle.gyro_bias_frd_rad_s)
+    bias = np.asarray(vehicle.gyro_bias_frd_rad_s)
+    omega = seg.rates_fine_rad_s - bias
     J = np.asarray(vehicle.inertia_diag_kg_m2)
     alpha = (body_moments(f, tau, vehicle) - np.cross(omega, omega * J)) / J
-    return sg_deriv(omega, seg.dt_s), sg_deriv(cumtrapz(alpha, seg.dt_s), seg.dt_s)
+    return sg_deriv(seg.rates_rad_s - bias, seg.dt_s), integrated(seg, alpha)
 
 
 def residuals(seg: Segment, vehicle: VehicleConfig, speed_scale: SpeedScale = None) -> dict[str, np.ndarray]:
@@ -115,13 +122,19 @@ def residuals(seg: Segment, vehicle: VehicleConfig, speed_scale: SpeedScale = No
     rot = meas - pred
     out = {name: rot[:, i] for i, name in enumerate(ROT_SIGNALS)}
     fs = specific_force_body(seg, f, vehicle)
-    if seg.accel_frd_m_s2 is not None:
-        acc = sg_smooth(seg.accel_frd_m_s2) - sg_smooth(fs)
-        out.update({name: acc[:, i] for i, name in enumerate(IMU_SIGNALS)})
-    elif seg.vel_ned_m_s is not None:
-        a_ned = np.einsum("tij,tj->ti", seg.R_world_body, fs) + G_NED
-        acc = sg_deriv(seg.vel_ned_m_s, seg.dt_s) - sg_deriv(cumtrapz(a_ned, seg.dt_s), seg.dt_s)
+    # Velocity first: like the rates, it integrates the force between grid
+    # instants, so it compares fairly with the integrated prediction. An IMU
+    # snapshot is instantaneous and favours the last logged command (it pulls a
+    # fitted motor lag low); it is the fallback when there is no velocity.
+    if seg.vel_ned_m_s is not None:
+        a_ned = np.einsum("tij,tj->ti", seg.R_world_body_fine, fs) + G_NED
+        w = SG_WINDOW_TRANSLATION
+        acc = sg_deriv(seg.vel_ned_m_s, seg.dt_s, w) - integrated(seg, a_ned, w)
         out.update({name: acc[:, i] for i, name in enumerate(VEL_SIGNALS)})
+    elif seg.accel_frd_m_s2 is not None:
+        w = SG_WINDOW_TRANSLATION
+        acc = sg_smooth(seg.accel_frd_m_s2, w) - sg_smooth(fs[::FINE], w)
+        out.update({name: acc[:, i] for i, name in enumerate(IMU_SIGNALS)})
     # Attitude kinematics, same integrate-then-differentiate form: a gyro bias shows here.
     kin = seg.euler_deriv_rad_s - sg_deriv(cumtrapz(euler_rates(seg.euler_rad, omega), seg.dt_s), seg.dt_s)
     out.update({name: kin[:, i] for i, name in enumerate(KIN_SIGNALS)})
