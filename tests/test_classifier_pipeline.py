@@ -131,3 +131,18 @@ def test_cli_train_export_evaluate(tmp_path, data, capsys):
     assert res["name"] == "synthetic (test split)"
     assert res["windows"] == 16 * 9  # 16 held-out flights, starts 0,20,..,160
     assert (tmp_path / "ev" / "confusion_synthetic.png").stat().st_size > 1000
+
+
+def test_shipped_build_reuses_what_the_dataset_cli_makes():
+    # build_shipped --reuse only reuses a data set made with the identical spec; keep the two in step.
+    from monitor.config import to_mapping
+    from offline.classifier.build_shipped import data_specs
+    from offline.dataset.cli import build_parser, specs_from_args
+
+    cli = specs_from_args(build_parser().parse_args(
+        ["--sets", "A,B,C", "--fault", "bent,cracked", "--flights-per-label", "5", "--propellers", "quadratic"]))
+    cli += specs_from_args(build_parser().parse_args(
+        ["--name", "R", "--waypoints", "random", "--payload", "0,0.6", "--wind", "3", "--variants", "8", "--fault", "mixed",
+         "--flights-per-label", "20", "--propellers", "quadratic", "--seed", "7"]))
+    shipped = data_specs("quadratic", 20, 5)
+    assert sorted(map(str, map(to_mapping, cli))) == sorted(map(str, map(to_mapping, shipped)))
