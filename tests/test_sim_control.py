@@ -133,6 +133,7 @@ def test_log_timing_and_shapes(vehicle):
     assert table.airborne.all() and len(table) == 40
     np.testing.assert_array_equal(table.motor_cmd, log.pwm_us[1])
     np.testing.assert_array_equal(table.pos_ned_m, log.pos_ned_m[1])
+    np.testing.assert_allclose(table.extras["esc_rpm"], log.motor_omega_rad_s[1] * RPM_PER_RAD_S)
 
 
 def test_bad_propeller_model_and_divergence_fail_by_name(vehicle):

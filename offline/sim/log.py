@@ -12,6 +12,7 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
+from monitor.esc import RPM_PER_RAD_S
 from monitor.features import SIGNALS
 from monitor.flight import FlightTable
 
@@ -87,6 +88,8 @@ class FlightLog:
             accel_frd_m_s2=self.accel_frd_m_s2[i].copy(),
             vel_ned_m_s=self.vel_ned_m_s[i].copy(),
             pos_ned_m=self.pos_ned_m[i].copy(),
+            # The same key the log readers use for ESC telemetry (the rotors' actual speed).
+            extras={"esc_rpm": self.motor_omega_rad_s[i] * RPM_PER_RAD_S},
         )
 
     @staticmethod
