@@ -155,6 +155,7 @@ class Controller:
         self._qq = np.empty((n, 4, 4))
         self._q4 = np.empty((n, 4))
         self._r4 = np.empty((n, 4))
+        self._ones3 = np.ones(3)
 
     def initial_state(self, n: int, yaw_rad: float = 0.0) -> ControllerState:
         q = np.zeros((n, 4))
@@ -182,8 +183,8 @@ class Controller:
         cfg, dt, rows = self.cfg, self.pos_dt, self.acc_axes
         target = waypoints_ned_m[rows, c.waypoint_index]
         err = target - pos_ned_m
-        reached = np.einsum("ij,ij->i", err, err) < cfg.nav_acc_rad_m**2
-        if reached.any():
+        reached = (err * err) @ self._ones3 < cfg.nav_acc_rad_m**2
+        if np.logical_or.reduce(reached):
             c.waypoints_reached += reached
             c.waypoint_index = (c.waypoint_index + reached) % waypoints_ned_m.shape[1]
             target = waypoints_ned_m[rows, c.waypoint_index]
@@ -217,7 +218,7 @@ class Controller:
         fh = np.hypot(f[:, 0], f[:, 1])
         fh_max = np.minimum(-f[:, 2] * self.tan_tilt_max, np.sqrt(np.maximum(self.thrust_max_n**2 - f[:, 2] ** 2, 0.0)))
         f[:, :2] *= (fh_max / (np.maximum(fh, fh_max) + 1e-12))[:, None]
-        thrust = np.sqrt(np.einsum("ij,ij->i", f, f))
+        thrust = np.sqrt((f * f) @ self._ones3)
         c.thrust_sp_n = thrust
 
         # Yaw setpoint: face the waypoint (MPC_YAW_MODE 0), rate-limited by MPC_YAWRAUTO_MAX.

@@ -105,6 +105,8 @@ class Dynamics:
         self._outer = self._features[:, :49].reshape(n, 7, 7)
         assert np.shares_memory(self._outer, self._features)
         self._out = np.empty((n, 11))
+        self._q4 = np.empty((n, 4))
+        self._ones4 = np.ones(4)
         self.force_body_n = np.zeros((n, 3))  # non-gravity force of the last step with drag, body FRD
         self.last_total_thrust_n = np.zeros(n)
 
@@ -150,5 +152,6 @@ class Dynamics:
         v += dv
         s.pos_ned_m += dt * v  # semi-implicit: the new velocity moves the vehicle
         q = s.q_world_body
-        q /= np.sqrt(np.einsum("ij,ij->i", q, q))[:, None]
+        # Row norms through a matmul: several times cheaper than einsum on small batches.
+        q /= np.sqrt(np.matmul(np.multiply(q, q, out=self._q4), self._ones4))[:, None]
         return thrust, torque
