@@ -147,3 +147,20 @@ def test_other_vehicle_by_scaling():
 def test_missing_weights_raise_model_error(tmp_path):
     with pytest.raises(ModelError, match="normal.npz"):
         build_propellers(VEHICLE, np.zeros((1, 4), dtype=int), kind="lstm", models_dir=tmp_path)
+
+
+@pytest.mark.parametrize(("physics_hz", "expected"), [(250, 40), (400, 40), (1000, 40)])
+def test_lstm_samples_every_25_ms_at_any_physics_rate(physics_hz, expected):
+    """The held departure changes once per load-cell period, also when the physics period does not divide it."""
+    prop = build_propellers(VEHICLE, np.array([[1, 2, 1, 2]]), kind="lstm", vibration=False)
+    dt = 1.0 / physics_hz
+    prop.reset(np.full((1, 4), 500.0))
+    held, changes = None, 0
+    for k in range(physics_hz):  # one second
+        omega = np.full((1, 4), 500.0 + 300.0 * k / physics_hz)
+        thrust, _ = prop(omega, dt)
+        delta = thrust - VEHICLE.kf_n_per_rad_s2 * omega**2
+        if held is not None and not np.allclose(delta, held, rtol=0, atol=1e-12):
+            changes += 1
+        held = delta
+    assert abs(changes - expected) <= 1
