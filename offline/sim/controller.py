@@ -146,6 +146,7 @@ class Controller:
         self.rotor_thrust_span_n = self.rotor_thrust_max_n - self.rotor_thrust_min_n
         self.mix_rp = (self.mix[:, 1:3] * self.torque_authority_nm[:2]).T  # (2, 4) normalised roll/pitch -> N
         self.mix_yaw = self.mix[:, 3] * self.torque_authority_nm[2]  # (4,) normalised yaw -> N
+        self.neg_rate_max, self.neg_rate_int_lim = -self.rate_max, -self.rate_int_lim
         self.yaw_spread = float(self.mix_yaw.max() - self.mix_yaw.min())
         self.mix_torque = np.vstack([self.mix_rp, self.mix_yaw])  # (3, 4) normalised torque -> N per rotor
         self.att_2p = 2.0 * self.att_p
@@ -250,19 +251,22 @@ class Controller:
         np.multiply(q[:, :, None], c.q_sp[:, None, :], out=self._qq)
         qe = np.matmul(self._qq.reshape(n, 16), QUAT_CONJ_MUL, out=self._q4)
         rate_sp = qe[:, 1:] * np.copysign(self.att_2p, qe[:, :1])
-        _clip_(rate_sp, -self.rate_max, self.rate_max)
+        np.maximum(rate_sp, self.neg_rate_max, out=rate_sp)
+        np.minimum(rate_sp, self.rate_max, out=rate_sp)
 
         # Rate PID in normalised torque, derivative on the measurement (PX4 RateControl).
         rerr = rate_sp
         rerr -= gyro_frd_rad_s
         integ = c.rate_int
         integ += self.rate_i_dt * rerr
-        _clip_(integ, -self.rate_int_lim, self.rate_int_lim)
+        np.maximum(integ, self.neg_rate_int_lim, out=integ)
+        np.minimum(integ, self.rate_int_lim, out=integ)
         u = self.rate_p * rerr
         u += integ
         u -= self.rate_d_per_dt * (gyro_frd_rad_s - c.rate_prev_rad_s)
         c.rate_prev_rad_s[:] = gyro_frd_rad_s
-        _clip_(u, -1.0, 1.0)
+        np.maximum(u, -1.0, out=u)
+        np.minimum(u, 1.0, out=u)
         return self.allocate(c.thrust_sp_n, u)
 
     def allocate(self, thrust_n: np.ndarray, torque_norm: np.ndarray) -> np.ndarray:
@@ -276,8 +280,9 @@ class Controller:
         lo, hi = self.rotor_thrust_min_n, self.rotor_thrust_max_n
         cmd = np.matmul(torque_norm, self.mix_torque, out=self._r4)
         cmd += (0.25 * thrust_n)[:, None]
-        fits = (np.minimum.reduce(cmd, axis=1) >= lo) & (np.maximum.reduce(cmd, axis=1) <= hi)
-        if not fits.all():
+        # Whole-batch extremes first: when every rotor of every flight fits, nothing else is needed.
+        if not (np.minimum.reduce(cmd, axis=None) >= lo and np.maximum.reduce(cmd, axis=None) <= hi):
+            fits = (np.minimum.reduce(cmd, axis=1) >= lo) & (np.maximum.reduce(cmd, axis=1) <= hi)
             cmd = np.where(fits[:, None], cmd, self._desaturate(thrust_n, torque_norm))
         cmd *= self.inv_kf
         return np.sqrt(cmd, out=cmd)
