@@ -164,3 +164,19 @@ def test_lstm_samples_every_25_ms_at_any_physics_rate(physics_hz, expected):
             changes += 1
         held = delta
     assert abs(changes - expected) <= 1
+
+
+def test_runtime_needs_no_torch():
+    """The simulator runs the learned propellers with numpy only (torch is for training)."""
+    import subprocess
+    import sys
+
+    code = ("import sys; sys.modules['torch'] = None\n"
+            "import numpy as np\n"
+            "from monitor.vehicle import DEFAULT_VEHICLE, load_vehicle\n"
+            "from offline.propellers import build_propellers\n"
+            "p = build_propellers(load_vehicle(DEFAULT_VEHICLE), np.array([[0, 1, 2, 0]]), kind='lstm')\n"
+            "w = np.full((1, 4), 600.0); p.reset(w); t, q = p(w, 0.0025)\n"
+            "assert t.shape == (1, 4) and (t > 0).all()\n")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
