@@ -146,3 +146,13 @@ def test_shipped_build_reuses_what_the_dataset_cli_makes():
          "--flights-per-label", "20", "--propellers", "quadratic", "--seed", "7"]))
     shipped = data_specs("quadratic", 20, 5)
     assert sorted(map(str, map(to_mapping, cli))) == sorted(map(str, map(to_mapping, shipped)))
+
+
+def test_shipped_configuration_is_the_ablations_last_row():
+    import dataclasses
+
+    from offline.classifier.build_shipped import SHIPPED, SHIPPED_ROW
+    from offline.classifier.experiments import EXPERIMENTS
+
+    sets, changes = EXPERIMENTS[SHIPPED_ROW]
+    assert sets == ("R-mixed",) and dataclasses.replace(TrainConfig(), **changes) == SHIPPED

@@ -110,6 +110,7 @@ def train(ds: FaultDataset, cfg: TrainConfig, log=print) -> TrainedModel:
         mean=norm.mean, std=norm.std,
     )
     y_flight = targets(ds, cfg.head)
+    label_index = ds.labels - 1  # per flight, computed once
     loss_fn = nn.CrossEntropyLoss() if cfg.head == "softmax16" else nn.BCEWithLogitsLoss()
     opt = torch.optim.Adam(net.parameters(), lr=cfg.learning_rate)
     history = []
@@ -137,7 +138,7 @@ def train(ds: FaultDataset, cfg: TrainConfig, log=print) -> TrainedModel:
             sched.step()
             tot += loss.item() * len(bi)
             count += len(bi)
-            correct += int((_predicted_labels(net, logits) == _true_labels(ds, bi)).sum())
+            correct += int((_predicted_labels(net, logits) == label_index[bi[:, 0]]).sum())
         row = {"epoch": epoch + 1, "loss": tot / count, "train_accuracy": correct / count, "windows": count}
         history.append(row)
         log(f"epoch {epoch + 1}/{cfg.epochs}: loss {row['loss']:.4f}, train accuracy {100 * row['train_accuracy']:.2f} % on {count} windows")
@@ -152,10 +153,6 @@ def _predicted_labels(net: FaultCnn, logits: torch.Tensor) -> np.ndarray:
         if net.cfg.head == "softmax16":
             return logits.argmax(-1).numpy()
         return _mask_to_index((torch.sigmoid(logits) > 0.5).numpy())
-
-
-def _true_labels(ds: FaultDataset, bi: np.ndarray) -> np.ndarray:
-    return ds.labels[bi[:, 0]] - 1
 
 
 _MASK_CODE = (LABEL_MASKS @ np.array([1, 2, 4, 8])).astype(np.int64)
