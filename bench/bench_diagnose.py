@@ -1,6 +1,6 @@
 """Throughput of ``propwatch diagnose`` on a 30-minute simulated tlog, as a multiple of real time.
 
-    python bench/bench_diagnose.py [--tlog PATH] [--minutes 30] [--hop 10] [--model PATH]
+    python bench/bench_diagnose.py [--tlog PATH] [--minutes 30] [--hop 20] [--model PATH]
 
 Without --tlog it simulates one flight with ``propwatch simulate --format tlog``
 (issue 2's PX4-like stream: 50 Hz ATTITUDE, SERVO_OUTPUT_RAW, LOCAL_POSITION_NED,
@@ -60,7 +60,7 @@ def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--tlog", type=Path)
     p.add_argument("--minutes", type=float, default=30.0)
-    p.add_argument("--hop", type=int, default=10)
+    p.add_argument("--hop", type=int, default=20, help="as propwatch diagnose (default 20 steps = 1 s)")
     p.add_argument("--model", type=Path, default=REPO / "models" / "classifier.onnx")
     p.add_argument("--repeat", type=int, default=2)
     args = p.parse_args(argv)

@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 from test_diagnose_fixtures import HOVER_PWM_US, build_model, write_tlog
 
@@ -46,18 +47,21 @@ def test_verdict_names_the_faulty_propeller(capsys, model, logs, faulty):
     assert len(p) == 4 and all(0.0 <= x <= 1.0 for x in p)
     if faulty:
         assert p[faulty - 1] == max(p) and p[faulty - 1] > 0.5
-    # 21 s airborne (IN_AIR 2..23 s, at 1 Hz landed-state resolution), windows of 5 s every 10 steps.
-    assert 25 <= res["windows"] <= 33
+    # One airborne segment (IN_AIR 2..23 s); a 100-step window every 20 steps inside it.
+    (seg,) = res["airborne_segments"]
+    assert 400 <= seg["steps"] <= 420 and res["windows"] == (seg["steps"] - 100) // 20 + 1
     assert len(res["timeline"]["t_boot_s"]) == res["windows"] == len(res["timeline"]["fault_probability"])
-    assert len(res["airborne_segments"]) == 1 and res["warnings"] == []
+    assert res["warnings"] == [] and res["hop_steps"] == 20
 
 
 def test_text_output_and_hop(capsys, model, logs):
     code, out = run(capsys, logs[2], "--model", model)
     assert code == 0 and "label 3" in out and "FAULTY" in out and "airborne" in out
     _, every = run(capsys, logs[2], "--model", model, "--json", "--hop", "1")
-    _, sparse = run(capsys, logs[2], "--model", model, "--json", "--hop", "10")
-    assert (every["windows"] - 1) // 10 + 1 == sparse["windows"]
+    _, sparse = run(capsys, logs[2], "--model", model, "--json", "--hop", "7")
+    t_every, t_sparse = every["timeline"]["t_boot_s"], sparse["timeline"]["t_boot_s"]
+    assert set(t_sparse) <= set(t_every) and abs(len(t_every) / 7 - len(t_sparse)) <= 1
+    assert np.allclose(np.diff(t_sparse), 7 / 20.0)  # one window every 7 steps of the 20 Hz grid
 
 
 def test_several_logs_one_result_each_and_errors_do_not_stop_the_rest(capsys, model, logs, tmp_path):

@@ -95,3 +95,51 @@ def test_unknown_format_is_a_clear_error(tmp_path):
     path.write_bytes(b"this is not a flight log at all\n" * 10)
     with pytest.raises(LogFormatError, match="unknown log format"):
         read_raw(path)
+
+
+def _assert_same_streams(a, b):
+    for k in ("motor_cmd", "attitude_rad", "rates_rad_s", "battery_v", "armed", "landed", "esc_rpm",
+              "accel_frd_m_s2", "vel_ned_m_s", "pos_ned_m"):
+        x, y = getattr(a, k), getattr(b, k)
+        assert (x is None) == (y is None), k
+        if x is not None:
+            np.testing.assert_array_equal(x.t_us, y.t_us, err_msg=k)
+            np.testing.assert_array_equal(x.values, y.values, err_msg=k)
+    assert a.warnings == b.warnings
+
+
+def test_bulk_unpacking_equals_pymavlink_frame_by_frame(tmp_path):
+    import struct
+
+    from pymavlink.dialects.v10 import common as v1
+    from pymavlink.dialects.v20 import common as v2
+
+    from monitor.logs.tlog import read_tlog
+
+    path = write_tlog(tmp_path / "f.tlog", duration_s=12.0, faulty=3)
+    # Append MAVLink 1 frames (and a truncated MAVLink 2 payload of trailing zeros) to the same log.
+    m1, m2 = v1.MAVLink(None, srcSystem=1, srcComponent=1), v2.MAVLink(None, srcSystem=1, srcComponent=1)
+    extra = bytearray()
+    for i in range(40):  # the receive clock jumps back by years here (a reset wall clock): still read
+        t_ms = 14_000 + 20 * i
+        extra += struct.pack(">Q", t_ms * 1000) + m1.attitude_encode(t_ms, 0.1, -0.2, 0.3, 0.0, 0.0, 0.0).pack(m1)
+        extra += struct.pack(">Q", t_ms * 1000) + m2.servo_output_raw_encode(t_ms * 1000, 0, 1500, 1510, 1520, 1530,
+                                                                              0, 0, 0, 0).pack(m2)
+    path.write_bytes(path.read_bytes() + bytes(extra))
+    for extras in (True, False):
+        fast, slow = read_tlog(path, extras=extras, bulk=True), read_tlog(path, extras=extras, bulk=False)
+        _assert_same_streams(fast, slow)
+    assert fast.attitude_rad.t_us[-1] == 14_780_000 and fast.motor_cmd.values[-1].tolist() == [1500, 1510, 1520, 1530]
+
+
+def test_a_bad_crc_falls_back_to_frame_by_frame(tmp_path):
+    from monitor.logs.tlog import read_tlog
+
+    path = write_tlog(tmp_path / "f.tlog", duration_s=12.0)
+    data = bytearray(path.read_bytes())
+    i = data.index(bytes([0xFD, 28]), len(data) // 2)  # an ATTITUDE frame (28-byte payload) mid-file
+    data[i + 14] ^= 0xFF  # one payload byte: length intact, CRC wrong
+    path.write_bytes(bytes(data))
+    fast, slow = read_tlog(path, bulk=True), read_tlog(path, bulk=False)
+    _assert_same_streams(fast, slow)
+    assert any("failing their CRC" in w for w in fast.warnings)

@@ -18,6 +18,7 @@ from pathlib import Path
 
 from monitor import mavlink_decode as md
 from monitor.errors import LogFormatError
+from monitor.logs.mavbulk import unpack_frames
 from monitor.logs.raw import RawFlight, Stream
 from monitor.logs.units import US_PER_MS
 
@@ -37,10 +38,16 @@ MAX_TS_JUMP_US = 3_600_000_000
 
 
 def _mavlink():
+    """A MAVLink 2 ``common`` parser (reads v1 frames too) and its id -> message class map."""
     from pymavlink.dialects.v20 import common
 
     md.mavlink_esc.register()
-    return common.MAVLink(None)
+    return common.MAVLink(None), common.mavlink_map
+
+
+def _next_is_frame(buf: bytes, off: int) -> bool:
+    """True at the end of the file or where a [time][magic] record starts."""
+    return off >= len(buf) or (off + TS_BYTES < len(buf) and buf[off + TS_BYTES] in (V1_MAGIC, V2_MAGIC))
 
 
 def iter_frames(buf: bytes, wanted=WANTED_IDS):
@@ -61,7 +68,9 @@ def iter_frames(buf: bytes, wanted=WANTED_IDS):
             off, skipped = off + 1, skipped + 1
             continue
         ts = int.from_bytes(buf[off:off + TS_BYTES], "big")
-        if last_ts is not None and abs(ts - last_ts) > MAX_TS_JUMP_US:
+        if last_ts is not None and abs(ts - last_ts) > MAX_TS_JUMP_US and not _next_is_frame(buf, p + flen):
+            # A receive time far off and no frame after it: a false start inside damaged bytes.
+            # (A real jump of the recording clock is followed by more frames and is kept.)
             off, skipped = off + 1, skipped + 1
             continue
         if p + flen > n:
@@ -118,33 +127,47 @@ def _stream(items) -> Stream | None:
     return Stream.build([i[0] for i in items], [i[1] for i in items])
 
 
-def read_tlog(path: str | Path, system_id: int | None = None, extras: bool = True) -> RawFlight:
-    """``extras=False`` skips ESC telemetry, position and IMU frames (a diagnosis does not use them)."""
+def frame_starts(buf: bytes, wanted) -> tuple[list[int], int, bool]:
+    """Offsets of the wanted frames' magic bytes, bytes skipped, and whether the end is cut off."""
+    starts: list[int] = []
+    frames = iter_frames(buf, wanted)
+    try:
+        off, _ = next(frames)
+        while True:
+            starts.append(off + TS_BYTES)
+            off, _ = frames.send(True)
+    except StopIteration as stop:
+        skipped, truncated = stop.value or (0, False)
+    return starts, skipped, truncated
+
+
+def read_tlog(path: str | Path, system_id: int | None = None, extras: bool = True, bulk: bool = True) -> RawFlight:
+    """``extras=False`` skips ESC telemetry, position and IMU frames (a diagnosis does not use them).
+
+    ``bulk``: unpack clean files with ``monitor.logs.mavbulk`` (same messages, several
+    times faster); a file with skipped bytes or a bad CRC is always read frame by frame.
+    """
     path = Path(path)
     if not path.is_file():
         raise LogFormatError(f"{path}: no such file")
     buf = path.read_bytes()
-    mav = _mavlink()
+    mav, mavlink_map = _mavlink()
     dec = md.MavlinkDecoder(system_id=system_id)
     col = _Collector()
-    frames = iter_frames(buf, WANTED_IDS if extras else CORE_IDS)
+    wanted = WANTED_IDS if extras else CORE_IDS
     bad_crc, skipped, truncated = 0, 0, False
-    try:
-        _, frame = next(frames)
-        while True:
-            try:
-                msg = mav.decode(bytearray(frame))
-            except Exception:  # pymavlink raises MAVError on a CRC or length mismatch
-                bad_crc += 1
-                _, frame = frames.send(False)
-                continue
+    msgs = None
+    if bulk:
+        starts, skipped, truncated = frame_starts(buf, wanted)
+        msgs = unpack_frames(buf, starts, mavlink_map) if skipped == 0 else None
+    if msgs is not None:
+        for msg in msgs:
             for s in dec.decode(msg):
                 col.add(s)
             if extras:
                 _extras(msg, dec, col)
-            _, frame = frames.send(True)
-    except StopIteration as stop:
-        skipped, truncated = stop.value or (0, False)
+    else:
+        bad_crc, skipped, truncated = _read_frame_by_frame(buf, wanted, mav, dec, col, extras)
     warnings = []
     if skipped or bad_crc:
         warnings.append(f"{path.name}: corrupted data skipped ({skipped} bytes, {bad_crc} frames failing their CRC)")
@@ -176,6 +199,29 @@ def read_tlog(path: str | Path, system_id: int | None = None, extras: bool = Tru
         pos_ned_m=pos,
         warnings=warnings,
     )
+
+
+def _read_frame_by_frame(buf: bytes, wanted, mav, dec: md.MavlinkDecoder, col: _Collector, extras: bool):
+    """pymavlink ``decode`` per frame; a frame failing its CRC makes the walk resync one byte on."""
+    frames = iter_frames(buf, wanted)
+    bad_crc, skipped, truncated = 0, 0, False
+    try:
+        _, frame = next(frames)
+        while True:
+            try:
+                msg = mav.decode(bytearray(frame))
+            except Exception:  # pymavlink raises MAVError on a CRC or length mismatch
+                bad_crc += 1
+                _, frame = frames.send(False)
+                continue
+            for s in dec.decode(msg):
+                col.add(s)
+            if extras:
+                _extras(msg, dec, col)
+            _, frame = frames.send(True)
+    except StopIteration as stop:
+        skipped, truncated = stop.value or (0, False)
+    return bad_crc, skipped, truncated
 
 
 def _extras(msg, dec: md.MavlinkDecoder, col: _Collector) -> None:
