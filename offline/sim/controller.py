@@ -140,7 +140,7 @@ class Controller:
         self.thrust_min_n = 4 * self.rotor_thrust_max_n * cfg.mpc_thr_min
         # Anti-windup: the velocity integrator never asks for more than these accelerations.
         self.vel_int_lim = np.array([cfg.mpc_acc_hor_m_s2, cfg.mpc_acc_hor_m_s2, GRAVITY_M_S2])
-        self.acc_axes = np.arange(len(self.mass_kg))
+        self.flight_rows = np.arange(len(self.mass_kg))  # for gathering each flight's current waypoint
         # Folded constants and work buffers for the fast inner loop.
         self.inv_kf = 1.0 / kf
         self.rotor_thrust_span_n = self.rotor_thrust_max_n - self.rotor_thrust_min_n
@@ -181,7 +181,7 @@ class Controller:
 
         Returns the waypoint error (target - position), (B, 3).
         """
-        cfg, dt, rows = self.cfg, self.pos_dt, self.acc_axes
+        cfg, dt, rows = self.cfg, self.pos_dt, self.flight_rows
         target = waypoints_ned_m[rows, c.waypoint_index]
         err = target - pos_ned_m
         reached = (err * err) @ self._ones3 < cfg.nav_acc_rad_m**2
