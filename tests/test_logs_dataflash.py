@@ -12,8 +12,7 @@ from monitor.esc import PAPER_ESC
 from monitor.logs import detect_format, read_log, read_raw, to_flight_table
 
 LOG171 = Path(__file__).resolve().parents[2] / "shared" / "data" / "ardupilot_log171" / "log171.bin"
-pytestmark = [pytest.mark.realdata,
-              pytest.mark.skipif(not LOG171.is_file(), reason=f"real ArduPilot log not found at {LOG171}")]
+needs_log171 = pytest.mark.skipif(not LOG171.is_file(), reason=f"real ArduPilot log not found at {LOG171}")
 
 
 @pytest.fixture(scope="module")
@@ -21,6 +20,8 @@ def raw():
     return read_raw(LOG171)
 
 
+@pytest.mark.realdata
+@needs_log171
 def test_streams_units_and_rates(raw):
     assert detect_format(LOG171) == "dataflash"
     assert 48 < raw.motor_cmd.rate_hz() < 52  # RCOU ~49 Hz
@@ -38,6 +39,8 @@ def test_streams_units_and_rates(raw):
     assert np.abs(np.median(raw.accel_frd_m_s2.values[:, 2]) + 9.8) < 0.5  # FRD specific force at rest
 
 
+@pytest.mark.realdata
+@needs_log171
 def test_airborne_matches_the_armed_flight(raw):
     table = to_flight_table(raw, esc=PAPER_ESC)
     seg = table.airborne_segments()
@@ -47,6 +50,8 @@ def test_airborne_matches_the_armed_flight(raw):
     assert any("below the model's 20 Hz" in w for w in table.warnings)  # ATT at 10 Hz
 
 
+@pytest.mark.realdata
+@needs_log171
 def test_truncated_dataflash_reads_up_to_the_cut(tmp_path):
     data = LOG171.read_bytes()
     cut = tmp_path / "cut.bin"
@@ -56,9 +61,25 @@ def test_truncated_dataflash_reads_up_to_the_cut(tmp_path):
     assert 100 < raw.motor_cmd.t_us[-1] / 1e6 < 200
 
 
+@pytest.mark.realdata
+@needs_log171
 def test_dataflash_without_motor_outputs_is_an_error(tmp_path):
     data = LOG171.read_bytes()
     cut = tmp_path / "head.bin"
     cut.write_bytes(data[:3000])  # formats and parameters only
     with pytest.raises(LogFormatError, match="RCOU"):
         read_log(cut, esc=PAPER_ESC)
+
+
+def test_motor_outputs_follow_servo_functions_and_frame_checks():
+    from monitor.logs.dataflash import motor_outputs
+
+    p = Path("x.bin")
+    assert motor_outputs({"FRAME": 1.0}, p) == (1, 2, 3, 4)  # Copter 3.3 quad X: motor k on output k
+    params = {"FRAME_CLASS": 1.0, "FRAME_TYPE": 1.0, "SERVO1_FUNCTION": 34.0, "SERVO2_FUNCTION": 33.0,
+              "SERVO5_FUNCTION": 35.0, "SERVO6_FUNCTION": 36.0, "SERVO3_FUNCTION": 0.0}
+    assert motor_outputs(params, p) == (2, 1, 5, 6)
+    for bad, msg in (({"FRAME": 0.0}, "not X"), ({"FRAME_CLASS": 2.0}, "not a quadrotor"),
+                     ({"FRAME_CLASS": 1.0, "FRAME_TYPE": 3.0}, "not X"), ({"SERVO1_FUNCTION": 33.0}, "Motor1..Motor4")):
+        with pytest.raises(LogFormatError, match=msg):
+            motor_outputs(bad, p)

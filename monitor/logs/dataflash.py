@@ -3,9 +3,13 @@
 Messages used, old (Copter 3.3: ``TimeMS``, ``Ch1..``, CURR) and new
 (``TimeUS``, ``C1..``, BAT) field names alike:
 - RCOU: motor PWM µs. ArduCopter quad-X numbers its motors as PX4 does
-  (1 front-right CCW, 2 rear-left CCW, 3 front-left CW, 4 rear-right CW;
-  ArduPilot "Connect ESCs and motors" page), with motor i on output i by
-  default, so Ch1..Ch4 map straight onto PX4 order.
+  (1 front-right CCW, 2 rear-left CCW, 3 front-left CW, 4 rear-right CW:
+  ardupilot.org/copter/docs/connect-escs-and-motors.html, quad X diagram;
+  "1, 4, 2, 3 going clockwise from the top right",
+  discuss.ardupilot.org/t/understanding-motor-numbering/104537). Motor k is
+  on the output whose SERVOn_FUNCTION is 32 + k (ArduPilot >= 3.5), else on
+  output k (Copter 3.3 has no such parameter). FRAME / FRAME_CLASS /
+  FRAME_TYPE are checked: only a quad X fits the model.
 - ATT: Roll, Pitch, Yaw in degrees (yaw 0..360) -> rad.
 - RATE: R, P, Y in deg/s -> rad/s (IMU GyrX/Y/Z in rad/s if RATE is absent).
 - BAT.Volt (V) or CURR.Volt (cV); EV 10/11 armed/disarmed; CTUN.Alt height;
@@ -24,7 +28,9 @@ from monitor.errors import LogFormatError
 from monitor.logs.raw import EVENT_MAX_AGE_US, RawFlight, Stream
 from monitor.logs.units import V_PER_CV, deg_to_rad, ms_to_us, wrap_pi
 
-WANTED = ["RCOU", "ATT", "RATE", "IMU", "BAT", "CURR", "EV", "CTUN", "EKF1", "NKF1", "XKF1"]
+WANTED = ["RCOU", "ATT", "RATE", "IMU", "BAT", "CURR", "EV", "CTUN", "EKF1", "NKF1", "XKF1", "PARM"]
+SERVO_FUNCTION_MOTOR1 = 33  # SERVOn_FUNCTION: 33..36 = Motor1..Motor4
+FRAME_CLASS_QUAD, FRAME_TYPE_X, OLD_FRAME_X = 1, 1, 1
 EV_ARMED, EV_DISARMED = 10, 11  # ArduCopter LogEvent DATA_ARMED / DATA_DISARMED
 
 
@@ -36,8 +42,21 @@ def _time_us(msg, names, last_us: int) -> int:
     return last_us  # EV has no time field in Copter 3.3: it happened at the last stamped message
 
 
-def _motor_fields(d: dict) -> tuple[str, ...]:
-    return ("C1", "C2", "C3", "C4") if "C1" in d else ("Ch1", "Ch2", "Ch3", "Ch4")
+def motor_outputs(params: dict[str, float], path: Path) -> tuple[int, int, int, int]:
+    """1-based output channel of motors 1..4, after checking the frame is a quad X."""
+    if params.get("FRAME_CLASS", FRAME_CLASS_QUAD) != FRAME_CLASS_QUAD:
+        raise LogFormatError(f"{path}: FRAME_CLASS {params['FRAME_CLASS']:g} is not a quadrotor (1): the model is for quad X")
+    frame_type = params.get("FRAME_TYPE", params.get("FRAME", OLD_FRAME_X) if "FRAME_CLASS" not in params else FRAME_TYPE_X)
+    if frame_type != FRAME_TYPE_X:
+        raise LogFormatError(f"{path}: frame type {frame_type:g} is not X (1): the model is for quad X")
+    by_function = {int(v): int(k[5:-9]) for k, v in params.items()
+                   if k.startswith("SERVO") and k.endswith("_FUNCTION") and k[5:-9].isdigit()}
+    if any(SERVO_FUNCTION_MOTOR1 + i in by_function for i in range(4)):
+        try:
+            return tuple(by_function[SERVO_FUNCTION_MOTOR1 + i] for i in range(4))  # type: ignore[return-value]
+        except KeyError:
+            raise LogFormatError(f"{path}: SERVOn_FUNCTION does not assign all of Motor1..Motor4") from None
+    return (1, 2, 3, 4)
 
 
 def read_dataflash(path: str | Path) -> RawFlight:
@@ -54,12 +73,16 @@ def read_dataflash(path: str | Path) -> RawFlight:
             if not hasattr(m, "formats"):
                 raise LogFormatError(f"{path}: not an ArduPilot DataFlash log")
             last_us = 0
+            params: dict[str, float] = {}
             while True:
                 msg = m.recv_match(type=WANTED)
                 if msg is None:
                     break
                 typ = msg.get_type()
                 names = msg.get_fieldnames()
+                if typ == "PARM":
+                    params[msg.Name] = float(msg.Value)
+                    continue
                 t = _time_us(msg, names, last_us)
                 last_us = max(last_us, t)
                 _collect(typ, {n: getattr(msg, n) for n in names}, t, rows)
@@ -78,6 +101,9 @@ def read_dataflash(path: str | Path) -> RawFlight:
         warnings.append(f"{path.name}: last message cut off {leftover} bytes short (truncated log): read up to the damage")
     if not rows["cmd"]:
         raise LogFormatError(f"{path}: no RCOU messages (motor outputs): cannot diagnose")
+    channels = motor_outputs(params, path)
+    for i, (t, outs) in enumerate(rows["cmd"]):
+        rows["cmd"][i] = (t, [outs.get(c, np.nan) for c in channels])
     if not rows["att"]:
         raise LogFormatError(f"{path}: no ATT messages (attitude): cannot diagnose")
     rates = rows["rate"]
@@ -148,7 +174,8 @@ def _events(s: Stream | None) -> Stream | None:
 
 def _collect(typ: str, d: dict, t: int, rows: dict) -> None:
     if typ == "RCOU":
-        rows["cmd"].append((t, [d[f] for f in _motor_fields(d)]))
+        # Output number -> PWM, for the old (Ch1..) and new (C1..) field names.
+        rows["cmd"].append((t, {int(k.lstrip("Ch")): v for k, v in d.items() if k.lstrip("Ch").isdigit()}))
     elif typ == "ATT":
         rows["att"].append((t, [d["Roll"], d["Pitch"], d["Yaw"]]))
     elif typ == "RATE":
