@@ -27,7 +27,7 @@ sys.path.insert(0, str(REPO / "tests"))  # the fixture model, when no shipped mo
 
 
 def simulate(minutes: float, out: Path) -> Path:
-    cmd = [sys.executable, "-m", "monitor", "simulate", "--out", str(out), "--format", "tlog",
+    cmd = [sys.executable, "-m", "monitor.cli", "simulate", "--out", str(out), "--format", "tlog",
            "--duration-s", str(int(minutes * 60)), "--label", "4", "--propellers", "quadratic", "--seed", "1"]
     subprocess.run(cmd, check=True, cwd=REPO, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     return out / "flight_000.tlog"
