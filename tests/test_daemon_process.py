@@ -118,6 +118,7 @@ def test_faulty_propeller_alert_over_udp_against_the_replay_stub(tmp_path, model
     assert set(first) >= {"time_boot_ms", "label", "faulty_propellers", "probabilities"}
     assert 0 < first["time_boot_ms"] - TAKEOFF_BOOT_MS <= 10_000  # within 10 s of flight time
     assert all(e["faulty_propellers"] == [3] for e in events)
+    assert 15.0 < first["battery_v"] < 16.5  # BATTERY_STATUS cells of the synthetic pack, summed
     # A good MAVLink component: heartbeats as an onboard controller on the autopilot's system, compid 191.
     hb = [m for m in received if m["mavpackettype"] == "HEARTBEAT"]
     assert hb and all(m["_from"] == [1, 191] and m["type"] == 18 for m in hb)

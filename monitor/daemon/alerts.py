@@ -9,6 +9,7 @@ re-arms or silences it). STATUSTEXT is rate-limited on the same clock.
 from __future__ import annotations
 
 import json
+import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -33,6 +34,7 @@ class Alert:
     label: int  # 1..16, the most likely label of the window
     label_probability: tuple[float, ...]
     critical: bool
+    battery_v: float = float("nan")  # context for the ground crew: a sagging pack also raises RPM
 
     def statustext(self) -> str:
         return statustext({p: self.fault_probability[p - 1] for p in self.faulty_propellers})
@@ -49,6 +51,7 @@ class Alert:
             "probabilities": [round(p, 4) for p in self.fault_probability],
             "label_probabilities": [round(p, 4) for p in self.label_probability],
             "severity": "CRITICAL" if self.critical else "WARNING",
+            "battery_v": None if math.isnan(self.battery_v) else round(self.battery_v, 2),
         }
 
 
@@ -92,7 +95,8 @@ class AlertRule:
         """Streaks count consecutive windows: a gap in classification breaks them."""
         self._streak[:] = 0
 
-    def update(self, time_boot_ms: int, fault_probability: np.ndarray, label_probability: np.ndarray) -> Alert | None:
+    def update(self, time_boot_ms: int, fault_probability: np.ndarray, label_probability: np.ndarray,
+               battery_v: float = float("nan")) -> Alert | None:
         p = np.asarray(fault_probability, dtype=np.float64)
         hot = np.isfinite(p) & (p >= self.config.threshold)
         self._streak = np.where(hot, self._streak + 1, 0)
@@ -105,7 +109,7 @@ class AlertRule:
         lp = np.asarray(label_probability, dtype=np.float64)
         critical = bool(max(p[i - 1] for i in props) >= self.config.critical_threshold)
         return Alert(int(time_boot_ms), props, tuple(map(float, p)), int(np.argmax(lp)) + 1,
-                     tuple(map(float, lp)), critical)
+                     tuple(map(float, lp)), critical, float(battery_v))
 
 
 class RateLimiter:

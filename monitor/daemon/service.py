@@ -144,7 +144,7 @@ class Daemon:
         if self.cfg.alerts.named_value_float:
             for i, v in enumerate(p):
                 self.link.send_named_value_float(step.time_boot_ms, f"PWF{i + 1}", float(v))
-        alert = self.rule.update(step.time_boot_ms, p, step.label_probability)
+        alert = self.rule.update(step.time_boot_ms, p, step.label_probability, step.battery_v)
         if alert is None:
             return
         self.counters.alerts += 1
