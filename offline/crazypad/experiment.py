@@ -136,8 +136,11 @@ def write_vehicle(cal: SteadyCalibration, sources: dict[str, str], path: Path) -
     return path
 
 
-def diagnose_real(model_paths: dict[str, Path], real: list[RealFlight]) -> list[dict]:
-    """Every non-calibration flight through ``diagnose_table`` with the model of its airframe (key) or "*"."""
+def diagnose_real(model_paths: dict[str, Path], real: list[RealFlight], esc=None) -> list[dict]:
+    """Every non-calibration flight through ``diagnose_table`` with the model of its airframe (key) or "*".
+
+    All windows (hop 1); ``propwatch diagnose`` defaults to one every 10 steps, which averages the same windows.
+    """
     from monitor.diagnose.engine import diagnose_table
 
     clfs = {k: Classifier(p) for k, p in model_paths.items()}
@@ -145,7 +148,7 @@ def diagnose_real(model_paths: dict[str, Path], real: list[RealFlight]) -> list[
     for r in real:
         if r.flight.role == "calibration":
             continue
-        d = diagnose_table(r.table, clfs.get(r.flight.airframe) or clfs["*"], hop=1)
+        d = diagnose_table(r.table, clfs.get(r.flight.airframe) or clfs["*"], hop=1, esc=esc)
         truth = truth_label(r.flight)
         pred = d.verdict["label"] if d.verdict else None
         rows.append({"file": r.flight.file, "group": r.flight.group, "airframe": r.flight.airframe,
@@ -249,9 +252,10 @@ def run(out: Path, root: Path = DEFAULT_ROOT, vehicle_path: Path | None = None, 
         paths[kind] = export_onnx(m, out / f"crazyflie-classifier-{kind}.onnx", extra_metadata={"crazypad": {
             "trained_on": kind, "window_s": WINDOW / 20.0, "signals": "motor commands only (shares of the mean)",
             "airframes": [af for af in AIRFRAMES if kind in ("calibrated", f"calibrated-{af}")]}})
-    results = {"nominal": diagnose_real({"*": paths["nominal"]}, real),
-               "calibrated": diagnose_real({"*": paths["calibrated"]}, real),
-               "calibrated_own": diagnose_real({af: paths[f"calibrated-{af}"] for af in AIRFRAMES}, real)}
+    esc = nominal.esc
+    results = {"nominal": diagnose_real({"*": paths["nominal"]}, real, esc),
+               "calibrated": diagnose_real({"*": paths["calibrated"]}, real, esc),
+               "calibrated_own": diagnose_real({af: paths[f"calibrated-{af}"] for af in AIRFRAMES}, real, esc)}
     report = {
         "split": {role: sorted(r.flight.file for r in real if r.flight.role == role) if role != "evaluation"
                   else len([r for r in real if r.flight.role == role]) for role in ("calibration", "holdout", "evaluation")},
