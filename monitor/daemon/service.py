@@ -202,7 +202,11 @@ class Daemon:
         span = now - self._rate_window_start
         need = self.cfg.link.min_rate_fraction * self.cfg.resample.rate_hz
         slow = set()
-        if self._system_id is not None and self._link_up:  # a link that is down is reported as such, not as slow streams
+        if self._system_id is None:
+            others = sum(self.pipeline.decoder.ignored.values())
+            log.warning("no autopilot HEARTBEAT yet (%d messages received, %d from other systems/components)",
+                        self.counters.messages, others)
+        elif self._link_up:  # a link that is down is reported as such, not as slow streams
             for name in self.fast_streams():
                 hz = self._rates[name] / span
                 if hz < need:
@@ -230,6 +234,8 @@ class Daemon:
 
     def summary(self) -> None:
         r = self.report()
+        if self._system_id is None:
+            log.warning("no autopilot HEARTBEAT was ever received: nothing was classified")
         log.info("stopped: %d messages, %d steps (%d valid, %d classified), %d alerts, %d bad packets",
                  r["messages"], r["pipeline"]["steps"], r["pipeline"]["valid_steps"], r["pipeline"]["classified"],
                  r["alerts"], r["bad_data"])
