@@ -30,9 +30,9 @@ BATTERY_MAX_AGE_US = 5_000_000
 EVENT_MAX_AGE_US = int(np.iinfo(np.int64).max // 2)
 
 # Mean throttle above which the rotors are taken as lifting (airborne rule), per
-# command unit: 15 % of the command range above idle. PX4 arms at ~1100 µs
-# (PWM_MAIN_MIN), ArduCopter spins armed at ~1070 µs (MOT_SPIN_ARMED 70);
-# both hover well above 1300 µs. The Crazyflie sends 0 when not flying.
+# command unit: 15 % of the command range above idle. PX4 idles armed near
+# 1100 µs (PWM_MAIN_MIN), ArduCopter log171 at 1117 µs (MOT_SPIN_ARMED 50); both
+# hover well above 1300 µs. The Crazyflie sends 0 when not flying.
 LIFT_CMD = {"us": 1150.0, "cf16": 0.15 * 65535.0}
 # Height above the first sample that counts as off the ground, where a
 # height stream exists (CrazyPAD's README uses z > 0.25 m).

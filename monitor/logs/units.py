@@ -33,20 +33,6 @@ def ms_to_us(t_ms):
     return np.round(np.asarray(t_ms, dtype=np.float64) * US_PER_MS).astype(np.int64)
 
 
-def s_to_us(t_s):
-    return np.round(np.asarray(t_s, dtype=np.float64) * US_PER_S).astype(np.int64)
-
-
-def unwrap_counter(t, bits: int = 32) -> np.ndarray:
-    """Undo wrap-around of an unsigned counter (MAVLink's uint32 ``time_usec`` wraps after 71.6 min)."""
-    t = np.asarray(t, dtype=np.int64)
-    if len(t) < 2:
-        return t
-    span = np.int64(1) << bits
-    wraps = np.cumsum(np.diff(t) < -(span // 2))
-    return t + np.concatenate([[0], wraps]) * span
-
-
 def quat_wxyz_to_euler_zyx(q) -> np.ndarray:
     """(N, 4) scalar-first quaternions -> (N, 3) roll, pitch, yaw in rad."""
     q = np.asarray(q, dtype=np.float64)
