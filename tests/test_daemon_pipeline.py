@@ -390,3 +390,31 @@ def test_statustext_rate_limit_merges_and_never_drops_an_alert():
     clock.t += 3.0
     assert q.due() == ("PROP 2,3 FAULT p=0.85,0.97", 2)  # merged, CRITICAL
     assert q.due() is None
+
+
+def test_an_exception_inside_the_pipeline_is_logged_and_survived(tmp_path, toy, caplog):
+    from test_daemon_helpers import write_tlog
+
+    from monitor.daemon.alerts import EventWriter
+    from monitor.daemon.link import Link
+    from monitor.daemon.service import Daemon
+
+    frames = synth_flight(2.0)
+    link = Link(str(write_tlog(tmp_path / "f.tlog", frames)), 191, tlog_speed=0)
+    pipe = Pipeline(toy, MonitorConfig(), PAPER_ESC)
+    daemon = Daemon(MonitorConfig(), link, pipe, EventWriter(None))
+    real_feed, calls = pipe.feed, []
+
+    def flaky(msg, received_s=None):
+        calls.append(msg.get_type())
+        if len(calls) == 5:
+            raise RuntimeError("boom")
+        return real_feed(msg, received_s)
+
+    pipe.feed = flaky
+    msgs = parse_all(frames)
+    for m in msgs:
+        daemon.handle(m, 0.0)
+    link.close()
+    assert daemon.counters.internal_errors == 1 and len(calls) == len(msgs)
+    assert "error while processing" in caplog.text and "boom" in caplog.text

@@ -102,8 +102,7 @@ class Pipeline:
     def feed_sample(self, s: md.Sample, received_s: float) -> list[StepResult]:
         if isinstance(s, md.ClockReset):
             self.stats["clock_resets"] += 1
-            self.hold.reset()
-            self._clear()
+            self.reset()
             return []
         if s.timestamp_us is None:
             return []  # before the boot clock is known: nothing to place it on
@@ -125,6 +124,11 @@ class Pipeline:
         if isinstance(s, md.Battery):
             return self._push("battery", s.timestamp_us, (s.voltage_v,), received_s)
         return []
+
+    def reset(self) -> None:
+        """Drop everything held (grid and ring); decoding state (autopilot, clock) is kept."""
+        self.hold.reset()
+        self._clear()
 
     def flush(self) -> list[StepResult]:
         return [self._step(g, time.perf_counter()) for g in self.hold.flush()]

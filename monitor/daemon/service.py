@@ -21,7 +21,7 @@ import numpy as np
 from monitor import mavlink_decode as md
 from monitor.daemon.alerts import AlertRule, EventWriter, RateLimiter, StatusTextQueue
 from monitor.daemon.config import MonitorConfig
-from monitor.daemon.link import Link
+from monitor.daemon.link import MAV_CMD_SET_MESSAGE_INTERVAL, Link
 from monitor.daemon.pipeline import Pipeline
 from monitor.daemon.sdnotify import Notifier
 
@@ -40,6 +40,7 @@ class Counters:
     alerts: int = 0
     statustexts: int = 0
     stream_requests: int = 0
+    internal_errors: int = 0
     acks: Counter = field(default_factory=Counter)
     latencies_s: list = field(default_factory=list)
 
@@ -68,6 +69,7 @@ class Daemon:
         self._bad_since_log = 0
         self._classifying_state = False
         self._state_log_limit = RateLimiter(2.0)
+        self._error_log_limit = RateLimiter(10.0)
         self._slow: set[str] = set(self.fast_streams())
 
     def fast_streams(self) -> tuple[str, ...]:
@@ -105,7 +107,14 @@ class Daemon:
             self.counters.bad_data += 1
             self._bad_since_log += 1
             return
-        steps = self.pipeline.feed(msg, received_s)
+        try:
+            steps = self.pipeline.feed(msg, received_s)
+        except Exception:  # noqa: BLE001 - one bad message must not stop the monitor in flight
+            self.counters.internal_errors += 1
+            if self._error_log_limit.allow():
+                log.exception("error while processing %s (%d so far); continuing", kind, self.counters.internal_errors)
+            self.pipeline.reset()
+            return
         dec = self.pipeline.decoder
         if dec.system_id is not None and self._system_id is None:
             self._system_id = dec.system_id
@@ -119,7 +128,7 @@ class Daemon:
                 if not self._link_up:
                     self._link_up = True
                     log.info("link up: autopilot heartbeat received")
-            elif kind == "COMMAND_ACK" and msg.command == 511:
+            elif kind == "COMMAND_ACK" and msg.command == MAV_CMD_SET_MESSAGE_INTERVAL:
                 self.counters.acks[int(msg.result)] += 1
                 if msg.result != 0:
                     log.warning("stream-rate request refused by the autopilot (MAV_RESULT %d)", msg.result)
@@ -225,7 +234,7 @@ class Daemon:
         return {
             "messages": c.messages, "bad_data": c.bad_data, "alerts": c.alerts,
             "statustexts": c.statustexts,
-            "stream_requests": c.stream_requests, "acks": {str(k): v for k, v in c.acks.items()},
+            "stream_requests": c.stream_requests, "internal_errors": c.internal_errors, "acks": {str(k): v for k, v in c.acks.items()},
             "pipeline": dict(self.pipeline.stats), "late_samples": self.pipeline.hold.late,
             "ignored": {f"{s}/{k}": n for (s, k), n in self.pipeline.decoder.ignored.items()},
             "undecodable": dict(self.pipeline.decoder.undecodable),
