@@ -15,7 +15,6 @@ from pathlib import Path
 from monitor.flight import FlightTable
 from monitor.logs import read_log
 from monitor.vehicle import DEFAULT_VEHICLE, VehicleConfig, load_vehicle_with_sources
-
 from offline.calibrate.calibrate import CalibrationResult, calibrate
 from offline.calibrate.terms import TERMS
 

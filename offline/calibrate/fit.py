@@ -31,6 +31,7 @@ from offline.calibrate.terms import Term, apply_terms, stacked
 BLOCK_S = 5.0
 MAX_LAG = 40  # samples (2 s at 20 Hz) for the autocorrelation time
 REWEIGHT_PASSES = 2
+LATER_ROUND_CANDIDATES = 4
 MIN_DELTA_BIC = 10.0
 # Effect-size floor. At 20 Hz the logged command is a snapshot of a signal
 # that moves at the controller's rate, so the predicted moments carry noise the
@@ -182,16 +183,24 @@ def fit_terms(data: Data, nominal: VehicleConfig, terms: list[Term], x0: np.ndar
     # nominal model got badly wrong count for little once it is fixed, and bias the joint fit.
     w = dict(sigma)
     for _ in range(REWEIGHT_PASSES):
-        sol = least_squares(lambda z, w=w: vec(x0 + z * scale, w), np.zeros(len(x0)),
+        sol = least_squares(lambda z, w=w, x0=x0: vec(x0 + z * scale, w), np.zeros(len(x0)),
                             bounds=((lo - x0) / scale, (hi - x0) / scale), method="trf", x_scale=1.0,
                             max_nfev=60 * max(len(x0), 1), diff_step=1e-3)
         x0 = np.clip(x0 + sol.x * scale, lo + 1e-9 * scale, hi - 1e-9 * scale)
         res = data.residuals(apply_terms(nominal, terms, x0))
         w = {k: max(v, noise_floor(k)) for k, v in rms_by_signal(res, data.fit_masks).items()}
     x = x0
-    J = sol.jac
-    dof = max(len(sol.fun) - len(x), 1)
-    s2 = 2.0 * sol.cost / dof
+    # Standard errors from our own central differences at the solution (a tenth of each
+    # parameter's resolution), not the solver's last Jacobian, which can be stale or zero
+    # when it stops on its first step.
+    f0 = vec(x, w)
+    J = np.empty((len(f0), len(x)))
+    for j in range(len(x)):
+        h = np.zeros(len(x))
+        h[j] = 0.1 * scale[j]
+        J[:, j] = (vec(np.clip(x + h, lo, hi), w) - vec(np.clip(x - h, lo, hi), w)) / 2.0 / 0.1
+    dof = max(len(f0) - len(x), 1)
+    s2 = float(f0 @ f0) / dof
     try:
         cov_z = np.linalg.inv(J.T @ J) * s2 * float(np.median(list(data.corr_time.values()) or [1.0]))
         std = np.sqrt(np.maximum(np.diag(cov_z), 0.0)) * scale
@@ -290,6 +299,11 @@ def select_terms(data: Data, nominal: VehicleConfig, candidates: list[Term]) -> 
             break
         current = ok[best]
         chosen.append(next(t for t in remaining if t.name == best))
+        # Later rounds try only the terms the first round found identifiable and promising: a term
+        # that neither the data can pin down nor helps alone rarely helps jointly, and each try is a fit.
+        if len(steps) == 1:
+            promising = sorted(ok, key=lambda n: ok[n].bic)[:LATER_ROUND_CANDIDATES + 1]
+            remaining = [t for t in remaining if t.name in promising]
         remaining = [t for t in remaining if t.name != best]
         x_cur = current.x
         base_bic, base_rms = current.bic, current.held_rms

@@ -110,7 +110,7 @@ def angular_accel(seg: Segment, vehicle: VehicleConfig, f: np.ndarray, tau: np.n
     omega = seg.rates_fine_rad_s - bias
     J = np.asarray(vehicle.inertia_diag_kg_m2)
     alpha = (body_moments(f, tau, vehicle) - np.cross(omega, omega * J)) / J
-    return sg_deriv(seg.rates_rad_s - bias, seg.dt_s), integrated(seg, alpha)
+    return seg.rates_deriv_rad_s2, integrated(seg, alpha)
 
 
 def residuals(seg: Segment, vehicle: VehicleConfig, speed_scale: SpeedScale = None) -> dict[str, np.ndarray]:
@@ -129,7 +129,7 @@ def residuals(seg: Segment, vehicle: VehicleConfig, speed_scale: SpeedScale = No
     if seg.vel_ned_m_s is not None:
         a_ned = np.einsum("tij,tj->ti", seg.R_world_body_fine, fs) + G_NED
         w = SG_WINDOW_TRANSLATION
-        acc = sg_deriv(seg.vel_ned_m_s, seg.dt_s, w) - integrated(seg, a_ned, w)
+        acc = seg.vel_deriv_ned_m_s2 - integrated(seg, a_ned, w)
         out.update({name: acc[:, i] for i, name in enumerate(VEL_SIGNALS)})
     elif seg.accel_frd_m_s2 is not None:
         w = SG_WINDOW_TRANSLATION

@@ -24,6 +24,7 @@ and landing puts forces on the vehicle that the flight model does not have.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -62,6 +63,8 @@ class Segment:
     vel_ned_m_s: np.ndarray | None  # (T, 3)
     accel_frd_m_s2: np.ndarray | None  # (T, 3) IMU specific force
     euler_deriv_rad_s: np.ndarray  # (T, 3) SG derivative of the logged attitude
+    rates_deriv_rad_s2: np.ndarray  # (T, 3) SG derivative of the logged rates (a constant gyro bias drops out)
+    vel_deriv_ned_m_s2: np.ndarray | None  # (T, 3) SG derivative of the velocity, translation window
     phase: np.ndarray  # (T,) str: hover / cruise / climb / manoeuvre
     valid: np.ndarray  # (T,) bool: inside the filter's support, away from the segment edges
     # The same signals on the fine prediction grid ((T - 1) * FINE + 1 instants).
@@ -95,9 +98,14 @@ def sg_deriv(x: np.ndarray, dt_s: float, window: int = SG_WINDOW) -> np.ndarray:
     return _sg(x, 1, dt_s, window)
 
 
+@functools.lru_cache(maxsize=16)
+def _sg_coeffs(window: int, deriv: int, dt_s: float) -> np.ndarray:
+    return savgol_coeffs(window, SG_POLYORDER, deriv=deriv, delta=dt_s, use="dot")
+
+
 def _sg(x: np.ndarray, deriv: int, dt_s: float, window: int) -> np.ndarray:
     """SG along axis 0, 'valid' style: the first/last half-window are NaN (never extrapolated)."""
-    c = savgol_coeffs(window, SG_POLYORDER, deriv=deriv, delta=dt_s, use="dot")
+    c = _sg_coeffs(window, deriv, float(dt_s))
     x = np.asarray(x, dtype=np.float64)
     h = window // 2
     out = np.full(x.shape, np.nan)
@@ -207,7 +215,8 @@ def _segment(tab: FlightTable, k: int, a: int, b: int, dt: float, vehicle: Vehic
     valid[len(valid) - h:] = False
     return Segment(flight=k, source=tab.source or f"flight {k}", dt_s=dt, time_s=t, motor_cmd=cmd, motor_rpm=rpm,
                    rates_rad_s=rates, euler_rad=euler, R_world_body=rotation_world_body(euler), vel_ned_m_s=vel,
-                   accel_frd_m_s2=acc, euler_deriv_rad_s=sg_deriv(euler, dt),
+                   accel_frd_m_s2=acc, euler_deriv_rad_s=sg_deriv(euler, dt), rates_deriv_rad_s2=sg_deriv(rates, dt),
+                   vel_deriv_ned_m_s2=None if vel is None else sg_deriv(vel, dt, SG_WINDOW_TRANSLATION),
                    phase=flight_phases(vel, euler, rates), valid=valid,
                    motor_cmd_fine=upsample(cmd), motor_rpm_fine=upsample(rpm), rates_fine_rad_s=upsample(rates),
                    R_world_body_fine=rotation_world_body(upsample(euler)),

@@ -18,7 +18,6 @@ import yaml
 from monitor.config import to_mapping
 from monitor.errors import ConfigError
 from monitor.vehicle import load_vehicle_with_sources
-
 from offline.calibrate.calibrate import CalibrationResult
 from offline.calibrate.terms import TERMS
 from offline.manifest import make_manifest
