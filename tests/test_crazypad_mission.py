@@ -75,3 +75,16 @@ def test_simulated_dataset_is_deterministic_and_labelled(vehicle):
     rpm = np.nanmean(a.signals["motor_rpm"], axis=1)
     share = rpm / rpm.mean(axis=1, keepdims=True)
     assert np.argmax(share[1]) == 2 and share[1, 2] > share[0, 2]  # label 4: propeller 3 (index 2) faulty
+
+
+def test_two_airframe_training_set_keeps_the_esc_curve_for_the_model(vehicle):
+    from dataclasses import replace
+
+    from offline.classifier.train import vehicle_info
+    from offline.crazypad.simdata import Recipe, training_set
+
+    other = replace(vehicle, motor_efficiency=(0.95, 1.0, 1.05, 1.0))
+    ds = training_set([vehicle, other], Recipe(flights_per_label=2, labels=(1,)), "two")
+    assert ds.n_flights == 2
+    info = vehicle_info(ds)
+    assert info["esc"]["cmd_unit"] == "cf16" and info["esc"]["b_rpm_per_cmd"] == vehicle.esc.b_rpm_per_cmd

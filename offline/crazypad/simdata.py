@@ -105,4 +105,10 @@ def training_set(vehicles: list[VehicleConfig], recipe: Recipe, name: str) -> Fa
     per = max(1, recipe.flights_per_label // len(vehicles))
     parts = [simulate_dataset(v, Recipe(**{**asdict(recipe), "flights_per_label": per}), f"{name}-{i}", seed_offset=i)
              for i, v in enumerate(vehicles)]
-    return replace(parts[0], name=name) if len(parts) == 1 else concat(parts, name)
+    if len(parts) == 1:
+        return replace(parts[0], name=name)
+    # concat() keeps only the parts' manifests; the classifier reads the vehicle (name, ESC curve)
+    # from the top level, and every part shares the nominal ESC curve (calibration leaves it).
+    first = parts[0].manifest
+    return replace(concat(parts, name), manifest={**first, "vehicle": {**first["vehicle"], "parts": [
+        p.manifest["vehicle"] for p in parts]}, "parts": [p.manifest for p in parts]})
