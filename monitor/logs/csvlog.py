@@ -82,18 +82,11 @@ class CsvFormat:
         if self.time.unit not in ("us", "ms", "s"):
             raise ConfigError(f"time.unit: must be us, ms or s, got {self.time.unit!r}")
 
-    def columns(self) -> list[str]:
-        """Every column this layout reads (required or not)."""
-        out = [self.time.column] + [m for m in self.motors if m]
-        out += [getattr(self, f.name).column for f in fields(self)
-                if isinstance(getattr(self, f.name), ColumnSpec) and f.name != "time" and getattr(self, f.name).column]
-        return list(dict.fromkeys(out))
-
     def required_columns(self) -> list[str]:
+        """Columns that must be in the file: time, motors, and every signal not marked ``required: false``."""
+        specs = [getattr(self, f.name) for f in fields(self)]
         out = [self.time.column] + [m for m in self.motors if m]
-        out += [getattr(self, f.name).column for f in fields(self)
-                if isinstance(getattr(self, f.name), ColumnSpec) and getattr(self, f.name).column
-                and getattr(self, f.name).required]
+        out += [c.column for c in specs if isinstance(c, ColumnSpec) and c.column and c.required]
         return list(dict.fromkeys(out))
 
 
