@@ -41,5 +41,10 @@ classifier: $(STAMP)
 
 models: propellers classifier
 
+# Sim-to-real on the real CrazyPAD flights (about 15 min on 2 cores): calibrate, simulate, train,
+# diagnose every held-out flight; --ship refreshes models/crazyflie-classifier.onnx.
+crazypad: $(STAMP)
+	$(BIN)/propwatch crazypad run --data $(DATA)/crazypad --out $(OUT)/crazypad --ship
+
 clean:
 	rm -rf $(VENV) $(OUT) .pytest_cache
