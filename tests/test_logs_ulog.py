@@ -53,13 +53,15 @@ def quat_from_euler(roll, pitch, yaw):
     return (cr * cp * cy + sr * sp * sy, sr * cp * cy - cr * sp * sy, cr * sp * cy + sr * cp * sy, cr * cp * sy - sr * sp * cy)
 
 
-def write_ulog(path, duration_s=20.0, rate_hz=50.0, faulty=None, with_attitude=True):
+def write_ulog(path, duration_s=20.0, rate_hz=50.0, faulty=None, with_attitude=True, old_px4=False):
     w = ULogWriter()
     w.topic("actuator_outputs", [("uint64_t", "timestamp"), ("uint32_t", "noutputs"), ("float[16]", "output")])
     w.topic("actuator_outputs", [("uint64_t", "timestamp"), ("uint32_t", "noutputs"), ("float[16]", "output")], multi_id=1)
     if with_attitude:
-        w.topic("vehicle_attitude", [("uint64_t", "timestamp"), ("float[4]", "q")])
-    w.topic("vehicle_angular_velocity", [("uint64_t", "timestamp"), ("float[3]", "xyz")])
+        w.topic("vehicle_attitude", [("uint64_t", "timestamp"), ("float[4]", "q")]
+                + ([("float", "rollspeed"), ("float", "pitchspeed"), ("float", "yawspeed")] if old_px4 else []))
+    if not old_px4:
+        w.topic("vehicle_angular_velocity", [("uint64_t", "timestamp"), ("float[3]", "xyz")])
     w.topic("vehicle_status", [("uint64_t", "timestamp"), ("uint8_t", "arming_state")])
     w.topic("vehicle_land_detected", [("uint64_t", "timestamp"), ("bool", "landed")])
     w.topic("battery_status", [("uint64_t", "timestamp"), ("float", "voltage_v")])
@@ -74,8 +76,9 @@ def write_ulog(path, duration_s=20.0, rate_hz=50.0, faulty=None, with_attitude=T
         w.data("actuator_outputs", t, 8, *([1234.0] * 16), multi_id=1)  # aux outputs: must not be read
         e = (0.1 * math.sin(s), -0.05 * math.cos(s), 2.5 * math.sin(0.3 * s))
         if with_attitude:
-            w.data("vehicle_attitude", t, *quat_from_euler(*e))
-        w.data("vehicle_angular_velocity", t, 0.01, -0.02, 0.03)
+            w.data("vehicle_attitude", t, *quat_from_euler(*e), *((0.01, -0.02, 0.03) if old_px4 else ()))
+        if not old_px4:
+            w.data("vehicle_angular_velocity", t, 0.01, -0.02, 0.03)
         if i % int(rate_hz) == 0:
             w.data("vehicle_status", t, 2)
             w.data("vehicle_land_detected", t, not flying)
@@ -121,3 +124,12 @@ def test_truncated_ulog_reads_up_to_the_cut(tmp_path):
     assert not any("truncated" in w for w in read_log(path, esc=PAPER_ESC).warnings)
     span_s = (table.timestamp_us[-1] - table.timestamp_us[0]) / 1e6
     assert 0.5 * 20 < span_s < 0.7 * 20
+
+
+def test_old_px4_rates_from_vehicle_attitude(tmp_path):
+    pytest.importorskip("pyulog")
+    path, ex = write_ulog(tmp_path / "old.ulg", duration_s=8.0, old_px4=True)
+    table = read_log(path, esc=PAPER_ESC)
+    np.testing.assert_allclose(table.pitch_rate_rad_s, -0.02, atol=1e-7)
+    np.testing.assert_allclose(table.yaw_rate_rad_s, 0.03, atol=1e-7)
+    assert any("before v1.11" in w for w in table.warnings)

@@ -9,7 +9,8 @@ Output with ``--json`` (stdout), for one LOG::
      "label_probability": [16 values] | null,
      "airborne_segments": [{"start_boot_s", "stop_boot_s", "steps"}, ...],
      "timeline": {"t_boot_s": [...], "fault_probability": [[p1..p4], ...], "label": [...]},
-     "hop_steps": k}
+     "hop_steps": k,
+     "envelope": {"airborne_mean_rpm", "trained_mean_rpm", "rpm_ratio", "large_attitude_fraction"}}
 
 For several LOGs: ``{"results": [one object as above per LOG, in order]}``;
 a log that cannot be read appears as ``{"log": PATH, "error": "..."}``.

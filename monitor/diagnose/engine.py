@@ -48,6 +48,7 @@ class Diagnosis:
     segments: list[dict] = field(default_factory=list)
     timeline: dict = field(default_factory=dict)
     hop_steps: int = 1
+    envelope: dict = field(default_factory=dict)  # the figures behind the envelope checks
 
     def to_json(self) -> dict:
         return {
@@ -61,6 +62,7 @@ class Diagnosis:
             "airborne_segments": self.segments,
             "timeline": self.timeline,
             "hop_steps": self.hop_steps,
+            "envelope": self.envelope,
         }
 
 
@@ -80,9 +82,11 @@ def _t_s(table: FlightTable, i) -> np.ndarray:
     return np.asarray(table.timestamp_us)[i] / US_PER_S
 
 
-def envelope_checks(table: FlightTable, clf: Classifier, esc: EscCurve | None = None) -> tuple[list[str], str | None]:
-    """(warnings, refusal reason or None) for a log the model may not fit."""
+def envelope_checks(table: FlightTable, clf: Classifier, esc: EscCurve | None = None,
+                    figures: dict | None = None) -> tuple[list[str], str | None]:
+    """(warnings, refusal reason or None) for a log the model may not fit; ``figures`` gets the numbers."""
     warnings: list[str] = []
+    figures = {} if figures is None else figures
     unit = table.extras.get("motor_cmd_unit")
     if esc is not None and unit is not None and unit != esc.cmd_unit:
         return warnings, (f"vehicle outside the model's envelope: its motor commands are in '{unit}' but the model's "
@@ -104,6 +108,7 @@ def envelope_checks(table: FlightTable, clf: Classifier, esc: EscCurve | None = 
         trained = float(np.mean([norm["mean"][i] for i in idx]))
         flown = float(np.nanmedian(np.nanmean(table.motor_rpm[air], axis=1)))
         ratio = flown / trained if trained > 0 else np.inf
+        figures.update(airborne_mean_rpm=round(flown, 1), trained_mean_rpm=round(trained, 1), rpm_ratio=round(ratio, 4))
         msg = (f"vehicle outside the model's envelope: median airborne mean RPM {flown:.0f} vs {trained:.0f} "
                f"in the model's training data (x{ratio:.2f})")
         if not RPM_RATIO_REFUSE[0] <= ratio <= RPM_RATIO_REFUSE[1]:
@@ -112,6 +117,7 @@ def envelope_checks(table: FlightTable, clf: Classifier, esc: EscCurve | None = 
             warnings.append(msg + ": the verdict is an extrapolation")
     tilt = np.maximum(np.abs(table.roll_rad[air]), np.abs(table.pitch_rad[air]))
     big = float(np.mean(np.nan_to_num(tilt) > LARGE_ATTITUDE_RAD))
+    figures["large_attitude_fraction"] = round(big, 4)
     if big > 0.01:
         warnings.append(f"{100 * big:.1f} % of the airborne time has roll or pitch beyond 45 deg "
                         "(aggressive flight, flip or crash): outside the model's training")
@@ -130,11 +136,12 @@ def diagnose_table(table: FlightTable, clf: Classifier, hop: int = 1, batch: int
     if abs(table.rate_hz - info.sample_rate_hz) > 1e-9:
         raise ModelError(f"{table.source}: table at {table.rate_hz} Hz but the model expects {info.sample_rate_hz} Hz")
     warnings = list(table.warnings)
-    env_warn, refusal = envelope_checks(table, clf, esc)
+    figures: dict = {}
+    env_warn, refusal = envelope_checks(table, clf, esc, figures)
     warnings += env_warn
     segs = [{"start_boot_s": float(_t_s(table, a)), "stop_boot_s": float(_t_s(table, b - 1)) + 1.0 / table.rate_hz,
              "steps": int(b - a)} for a, b in table.airborne_segments()]
-    d = Diagnosis(table.source, None, 0, warnings, refusal, segments=segs, hop_steps=hop)
+    d = Diagnosis(table.source, None, 0, warnings, refusal, segments=segs, hop_steps=hop, envelope=figures)
     if refusal:
         return d
     feats = compute_features(table.signals(), info.features)

@@ -101,7 +101,13 @@ def read_ulog(path: str | Path) -> RawFlight:
     if len(cmd) and np.nanmax(cmd.values) <= 1.0:
         warnings.append("actuator_outputs look normalised (<= 1), not PWM µs: the ESC fit will not apply")
     q = need("vehicle_attitude", [f"q[{i}]" for i in range(4)])
-    rates = need("vehicle_angular_velocity", [f"xyz[{i}]" for i in range(3)])
+    rates = opt("vehicle_angular_velocity", [f"xyz[{i}]" for i in range(3)])
+    if rates is None:
+        # PX4 before v1.11 has no vehicle_angular_velocity; vehicle_attitude carried the rates.
+        rates = opt("vehicle_attitude", ["rollspeed", "pitchspeed", "yawspeed"])
+        if rates is None:
+            raise LogFormatError(f"{path}: neither vehicle_angular_velocity nor vehicle_attitude rates logged: cannot diagnose")
+        warnings.append("body rates from vehicle_attitude.rollspeed/pitchspeed/yawspeed (PX4 before v1.11)")
     battery = opt("battery_status", ["voltage_v"]) or opt("battery_status", ["voltage_filtered_v"])
     status = opt("vehicle_status", ["arming_state"])
     armed = None if status is None else Stream(status.t_us, (status.values == ARMING_STATE_ARMED).astype(float))
