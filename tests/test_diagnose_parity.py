@@ -3,6 +3,8 @@ batch path give identical probabilities at every step both classify."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 from test_diagnose_fixtures import build_model, write_tlog
@@ -63,3 +65,16 @@ def test_daemon_and_batch_give_identical_probabilities(tmp_path, faulty):
     # Batched inference (diagnose's default) differs only by onnxruntime's float32 summation order.
     batched = batch(path, clf, batch_size=512)
     assert max(float(np.abs(live[t] - batched[t]).max()) for t in common) < 2e-5
+
+
+SHIPPED = Path(__file__).resolve().parent.parent / "models" / "classifier.onnx"
+
+
+@pytest.mark.skipif(not SHIPPED.is_file(), reason=f"no shipped classifier at {SHIPPED}")
+def test_parity_with_the_shipped_cnn(tmp_path):
+    clf = Classifier(SHIPPED)
+    path = write_tlog(tmp_path / "f.tlog", duration_s=20.0, faulty=1, seed=5)
+    live, offline = streamed(path, clf), batch(path, clf, batch_size=1)
+    common = sorted(set(live) & set(offline))
+    assert len(common) > 0.9 * max(len(live), len(offline)) > 150
+    assert all(np.array_equal(live[t], offline[t]) for t in common)
