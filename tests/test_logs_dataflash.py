@@ -41,6 +41,27 @@ def test_streams_units_and_rates(raw):
 
 @pytest.mark.realdata
 @needs_log171
+def test_rate_units_agree_with_the_imu_gyro(raw):
+    # Copter 3.3 logs RATE in centi-degrees/s (the README's "deg/s" is off by 100): the reader finds out.
+    assert any("centi-degrees/s" in w for w in raw.warnings)
+    from pymavlink import mavutil
+
+    conn = mavutil.mavlink_connection(str(LOG171))
+    gyro = []
+    while (m := conn.recv_match(type="IMU")) is not None:
+        gyro.append((m.TimeMS * 1000, m.GyrX, m.GyrY, m.GyrZ))
+    conn.close()
+    gyro = np.array(gyro)
+    t = raw.rates_rad_s.t_us
+    flight = (t > 90e6) & (t < 230e6)
+    for k in range(3):
+        g = np.interp(t[flight], gyro[:, 0], gyro[:, k + 1])
+        slope = np.polyfit(g, raw.rates_rad_s.values[flight, k], 1)[0]
+        assert 0.7 < slope < 1.1, (k, slope)  # RATE is the filtered gyro, 10 Hz: close to 1, not 57 or 0.01
+
+
+@pytest.mark.realdata
+@needs_log171
 def test_airborne_matches_the_armed_flight(raw):
     table = to_flight_table(raw, esc=PAPER_ESC)
     seg = table.airborne_segments()

@@ -11,7 +11,8 @@ Messages used, old (Copter 3.3: ``TimeMS``, ``Ch1..``, CURR) and new
   output k (Copter 3.3 has no such parameter). FRAME / FRAME_CLASS /
   FRAME_TYPE are checked: only a quad X fits the model.
 - ATT: Roll, Pitch, Yaw in degrees (yaw 0..360) -> rad.
-- RATE: R, P, Y in deg/s -> rad/s (IMU GyrX/Y/Z in rad/s if RATE is absent).
+- RATE: R, P, Y in deg/s (centi-deg/s in Copter 3.3, told apart by their ratio to the
+  IMU gyro) -> rad/s (IMU GyrX/Y/Z in rad/s if RATE is absent).
 - BAT.Volt (V) or CURR.Volt (cV); EV 10/11 armed/disarmed; CTUN.Alt height;
   IMU Acc (m/s², FRD) and EKF1/NKF1/XKF1 velocity/position (NED) as extras.
 """
@@ -125,7 +126,12 @@ def read_dataflash(path: str | Path) -> RawFlight:
     att_v[:, :2] = deg_to_rad(att_v[:, :2])
     att_v[:, 2] = wrap_pi(deg_to_rad(att_v[:, 2]))
     rate_s = stream(rates)
-    rate_v = rate_s.values if not rows["rate"] else deg_to_rad(rate_s.values)
+    rate_v = rate_s.values
+    if rows["rate"]:
+        per_unit, unit = rate_unit(rate_s, stream(rows["imu"], [0, 1, 2]))
+        rate_v = deg_to_rad(rate_s.values) * per_unit
+        if unit != "deg/s":
+            warnings.append(f"RATE logged in {unit} (checked against the IMU gyro): converted")
     alt = stream(rows["alt"])
     if alt is not None:
         alt = Stream(alt.t_us, alt.values - alt.values[0])
@@ -165,6 +171,24 @@ def _cut_off_bytes(data: bytes, lengths: dict[int, int]) -> int:
         if p > c and p + 3 > n:
             return 1  # a header fragment at the very end
     return 0
+
+
+# RATE.R/P/Y are deg/s in current ArduPilot but centi-degrees/s in Copter 3.3
+# (log171: RATE.R / IMU.GyrX ~ 5700 = 100 * 180/pi over the flight), and old
+# logs carry no FMTU unit message. The IMU gyro (rad/s in every version) decides.
+CDEG_THRESHOLD = 10.0 * 180.0 / 3.141592653589793  # between 57.3 (deg/s) and 5730 (cdeg/s)
+
+
+def rate_unit(rate: Stream, gyro: Stream | None) -> tuple[float, str]:
+    """(factor to degrees, unit name) of RATE's R/P/Y, from their ratio to the IMU gyro."""
+    if gyro is None or len(gyro) < 10 or len(rate) < 10:
+        return 1.0, "deg/s"
+    g = np.column_stack([np.interp(rate.t_us, gyro.t_us, gyro.values[:, k]) for k in range(3)])
+    moving = np.abs(g) > 0.2  # rad/s: well above gyro noise
+    if moving.sum() < 10:
+        return 1.0, "deg/s"
+    ratio = float(np.median(np.abs(rate.values[moving]) / np.abs(g[moving])))
+    return (0.01, "centi-degrees/s") if ratio > CDEG_THRESHOLD else (1.0, "deg/s")
 
 
 def _events(s: Stream | None) -> Stream | None:
