@@ -44,6 +44,7 @@ SG_POLYORDER = 2
 SG_WINDOW_TRANSLATION = 21
 EDGE_TRIM_S = 1.0
 MIN_SEGMENT_S = 3.0
+MAX_TILT_DEG = 60.0
 FINE = 10  # prediction grid: 10 x the log rate (5 ms at 20 Hz)
 
 
@@ -173,7 +174,7 @@ def prepare(tables: list[FlightTable], vehicle: VehicleConfig) -> list[Segment]:
     for k, tab in enumerate(tables):
         dt = 1.0 / tab.rate_hz
         trim = int(round(EDGE_TRIM_S * tab.rate_hz))
-        for a, b in tab.airborne_segments():
+        for a, b in _flying_segments(tab):
             a, b = a + trim, b - trim
             if b - a < MIN_SEGMENT_S * tab.rate_hz:
                 continue
@@ -185,6 +186,15 @@ def prepare(tables: list[FlightTable], vehicle: VehicleConfig) -> list[Segment]:
         raise LogFormatError(f"{names}: no airborne stretch of at least {MIN_SEGMENT_S + 2 * EDGE_TRIM_S:.0f} s "
                              "with motor commands, attitude and rates; nothing to calibrate against")
     return segs
+
+
+def _flying_segments(tab: FlightTable) -> list[tuple[int, int]]:
+    """Airborne stretches inside the flight model's envelope: a flip or crash (tilt above
+    MAX_TILT_DEG, often with ground contact) is no evidence about the vehicle's parameters."""
+    tilt = np.degrees(np.arccos(np.clip(np.cos(tab.roll_rad) * np.cos(tab.pitch_rad), -1.0, 1.0)))
+    ok = tab.airborne.astype(bool) & (np.nan_to_num(tilt, nan=180.0) < MAX_TILT_DEG)
+    d = np.diff(np.concatenate([[0], ok.astype(np.int8), [0]]))
+    return list(zip(np.flatnonzero(d == 1).tolist(), np.flatnonzero(d == -1).tolist()))
 
 
 def _segment(tab: FlightTable, k: int, a: int, b: int, dt: float, vehicle: VehicleConfig) -> Segment | None:
