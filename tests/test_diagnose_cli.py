@@ -93,10 +93,11 @@ def test_outside_envelope_is_refused_not_classified(capsys, logs, tmp_path):
     assert code == 1 and res["verdict"] is None and res["windows"] == 0
     assert "outside the model's envelope" in res["reason"]
     assert res["envelope"]["trained_mean_rpm"] == 2000.0 and res["envelope"]["rpm_ratio"] > 3
-    # Moderately off (x1.3): classified, with a warning.
-    near = build_model(tmp_path / "near.onnx", trained_rpm=float(PAPER_ESC.cmd_to_rpm(HOVER_PWM_US)) / 1.3)
-    code, res = run(capsys, logs[1], "--model", near, "--json")
-    assert code == 0 and res["verdict"]["label"] == 2
+    assert res["envelope"]["rpm_z"] > 4
+    # Moderately off (x1.2, about 1.2 training std): classified, with a warning.
+    near = build_model(tmp_path / "near.onnx", trained_rpm=float(PAPER_ESC.cmd_to_rpm(HOVER_PWM_US)) / 1.2)
+    code, res = run(capsys, logs[0], "--model", near, "--json")
+    assert code == 0 and res["verdict"]["label"] == 1
     assert any("outside the model's envelope" in w for w in res["warnings"])
 
 

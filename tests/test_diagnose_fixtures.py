@@ -23,6 +23,7 @@ from monitor.labels import LABEL_MASKS, class_names
 GAIN_PER_RPM = 0.01
 BIAS = 2.0
 HOVER_PWM_US = 1500.0
+RPM_STD = 1000.0  # the fixture's "training" spread of each rotor's RPM (the envelope check reads it)
 
 
 def build_model(path: Path, features=PAPER_FEATURES, window: int = 100, rate_hz: float = 20.0,
@@ -59,9 +60,10 @@ def build_model(path: Path, features=PAPER_FEATURES, window: int = 100, rate_hz:
     model.ir_version = 8
     hover_rpm = float(PAPER_ESC.cmd_to_rpm(HOVER_PWM_US)) if trained_rpm is None else trained_rpm
     mean = [hover_rpm if n.startswith("rpm_") else 0.0 for n in features]
+    std = [RPM_STD if n.startswith("rpm_") else 1.0 for n in features]
     meta = {
         "format_version": 1, "features": list(features), "sample_rate_hz": rate_hz, "window": window,
-        "normalization": {"mean": mean, "std": [1.0] * f}, "class_names": class_names(),
+        "normalization": {"mean": mean, "std": std}, "class_names": class_names(),
         "label_table": {str(k): [] for k in range(1, 17)},
         "vehicle": {"name": "fixture", "esc": esc or {
             "a_rpm_per_cmd2": PAPER_ESC.a_rpm_per_cmd2, "b_rpm_per_cmd": PAPER_ESC.b_rpm_per_cmd,

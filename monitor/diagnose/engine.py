@@ -26,8 +26,12 @@ from monitor.labels import LABEL_TABLE
 from monitor.model import Classifier
 from monitor.resample import US_PER_S
 
-# Mean airborne RPM against the mean the model saw in training (its normaliser):
-# beyond WARN the model extrapolates, beyond REFUSE it would be guessing.
+# Airborne RPM against what the model saw in training (its normaliser's mean and
+# std per RPM feature): the typical |z| of each rotor's RPM over the flight. A
+# flight inside the training distribution sits within ~2 std (simulated flights:
+# 0.2-1.2, faulty ones and payload variation included); beyond WARN the model
+# extrapolates, beyond REFUSE it would be guessing. The ratio of means too.
+RPM_Z_WARN, RPM_Z_REFUSE = 2.0, 3.0
 RPM_RATIO_WARN = (0.85, 1.15)
 RPM_RATIO_REFUSE = (0.6, 1.6)
 # The paper's flights are gentle; beyond this attitude the model has not been trained.
@@ -102,19 +106,11 @@ def envelope_checks(table: FlightTable, clf: Classifier, esc: EscCurve | None = 
             what = "motor RPM (commands not logged or in another unit than the model's ESC curve)" \
                 if name == "motor_rpm" else name
             return warnings, f"{what} unknown during flight: the model needs it for feature {f}"
-    norm = clf.info.metadata.get("normalization", {})
-    idx = [i for i, f in enumerate(clf.info.features) if f in RPM_FEATURES]
-    if idx and "mean" in norm:
-        trained = float(np.mean([norm["mean"][i] for i in idx]))
-        flown = float(np.nanmedian(np.nanmean(table.motor_rpm[air], axis=1)))
-        ratio = flown / trained if trained > 0 else np.inf
-        figures.update(airborne_mean_rpm=round(flown, 1), trained_mean_rpm=round(trained, 1), rpm_ratio=round(ratio, 4))
-        msg = (f"vehicle outside the model's envelope: median airborne mean RPM {flown:.0f} vs {trained:.0f} "
-               f"in the model's training data (x{ratio:.2f})")
-        if not RPM_RATIO_REFUSE[0] <= ratio <= RPM_RATIO_REFUSE[1]:
-            return warnings, msg
-        if not RPM_RATIO_WARN[0] <= ratio <= RPM_RATIO_WARN[1]:
-            warnings.append(msg + ": the verdict is an extrapolation")
+    warn, refusal = rpm_envelope(table, clf, figures)
+    if refusal:
+        return warnings, refusal
+    if warn:
+        warnings.append(warn)
     tilt = np.maximum(np.abs(table.roll_rad[air]), np.abs(table.pitch_rad[air]))
     big = float(np.mean(np.nan_to_num(tilt) > LARGE_ATTITUDE_RAD))
     figures["large_attitude_fraction"] = round(big, 4)
@@ -122,6 +118,33 @@ def envelope_checks(table: FlightTable, clf: Classifier, esc: EscCurve | None = 
         warnings.append(f"{100 * big:.1f} % of the airborne time has roll or pitch beyond 45 deg "
                         "(aggressive flight, flip or crash): outside the model's training")
     return warnings, None
+
+
+def rpm_envelope(table: FlightTable, clf: Classifier, figures: dict) -> tuple[str | None, str | None]:
+    """(warning, refusal) from the airborne RPM features against the model's training statistics."""
+    norm = clf.info.metadata.get("normalization", {})
+    idx = [i for i, f in enumerate(clf.info.features) if f in RPM_FEATURES]
+    if not idx or "mean" not in norm or "std" not in norm:
+        return None, None
+    names = [clf.info.features[i] for i in idx]
+    feats = compute_features(table.signals(), names)[table.airborne].astype(np.float64)
+    feats = feats[np.isfinite(feats).all(axis=1)]
+    if len(feats) == 0:
+        return None, None
+    mean = np.array([norm["mean"][i] for i in idx])
+    std = np.array([norm["std"][i] for i in idx])
+    z = float(np.max(np.median(np.abs(feats - mean) / std, axis=0)))
+    flown, trained = float(np.median(feats.mean(axis=1))), float(mean.mean())
+    ratio = flown / trained if trained > 0 else float("inf")
+    figures.update(airborne_mean_rpm=round(flown, 1), trained_mean_rpm=round(trained, 1),
+                   rpm_ratio=round(ratio, 4), rpm_z=round(z, 3))
+    msg = (f"vehicle outside the model's envelope: median airborne RPM {flown:.0f} vs {trained:.0f} in the model's "
+           f"training data (x{ratio:.2f}; a rotor's typical RPM is {z:.1f} training std away)")
+    if z > RPM_Z_REFUSE or not RPM_RATIO_REFUSE[0] <= ratio <= RPM_RATIO_REFUSE[1]:
+        return None, msg
+    if z > RPM_Z_WARN or not RPM_RATIO_WARN[0] <= ratio <= RPM_RATIO_WARN[1]:
+        return msg + ": the verdict is an extrapolation", None
+    return None, None
 
 
 def diagnose_table(table: FlightTable, clf: Classifier, hop: int = 1, batch: int = 4096,
