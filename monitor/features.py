@@ -51,6 +51,27 @@ def _rpm_rel(i: int) -> Callable[[Signals], np.ndarray]:
     return f
 
 
+# Body moments each rotor's speed asks for, PX4 quad-X (1 front-right CCW, 2 rear-left CCW,
+# 3 front-left CW, 4 rear-right CW): thrust ~ rpm^2, roll = -y*T, pitch = x*T, yaw = spin drag.
+# In (kRPM)^2, not normalised: the angular acceleration they produce is what reveals a weak
+# propeller independently of payload (payload changes the mass, not the rotor's leverage).
+_MOMENT_SIGNS = {
+    "roll": (-1.0, 1.0, 1.0, -1.0),
+    "pitch": (1.0, -1.0, 1.0, -1.0),
+    "yaw": (1.0, 1.0, -1.0, -1.0),
+}
+
+
+def _moment(axis: str) -> Callable[[Signals], np.ndarray]:
+    signs = np.array(_MOMENT_SIGNS[axis])
+
+    def f(s: Signals) -> np.ndarray:
+        k = np.asarray(s["motor_rpm"], dtype=np.float64) / 1000.0
+        return (k * k) @ signs
+
+    return f
+
+
 def _plain(name: str) -> Callable[[Signals], np.ndarray]:
     return lambda s: s[name]
 
@@ -62,6 +83,7 @@ FEATURES: dict[str, Callable[[Signals], np.ndarray]] = {
     "rpm_mean": lambda s: np.mean(s["motor_rpm"], axis=-1),
     "yaw_sin": lambda s: np.sin(s["yaw_rad"]),
     "yaw_cos": lambda s: np.cos(s["yaw_rad"]),
+    **{f"{a}_moment_krpm2": _moment(a) for a in _MOMENT_SIGNS},
 }
 
 PAPER_FEATURES: tuple[str, ...] = (
@@ -89,7 +111,7 @@ def compute_features(signals: Signals, names: Sequence[str] = PAPER_FEATURES) ->
 
 def _needs(feature: str, signal: str) -> bool:
     if signal == "motor_rpm":
-        return feature.startswith("rpm")
+        return feature.startswith("rpm") or feature.endswith("_moment_krpm2")
     if signal == "yaw_rad":
         return feature in ("yaw_rad", "yaw_sin", "yaw_cos")
     return feature == signal
