@@ -2,11 +2,12 @@
 
 A tlog is a sequence of [8-byte big-endian receive time µs][MAVLink v1/v2
 frame]. Frames are located here by their headers and only the message ids
-propwatch uses are handed to pymavlink's ``decode`` (which checks the CRC);
-the rest are skipped unparsed, which is what makes a long log fast. Every
-decoded message then goes, in order, through ``monitor.mavlink_decode``'s
-``MavlinkDecoder``, the same decoder the onboard daemon uses, so both see the
-same samples on the same boot clock.
+propwatch uses are unpacked; the rest are skipped unparsed. A clean file is
+CRC-checked and unpacked in bulk (``monitor.logs.mavbulk``, from pymavlink's
+message definitions); a damaged one goes frame by frame through pymavlink's
+``decode``. Either way every message then goes, in file order, through
+``monitor.mavlink_decode``'s ``MavlinkDecoder``, the same decoder the onboard
+daemon uses, so both see the same samples on the same boot clock.
 
 Bytes that are not a valid frame (corruption) are skipped with a warning; a
 frame cut off at the end of the file (truncation) ends the read with a warning.
