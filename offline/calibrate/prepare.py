@@ -161,10 +161,13 @@ def flight_phases(vel_ned_m_s: np.ndarray | None, euler_rad: np.ndarray, rates_r
     v_h = np.linalg.norm(vel_ned_m_s[:, :2], axis=1)
     v_z = np.abs(vel_ned_m_s[:, 2])
     acc = np.linalg.norm(np.nan_to_num(sg_deriv(vel_ned_m_s, 0.05)), axis=1)
+    # Steady = unaccelerated and not rotating: the controller has settled each motor where the
+    # vehicle needs it. Cruise is any steady translation, climbing or not (trim handles both).
     steady = (rate < 0.3) & (acc < 0.5)
-    phase[steady & (v_h < 0.3) & (v_z < 0.2)] = "hover"
-    phase[steady & (v_h >= 1.0) & (v_z < 0.3)] = "cruise"
-    phase[(v_z >= 0.3) & (phase == "manoeuvre")] = "climb"
+    hover = steady & (v_h < 0.3) & (v_z < 0.2)
+    phase[hover] = "hover"
+    phase[steady & ~hover] = "cruise"
+    phase[~steady & (v_z >= 0.3)] = "climb"
     return phase.astype(str)
 
 
