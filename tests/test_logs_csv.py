@@ -35,6 +35,7 @@ def test_crazypad_motors_map_to_px4_order_and_units():
     ok = idx >= 0
     for j, m in enumerate(("motor.m1", "motor.m3", "motor.m4", "motor.m2")):
         np.testing.assert_array_equal(table.motor_cmd[ok, j], cols[m][idx[ok]])
+        np.testing.assert_array_equal(table.extras["motor_cmd_applied"][ok, j], cols[f"pwm.m{m[-1]}_pwm"][idx[ok]])
     np.testing.assert_allclose(table.roll_rad[ok], np.deg2rad(cols["stateEstimate.roll"][idx[ok]]))
     np.testing.assert_allclose(table.yaw_rad[ok], -np.deg2rad(cols["stateEstimate.yaw"][idx[ok]]))  # CCW-up -> CW-down
     assert np.isnan(table.pitch_rad).all() and np.isnan(table.roll_rate_rad_s).all()  # not logged in this config

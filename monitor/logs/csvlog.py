@@ -71,6 +71,9 @@ class CsvFormat:
     pos_n: ColumnSpec = _NONE
     pos_e: ColumnSpec = _NONE
     pos_d: ColumnSpec = _NONE
+    # Optional second set of motor columns (PX4 order), e.g. the PWM applied after battery
+    # compensation: FlightTable.extras["motor_cmd_applied"], same unit as ``motors``.
+    motors_applied: tuple[str, str, str, str] | None = None
     min_height_m: float = DEFAULT_MIN_HEIGHT_M
     delimiter: str = ","
 
@@ -195,6 +198,9 @@ def read_csv(path: str | Path, fmt: str | CsvFormat, formats_path: str | Path = 
         v = np.stack([values(s, s.column or "") for s in specs], axis=1)
         return Stream.build(t_us, v if len(specs) > 1 else v[:, 0])
 
+    extra = {}
+    if spec.motors_applied and all(m in col for m in spec.motors_applied):
+        extra["motor_cmd_applied"] = Stream.build(t_us, np.stack([data[:, col[m]] for m in spec.motors_applied], axis=1))
     height = opt(spec.height)
     if height is not None:
         height = Stream(height.t_us, height.values - height.values[0])
@@ -213,6 +219,7 @@ def read_csv(path: str | Path, fmt: str | CsvFormat, formats_path: str | Path = 
         vel_ned_m_s=opt(spec.vel_n, spec.vel_e, spec.vel_d),
         pos_ned_m=opt(spec.pos_n, spec.pos_e, spec.pos_d),
         motor_names=spec.motor_names,
+        extra_streams=extra,
         min_height_m=spec.min_height_m,
         warnings=warnings,
     )

@@ -93,6 +93,7 @@ class RawFlight:
     vel_ned_m_s: Stream | None = None
     pos_ned_m: Stream | None = None
     motor_names: tuple[str, str, str, str] = ("1", "2", "3", "4")
+    extra_streams: dict[str, Stream] = field(default_factory=dict)  # reader-specific, held into FlightTable.extras
     min_height_m: float = DEFAULT_MIN_HEIGHT_M
     warnings: list[str] = field(default_factory=list)
 
@@ -181,6 +182,8 @@ def to_flight_table(raw: RawFlight, esc: EscCurve | None = None, rate_hz: float 
     if raw.height_m is not None and len(raw.height_m) and not (raw.landed is not None and len(raw.landed)):
         # Height only where the autopilot's own land detector is not logged: it knows better.
         extras["height_m"] = held(raw.height_m, None)
+    for name, stream in raw.extra_streams.items():
+        extras[name] = held(stream, None if stream.values.ndim == 1 else stream.values.shape[1])
     opt = {n: (held(getattr(raw, n), 3) if getattr(raw, n) is not None and len(getattr(raw, n)) else None)
            for n in ("accel_frd_m_s2", "vel_ned_m_s", "pos_ned_m")}
     return FlightTable(
