@@ -29,7 +29,7 @@ from offline.classifier.card import write_card
 from offline.classifier.evaluate import Result, evaluate_dataset, format_table
 from offline.classifier.experiments import EXPERIMENTS, SHIFT_FEATURES, SHIFT_TRAINING, ablation_table
 from offline.classifier.export import export_onnx
-from offline.classifier.onboard import DAEMON_ALERTS, ShiftFlights, detection_times, false_alarms_per_hour, simulate_onset
+from offline.classifier.onboard import DAEMON_ALERTS, RULES, ShiftFlights, rule_sweep, simulate_onset
 from offline.classifier.train import TrainConfig, train
 from offline.dataset.generate import PRESETS, DatasetSpec, generate
 from offline.dataset.records import load_dataset, save_dataset
@@ -130,11 +130,13 @@ def main(argv: list[str] | None = None) -> int:
            "results": [{k: v for k, v in r.to_dict().items() if k != "confusion"} for r in results]}
     (a.ablation / f"{SHIPPED_ROW}.json").write_text(json.dumps(row, indent=2) + "\n", encoding="utf-8")
     onboard_cfg = ShiftFlights(n_flights=a.onboard_flights, propellers=kind)
-    alarms = false_alarms_per_hour(clf.predict, simulate_onset(vehicle, onboard_cfg, healthy=True), cfg.features, cfg.window)
-    detect = detection_times(clf.predict, simulate_onset(vehicle, onboard_cfg, healthy=False), cfg.features, cfg.window)
-    print(json.dumps({"false_alarms": alarms, "detection": detect}, indent=1))
+    sweep = rule_sweep(clf.predict, simulate_onset(vehicle, onboard_cfg, healthy=True),
+                       simulate_onset(vehicle, onboard_cfg, healthy=False), cfg.features, cfg.window, RULES)
+    alarms, detect = sweep["daemon default"]["false_alarms"], sweep["daemon default"]["detection"]
+    print(json.dumps(sweep, indent=1))
     figures = {"results": [{k: v for k, v in r.to_dict().items() if k != "confusion"} for r in results],
                "hop": a.hop, "false_alarms": alarms, "detection": detect, "alert_rule": dataclasses.asdict(DAEMON_ALERTS),
+               "rule_sweep": sweep,
                "onboard_flights": dataclasses.asdict(onboard_cfg)}
     manifest = make_manifest("classifier", {"train": m.training_manifest["train_config"], "propellers": kind,
                                             "data_specs": [to_mapping(s) for s in specs]}, cfg.seed,

@@ -57,6 +57,16 @@ def write_card(path: str | Path, manifest: dict, results: list[Result], ablation
         f"Alerts before onset: {det['alerts_before_onset']}.",
         "",
     ]
+    if fig.get("rule_sweep"):
+        lines += ["Alert rule trade-off (same classifier outputs):", "",
+                  "| rule | false alarms / healthy flight-hour | detected | median / p90 to first correct alert | alerts before onset |",
+                  "|---|---|---|---|---|"]
+        for name, v in fig["rule_sweep"].items():
+            c = v["detection"]["first_correct_alert"]
+            lines.append(f"| {name} (P >= {v['rule']['threshold']}, {v['rule']['consecutive']} windows) | "
+                         f"{v['false_alarms']['alarms_per_hour']:.1f} | {100 * c['detected']:.0f} % | "
+                         f"{_s(c['median_s'])} / {_s(c['p90_s'])} | {v['detection']['alerts_before_onset']} |")
+        lines.append("")
     if ablation:
         lines += ["## Ablation (accuracy %, window hop in the experiments run)", ablation, ""]
     lines += [

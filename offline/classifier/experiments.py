@@ -29,6 +29,11 @@ from offline.dataset.records import FaultDataset, concat, load_dataset
 SHIFT_FEATURES = ("rpm_rel_1", "rpm_rel_2", "rpm_rel_3", "rpm_rel_4", "rpm_mean", "roll_rad", "pitch_rad",
                   "yaw_sin", "yaw_cos", "roll_rate_rad_s", "pitch_rate_rad_s", "yaw_rate_rad_s")
 NO_LOAD_FEATURES = tuple(f for f in SHIFT_FEATURES if f != "rpm_mean")
+# Each moment proxy sits next to the body rate it drives, so the first 3x3 convolutions see both: the
+# rate response per (kRPM)^2 is the rotors' leverage, which payload does not change and a fault does.
+MOMENT_FEATURES = ("rpm_rel_1", "rpm_rel_2", "rpm_rel_3", "rpm_rel_4", "rpm_mean", "roll_rad", "pitch_rad",
+                   "yaw_sin", "yaw_cos", "roll_moment_krpm2", "roll_rate_rad_s", "pitch_moment_krpm2",
+                   "pitch_rate_rad_s", "yaw_moment_krpm2", "yaw_rate_rad_s")
 
 # R has 4x the flights of A: a sparser window stride keeps an epoch the same size; 10 % of flights held out.
 SHIFT_TRAINING = {"train_stride": 32, "test_fraction": 0.1}
@@ -41,6 +46,9 @@ EXPERIMENTS: dict[str, tuple[tuple[str, ...], dict]] = {
     "random+rel": (("R-mixed",), {**SHIFT_TRAINING, "features": SHIFT_FEATURES}),
     "random+rel+multilabel": (("R-mixed",), {**SHIFT_TRAINING, "features": SHIFT_FEATURES, "head": "multilabel4"}),
     "random+rel-load+multilabel": (("R-mixed",), {**SHIFT_TRAINING, "features": NO_LOAD_FEATURES, "head": "multilabel4"}),
+    "random+rel+moments+multilabel": (("R-mixed",), {**SHIFT_TRAINING, "features": MOMENT_FEATURES, "head": "multilabel4"}),
+    "random+rel+moments+multilabel x2": (("R-mixed",), {**SHIFT_TRAINING, "features": MOMENT_FEATURES, "head": "multilabel4",
+                                                         "epochs": 12}),
 }
 EVAL_SETS = ("A-bent", "B-bent", "C-bent", "A-cracked", "B-cracked", "C-cracked")
 

@@ -24,6 +24,12 @@ from offline.dataset.onset import SwitchedPropellers
 from offline.dataset.records import FaultDataset
 
 DAEMON_ALERTS = AlertConfig()  # the daemon's defaults: what the shipped monitor does
+# Stricter rules to show the trade-off: a longer run of hot windows (1 s, 3 s at 20 Hz).
+RULES = {
+    "daemon default": DAEMON_ALERTS,
+    "0.9 for 1 s": AlertConfig(threshold=0.9, consecutive=20),
+    "0.9 for 3 s": AlertConfig(threshold=0.9, consecutive=60),
+}
 
 
 @dataclass(frozen=True)
@@ -99,8 +105,9 @@ def flight_fault_probabilities(predict: Predictor, ds: FaultDataset, features, w
 
 
 def false_alarms_per_hour(predict: Predictor, healthy: FaultDataset, features, window: int,
-                          config: AlertConfig = DAEMON_ALERTS) -> dict:
-    probs = flight_fault_probabilities(predict, healthy, features, window)
+                          config: AlertConfig = DAEMON_ALERTS, probs: list[np.ndarray] | None = None) -> dict:
+    if probs is None:
+        probs = flight_fault_probabilities(predict, healthy, features, window)
     alarms = sum(len(replay_alerts(p, healthy.sample_rate_hz, window, config)) for p in probs)
     classified_s = sum(len(p) for p in probs) / healthy.sample_rate_hz
     hot_windows = float(np.mean(np.concatenate(probs) >= config.threshold))
@@ -109,9 +116,10 @@ def false_alarms_per_hour(predict: Predictor, healthy: FaultDataset, features, w
 
 
 def detection_times(predict: Predictor, onset: FaultDataset, features, window: int,
-                    config: AlertConfig = DAEMON_ALERTS) -> dict:
+                    config: AlertConfig = DAEMON_ALERTS, probs: list[np.ndarray] | None = None) -> dict:
     """Seconds from fault onset to the first alert, and to the first alert naming only truly faulty propellers."""
-    probs = flight_fault_probabilities(predict, onset, features, window)
+    if probs is None:
+        probs = flight_fault_probabilities(predict, onset, features, window)
     rate = onset.sample_rate_hz
     first, correct, early = [], [], 0
     for b, p in enumerate(probs):
@@ -132,3 +140,14 @@ def detection_times(predict: Predictor, onset: FaultDataset, features, window: i
 
     return {"flights": onset.n_flights, "first_alert": summary(first), "first_correct_alert": summary(correct),
             "alerts_before_onset": early}
+
+
+def rule_sweep(predict: Predictor, healthy: FaultDataset, onset: FaultDataset, features, window: int,
+               rules: dict[str, AlertConfig]) -> dict[str, dict]:
+    """False alarms and detection for several alert rules on the same classifier outputs (classified once)."""
+    ph = flight_fault_probabilities(predict, healthy, features, window)
+    po = flight_fault_probabilities(predict, onset, features, window)
+    return {name: {"rule": {"threshold": r.threshold, "consecutive": r.consecutive, "refractory_s": r.refractory_s},
+                   "false_alarms": false_alarms_per_hour(predict, healthy, features, window, r, ph),
+                   "detection": detection_times(predict, onset, features, window, r, po)}
+            for name, r in rules.items()}
