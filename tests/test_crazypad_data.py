@@ -85,3 +85,18 @@ def test_calibration_names_a_cause_and_helps_held_out_flights(flights, vehicle):
         assert cal.calibrated_holdout_rms_cmd < 0.5 * cal.nominal_holdout_rms_cmd
         ranks = [r.name for r in cal.ranking]
         assert ranks.index("motor_efficiency") < ranks.index("cg_offset")
+
+
+def test_calibrated_vehicle_file_round_trips(flights, vehicle, tmp_path):
+    from monitor.vehicle import load_vehicle_with_sources
+    from offline.crazypad.calibration import calibrate_steady
+    from offline.crazypad.experiment import write_vehicle
+    from offline.crazypad.real import summarise
+
+    fit = np.array([summarise(f, vehicle).motor_cmd_mean for f in select(flights, role="calibration", airframe="E9")])
+    cal = calibrate_steady("E9", vehicle, fit, fit, [], [])
+    nominal = load_vehicle_with_sources(REPO_ROOT / "models" / "crazyflie.yaml")
+    back = load_vehicle_with_sources(write_vehicle(cal, nominal.sources, tmp_path / "e9.yaml"))
+    assert back.config == cal.calibrated
+    assert "steady-state calibration" in back.sources["motor_efficiency"]
+    assert back.provenance["config"]["cause"] == "motor_efficiency"

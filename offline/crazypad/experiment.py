@@ -129,10 +129,13 @@ def write_vehicle(cal: SteadyCalibration, sources: dict[str, str], path: Path) -
     why = f"steady-state calibration on CrazyPAD {cal.airframe} healthy flights {', '.join(Path(f).name for f in cal.fit_files)}"
     for name in ("motor_efficiency", "cg_offset_frd_m", "mass_kg"):
         src[name] = why
+    for f in dataclasses.fields(cal.calibrated):
+        src.setdefault(f.name, "neutral default of monitor.vehicle.VehicleConfig (not calibrated)")
     data = to_mapping(cal.calibrated, src)
     data["provenance"] = make_manifest("crazypad-calibrated-vehicle", cal.to_dict(), None)
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(yaml.safe_dump(data, sort_keys=False), encoding="utf-8")
+    load_vehicle_with_sources(path)  # the project's loader must read back what was written
     return path
 
 
