@@ -88,3 +88,17 @@ def test_two_airframe_training_set_keeps_the_esc_curve_for_the_model(vehicle):
     assert ds.n_flights == 2
     info = vehicle_info(ds)
     assert info["esc"]["cmd_unit"] == "cf16" and info["esc"]["b_rpm_per_cmd"] == vehicle.esc.b_rpm_per_cmd
+
+
+def test_equivalent_speed_ratio_recovers_a_weak_rotor(vehicle):
+    from dataclasses import replace
+
+    from offline.crazypad.calibration import equivalent_speed_ratios, predicted_commands
+
+    base = replace(vehicle, motor_efficiency=(0.95, 0.92, 1.05, 1.08))
+    np.testing.assert_allclose(equivalent_speed_ratios(base, predicted_commands(base)[None]), 1.0, atol=1e-4)
+    m3 = PROJECT_INDEX_OF_BITCRAZE["M3"]
+    eff = np.array(base.motor_efficiency)
+    eff[m3] *= 0.9
+    r = equivalent_speed_ratios(base, predicted_commands(replace(base, motor_efficiency=tuple(eff)))[None])
+    assert r[m3] / np.delete(r, m3).mean() == pytest.approx(0.9, rel=2e-3)

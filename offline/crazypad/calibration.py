@@ -136,3 +136,15 @@ def calibrate_steady(airframe: str, nominal: VehicleConfig, fit_cmd: np.ndarray,
             best_bic, calibrated = b, v
     return SteadyCalibration(airframe, nominal, calibrated, chosen[0] if chosen else None, ranking, base_rms,
                              _rms(nominal, holdout_cmd), _rms(calibrated, holdout_cmd), fit_files, holdout_files)
+
+
+def equivalent_speed_ratios(calibrated: VehicleConfig, fault_cmd: np.ndarray) -> np.ndarray:
+    """(4,) per-rotor speed scale, relative to the calibrated airframe, that reproduces ``fault_cmd``.
+
+    ``fault_cmd`` (F, 4) are the mean commands of flights of one condition; the
+    common part (extra mass, battery) is divided out (geometric mean 1), so a
+    value below 1 is a rotor that lost thrust: thrust factor = ratio**2.
+    """
+    v = fit_terms(calibrated, [TERMS["motor_efficiency"]], fault_cmd)
+    r = np.asarray(v.motor_efficiency) / np.asarray(calibrated.motor_efficiency)
+    return r / np.exp(np.mean(np.log(r)))

@@ -56,18 +56,29 @@ def _root(args) -> Path:
 
 
 def analyse(root: Path, vehicle_path: str) -> dict:
+    from offline.crazypad.calibration import calibrate_steady, equivalent_speed_ratios
     from offline.crazypad.real import summarise
+    from offline.crazypad.vehicle import bitcraze_order
 
     v = load_vehicle(vehicle_path)
     groups: dict[tuple[str, str], list] = defaultdict(list)
     for f in select(load_manifest(root)):
         groups[(f.group, f.airframe)].append(summarise(f, v, root))
+    # Each airframe's own calibration (healthy calibration flights only), to express every
+    # condition as the rotor speed scale it would take in the model.
+    cal = {}
+    for af in {a for _, a in groups}:
+        fit = np.array([r.motor_cmd_mean for r in groups.get(("healthy", af), []) if r.flight.role == "calibration"])
+        cal[af] = calibrate_steady(af, v, fit, fit, [], []).calibrated if len(fit) else None
     out = {}
     for (group, af), rows in sorted(groups.items()):
         sh = np.array([r.shares_bitcraze for r in rows])
         out[f"{group} / {af}"] = {"flights": len(rows), "shares_M1_M4_mean": sh.mean(axis=0).round(4).tolist(),
                                   "shares_M1_M4_std": sh.std(axis=0).round(4).tolist(),
                                   "mean_cmd": round(float(np.mean([r.mean_cmd for r in rows])), 1)}
+        if cal[af] is not None:
+            ratio = equivalent_speed_ratios(cal[af], np.array([r.motor_cmd_mean for r in rows]))
+            out[f"{group} / {af}"]["thrust_factor_M1_M4"] = [round(float(x) ** 2, 3) for x in bitcraze_order(ratio)]
     return out
 
 
@@ -80,9 +91,11 @@ def main(argv: list[str] | None = None) -> int:
             json.dump(res, sys.stdout, indent=2)
             print()
         else:
-            print(f"{'condition / airframe':34s} flights  M1     M2     M3     M4    (mean command share, core phases)")
+            print(f"{'condition / airframe':30s} flights  command share M1..M4 (core phases)"
+                  "   thrust factor M1..M4 vs own calibrated airframe")
             for k, r in res.items():
-                print(f"{k:34s} {r['flights']:5d}  " + "  ".join(f"{x:.3f}" for x in r["shares_M1_M4_mean"]))
+                tf = "  ".join(f"{x:.2f}" for x in r.get("thrust_factor_M1_M4", []))
+                print(f"{k:30s} {r['flights']:5d}  " + "  ".join(f"{x:.3f}" for x in r["shares_M1_M4_mean"]) + f"    {tf}")
         return 0
     if args.cmd == "calibrate":
         from offline.crazypad.experiment import calibrate_airframes, load_real, write_vehicle
