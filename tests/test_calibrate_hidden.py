@@ -96,11 +96,13 @@ def test_hidden_term_is_named_fitted_and_gains(seed):
     assert r.gain["heldout_residual_reduction_pct"] > 0
     # the calibrated vehicle carries the fitted term
     assert r.calibrated != NOM
-    # The paper's unbalance ratio (eqs. 14-17) helps when a motor is weak, and is beaten by the
-    # fitted CG when the per-motor spread comes from the CG instead.
+    # The paper's unbalance ratio (eqs. 14-17) is a special case of motor_efficiency: the fitted
+    # term is never worse; and when the per-motor spread comes from the CG, the fitted CG beats it.
+    # (With motor 1 weak, seed 4, the ratio is twice worse than nominal: eq. 14 takes motor 1 as
+    # the healthy baseline and "corrects" the three healthy motors instead.)
     u = r.unbalance
     if kind == "motor_efficiency":
-        assert u["residual_rms_unbalance_ratio"] < u["residual_rms_nominal"]
+        assert u["residual_rms_fitted_motor_efficiency"] <= u["residual_rms_unbalance_ratio"]
     if kind == "cg_offset":
         assert r.findings[0]["residual_rms_after"] < u["residual_rms_unbalance_ratio"]
 

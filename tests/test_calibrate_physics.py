@@ -8,7 +8,7 @@ import pytest
 
 from monitor.vehicle import DEFAULT_VEHICLE, load_vehicle
 from offline.calibrate.physics import G_M_S2, first_order_lag, trim_commands, trim_thrusts
-from offline.calibrate.prepare import euler_rates, rotation_world_body, sg_deriv, upsample
+from offline.calibrate.prepare import FINE, euler_rates, rotation_world_body, sg_deriv, upsample
 from offline.calibrate.terms import TERMS, apply_terms
 from offline.calibrate.unbalance import UnbalanceRatio
 
@@ -70,7 +70,7 @@ def test_euler_kinematics_inverts_a_known_rotation_and_cubic_upsampling_keeps_sa
     R = rotation_world_body(euler)
     np.testing.assert_allclose(np.einsum("tij,tkj->tik", R, R), np.broadcast_to(np.eye(3), R.shape), atol=1e-12)
     up = upsample(euler)
-    np.testing.assert_allclose(up[::10], euler, atol=1e-12)
+    np.testing.assert_allclose(up[::FINE], euler, atol=1e-12)
     d = sg_deriv(euler, 0.05)
     np.testing.assert_allclose(d[10:-10], deriv[10:-10], atol=2e-3)
 

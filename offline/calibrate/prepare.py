@@ -45,7 +45,7 @@ SG_WINDOW_TRANSLATION = 21
 EDGE_TRIM_S = 1.0
 MIN_SEGMENT_S = 3.0
 MAX_TILT_DEG = 60.0
-FINE = 10  # prediction grid: 10 x the log rate (5 ms at 20 Hz)
+FINE = 5  # prediction grid: 5 x the log rate (10 ms at 20 Hz)
 
 
 @dataclass(frozen=True)

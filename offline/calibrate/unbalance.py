@@ -10,9 +10,11 @@ Eqs. 16-17: ``F_i = kf * w_i**2 / U_r**2`` and the same for the torque, which
 is a rotor *speed* scale ``1 / U_r(w_i)``: ``motor_efficiency`` with a value
 computed from the mean speeds instead of fitted, and drifting with speed.
 
-It attributes every per-motor speed difference to the motors; the comparison
-in ``calibrate`` shows what that costs when the cause is elsewhere (a CG
-offset also spreads the mean speeds).
+It attributes every per-motor speed difference to the motors, and takes
+motor 1 as the healthy baseline; the comparison in ``calibrate`` shows what
+that costs when the cause is elsewhere (a CG offset also spreads the mean
+speeds) or when motor 1 is the weak one (the ratio then "corrects" the three
+healthy motors and doubles the residual, in the tests).
 """
 
 from __future__ import annotations
