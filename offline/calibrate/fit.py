@@ -42,6 +42,11 @@ MIN_DELTA_BIC = 10.0
 # pooled held-out RMS by MIN_RMS_REDUCTION (real effects of the sizes a vehicle
 # has, e.g. a 30 ms motor lag, cut it by 3 % or more; fitted noise by < 1 %).
 MIN_RMS_REDUCTION = 0.02
+# Consistency: a real vehicle effect improves the equations it enters and leaves the others
+# alone. A term that buys a better fit of one channel with a worse fit of another is fitting an
+# artefact of the log (e.g. the translation channel's streams resampled 0-10 ms stale in a
+# .tlog made a motor lag "improve" velocity while worsening every moment equation).
+MAX_SIGNAL_WORSENING = 1.03
 INERTIA_MAX_BIAS = 0.05  # relative bias above which an inertia fit is not reported
 
 
@@ -130,6 +135,12 @@ def relative_rms(rms: dict[str, float], base: dict[str, float]) -> float:
     """Held-out RMS of a model relative to a base model, pooled over signals (each floored at its noise level)."""
     ratios = [(rms[s] ** 2 + noise_floor(s) ** 2) / (base[s] ** 2 + noise_floor(s) ** 2) for s in base if s in rms]
     return float(np.sqrt(np.mean(ratios)))
+
+
+def worst_signal(rms: dict[str, float], base: dict[str, float]) -> float:
+    """Largest held-out RMS ratio over signals (each floored at its noise level)."""
+    return float(max(np.sqrt((rms[s] ** 2 + noise_floor(s) ** 2) / (base[s] ** 2 + noise_floor(s) ** 2))
+                     for s in base if s in rms))
 
 
 def combined_rms(rms: dict[str, float], sigma: dict[str, float]) -> float:
@@ -288,7 +299,8 @@ def select_terms(data: Data, nominal: VehicleConfig, candidates: list[Term]) -> 
         ok = {n: f for n, f in trials.items() if all(f.identifiable.values())}
         best = min(ok, key=lambda n: ok[n].bic) if ok else None
         worth = (best is not None and base_bic - ok[best].bic > MIN_DELTA_BIC
-                 and relative_rms(ok[best].held_rms, base_rms) < 1.0 - MIN_RMS_REDUCTION)
+                 and relative_rms(ok[best].held_rms, base_rms) < 1.0 - MIN_RMS_REDUCTION
+                 and worst_signal(ok[best].held_rms, base_rms) <= MAX_SIGNAL_WORSENING)
         conf = 0.0
         if worth:
             scores = np.array([base_bic] + [f.bic for f in ok.values()])
