@@ -5,10 +5,10 @@ daemon running the shipped classifier (``models/classifier.onnx``).
 - a full (80 s) healthy flight: no alert.
 
 Skipped until the shipped classifier exists (issue 4, ``make classifier``). The
-flights are simulated here (tmp dir), never committed. They fly the paper's
-route A, the shipped model's training route, with sensor-noise seeds of their
-own: this tests the daemon end to end, not how the model generalises to new
-routes and payloads (that is issue 4's evaluation, ``models/classifier.card.md``).
+flights are simulated here (tmp dir), never committed, each on a random route
+of its own (seeded). Replayed at 4x: faster overruns the daemon on 2 shared
+cores and UDP drops packets, which shows as gaps (the daemon then, rightly,
+classifies less).
 """
 
 from __future__ import annotations
@@ -40,7 +40,7 @@ def flights(tmp_path_factory):
     for name, (label, fault, duration, seed) in FLIGHTS.items():
         d = tmp_path_factory.mktemp(name)
         cmd = [PY, "-m", "monitor.cli", "simulate", "--out", str(d), "--flights", "1", "--label", str(label),
-               "--format", "tlog", "--duration-s", str(duration), "--seed", str(seed), "--waypoint-set", "A"]
+               "--format", "tlog", "--duration-s", str(duration), "--seed", str(seed)]
         if fault:
             cmd += ["--fault", fault]
         p = subprocess.run(cmd, cwd=REPO, capture_output=True, text=True, timeout=300)
@@ -65,7 +65,7 @@ def test_single_faulty_propeller_named_within_10_s(tmp_path, flights, name):
     tlog, faulty = flights[name]
     assert len(faulty) == 1
     raw, frames = frames_of(tlog)
-    d, _, events, _, received, report = fly_over_udp(tmp_path, CLASSIFIER, raw, speed=10)
+    d, _, events, _, received, report = fly_over_udp(tmp_path, CLASSIFIER, raw, speed=4)
     assert events, f"no alert for {name}:\n{d.text[-2000:]}"
     first = events[0]
     assert first["faulty_propellers"] == list(faulty), first
@@ -78,7 +78,7 @@ def test_full_healthy_flight_raises_no_alert(tmp_path, flights):
     tlog, faulty = flights["healthy"]
     assert faulty == ()
     raw, _ = frames_of(tlog)
-    d, _, events, _, received, report = fly_over_udp(tmp_path, CLASSIFIER, raw, speed=20)
+    d, _, events, _, received, report = fly_over_udp(tmp_path, CLASSIFIER, raw, speed=4)
     assert report["pipeline"]["classified"] > 1000, d.text[-2000:]  # it did watch the flight
     assert events == [], events
     assert not [m for m in received if m["mavpackettype"] == "STATUSTEXT"]

@@ -288,7 +288,7 @@ def test_alert_rule_consecutive_refractory_and_text():
     assert c.faulty_propellers == (1,) and not c.critical and c.statustext() == "PROP 1 FAULT p=0.90"
     worst = AlertRule(AlertConfig(consecutive=1), clock).update(1, np.array([0.999] * 4), np.eye(16)[15])
     assert len(worst.statustext()) <= 50 and worst.faulty_propellers == (1, 2, 3, 4)
-    assert not AlertRule(AlertConfig(consecutive=1), clock).update(1, np.array([0.85, 0, 0, 0]), lp).critical
+    assert not AlertRule(AlertConfig(threshold=0.8, consecutive=1), clock).update(1, np.array([0.85, 0, 0, 0]), lp).critical
 
 
 def test_rate_limiter_and_nan_probabilities():
@@ -377,7 +377,7 @@ def test_statustext_rate_limit_merges_and_never_drops_an_alert():
     from monitor.daemon.alerts import StatusTextQueue
 
     clock = FakeClock()
-    rule = AlertRule(AlertConfig(consecutive=1, critical_threshold=0.95), clock)
+    rule = AlertRule(AlertConfig(threshold=0.8, consecutive=1, critical_threshold=0.95), clock)
     q = StatusTextQueue(5.0, 0.95, clock)
     lp = np.eye(16)[1]
     q.add(rule.update(1, np.array([0.9, 0.0, 0.0, 0.0]), lp))
