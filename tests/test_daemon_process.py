@@ -359,3 +359,13 @@ def test_udpout_daemon_announces_itself_to_a_listening_autopilot(tmp_path, model
     assert any(m["mavpackettype"] == "HEARTBEAT" and m["_from"] == [1, 191] for m in got)
     ev = [json.loads(x) for x in events.read_text().splitlines()]
     assert ev and ev[0]["faulty_propellers"] == [4]
+
+
+def test_slow_stream_is_reported_and_requested_again(tmp_path, model):
+    """PX4's onboard default SERVO_OUTPUT_RAW rate (10 Hz) is below the grid: warn, and ask again."""
+    cfg = "link:\n  rate_check_period_s: 1.0\n  request_retry_s: 1.0\n"
+    d, _, _, requests, _, _ = fly_over_udp(tmp_path, model, synth_flight(6.0, servo_hz=10.0), speed=1, config_text=cfg)
+    assert "stream SERVO_OUTPUT_RAW at" in d.text and "need >= 16 Hz" in d.text, d.text
+    servo = [r for r in requests if r["message_id"] == 36]
+    assert len(servo) >= 2 and all(r["interval_us"] <= 50_000 for r in servo)
+    assert "stream ATTITUDE at" not in d.text  # 50 Hz is fine (it goes "missing" only once the replay ends)
