@@ -139,3 +139,20 @@ def test_too_short_a_log_is_refused_by_name():
     tables = measured((), 3, n_flights=1, duration_s=4.0)
     with pytest.raises(LogFormatError, match="hidden-3-0"):
         calibrate(tables, NOM)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("kind, changes, check", [
+    ("mass", {"mass_kg": 1.7}, lambda p: abs(p["mass_kg"] - 1.7) <= 0.25 * 0.2),
+    ("gyro_bias", {"gyro_bias_frd_rad_s": (0.02, -0.01, 0.01)},
+     lambda p: np.linalg.norm(np.array([p["bias_x_rad_s"], p["bias_y_rad_s"], p["bias_z_rad_s"]]) - (0.02, -0.01, 0.01))
+     <= 0.25 * np.linalg.norm((0.02, -0.01, 0.01))),
+    ("drag", {"linear_drag_n_per_m_s": (0.3, 0.3, 0.5)},
+     lambda p: np.allclose([p["drag_x_n_per_m_s"], p["drag_y_n_per_m_s"], p["drag_z_n_per_m_s"]], (0.3, 0.3, 0.5), rtol=0.25)),
+])
+def test_other_library_terms_are_found_too(kind, changes, check):
+    # One flight is enough for these: each acts on a channel the others leave alone.
+    r = calibrate(measured(_key(changes), 9, n_flights=1), NOM)
+    assert r.cause == kind, (r.cause, [f["effect"] for f in r.findings])
+    assert check(r.findings[0]["params"]), r.findings[0]["params"]
+    assert r.gain["heldout_residual_rms_after"] < r.gain["heldout_residual_rms_before"]

@@ -142,7 +142,9 @@ def calibrate(tables: list[FlightTable], nominal: VehicleConfig, candidates: lis
         "heldout_residual_rms_by_signal_after": _round(after_held),
         "steady_state_cmd_error_rms_before": {p: round(v["error_rms"], 4) for p, v in steady_nom.items()},
         "steady_state_cmd_error_rms_after": {p: round(v["error_rms"], 4) for p, v in steady_cal.items()},
-        "classifier": {"done": False, "reason": "the measured flights carry no fault labels"},
+        "classifier": {"done": False, "reason": "the measured logs carry no fault labels; with labelled flights, "
+                       "offline.calibrate.gain.classifier_gain compares nominal- and calibrated-sim classifiers "
+                       "(python -m offline.calibrate.gain runs it on a vehicle with hidden terms)"},
     }
     gain["heldout_residual_reduction_pct"] = round(
         100.0 * (1.0 - gain["heldout_residual_rms_after"] / gain["heldout_residual_rms_before"]), 3)
