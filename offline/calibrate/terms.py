@@ -86,7 +86,7 @@ TERMS: dict[str, Term] = {
         Term("esc_curve", ("rpm_gain", "rpm_offset"),
              lambda v: np.array([1.0, 0.0]), _set_esc,
              _const(0.02, 200.0), _const(0.5, -3000.0), _const(1.5, 3000.0),
-             ("esc",), "the ESC command-to-speed map differs from the load-cell fit"),
+             ("esc", "omega_max_rad_s"), "the ESC command-to-speed map differs from the load-cell fit"),
         Term("gyro_bias", ("bias_x_rad_s", "bias_y_rad_s", "bias_z_rad_s"),
              lambda v: np.array(v.gyro_bias_frd_rad_s),
              lambda v, x: dataclasses.replace(v, gyro_bias_frd_rad_s=tuple(float(b) for b in x)),
