@@ -28,8 +28,8 @@ pytestmark = [
     pytest.mark.skipif(not CLASSIFIER.is_file(), reason="models/classifier.onnx not built yet (issue 4: make classifier)"),
 ]
 FLIGHTS = {  # name: (label, fault, duration_s, seed); label 4 = propeller 3 alone, 3 = propeller 2 alone
-    "bent_3": (4, "bent", 30.0, 11),
-    "cracked_2": (3, "cracked", 30.0, 12),
+    "bent_3": (4, "bent", 20.0, 11),
+    "cracked_2": (3, "cracked", 20.0, 12),
     "healthy": (1, None, 80.0, 13),
 }
 
