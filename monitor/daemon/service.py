@@ -128,6 +128,7 @@ class Daemon:
                 if not self._link_up:
                     self._link_up = True
                     log.info("link up: autopilot heartbeat received")
+                    self.notifier.status(f"link up: autopilot {self._system_id}")
             elif kind == "COMMAND_ACK" and msg.command == MAV_CMD_SET_MESSAGE_INTERVAL:
                 self.counters.acks[int(msg.result)] += 1
                 if msg.result != 0:
@@ -140,8 +141,10 @@ class Daemon:
             self._classifying_state = step.valid
             if step.valid:
                 log.info("t=%d ms: buffering (classification after %d valid steps)", step.time_boot_ms, self.pipeline.window)
+                self.notifier.status("airborne: classifying")
             elif self._state_log_limit.allow():  # NaN flapping must not flood the journal
                 log.info("t=%d ms: not classifying: %s", step.time_boot_ms, step.reason)
+                self.notifier.status(f"not classifying: {step.reason}")
         if not step.valid:
             self.rule.reset()
             return
@@ -160,6 +163,7 @@ class Daemon:
         text = alert.statustext()
         log.warning("ALERT t=%d ms: %s (label %d, p=%s)", alert.time_boot_ms, text, alert.label,
                     np.array2string(np.asarray(alert.fault_probability), precision=3))
+        self.notifier.status(f"last alert: {text} at t={alert.time_boot_ms} ms")
         self.events.write(alert)
         self.statustexts.add(alert)
         self._send_statustext()
@@ -186,6 +190,7 @@ class Daemon:
         if self._link_up and self._last_autopilot_hb is not None and now - self._last_autopilot_hb > link.link_timeout_s:
             self._link_up = False
             log.warning("link lost: no autopilot heartbeat for %.1f s", now - self._last_autopilot_hb)
+            self.notifier.status("link lost")
         if now - self._rate_window_start >= link.rate_check_period_s:
             self._check_rates(now)
         if self.notifier.watchdog_s and now >= self._next_watchdog:
