@@ -31,11 +31,15 @@ def test_shipped_model_meets_the_contract():
 def test_diagnose_names_the_cut_propeller_with_bitcraze_numbers(capsys):
     from monitor.diagnose.cli import main
 
-    code = main([str(SEVERE_CUT), "--format", "crazypad", "--vehicle", str(VEHICLE), "--model", str(MODEL), "--json"])
+    # The exact command: the Crazyflie's own model is chosen from --vehicle.
+    code = main([str(SEVERE_CUT), "--format", "crazypad", "--vehicle", str(VEHICLE), "--json"])
     out = json.loads(capsys.readouterr().out)
     assert code == 0
     names = [p["name"] for p in out["propellers"]]
-    assert names == ["M1", "M3", "M4", "M2"]
+    assert names == ["M1", "M2", "M3", "M4"]  # CrazyPAD's numbering, in its order
+    assert [p["px4_rotor"] for p in out["propellers"]] == [1, 4, 2, 3]
+    assert out["verdict"]["faulty_propellers"] == [3]
+    assert out["verdict"]["label"] == 4  # label of "propeller 3 alone", in M numbering
     faulty = [p["name"] for p in out["propellers"] if p["faulty"]]
     assert faulty == ["M3"]
     assert out["verdict"]["fault_probability"][names.index("M3")] > 0.9

@@ -40,13 +40,29 @@ from monitor.vehicle import REPO_ROOT
 DEFAULT_MODEL = REPO_ROOT / "models" / "classifier.onnx"
 
 
+def default_model(vehicle_yaml: str | None) -> Path:
+    """The classifier shipped for a vehicle: ``models/NAME-classifier.onnx`` beside ``NAME.yaml``.
+
+    A vehicle with its own shipped model (the Crazyflie) gets it without
+    ``--model``; any other vehicle gets the paper quad's classifier, whose
+    envelope checks then say whether the log fits it.
+    """
+    if vehicle_yaml:
+        own = REPO_ROOT / "models" / f"{Path(vehicle_yaml).stem}-classifier.onnx"
+        if own.is_file():
+            return own
+    return DEFAULT_MODEL
+
+
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p = argparse.ArgumentParser(prog="propwatch diagnose", description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("logs", nargs="+", metavar="LOG", help=".tlog, .ulg, DataFlash .bin, or CSV (with --format)")
     p.add_argument("--format", dest="fmt", default=None,
                    help="log format: tlog, ulog, dataflash, or a CSV mapping name from monitor/formats.yaml (e.g. crazypad)")
-    p.add_argument("--model", default=str(DEFAULT_MODEL), help="classifier ONNX file (default: models/classifier.onnx)")
+    p.add_argument("--model", default=None,
+                   help="classifier ONNX file (default: models/NAME-classifier.onnx for --vehicle .../NAME.yaml when "
+                        "that file exists, else models/classifier.onnx)")
     p.add_argument("--vehicle", default=None,
                    help="vehicle YAML whose ESC curve converts motor commands to RPM "
                         "(default: the model's metadata vehicle.esc, else the paper's fit = models/vehicle.yaml)")
@@ -86,7 +102,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.hop < 1:
         print("propwatch diagnose: --hop must be >= 1", file=sys.stderr)
         return 2
-    clf = Classifier(args.model)
+    clf = Classifier(args.model or default_model(args.vehicle))
     # The daemon's rule, so both convert commands identically: --vehicle, else the model's own ESC curve.
     esc = choose_esc(clf, args.vehicle or "")
     results, code = [], 0
