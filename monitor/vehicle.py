@@ -12,6 +12,9 @@ boundary.
 
 The calibration terms (``cg_offset_frd_m`` .. ``gyro_bias_frd_rad_s``) are all
 neutral by default; ``offline.calibrate`` fits them and writes a new YAML.
+``motor_efficiency[i]`` scales the rotor speed motor i reaches for its
+command (a weak motor or sagging ESC), so its thrust scales with the square;
+the paper's unbalance ratio (eqs. 14-17) divides omega by U_r in the same way.
 """
 
 from __future__ import annotations
@@ -55,7 +58,7 @@ class VehicleConfig:
     battery_internal_resistance_ohm: float
     # Calibration terms: neutral by default.
     cg_offset_frd_m: Vec3 = (0.0, 0.0, 0.0)
-    motor_efficiency: Vec4 = (1.0, 1.0, 1.0, 1.0)
+    motor_efficiency: Vec4 = (1.0, 1.0, 1.0, 1.0)  # rotor-speed scale per motor (thrust ~ square)
     linear_drag_n_per_m_s: Vec3 = (0.0, 0.0, 0.0)
     wind_ned_m_s: Vec3 = (0.0, 0.0, 0.0)
     gyro_bias_frd_rad_s: Vec3 = (0.0, 0.0, 0.0)
