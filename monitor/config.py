@@ -17,8 +17,9 @@ from __future__ import annotations
 import dataclasses
 import types
 import typing
+from collections.abc import Mapping
 from pathlib import Path
-from typing import Any, Mapping, TypeVar
+from typing import Any, TypeVar
 
 import yaml
 
@@ -46,7 +47,6 @@ def read_yaml(path: str | Path) -> dict[str, Any]:
 
 
 def _convert(tp: Any, value: Any, where: str, cited: bool, sources: dict[str, str]) -> Any:
-    origin = typing.get_origin(tp)
     if dataclasses.is_dataclass(tp):
         if not isinstance(value, Mapping):
             raise ConfigError(f"{where}: expected a mapping, got {type(value).__name__}")
@@ -63,7 +63,6 @@ def _convert(tp: Any, value: Any, where: str, cited: bool, sources: dict[str, st
 
 
 def _convert_plain(tp: Any, value: Any, where: str) -> Any:
-    origin = typing.get_origin(tp)
     if origin in (typing.Union, types.UnionType):
         args = typing.get_args(tp)
         if value is None and type(None) in args:

@@ -14,8 +14,8 @@ computes exactly those. ``PAPER_FEATURES`` are the paper's ten signals.
 
 from __future__ import annotations
 
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import Callable, Mapping, Sequence
 
 import numpy as np
 
@@ -140,7 +140,7 @@ class Normalizer:
     std: tuple[float, ...]
 
     @classmethod
-    def fit(cls, features: np.ndarray) -> "Normalizer":
+    def fit(cls, features: np.ndarray) -> Normalizer:
         flat = features.reshape(-1, features.shape[-1]).astype(np.float64)
         flat = flat[np.isfinite(flat).all(axis=1)]
         std = flat.std(axis=0)
@@ -154,5 +154,5 @@ class Normalizer:
         return {"mean": list(self.mean), "std": list(self.std)}
 
     @classmethod
-    def from_dict(cls, d: Mapping) -> "Normalizer":
+    def from_dict(cls, d: Mapping) -> Normalizer:
         return cls(tuple(map(float, d["mean"])), tuple(map(float, d["std"])))

@@ -27,7 +27,7 @@ recomputes it the same way.
 from __future__ import annotations
 
 import struct
-from typing import Sequence
+from collections.abc import Sequence
 
 from pymavlink.dialects.v20 import common as _common
 

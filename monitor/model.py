@@ -72,7 +72,10 @@ class Classifier:
         if meta["format_version"] != 1:
             raise ModelError(f"{self.path}: unsupported format_version {meta['format_version']}")
         feats = tuple(meta["features"])
-        check_feature_names(feats)
+        try:
+            check_feature_names(feats)
+        except ModelError as exc:
+            raise ModelError(f"{self.path}: {exc}") from None
         inputs = {i.name: i for i in self.session.get_inputs()}
         outputs = {o.name for o in self.session.get_outputs()}
         if INPUT_NAME not in inputs or not {OUTPUT_LABELS, OUTPUT_FAULTS} <= outputs:

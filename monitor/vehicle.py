@@ -25,7 +25,6 @@ from pathlib import Path
 
 import numpy as np
 
-from monitor.config import load_dataclass
 from monitor.errors import ConfigError
 from monitor.esc import EscCurve
 
@@ -123,7 +122,7 @@ def load_vehicle(path: str | Path) -> VehicleConfig:
 
 
 def load_vehicle_with_sources(path: str | Path) -> LoadedVehicle:
-    from monitor.config import read_yaml, from_mapping
+    from monitor.config import from_mapping, read_yaml
 
     data = read_yaml(path)
     provenance = data.pop("provenance", None)

@@ -1,6 +1,5 @@
 """ESC_STATUS (291): definition-derived CRC, and round trips through pymavlink readers."""
 
-import os
 
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import common
