@@ -63,6 +63,7 @@ def _convert(tp: Any, value: Any, where: str, cited: bool, sources: dict[str, st
 
 
 def _convert_plain(tp: Any, value: Any, where: str) -> Any:
+    origin = typing.get_origin(tp)
     if origin in (typing.Union, types.UnionType):
         args = typing.get_args(tp)
         if value is None and type(None) in args:
