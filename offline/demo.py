@@ -73,6 +73,7 @@ def run(out: Path, data: Path, duration_s: float = 40.0) -> int:
     print("\n== 3. real logs")
     ardu = data / "ardupilot_log171" / "log171.bin"
     if ardu.is_file():
+        print("  (an ArduCopter of unknown build: the paper quad's model, uncalibrated for it; read the warnings)")
         _diagnose(ardu)
     else:
         print(f"  (skipped: {ardu} not found)")
@@ -82,8 +83,8 @@ def run(out: Path, data: Path, duration_s: float = 40.0) -> int:
         for sub in ("normal_flight", "cut_propeller_M3_4mm_3.5mm_39.5mm"):
             files = sorted((cp / sub).glob("*.csv.gz"))
             if files:
-                _diagnose(files[0], "--format", "crazypad", "--vehicle", str(REPO / "models" / "crazyflie.yaml"),
-                          "--model", str(cf_model))
+                # The vehicle YAML selects its own shipped model (models/crazyflie-classifier.onnx).
+                _diagnose(files[0], "--format", "crazypad", "--vehicle", str(REPO / "models" / "crazyflie.yaml"))
     else:
         print("  (CrazyPAD skipped: model or data not found)")
     print(f"\nsimulated logs and sidecars are in {out}")
