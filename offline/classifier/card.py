@@ -37,7 +37,8 @@ def write_card(path: str | Path, manifest: dict, results: list[Result], ablation
         + (" (analytic fault signatures of `offline/propellers/faults.py`: the LSTM weights were not built when this model was trained)."
            if cfg["propellers"] == "quadratic" else " (the paper's stacked LSTMs)."),
         f"- Split: whole flights held out ({train['test_fraction']:.0%} per label); no window shares a sample across the split. "
-        f"Training windows: every {train['train_stride']}th start per epoch, {train['epochs']} epochs.",
+        "(The paper split *windows* 80/20 at random, so its test windows share up to 99 of 100 samples with training ones.) "
+        f"Each epoch uses every {train['train_stride']}-th window start (random offset), {train['epochs']} epochs.",
         "- The paper's routes A and B and its 1.95 kg payload are never in training: A, B and C below are all unseen flights.",
         "",
         f"## Accuracy (window-level, hop {fig['hop']}), beside the paper",
@@ -68,7 +69,9 @@ def write_card(path: str | Path, manifest: dict, results: list[Result], ablation
                          f"{_s(c['median_s'])} / {_s(c['p90_s'])} | {v['detection']['alerts_before_onset']} |")
         lines.append("")
     if ablation:
-        lines += ["## Ablation (accuracy %, window hop in the experiments run)", ablation, ""]
+        lines += ["## Ablation (window accuracy %, hop 10; `python -m offline.classifier.experiments`)",
+                  "Each row adds one change to the row above (paper rows: the paper's recipe on A of one fault type; "
+                  "A of that type is then scored on held-out flights, everything else on all flights).", "", ablation, ""]
     lines += [
         "## Limits",
         "- Simulation only: no real bent or cracked propeller flight exists to test on (see ../shared/data/README.md).",

@@ -24,11 +24,11 @@ from offline.dataset.onset import SwitchedPropellers
 from offline.dataset.records import FaultDataset
 
 DAEMON_ALERTS = AlertConfig()  # the daemon's defaults: what the shipped monitor does
-# Stricter rules to show the trade-off: a longer run of hot windows (1 s, 3 s at 20 Hz).
+# Other rules to show the trade-off: a hair trigger (3 windows) and a longer run of hot windows (3 s at 20 Hz).
 RULES = {
     "daemon default": DAEMON_ALERTS,
-    "0.9 for 1 s": AlertConfig(threshold=0.9, consecutive=20),
-    "0.9 for 3 s": AlertConfig(threshold=0.9, consecutive=60),
+    "hair trigger": AlertConfig(threshold=0.8, consecutive=3, critical_threshold=0.95),
+    "3 s": AlertConfig(threshold=0.9, consecutive=60, critical_threshold=0.95),
 }
 
 
