@@ -77,7 +77,8 @@ def test_detection_time_counts_from_onset_and_checks_the_named_propellers():
     rpm[:, onset:] = faulty.signals["motor_rpm"][:, onset:]
     ds = dataclasses.replace(faulty, signals={**faulty.signals, "motor_rpm": rpm}, onset_step=np.full(16, onset))
     ds = ds.subset(np.arange(1, 15))  # labels 2..15: at least one rotor healthy, so "above the mean" is defined
-    det = detection_times(_rpm_rule, ds, ("rpm_1", "rpm_2", "rpm_3", "rpm_4"), 100)
+    rule = AlertConfig(threshold=0.8, consecutive=3, refractory_s=30.0)  # pinned: the daemon's default may change
+    det = detection_times(_rpm_rule, ds, ("rpm_1", "rpm_2", "rpm_3", "rpm_4"), 100, rule)
     assert det["flights"] == 14 and det["alerts_before_onset"] == 0
     assert det["first_alert"]["detected"] == 1.0 and det["first_correct_alert"]["detected"] == 1.0
     # 5 of 20 faulty samples lift the 1-s mean over 1 %, then 3 consecutive windows: ~0.25-0.5 s after onset
