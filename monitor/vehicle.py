@@ -28,6 +28,8 @@ import numpy as np
 from monitor.errors import ConfigError
 from monitor.esc import EscCurve
 
+GRAVITY_M_S2 = 9.80665  # standard gravity (ISO 80000-3), PX4 CONSTANTS_ONE_G; the one definition
+
 Vec3 = tuple[float, float, float]
 Vec4 = tuple[float, float, float, float]
 
@@ -105,7 +107,7 @@ class VehicleConfig:
 
     @property
     def hover_omega_rad_s(self) -> float:
-        return math.sqrt(self.mass_kg * 9.80665 / (4.0 * self.kf_n_per_rad_s2))
+        return math.sqrt(self.mass_kg * GRAVITY_M_S2 / (4.0 * self.kf_n_per_rad_s2))
 
 
 @dataclass(frozen=True)

@@ -11,12 +11,14 @@ import math
 
 import numpy as np
 
+from monitor.vehicle import GRAVITY_M_S2
+
 RAD_PER_DEG = math.pi / 180.0
 US_PER_MS = 1000
 US_PER_S = 1_000_000
 V_PER_MV = 1e-3
 V_PER_CV = 1e-2  # ArduCopter 3.3's CURR.Volt is an int16 in centivolts
-M_S2_PER_G = 9.80665
+M_S2_PER_G = GRAVITY_M_S2
 
 
 def deg_to_rad(deg):

@@ -31,10 +31,10 @@ import numpy as np
 from scipy.signal import lfilter, lfilter_zi
 
 from monitor.esc import RAD_S_PER_RPM
-from monitor.vehicle import VehicleConfig
+from monitor.vehicle import GRAVITY_M_S2, VehicleConfig
 from offline.calibrate.prepare import FINE, SG_WINDOW, SG_WINDOW_TRANSLATION, Segment, cumtrapz, euler_rates, sg_deriv, sg_smooth
 
-G_M_S2 = 9.80665
+G_M_S2 = GRAVITY_M_S2
 G_NED = np.array([0.0, 0.0, G_M_S2])
 
 ROT_SIGNALS = ("roll_accel_rad_s2", "pitch_accel_rad_s2", "yaw_accel_rad_s2")

@@ -11,9 +11,9 @@ import math
 
 import numpy as np
 
-from monitor.vehicle import VehicleConfig
+from monitor.vehicle import GRAVITY_M_S2, VehicleConfig
 
-G_M_S2 = 9.80665
+G_M_S2 = GRAVITY_M_S2
 
 # BITCRAZE_OF_PROJECT[i] is the Bitcraze motor at project rotor index i.
 BITCRAZE_OF_PROJECT: tuple[str, str, str, str] = ("M1", "M3", "M4", "M2")

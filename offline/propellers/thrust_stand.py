@@ -30,8 +30,8 @@ import numpy as np
 
 from monitor.errors import LogFormatError
 from monitor.esc import RAD_S_PER_RPM, EscCurve
+from monitor.vehicle import GRAVITY_M_S2
 
-GRAVITY_M_S2 = 9.80665
 THRUST_UNITS_TO_N = {"gf": GRAVITY_M_S2 / 1000.0, "kgf": GRAVITY_M_S2, "N": 1.0,
                      "lbf": 4.4482216152605, "ozf": 0.27801385095378}
 TORQUE_UNITS_TO_NM = {"N·m": 1.0, "N.m": 1.0, "Nm": 1.0, "N m": 1.0, "ozf·in": 0.00706155183333,

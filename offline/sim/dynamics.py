@@ -29,10 +29,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from monitor.vehicle import VehicleConfig
+from monitor.vehicle import GRAVITY_M_S2, VehicleConfig
 from offline.sim.quat import rotate_body_to_world, rotate_world_to_body, state_products_map
-
-GRAVITY_M_S2 = 9.80665  # standard gravity (ISO 80000-3), PX4 CONSTANTS_ONE_G
 
 
 @dataclass
