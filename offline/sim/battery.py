@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from monitor.vehicle import VehicleConfig
+from offline.sim.controller import clip_in_place
 
 # Motor + ESC efficiency, shaft power / electrical power: typical 0.75-0.85 for
 # 10-inch multirotor powertrains (manufacturers' test tables); assumption.
@@ -29,7 +30,7 @@ class Battery:
 
     def update(self, shaft_power_w: np.ndarray, dt_s: float) -> np.ndarray:
         """Draw ``shaft_power_w`` (B,) for ``dt_s``; returns the loaded pack voltage (B,)."""
-        ocv = self.full_v - (self.full_v - self.empty_v) * np.clip(self.used_c / self.capacity_c, 0.0, 1.0)
+        ocv = self.full_v - (self.full_v - self.empty_v) * clip_in_place(self.used_c / self.capacity_c, 0.0, 1.0)
         p = np.maximum(shaft_power_w, 0.0) / POWERTRAIN_EFFICIENCY
         # Solve P = I (V_oc - I R) for the smaller root (the stable operating point).
         disc = np.maximum(ocv * ocv - 4.0 * self.r_ohm * p, 0.0)

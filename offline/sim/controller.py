@@ -32,11 +32,15 @@ from monitor.vehicle import VehicleConfig
 from offline.sim.dynamics import GRAVITY_M_S2
 from offline.sim.quat import QUAT_CONJ_MUL
 
+try:  # the clip ufunc itself: one call, where np.clip's Python wrapper costs more than the work
+    from numpy._core.umath import clip as _clip_ufunc
+except ImportError:  # numpy < 2
+    from numpy.core.umath import clip as _clip_ufunc
 
-def _clip_(x: np.ndarray, lo, hi) -> np.ndarray:
-    """In-place clip; np.clip's Python wrapper costs more than the work on small arrays."""
-    np.maximum(x, lo, out=x)
-    return np.minimum(x, hi, out=x)
+
+def clip_in_place(x: np.ndarray, lo, hi) -> np.ndarray:
+    """``np.clip(x, lo, hi, out=x)`` without its wrapper: max then min, NaN propagates."""
+    return _clip_ufunc(x, lo, hi, out=x)
 
 
 @dataclass(frozen=True)
@@ -154,9 +158,42 @@ class Controller:
         self.rate_d_per_dt = self.rate_d / self.ctrl_dt
         n = len(self.mass_kg)
         self._qq = np.empty((n, 4, 4))
+        self._qq16 = self._qq.reshape(n, 16)
         self._q4 = np.empty((n, 4))
+        self._qe_w, self._qe_vec = self._q4[:, :1], self._q4[:, 1:]
         self._r4 = np.empty((n, 4))
+        self._quarter = np.empty(n)
         self._ones3 = np.ones(3)
+        # Position loop: per-call constants (same products as written out in the loop) and
+        # buffers with their column views made once. Scalars are 0-d arrays, which numpy takes
+        # faster than Python floats (same float64 values), and outputs are passed positionally.
+        dt = self.pos_dt
+        k = lambda x: np.array(float(x))  # noqa: E731
+        self.dmax_h = k(cfg.mpc_acc_hor_m_s2 * dt)
+        self.dv_z_lo, self.dv_z_hi = k(-cfg.mpc_acc_up_max_m_s2 * dt), k(cfg.mpc_acc_down_max_m_s2 * dt)
+        self.yaw_step, self.neg_yaw_step = k(math.radians(cfg.mpc_yawrauto_max_deg_s) * dt), k(-(math.radians(cfg.mpc_yawrauto_max_deg_s) * dt))
+        self._k = {name: k(value) for name, value in (
+            ("cruise", cfg.mpc_xy_cruise_m_s), ("vz_lo", -cfg.mpc_z_vel_max_up_m_s), ("vz_hi", cfg.mpc_z_vel_max_dn_m_s),
+            ("dt", dt), ("fz_lo", -self.thrust_max_n), ("fz_hi", -self.thrust_min_n), ("tmax2", self.thrust_max_n**2),
+            ("tan", self.tan_tilt_max), ("zero", 0.0), ("eps", 1e-12), ("one", 1.0), ("neg_one", -1.0), ("half", 0.5),
+            ("quarter", 0.25), ("pi", math.pi), ("two_pi", 2 * math.pi), ("heading_min", cfg.mpc_yaw_mode_heading_min_m),
+            ("acc_rad2", cfg.nav_acc_rad_m**2), ("inv_kf", self.inv_kf))}
+        self.neg_vel_int_lim = -self.vel_int_lim
+        self.weight_n = self.mass_kg * GRAVITY_M_S2
+        self.mass_col = self.mass_kg[:, None]
+        self._vsp, self._dv, self._acc_ff, self._verr, self._acc, self._f, self._pt3 = np.empty((7, n, 3))
+        self._h, self._h2, self._h3, self._h4, self._h5, self._h6 = np.empty((6, n))
+        self._h_col = self._h[:, None]
+        # (x, y, horizontal pair, z) column views of the position loop's buffers
+        self._vsp_cols = (self._vsp[:, 0], self._vsp[:, 1], self._vsp[:, :2], self._vsp[:, 2])
+        self._dv_cols = (self._dv[:, 0], self._dv[:, 1], self._dv[:, :2], self._dv[:, 2])
+        self._f_cols = (self._f[:, 0], self._f[:, 1], self._f[:, :2], self._f[:, 2])
+        self._h2_col = self._h2[:, None]
+        self._att_views = (None, None, None, None)  # (q, q_sp, q as a column, q_sp as a row)
+        self._qsp_cols = (None, ())  # (q_sp, its columns)
+        self._r3 = np.empty((n, 3))
+        self._u3 = np.empty((n, 3))
+        self._t3 = np.empty((n, 3))
 
     def initial_state(self, n: int, yaw_rad: float = 0.0) -> ControllerState:
         q = np.zeros((n, 4))
@@ -181,92 +218,140 @@ class Controller:
 
         Returns the waypoint error (target - position), (B, 3).
         """
-        cfg, dt, rows = self.cfg, self.pos_dt, self.flight_rows
+        # Written with preallocated buffers and the operations of the plain formulas in the same
+        # order, so the results are the same to the last bit.
+        K, rows = self._k, self.flight_rows
         target = waypoints_ned_m[rows, c.waypoint_index]
         err = target - pos_ned_m
-        reached = (err * err) @ self._ones3 < cfg.nav_acc_rad_m**2
+        reached = np.less((err * err) @ self._ones3, K["acc_rad2"])
         if np.logical_or.reduce(reached):
             c.waypoints_reached += reached
             c.waypoint_index = (c.waypoint_index + reached) % waypoints_ned_m.shape[1]
             target = waypoints_ned_m[rows, c.waypoint_index]
             err = target - pos_ned_m
+        hn, hn_col, dt = self._h, self._h_col, K["dt"]
 
         # Position P with PX4's speed limits (horizontal norm, separate up/down).
-        vel_sp = err * self.pos_p
-        hnorm = np.hypot(vel_sp[:, 0], vel_sp[:, 1])
-        vel_sp[:, :2] *= (cfg.mpc_xy_cruise_m_s / np.maximum(hnorm, cfg.mpc_xy_cruise_m_s))[:, None]
-        _clip_(vel_sp[:, 2], -cfg.mpc_z_vel_max_up_m_s, cfg.mpc_z_vel_max_dn_m_s)
+        vel_sp = np.multiply(err, self.pos_p, self._vsp)
+        v_x, v_y, v_xy, v_z = self._vsp_cols
+        np.hypot(v_x, v_y, hn)
+        np.maximum(hn, K["cruise"], out=hn)
+        v_xy *= np.divide(K["cruise"], hn_col, hn_col)
+        clip_in_place(v_z, K["vz_lo"], K["vz_hi"])
         # Slew-limit the setpoint (stands in for PX4's jerk-limited trajectory).
-        dv = vel_sp - c.vel_sp_ned_m_s
-        dh = np.hypot(dv[:, 0], dv[:, 1])
-        dmax = cfg.mpc_acc_hor_m_s2 * dt
-        dv[:, :2] *= (dmax / np.maximum(dh, dmax))[:, None]
-        _clip_(dv[:, 2], -cfg.mpc_acc_up_max_m_s2 * dt, cfg.mpc_acc_down_max_m_s2 * dt)
+        dv = np.subtract(vel_sp, c.vel_sp_ned_m_s, self._dv)
+        d_x, d_y, d_xy, d_z = self._dv_cols
+        np.hypot(d_x, d_y, hn)
+        np.maximum(hn, self.dmax_h, out=hn)
+        d_xy *= np.divide(self.dmax_h, hn_col, hn_col)
+        clip_in_place(d_z, self.dv_z_lo, self.dv_z_hi)
         c.vel_sp_ned_m_s += dv
-        acc_ff = dv / dt
+        acc_ff = np.divide(dv, dt, self._acc_ff)
 
         # Velocity PID (derivative on the measurement, as PX4), integrator clamped.
-        verr = c.vel_sp_ned_m_s - vel_ned_m_s
-        c.vel_int_ned_m_s2 += self.vel_i * verr * dt
-        _clip_(c.vel_int_ned_m_s2, -self.vel_int_lim, self.vel_int_lim)
-        acc_sp = acc_ff + self.vel_p * verr + c.vel_int_ned_m_s2 - self.vel_d * (vel_ned_m_s - c.vel_prev_ned_m_s) / dt
-        c.vel_prev_ned_m_s[:] = vel_ned_m_s
+        verr = np.subtract(c.vel_sp_ned_m_s, vel_ned_m_s, self._verr)
+        t3 = np.multiply(self.vel_i, verr, self._pt3)
+        t3 *= dt
+        c.vel_int_ned_m_s2 += t3
+        clip_in_place(c.vel_int_ned_m_s2, self.neg_vel_int_lim, self.vel_int_lim)
+        acc_sp = np.multiply(self.vel_p, verr, self._acc)
+        np.add(acc_ff, acc_sp, acc_sp)
+        acc_sp += c.vel_int_ned_m_s2
+        np.subtract(vel_ned_m_s, c.vel_prev_ned_m_s, t3)
+        np.multiply(self.vel_d, t3, t3)
+        t3 /= dt
+        acc_sp -= t3
+        c.vel_prev_ned_m_s[...] = vel_ned_m_s
 
         # Thrust vector (NED) with vertical priority: clamp collective, then limit the tilt.
-        f = acc_sp * self.mass_kg[:, None]
-        f[:, 2] -= self.mass_kg * GRAVITY_M_S2
-        _clip_(f[:, 2], -self.thrust_max_n, -self.thrust_min_n)
-        fh = np.hypot(f[:, 0], f[:, 1])
-        fh_max = np.minimum(-f[:, 2] * self.tan_tilt_max, np.sqrt(np.maximum(self.thrust_max_n**2 - f[:, 2] ** 2, 0.0)))
-        f[:, :2] *= (fh_max / (np.maximum(fh, fh_max) + 1e-12))[:, None]
+        f = np.multiply(acc_sp, self.mass_col, self._f)
+        f_x, f_y, f_xy, f_z = self._f_cols
+        f_z -= self.weight_n
+        clip_in_place(f_z, K["fz_lo"], K["fz_hi"])
+        fh = np.hypot(f_x, f_y, hn)
+        # fh_max = min(-f_z tan(tilt_max), sqrt(max(thrust_max^2 - f_z^2, 0)))
+        room = np.square(f_z, self._h2)
+        np.subtract(K["tmax2"], room, room)
+        np.maximum(room, K["zero"], out=room)
+        np.sqrt(room, room)
+        fh_max = np.negative(f_z, self._h3)
+        fh_max *= K["tan"]
+        np.minimum(fh_max, room, out=fh_max)
+        np.maximum(fh, fh_max, out=fh)
+        fh += K["eps"]
+        f_xy *= np.divide(fh_max[:, None], hn_col, hn_col)
         thrust = np.sqrt((f * f) @ self._ones3)
         c.thrust_sp_n = thrust
 
         # Yaw setpoint: face the waypoint (MPC_YAW_MODE 0), rate-limited by MPC_YAWRAUTO_MAX.
-        far = np.hypot(err[:, 0], err[:, 1]) > cfg.mpc_yaw_mode_heading_min_m
-        yaw_target = np.where(far, np.arctan2(err[:, 1], err[:, 0]), c.yaw_sp_rad)
-        dyaw = (yaw_target - c.yaw_sp_rad + math.pi) % (2 * math.pi) - math.pi
-        step = math.radians(cfg.mpc_yawrauto_max_deg_s) * dt
-        c.yaw_sp_rad = (c.yaw_sp_rad + _clip_(dyaw, -step, step) + math.pi) % (2 * math.pi) - math.pi
+        err_x, err_y = err[:, 0], err[:, 1]
+        far = np.greater(np.hypot(err_x, err_y, hn), K["heading_min"])
+        yaw_target = np.where(far, np.arctan2(err_y, err_x, self._h3), c.yaw_sp_rad)
+        pi, two_pi = K["pi"], K["two_pi"]
+        dyaw = np.subtract(yaw_target, c.yaw_sp_rad, self._h4)
+        dyaw += pi
+        np.remainder(dyaw, two_pi, dyaw)
+        dyaw -= pi
+        yaw = c.yaw_sp_rad + clip_in_place(dyaw, self.neg_yaw_step, self.yaw_step)
+        yaw += pi
+        np.remainder(yaw, two_pi, yaw)
+        yaw -= pi
+        c.yaw_sp_rad = yaw
 
         # Attitude setpoint: tilt body z onto -f, then yaw. q_tilt takes e_z to z_b = -f/|f|.
-        zb = f / -thrust[:, None]
+        zb = f
+        zb /= np.negative(thrust[:, None], self._h2_col)
+        zb_x, zb_y, zb_z = f_x, f_y, f_z
         # q_tilt = normalise(1 + zb_z, -zb_y, zb_x, 0), then q_sp = q_tilt ⊗ (cos(yaw/2), 0, 0, sin(yaw/2)).
-        tw = 1.0 + zb[:, 2]
-        inv = 1.0 / np.sqrt(tw * tw + zb[:, 0] * zb[:, 0] + zb[:, 1] * zb[:, 1])
-        cy, sy = np.cos(0.5 * c.yaw_sp_rad) * inv, np.sin(0.5 * c.yaw_sp_rad) * inv
-        tx, ty = -zb[:, 1], zb[:, 0]
-        qs = c.q_sp
-        qs[:, 0] = tw * cy
-        qs[:, 1] = tx * cy + ty * sy
-        qs[:, 2] = ty * cy - tx * sy
-        qs[:, 3] = tw * sy
+        tw = np.add(K["one"], zb_z, self._h2)
+        inv = np.multiply(tw, tw, self._h3)
+        inv += np.multiply(zb_x, zb_x, hn)
+        inv += np.multiply(zb_y, zb_y, hn)
+        np.sqrt(inv, inv)
+        np.divide(K["one"], inv, inv)
+        half_yaw = np.multiply(K["half"], yaw, self._h4)
+        cy = np.cos(half_yaw, self._h5)
+        cy *= inv
+        sy = np.sin(half_yaw, self._h6)
+        sy *= inv
+        tx, ty = np.negative(zb_y, self._h4), zb_x
+        qs, cols = self._qsp_cols
+        if qs is not c.q_sp:
+            qs = c.q_sp
+            qs, cols = self._qsp_cols = (qs, (qs[:, 0], qs[:, 1], qs[:, 2], qs[:, 3]))
+        np.multiply(tw, cy, cols[0])
+        np.add(np.multiply(tx, cy, cols[1]), np.multiply(ty, sy, hn), cols[1])
+        np.subtract(np.multiply(ty, cy, cols[2]), np.multiply(tx, sy, hn), cols[2])
+        np.multiply(tw, sy, cols[3])
         return err
 
     # -- attitude, rates and allocation (MulticopterAttitudeControl/RateControl) ---------------
     def update_attitude(self, c: ControllerState, q: np.ndarray, gyro_frd_rad_s: np.ndarray) -> np.ndarray:
         """Returns the commanded rotor speed (B, 4) in rad/s."""
-        n = len(q)
         # q_err = conj(q) ⊗ q_sp; rate setpoint = P * 2 sign(w) vec(q_err) (PX4 AttitudeControl).
-        np.multiply(q[:, :, None], c.q_sp[:, None, :], out=self._qq)
-        qe = np.matmul(self._qq.reshape(n, 16), QUAT_CONJ_MUL, out=self._q4)
-        rate_sp = qe[:, 1:] * np.copysign(self.att_2p, qe[:, :1])
-        np.maximum(rate_sp, self.neg_rate_max, out=rate_sp)
-        np.minimum(rate_sp, self.rate_max, out=rate_sp)
+        views = self._att_views
+        if views[0] is not q or views[1] is not c.q_sp:  # broadcasting views, made once per array
+            views = self._att_views = (q, c.q_sp, q[:, :, None], c.q_sp[:, None, :])
+        np.multiply(views[2], views[3], self._qq)
+        np.matmul(self._qq16, QUAT_CONJ_MUL, self._q4)
+        rate_sp = np.copysign(self.att_2p, self._qe_w, self._r3)
+        rate_sp *= self._qe_vec
+        clip_in_place(rate_sp, self.neg_rate_max, self.rate_max)
 
         # Rate PID in normalised torque, derivative on the measurement (PX4 RateControl).
         rerr = rate_sp
         rerr -= gyro_frd_rad_s
         integ = c.rate_int
-        integ += self.rate_i_dt * rerr
-        np.maximum(integ, self.neg_rate_int_lim, out=integ)
-        np.minimum(integ, self.rate_int_lim, out=integ)
-        u = self.rate_p * rerr
+        t = np.multiply(self.rate_i_dt, rerr, self._t3)
+        integ += t
+        clip_in_place(integ, self.neg_rate_int_lim, self.rate_int_lim)
+        u = np.multiply(self.rate_p, rerr, self._u3)
         u += integ
-        u -= self.rate_d_per_dt * (gyro_frd_rad_s - c.rate_prev_rad_s)
-        c.rate_prev_rad_s[:] = gyro_frd_rad_s
-        np.maximum(u, -1.0, out=u)
-        np.minimum(u, 1.0, out=u)
+        np.subtract(gyro_frd_rad_s, c.rate_prev_rad_s, t)
+        np.multiply(self.rate_d_per_dt, t, t)
+        u -= t
+        c.rate_prev_rad_s[...] = gyro_frd_rad_s
+        clip_in_place(u, self._k["neg_one"], self._k["one"])
         return self.allocate(c.thrust_sp_n, u)
 
     def allocate(self, thrust_n: np.ndarray, torque_norm: np.ndarray) -> np.ndarray:
@@ -278,14 +363,14 @@ class Controller:
         its flights run one at a time, and skips the work when nothing saturates.
         """
         lo, hi = self.rotor_thrust_min_n, self.rotor_thrust_max_n
-        cmd = np.matmul(torque_norm, self.mix_torque, out=self._r4)
-        cmd += (0.25 * thrust_n)[:, None]
+        cmd = np.matmul(torque_norm, self.mix_torque, self._r4)
+        cmd += np.multiply(thrust_n, self._k["quarter"], self._quarter)[:, None]
         # Whole-batch extremes first: when every rotor of every flight fits, nothing else is needed.
         if not (np.minimum.reduce(cmd, axis=None) >= lo and np.maximum.reduce(cmd, axis=None) <= hi):
             fits = (np.minimum.reduce(cmd, axis=1) >= lo) & (np.maximum.reduce(cmd, axis=1) <= hi)
             cmd = np.where(fits[:, None], cmd, self._desaturate(thrust_n, torque_norm))
-        cmd *= self.inv_kf
-        return np.sqrt(cmd, out=cmd)
+        cmd *= self._k["inv_kf"]
+        return np.sqrt(cmd, cmd)
 
     def _desaturate(self, thrust_n: np.ndarray, torque_norm: np.ndarray) -> np.ndarray:
         """Per-rotor thrust (B, 4) that fits the rotors' range, keeping roll/pitch authority.

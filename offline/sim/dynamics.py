@@ -105,6 +105,20 @@ class Dynamics:
         self._out = np.empty((n, 11))
         self._q4 = np.empty((n, 4))
         self._ones4 = np.ones(4)
+        # Fixed views of the buffers, made once: at a handful of flights a view costs as much as the
+        # arithmetic it feeds.
+        self._f_thrust, self._f_torque = self._features[:, 49:53], self._features[:, 53:57]
+        self._d_att, self._d_zdt, self._d_total = self._out[:, :7], self._out[:, 7:10], self._out[:, 10:11]
+        self._total_thrust = self._out[:, 10]
+        self._om4 = np.empty((n, 4))
+        self._t1 = np.empty((n, 1))
+        self._dv = np.empty((n, 3))
+        self._v3 = np.empty((n, 3))
+        self._norm = np.empty(n)
+        self._norm_col = self._norm[:, None]
+        self._state_views = (None, None, None, None)  # (packed, [q, w] view, as a column, as a row)
+        # Scalars as 0-d arrays: numpy takes those faster than Python floats (same float64 values).
+        self._alpha0, self._dt0 = np.array(self.motor_alpha), np.array(dt)
         self.force_body_n = np.zeros((n, 3))  # non-gravity force of the last step with drag, body FRD
         self.last_total_thrust_n = np.zeros(n)
 
@@ -122,16 +136,21 @@ class Dynamics:
         """Advance ``s`` by dt in place; returns this step's (thrust_n, torque_nm)."""
         dt = self.dt_s
         om = s.omega_rad_s
-        om += self.motor_alpha * (omega_target_rad_s - om)
+        # Outputs are passed positionally (out=... costs a keyword parse on every call).
+        d = np.subtract(omega_target_rad_s, om, self._om4)
+        d *= self._alpha0
+        om += d
         thrust, torque = propellers(om, dt)
-        f = self._features
-        f[:, 49:53] = thrust
-        f[:, 53:57] = torque
-        p = s.packed
-        x = p[:, 6:13]  # [q, w]
-        np.multiply(x[:, :, None], x[:, None, :], out=self._outer)
-        out = np.matmul(f, self.step_map, out=self._out)
-        self.last_total_thrust_n = out[:, 10]
+        self._f_thrust[...] = thrust
+        self._f_torque[...] = torque
+        p, x, x_col, x_row = self._state_views
+        if p is not s.packed:  # [q, w] and its broadcasting views, made once per state array
+            p = s.packed
+            x = p[:, 6:13]
+            p, x, x_col, x_row = self._state_views = (p, x, x[:, :, None], x[:, None, :])
+        np.multiply(x_col, x_row, self._outer)
+        out = np.matmul(self._features, self.step_map, self._out)
+        self.last_total_thrust_n = self._total_thrust
 
         # Linear, with the attitude at the start of the step: dv = dt (R f_body / m + g).
         if self.has_drag:
@@ -142,14 +161,16 @@ class Dynamics:
             f_body -= self.drag * rotate_world_to_body(q, v - self.wind_ned_m_s)
             dv = rotate_body_to_world(q, f_body) * (self.inv_mass * dt)
         else:
-            dv = out[:, 7:10] * (out[:, 10:11] * self.inv_mass)
+            dv = np.multiply(self._d_zdt, np.multiply(self._d_total, self.inv_mass, self._t1), self._dv)
         dv += self.gravity_dt
 
-        p[:, 6:13] += out[:, :7]  # attitude and rates, explicit Euler from the start-of-step values
+        x += self._d_att  # attitude and rates, explicit Euler from the start-of-step values
         v = s.vel_ned_m_s
         v += dv
-        s.pos_ned_m += dt * v  # semi-implicit: the new velocity moves the vehicle
+        s.pos_ned_m += np.multiply(self._dt0, v, self._v3)  # semi-implicit: the new velocity moves the vehicle
         q = s.q_world_body
         # Row norms through a matmul: several times cheaper than einsum on small batches.
-        q /= np.sqrt(np.matmul(np.multiply(q, q, out=self._q4), self._ones4))[:, None]
+        norm = np.matmul(np.multiply(q, q, self._q4), self._ones4, self._norm)
+        np.sqrt(norm, norm)
+        q /= self._norm_col
         return thrust, torque

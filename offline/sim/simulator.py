@@ -22,7 +22,7 @@ import numpy as np
 from monitor.errors import ConfigError, ModelError
 from monitor.vehicle import VehicleConfig
 from offline.sim.battery import Battery
-from offline.sim.controller import Controller, ControllerConfig
+from offline.sim.controller import Controller, ControllerConfig, clip_in_place
 from offline.sim.dynamics import GRAVITY_M_S2, Dynamics, VehicleState
 from offline.sim.log import BOOT_OFFSET_US, FlightLog
 from offline.sim.mission import START_NED_M
@@ -134,21 +134,27 @@ def simulate(vehicle: VehicleConfig, waypoints_ned_m: np.ndarray, propellers, si
     state = VehicleState.hover(n, sim.start_ned_m, hover)
     cstate = ctrl.initial_state(n)
     propellers.reset(state.omega_rad_s.copy())
-    rows = np.arange(n)
 
     seqs = [s.spawn(2) for s in flight_seed_sequences(seed, n)]
     gyro_rngs = [np.random.default_rng(s[0]) for s in seqs]
     att_rngs = [np.random.default_rng(s[1]) for s in seqs]
     gyro_bias = np.array(vehicle.gyro_bias_frd_rad_s, dtype=np.float64)
     chunk = max(1, int(round(NOISE_CHUNK_S * sim.control_rate_hz)))
-    gyro_noise = np.zeros((n, chunk, 3))
+    gyro_noise = np.zeros((chunk, n, 3))  # time-major, so one control step's noise is a plain view
     noise_on = sim.gyro_noise_std_rad_s > 0
 
     T = sim.n_log_samples
-    log = {k: np.empty((n, T, d)) for k, d in (("pos_ned_m", 3), ("vel_ned_m_s", 3), ("q_world_body", 4),
-                                                 ("rates_frd_rad_s", 3), ("accel_frd_m_s2", 3),
-                                                 ("motor_omega_rad_s", 4), ("thrust_n", 4), ("torque_nm", 4),
-                                                 ("pwm_us", 4), ("waypoint_error_ned_m", 3))}
+    # PWM and the waypoint error are worked out after the loop from the logged command and
+    # waypoint index (elementwise, so the same numbers as step by step).
+    log_pos = np.empty((n, T, 3))
+    log_vel = np.empty((n, T, 3))
+    log_q = np.empty((n, T, 4))
+    log_rates = np.empty((n, T, 3))
+    log_accel = np.empty((n, T, 3))
+    log_omega = np.empty((n, T, 4))
+    log_thrust = np.empty((n, T, 4))
+    log_torque = np.empty((n, T, 4))
+    log_cmd = np.empty((n, T, 4))
     battery_v = np.empty((n, T))
     battery_a = np.empty((n, T))
     wp_index = np.empty((n, T), dtype=np.int64)
@@ -161,49 +167,58 @@ def simulate(vehicle: VehicleConfig, waypoints_ned_m: np.ndarray, propellers, si
 
     # The ESC turns PWM into speed through its fit; the command is the speed the controller
     # asks for, inside the ESC's range. PWM itself (its inverse) is only needed for the log.
-    omega_lo = float(esc.cmd_to_omega_rad_s(esc.cmd_min))
-    omega_hi = float(esc.cmd_to_omega_rad_s(esc.cmd_max))
+    # (0-d arrays: numpy takes those faster than Python floats.)
+    omega_lo = np.array(float(esc.cmd_to_omega_rad_s(esc.cmd_min)))
+    omega_hi = np.array(float(esc.cmd_to_omega_rad_s(esc.cmd_max)))
     omega_cmd = hover.copy()
     omega_target = dyn.motor_target(omega_cmd)
     gyro = gyro_bias + state.rates_frd_rad_s
+    # Hoisted out of the 400 Hz loop: bound methods and the state's views (updated in place).
+    update_position, update_attitude, motor_target, step = ctrl.update_position, ctrl.update_attitude, dyn.motor_target, dyn.step
+    pos, vel, q, rates, omega = state.pos_ned_m, state.vel_ned_m_s, state.q_world_body, state.rates_frd_rad_s, state.omega_rad_s
+    noise_std, log_dt = sim.gyro_noise_std_rad_s, 1.0 / sim.log_rate_hz
+    prop = _checked(propellers, (n, 4))  # the first step only
     j_ctrl = 0
     for k in range(sim.n_physics_steps):
         if k % k_pos == 0:
-            ctrl.update_position(cstate, state.pos_ned_m, state.vel_ned_m_s, wps)
+            update_position(cstate, pos, vel, wps)
         if k % k_ctrl == 0:
-            gyro = state.rates_frd_rad_s + gyro_bias
+            gyro = rates + gyro_bias
             if noise_on:
                 jc = j_ctrl % chunk
                 if jc == 0:
                     for i, g in enumerate(gyro_rngs):
-                        gyro_noise[i] = g.standard_normal((chunk, 3))
-                    gyro_noise *= sim.gyro_noise_std_rad_s
-                gyro += gyro_noise[:, jc]
+                        gyro_noise[:, i] = g.standard_normal((chunk, 3))
+                    gyro_noise *= noise_std
+                gyro += gyro_noise[jc]
             j_ctrl += 1
-            omega_cmd = ctrl.update_attitude(cstate, state.q_world_body, gyro)
-            np.maximum(omega_cmd, omega_lo, out=omega_cmd)
-            np.minimum(omega_cmd, omega_hi, out=omega_cmd)
-            omega_target = dyn.motor_target(omega_cmd)
-        thrust, torque = dyn.step(state, omega_target, propellers if k else _checked(propellers, (n, 4)))
+            omega_cmd = update_attitude(cstate, q, gyro)
+            clip_in_place(omega_cmd, omega_lo, omega_hi)
+            omega_target = motor_target(omega_cmd)
+        thrust, torque = step(state, omega_target, prop)
+        prop = propellers
         if (k + 1) % k_log == 0:
             j = (k + 1) // k_log - 1
-            log["pos_ned_m"][:, j] = state.pos_ned_m
-            log["vel_ned_m_s"][:, j] = state.vel_ned_m_s
-            log["q_world_body"][:, j] = state.q_world_body
-            log["rates_frd_rad_s"][:, j] = gyro  # what the gyro last reported
-            log["accel_frd_m_s2"][:, j] = dyn.specific_force_frd_m_s2()
-            log["motor_omega_rad_s"][:, j] = state.omega_rad_s
-            log["thrust_n"][:, j] = thrust
-            log["torque_nm"][:, j] = torque
-            log["pwm_us"][:, j] = esc.omega_rad_s_to_cmd(omega_cmd)
-            log["waypoint_error_ned_m"][:, j] = wps[rows, cstate.waypoint_index] - state.pos_ned_m
+            log_pos[:, j] = pos
+            log_vel[:, j] = vel
+            log_q[:, j] = q
+            log_rates[:, j] = gyro  # what the gyro last reported
+            log_accel[:, j] = dyn.specific_force_frd_m_s2()
+            log_omega[:, j] = omega
+            log_thrust[:, j] = thrust
+            log_torque[:, j] = torque
+            log_cmd[:, j] = omega_cmd
             wp_index[:, j] = cstate.waypoint_index
-            battery_v[:, j] = battery.update(np.einsum("ij,ij->i", torque, state.omega_rad_s), 1.0 / sim.log_rate_hz)
+            battery_v[:, j] = battery.update(np.einsum("ij,ij->i", torque, omega), log_dt)
             battery_a[:, j] = battery.current_a
             if bar is not None:
                 bar.update(1)
     if bar is not None:
         bar.close()
+    log = {"pos_ned_m": log_pos, "vel_ned_m_s": log_vel, "q_world_body": log_q, "rates_frd_rad_s": log_rates, "accel_frd_m_s2": log_accel,
+           "motor_omega_rad_s": log_omega, "thrust_n": log_thrust, "torque_nm": log_torque,
+           "pwm_us": esc.omega_rad_s_to_cmd(log_cmd),
+           "waypoint_error_ned_m": wps[np.arange(n)[:, None], wp_index] - log_pos}
 
     bad = ~np.all(np.isfinite(log["pos_ned_m"]), axis=(1, 2))
     if bad.any():
