@@ -163,6 +163,7 @@ class Controller:
         self._qe_w, self._qe_vec = self._q4[:, :1], self._q4[:, 1:]
         self._r4 = np.empty((n, 4))
         self._quarter = np.empty(n)
+        self._quarter_col = self._quarter[:, None]
         self._ok4 = np.empty((n, 4), dtype=bool)
         self._ones3 = np.ones(3)
         # Position loop: per-call constants (same products as written out in the loop) and
@@ -180,6 +181,8 @@ class Controller:
             ("quarter", 0.25), ("pi", math.pi), ("two_pi", 2 * math.pi), ("heading_min", cfg.mpc_yaw_mode_heading_min_m),
             ("acc_rad2", cfg.nav_acc_rad_m**2), ("inv_kf", self.inv_kf), ("lo", self.rotor_thrust_min_n),
             ("hi", self.rotor_thrust_max_n))}
+        self._quarter_k, self._lo_k, self._hi_k, self._inv_kf_k, self._neg_one_k, self._one_k = (
+            self._k[name] for name in ("quarter", "lo", "hi", "inv_kf", "neg_one", "one"))
         self.neg_vel_int_lim = -self.vel_int_lim
         self.weight_n = self.mass_kg * GRAVITY_M_S2
         self.mass_col = self.mass_kg[:, None]
@@ -353,7 +356,7 @@ class Controller:
         np.multiply(self.rate_d_per_dt, t, t)
         u -= t
         c.rate_prev_rad_s[...] = gyro_frd_rad_s
-        _clip_ufunc(u, self._k["neg_one"], self._k["one"], u)
+        _clip_ufunc(u, self._neg_one_k, self._one_k, u)
         return self.allocate(c.thrust_sp_n, u)
 
     def allocate(self, thrust_n: np.ndarray, torque_norm: np.ndarray) -> np.ndarray:
@@ -366,15 +369,16 @@ class Controller:
         """
         lo, hi = self.rotor_thrust_min_n, self.rotor_thrust_max_n
         cmd = np.matmul(torque_norm, self.mix_torque, self._r4)
-        cmd += np.multiply(thrust_n, self._k["quarter"], self._quarter)[:, None]
+        np.multiply(thrust_n, self._quarter_k, self._quarter)
+        cmd += self._quarter_col
         # Whole-batch check first: when every rotor of every flight fits (NaN does not), nothing else
         # is needed. Comparisons and counts: cheaper than min/max reductions on a few flights.
         ok = self._ok4
-        if np.count_nonzero(np.greater_equal(cmd, self._k["lo"], ok)) + np.count_nonzero(
-                np.less_equal(cmd, self._k["hi"], ok)) != 2 * cmd.size:
+        if np.count_nonzero(np.greater_equal(cmd, self._lo_k, ok)) + np.count_nonzero(
+                np.less_equal(cmd, self._hi_k, ok)) != 2 * cmd.size:
             fits = (np.minimum.reduce(cmd, axis=1) >= lo) & (np.maximum.reduce(cmd, axis=1) <= hi)
             cmd = np.where(fits[:, None], cmd, self._desaturate(thrust_n, torque_norm))
-        cmd *= self._k["inv_kf"]
+        cmd *= self._inv_kf_k
         return np.sqrt(cmd, cmd)
 
     def _desaturate(self, thrust_n: np.ndarray, torque_norm: np.ndarray) -> np.ndarray:

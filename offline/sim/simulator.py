@@ -173,6 +173,7 @@ def simulate(vehicle: VehicleConfig, waypoints_ned_m: np.ndarray, propellers, si
     omega_cmd = hover.copy()
     omega_target = dyn.motor_target(omega_cmd)
     gyro = gyro_bias + state.rates_frd_rad_s
+    gyro_buf = np.empty((n, 3))  # what the gyro reports, rewritten every control step
     # Hoisted out of the 400 Hz loop: bound methods and the state's views (updated in place).
     update_position, update_attitude, motor_target, step = ctrl.update_position, ctrl.update_attitude, dyn.motor_target, dyn.step
     pos, vel, q, rates, omega = state.pos_ned_m, state.vel_ned_m_s, state.q_world_body, state.rates_frd_rad_s, state.omega_rad_s
@@ -183,7 +184,7 @@ def simulate(vehicle: VehicleConfig, waypoints_ned_m: np.ndarray, propellers, si
         if k % k_pos == 0:
             update_position(cstate, pos, vel, wps)
         if k % k_ctrl == 0:
-            gyro = rates + gyro_bias
+            gyro = np.add(rates, gyro_bias, gyro_buf)
             if noise_on:
                 jc = j_ctrl % chunk
                 if jc == 0:
@@ -215,10 +216,15 @@ def simulate(vehicle: VehicleConfig, waypoints_ned_m: np.ndarray, propellers, si
                 bar.update(1)
     if bar is not None:
         bar.close()
-    log = {"pos_ned_m": log_pos, "vel_ned_m_s": log_vel, "q_world_body": log_q, "rates_frd_rad_s": log_rates, "accel_frd_m_s2": log_accel,
-           "motor_omega_rad_s": log_omega, "thrust_n": log_thrust, "torque_nm": log_torque,
-           "pwm_us": esc.omega_rad_s_to_cmd(log_cmd),
-           "waypoint_error_ned_m": wps[np.arange(n)[:, None], wp_index] - log_pos}
+    # In place and by blocks of samples, so peak memory stays that of the logs themselves.
+    block = sim.log_rate_hz  # one second of samples
+    for j0 in range(0, T, block):
+        log_cmd[:, j0:j0 + block] = esc.omega_rad_s_to_cmd(log_cmd[:, j0:j0 + block])
+    wp_error = wps[np.arange(n)[:, None], wp_index]
+    wp_error -= log_pos
+    log = {"pos_ned_m": log_pos, "vel_ned_m_s": log_vel, "q_world_body": log_q, "rates_frd_rad_s": log_rates,
+           "accel_frd_m_s2": log_accel, "motor_omega_rad_s": log_omega, "thrust_n": log_thrust, "torque_nm": log_torque,
+           "pwm_us": log_cmd, "waypoint_error_ned_m": wp_error}
 
     bad = ~np.all(np.isfinite(log["pos_ned_m"]), axis=(1, 2))
     if bad.any():
