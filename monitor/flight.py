@@ -16,6 +16,12 @@ import numpy as np
 from monitor.errors import LogFormatError
 
 
+def true_runs(mask: np.ndarray) -> list[tuple[int, int]]:
+    """[start, stop) index ranges where a 1-D boolean mask is true."""
+    d = np.diff(np.concatenate([[0], np.asarray(mask, dtype=bool).astype(np.int8), [0]]))
+    return list(zip(np.flatnonzero(d == 1).tolist(), np.flatnonzero(d == -1).tolist()))
+
+
 @dataclass(frozen=True)
 class FlightTable:
     timestamp_us: np.ndarray  # (T,) int64, autopilot boot clock, uniform grid
@@ -70,6 +76,4 @@ class FlightTable:
 
     def airborne_segments(self) -> list[tuple[int, int]]:
         """[start, stop) index ranges where ``airborne`` is true."""
-        a = np.concatenate([[False], self.airborne.astype(bool), [False]])
-        d = np.diff(a.astype(np.int8))
-        return list(zip(np.flatnonzero(d == 1).tolist(), np.flatnonzero(d == -1).tolist()))
+        return true_runs(self.airborne)

@@ -16,7 +16,7 @@ import numpy as np
 
 from monitor.errors import LogFormatError
 from monitor.esc import EscCurve
-from monitor.flight import FlightTable
+from monitor.flight import FlightTable, true_runs
 from monitor.resample import US_PER_S, grid_us, hold, period_us
 
 # A held sample is used for at most this long, then it is NaN: a stream that
@@ -137,9 +137,7 @@ def _hold_flag(s: Stream, grid: np.ndarray) -> np.ndarray:
 
 def _drop_short(mask: np.ndarray, min_len: int) -> np.ndarray:
     out = mask.copy()
-    a = np.concatenate([[False], mask, [False]]).astype(np.int8)
-    d = np.diff(a)
-    for s, e in zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1)):
+    for s, e in true_runs(mask):
         if e - s < min_len:
             out[s:e] = False
     return out

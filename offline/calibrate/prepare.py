@@ -32,7 +32,7 @@ from scipy.interpolate import CubicSpline
 from scipy.signal import savgol_coeffs
 
 from monitor.errors import LogFormatError
-from monitor.flight import FlightTable
+from monitor.flight import FlightTable, true_runs
 from monitor.vehicle import VehicleConfig
 
 SG_WINDOW = 7  # samples (0.35 s at 20 Hz): long enough to average noise, short against manoeuvres
@@ -149,10 +149,15 @@ def euler_rates(euler_rad: np.ndarray, rates_rad_s: np.ndarray) -> np.ndarray:
     return np.stack([p + (sf * q + cf * r) * np.tan(th), cf * q - sf * r, (sf * q + cf * r) / ct], axis=1)
 
 
+def tilt_deg(roll_rad: np.ndarray, pitch_rad: np.ndarray) -> np.ndarray:
+    """Angle between body z and the vertical, degrees (NaN in, NaN out)."""
+    return np.degrees(np.arccos(np.clip(np.cos(roll_rad) * np.cos(pitch_rad), -1.0, 1.0)))
+
+
 def flight_phases(vel_ned_m_s: np.ndarray | None, euler_rad: np.ndarray, rates_rad_s: np.ndarray) -> np.ndarray:
     """Label each sample hover / cruise / climb / manoeuvre (steady-state analysis uses hover and cruise)."""
     n = len(euler_rad)
-    tilt = np.degrees(np.arccos(np.clip(np.cos(euler_rad[:, 0]) * np.cos(euler_rad[:, 1]), -1, 1)))
+    tilt = tilt_deg(euler_rad[:, 0], euler_rad[:, 1])
     rate = np.linalg.norm(rates_rad_s, axis=1)
     phase = np.full(n, "manoeuvre", dtype=object)
     if vel_ned_m_s is None:
@@ -194,10 +199,8 @@ def prepare(tables: list[FlightTable], vehicle: VehicleConfig) -> list[Segment]:
 def _flying_segments(tab: FlightTable) -> list[tuple[int, int]]:
     """Airborne stretches inside the flight model's envelope: a flip or crash (tilt above
     MAX_TILT_DEG, often with ground contact) is no evidence about the vehicle's parameters."""
-    tilt = np.degrees(np.arccos(np.clip(np.cos(tab.roll_rad) * np.cos(tab.pitch_rad), -1.0, 1.0)))
-    ok = tab.airborne.astype(bool) & (np.nan_to_num(tilt, nan=180.0) < MAX_TILT_DEG)
-    d = np.diff(np.concatenate([[0], ok.astype(np.int8), [0]]))
-    return list(zip(np.flatnonzero(d == 1).tolist(), np.flatnonzero(d == -1).tolist()))
+    tilt = tilt_deg(tab.roll_rad, tab.pitch_rad)
+    return true_runs(tab.airborne.astype(bool) & (np.nan_to_num(tilt, nan=180.0) < MAX_TILT_DEG))
 
 
 def _segment(tab: FlightTable, k: int, a: int, b: int, dt: float, vehicle: VehicleConfig) -> Segment | None:
