@@ -65,11 +65,10 @@ def main(argv=None) -> int:
     p.add_argument("--repeat", type=int, default=2)
     args = p.parse_args(argv)
 
-    from monitor.daemon.cli import choose_esc
     from monitor.diagnose.engine import predict_at, window_ends
     from monitor.features import compute_features
     from monitor.logs import read_log
-    from monitor.model import Classifier
+    from monitor.model import Classifier, choose_esc
 
     with tempfile.TemporaryDirectory() as tmp:
         model = args.model

@@ -14,14 +14,19 @@ Contract (written by ``offline`` export, checked here at load):
 from __future__ import annotations
 
 import json
+import logging
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from monitor.errors import ModelError
+from monitor.config import from_mapping
+from monitor.errors import ConfigError, ModelError
+from monitor.esc import PAPER_ESC, EscCurve
 from monitor.features import check_feature_names
+
+log = logging.getLogger("propwatch.model")
 
 META_PREFIX = "propwatch."
 REQUIRED_META = ("format_version", "features", "sample_rate_hz", "window", "normalization", "label_table")
@@ -104,3 +109,23 @@ class Classifier:
             return np.empty((0, 16), np.float32), np.empty((0, 4), np.float32)
         labels, faults = self.session.run([OUTPUT_LABELS, OUTPUT_FAULTS], {INPUT_NAME: x})
         return labels, faults
+
+
+def choose_esc(classifier: Classifier, vehicle_path: str) -> EscCurve:
+    """The ESC curve: a vehicle YAML if given, else the model's training vehicle, else the paper's.
+
+    One rule for the daemon and for diagnose, so both convert motor commands identically.
+    """
+    if vehicle_path:
+        log.info("ESC curve from vehicle file %s", vehicle_path)
+        from monitor.vehicle import load_vehicle
+
+        return load_vehicle(vehicle_path).esc
+    esc = (classifier.info.metadata.get("vehicle") or {}).get("esc")
+    if esc:
+        try:
+            return from_mapping(EscCurve, esc, origin=f"{classifier.path} metadata propwatch.vehicle.esc")[0]
+        except ConfigError as exc:
+            raise ModelError(str(exc)) from None
+    log.warning("model %s carries no ESC curve; using the paper's fit", classifier.path)
+    return PAPER_ESC

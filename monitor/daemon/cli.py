@@ -15,17 +15,13 @@ import signal
 import sys
 import time
 
-from monitor.config import from_mapping
 from monitor.daemon.alerts import EventWriter
 from monitor.daemon.config import load_monitor_config
 from monitor.daemon.link import Link
 from monitor.daemon.pipeline import Pipeline
 from monitor.daemon.sdnotify import Notifier
 from monitor.daemon.service import Daemon
-from monitor.errors import ConfigError, ModelError
-from monitor.esc import PAPER_ESC, EscCurve
-from monitor.model import Classifier
-from monitor.vehicle import load_vehicle
+from monitor.model import Classifier, choose_esc
 
 log = logging.getLogger("propwatch.monitor")
 
@@ -41,21 +37,6 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument("--tlog-speed", type=float, help="for a .tlog: 1 = recorded pace, 0 = as fast as possible")
     p.add_argument("--log-level", default="INFO", choices=["DEBUG", "INFO", "WARNING", "ERROR"])
     return p.parse_args(argv)
-
-
-def choose_esc(classifier: Classifier, vehicle_path: str) -> EscCurve:
-    """The ESC curve: a vehicle YAML if given, else the model's training vehicle, else the paper's."""
-    if vehicle_path:
-        log.info("ESC curve from vehicle file %s", vehicle_path)
-        return load_vehicle(vehicle_path).esc
-    esc = (classifier.info.metadata.get("vehicle") or {}).get("esc")
-    if esc:
-        try:
-            return from_mapping(EscCurve, esc, origin=f"{classifier.path} metadata propwatch.vehicle.esc")[0]
-        except ConfigError as exc:
-            raise ModelError(str(exc)) from None
-    log.warning("model %s carries no ESC curve; using the paper's fit", classifier.path)
-    return PAPER_ESC
 
 
 def main(argv: list[str] | None = None) -> int:

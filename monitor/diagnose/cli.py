@@ -29,12 +29,11 @@ import json
 import sys
 from pathlib import Path
 
-from monitor.daemon.cli import choose_esc
 from monitor.diagnose.engine import Diagnosis, diagnose_table
 from monitor.errors import PropwatchError
 from monitor.esc import EscCurve
 from monitor.logs import read_log
-from monitor.model import Classifier
+from monitor.model import Classifier, choose_esc
 from monitor.vehicle import REPO_ROOT
 
 DEFAULT_MODEL = REPO_ROOT / "models" / "classifier.onnx"
