@@ -72,6 +72,12 @@ def _moment(axis: str) -> Callable[[Signals], np.ndarray]:
     return f
 
 
+def _collective(s: Signals) -> np.ndarray:
+    # Sum of the four rotors' (kRPM)^2: what the rotors' collective thrust and drag torque scale with.
+    k = np.asarray(s["motor_rpm"], dtype=np.float64) / 1000.0
+    return np.sum(k * k, axis=-1)
+
+
 def _plain(name: str) -> Callable[[Signals], np.ndarray]:
     return lambda s: s[name]
 
@@ -84,6 +90,7 @@ FEATURES: dict[str, Callable[[Signals], np.ndarray]] = {
     "yaw_sin": lambda s: np.sin(s["yaw_rad"]),
     "yaw_cos": lambda s: np.cos(s["yaw_rad"]),
     **{f"{a}_moment_krpm2": _moment(a) for a in _MOMENT_SIGNS},
+    "collective_krpm2": _collective,
 }
 
 PAPER_FEATURES: tuple[str, ...] = (
@@ -111,7 +118,7 @@ def compute_features(signals: Signals, names: Sequence[str] = PAPER_FEATURES) ->
 
 def _needs(feature: str, signal: str) -> bool:
     if signal == "motor_rpm":
-        return feature.startswith("rpm") or feature.endswith("_moment_krpm2")
+        return feature.startswith("rpm") or feature.endswith("_krpm2")
     if signal == "yaw_rad":
         return feature in ("yaw_rad", "yaw_sin", "yaw_cos")
     return feature == signal

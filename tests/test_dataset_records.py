@@ -25,6 +25,19 @@ def test_conditions_follow_the_label_table():
         assert set(np.unique(cond[cond > 0])) == kinds
 
 
+def test_varied_faults_give_uniform_and_mixed_flights():
+    cond = flight_conditions("varied", 60, np.random.default_rng(1))
+    multi = cond[(cond > 0).sum(axis=1) >= 2]
+    kinds = [set(row[row > 0]) for row in multi]
+    uniform_bent, uniform_cracked = sum(k == {1} for k in kinds), sum(k == {2} for k in kinds)
+    mixed = sum(k == {1, 2} for k in kinds)
+    # a third each of all-bent, all-cracked and per-propeller draws (of which 3/4+ mix on a 2+ fault set)
+    assert 0.38 < uniform_bent / len(kinds) < 0.5 and 0.38 < uniform_cracked / len(kinds) < 0.5, (uniform_bent, uniform_cracked)
+    assert 0.15 < mixed / len(kinds) < 0.3
+    label16 = cond[15 * 60:]
+    assert ((label16 == 1).all(axis=1).mean() > 0.25) and ((label16 == 2).all(axis=1).mean() > 0.25)
+
+
 def test_round_trip_keeps_every_propellers_condition(tmp_path):
     ds = synthetic_dataset(2, 150, seed=3)
     back = load_dataset(save_dataset(tmp_path / "d.npz", ds))

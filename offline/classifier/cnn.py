@@ -9,6 +9,10 @@ one dense layer and the output layer. Two heads:
 - ``multilabel4``: one sigmoid per propeller (our change for generalisation);
   the 16 label probabilities are the product of independent Bernoullis.
 
+Optionally (``yaw_effectiveness``) a physics block adds four window statistics
+to the dense layer's input; see ``yaw_effectiveness``. It has no weights and
+is part of the exported graph, so the monitor feeds the same raw features.
+
 ``forward`` returns logits for training; ``probabilities`` returns the two
 outputs of the ONNX contract (``monitor.model``).
 """
@@ -23,6 +27,9 @@ from torch import nn
 from monitor.labels import LABEL_MASKS
 
 HEADS = ("softmax16", "multilabel4")
+# The features the yaw-effectiveness block reads, in this order (``CnnConfig.yaw_effectiveness`` holds their indices).
+YAW_EFFECTIVENESS_INPUTS = ("yaw_moment_krpm2", "collective_krpm2", "yaw_rate_rad_s")
+N_YAW_STATS = 4
 
 
 @dataclass(frozen=True)
@@ -34,10 +41,50 @@ class CnnConfig:
     dense: int = 64
     head: str = "softmax16"
     dropout: float = 0.0
+    # Indices of YAW_EFFECTIVENESS_INPUTS in the feature list, or None for the paper's CNN alone.
+    yaw_effectiveness: tuple[int, int, int] | None = None
 
     def __post_init__(self) -> None:
         if self.head not in HEADS:
             raise ValueError(f"head must be one of {HEADS}, got {self.head!r}")
+        if self.yaw_effectiveness is not None:
+            idx = tuple(int(i) for i in self.yaw_effectiveness)  # a checkpoint stores a list
+            if len(idx) != 3 or not all(0 <= i < self.n_features for i in idx):
+                raise ValueError(f"yaw_effectiveness: need 3 feature indices below {self.n_features}, got {idx}")
+            object.__setattr__(self, "yaw_effectiveness", idx)
+
+
+def yaw_effectiveness(x: torch.Tensor, idx: tuple[int, int, int]) -> torch.Tensor:
+    """(N, window, F) raw features -> (N, 4): g, h, log excitation of m and of c, per window.
+
+    Least squares over the window's steps of the yaw-rate change on what the
+    rotors were asked for:  r[t+1] - r[t] = g*m[t] + h*c[t] + const, with
+    m = yaw_moment_krpm2 and c = collective_krpm2 (both in (kRPM)^2).
+
+    - g is yaw acceleration per unit of commanded yaw moment: it grows with
+      every propeller whose drag torque per (RPM)^2 grows (a damaged blade),
+      and a payload at the CG leaves it alone (a point mass adds no inertia
+      about z), which is what tells "all four damaged" from "heavier".
+    - h is yaw acceleration per unit of collective: zero when CCW and CW
+      rotors have equal torque coefficients; its sign says which spin
+      direction carries more damaged propellers (the same-spin pairs 1+2
+      and 3+4, which relative RPM hardly shows).
+    - the two log excitations tell the network how much the fit can be trusted.
+    """
+    im, ic, ir = idx
+    m = x[:, :-1, im]
+    c = x[:, :-1, ic]
+    a = x[:, 1:, ir] - x[:, :-1, ir]
+    m = m - m.mean(dim=1, keepdim=True)
+    c = c - c.mean(dim=1, keepdim=True)
+    a = a - a.mean(dim=1, keepdim=True)
+    smm, scc, smc = (m * m).sum(1), (c * c).sum(1), (m * c).sum(1)
+    sam, sac = (a * m).sum(1), (a * c).sum(1)
+    tiny = 1e-6
+    det = smm * scc - smc * smc + tiny * (smm * scc + tiny)
+    g = (sam * scc - sac * smc) / det
+    h = (sac * smm - sam * smc) / det
+    return torch.stack([g, h, torch.log(smm + tiny), torch.log(scc + tiny)], dim=1)
 
 
 def _pooled(n: int, blocks: int) -> int:
@@ -55,6 +102,10 @@ class FaultCnn(nn.Module):
         self.register_buffer("mean", torch.zeros(f) if mean is None else torch.as_tensor(mean, dtype=torch.float32))
         self.register_buffer("std", torch.ones(f) if std is None else torch.as_tensor(std, dtype=torch.float32))
         self.register_buffer("masks", torch.as_tensor(LABEL_MASKS))
+        if cfg.yaw_effectiveness is not None:
+            # Standardisation of the yaw statistics (set from training windows by ``fit_yaw_stats``).
+            self.register_buffer("yaw_mean", torch.zeros(N_YAW_STATS))
+            self.register_buffer("yaw_std", torch.ones(N_YAW_STATS))
         layers: list[nn.Module] = []
         c_in, h, w = 1, cfg.window, f
         for b in range(cfg.blocks):
@@ -64,14 +115,31 @@ class FaultCnn(nn.Module):
             c_in, h, w = c_out, h // kh, w // kw
         self.features = nn.Sequential(*layers)
         n_out = 16 if cfg.head == "softmax16" else 4
-        self.head = nn.Sequential(
-            nn.Flatten(), nn.Linear(c_in * h * w, cfg.dense), nn.ReLU(), nn.Dropout(cfg.dropout), nn.Linear(cfg.dense, n_out)
+        n_extra = N_YAW_STATS if cfg.yaw_effectiveness is not None else 0
+        self.head = nn.Sequential(  # the Flatten is a no-op on the (N, D) input; kept so checkpoints keep their keys
+            nn.Flatten(), nn.Linear(c_in * h * w + n_extra, cfg.dense), nn.ReLU(), nn.Dropout(cfg.dropout), nn.Linear(cfg.dense, n_out)
         )
+
+    def yaw_stats(self, x: torch.Tensor) -> torch.Tensor:
+        """(N, window, F) raw -> (N, 4) raw yaw statistics (``yaw_effectiveness``)."""
+        return yaw_effectiveness(x, self.cfg.yaw_effectiveness)
+
+    def fit_yaw_stats(self, x: torch.Tensor) -> None:
+        """Set the yaw statistics' standardisation from raw training windows."""
+        with torch.no_grad():
+            s = self.yaw_stats(x).double()
+            s = s[torch.isfinite(s).all(dim=1)]
+            std = s.std(dim=0)
+            self.yaw_mean.copy_(s.mean(dim=0).float())
+            self.yaw_std.copy_(torch.where(std > 1e-12, std, torch.ones_like(std)).float())
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         """(N, window, F) raw features -> logits (N, 16) or (N, 4)."""
         z = (x - self.mean) / self.std
-        return self.head(self.features(z.unsqueeze(1)))
+        flat = self.features(z.unsqueeze(1)).flatten(1)
+        if self.cfg.yaw_effectiveness is not None:
+            flat = torch.cat([flat, (self.yaw_stats(x) - self.yaw_mean) / self.yaw_std], dim=1)
+        return self.head(flat)
 
     def probabilities(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """(label_probability (N,16), fault_probability (N,4)) as in the ONNX contract."""

@@ -33,6 +33,9 @@ SHIFT_FEATURES = ("rpm_rel_1", "rpm_rel_2", "rpm_rel_3", "rpm_rel_4", "rpm_mean"
 MOMENT_FEATURES = ("rpm_rel_1", "rpm_rel_2", "rpm_rel_3", "rpm_rel_4", "rpm_mean", "roll_rad", "pitch_rad",
                    "yaw_sin", "yaw_cos", "roll_moment_krpm2", "roll_rate_rad_s", "pitch_moment_krpm2",
                    "pitch_rate_rad_s", "yaw_moment_krpm2", "yaw_rate_rad_s")
+# The yaw-effectiveness block (offline.classifier.cnn.yaw_effectiveness) reads the yaw moment and the collective
+# the rotors are asked for beside the yaw rate; they sit next to it so the convolutions see them together too.
+YAW_FEATURES = SHIFT_FEATURES + ("yaw_moment_krpm2", "collective_krpm2")
 
 # R has 4x the flights of A: a sparser window stride keeps an epoch the same size; 10 % of flights held out.
 SHIFT_TRAINING = {"train_stride": 32, "test_fraction": 0.1}
@@ -49,6 +52,15 @@ EXPERIMENTS: dict[str, tuple[tuple[str, ...], dict]] = {
                                                        "epochs": 12}),
     "random+rel+multilabel x2 epochs healthy x4": (("R-mixed",), {**SHIFT_TRAINING, "features": SHIFT_FEATURES,
                                                                   "head": "multilabel4", "epochs": 12, "healthy_weight": 4.0}),
+    "random+rel+multilabel x2 epochs +yaw": (("R-mixed",), {**SHIFT_TRAINING, "features": YAW_FEATURES, "head": "multilabel4",
+                                                            "epochs": 12, "yaw_effectiveness": True}),
+    "random+rel x2 epochs +yaw": (("R-mixed",), {**SHIFT_TRAINING, "features": YAW_FEATURES, "epochs": 12,
+                                                 "yaw_effectiveness": True}),
+    # R-varied: 30 flights per label, a third all bent, a third all cracked, a third mixed (R-mixed: 20, all mixed).
+    "varied+rel+multilabel x2 epochs +yaw": (("R-varied",), {**SHIFT_TRAINING, "features": YAW_FEATURES, "head": "multilabel4",
+                                                             "epochs": 12, "yaw_effectiveness": True}),
+    "varied+rel x2 epochs +yaw": (("R-varied",), {**SHIFT_TRAINING, "features": YAW_FEATURES, "epochs": 12,
+                                                  "yaw_effectiveness": True}),
 }
 EVAL_SETS = ("A-bent", "B-bent", "C-bent", "A-cracked", "B-cracked", "C-cracked")
 

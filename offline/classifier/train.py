@@ -21,7 +21,7 @@ from torch import nn
 from monitor.errors import ModelError
 from monitor.features import PAPER_FEATURES, SAMPLE_RATE_HZ, WINDOW_STEPS, Normalizer, check_feature_names
 from monitor.labels import LABEL_MASKS
-from offline.classifier.cnn import CnnConfig, FaultCnn
+from offline.classifier.cnn import YAW_EFFECTIVENESS_INPUTS, CnnConfig, FaultCnn
 from offline.classifier.windows import gather, window_index
 from offline.dataset.records import FaultDataset
 
@@ -43,11 +43,17 @@ class TrainConfig:
     # Loss weight of windows from healthy flights: healthy flight is the common case onboard, so a
     # weight > 1 trades missed all-faulty cases for fewer false alarms.
     healthy_weight: float = 1.0
+    # Add the yaw-effectiveness statistics (offline.classifier.cnn.yaw_effectiveness) to the dense layer;
+    # the features must then include YAW_EFFECTIVENESS_INPUTS.
+    yaw_effectiveness: bool = False
     seed: int = 0
     threads: int = 1
 
     def __post_init__(self) -> None:
         check_feature_names(self.features)
+        missing = [n for n in YAW_EFFECTIVENESS_INPUTS if n not in self.features] if self.yaw_effectiveness else []
+        if missing:
+            raise ModelError(f"yaw_effectiveness needs the feature(s) {missing} in the feature list")
         if not 0.0 <= self.test_fraction < 1.0:
             raise ValueError(f"test_fraction must be in [0, 1), got {self.test_fraction}")
 
@@ -107,11 +113,16 @@ def train(ds: FaultDataset, cfg: TrainConfig, log=print) -> TrainedModel:
     feats = ds.features(cfg.features)
     train_f, test_f = split_flights(ds.labels, cfg.test_fraction, cfg.seed)
     norm = Normalizer.fit(feats[train_f])
+    yaw_idx = tuple(cfg.features.index(n) for n in YAW_EFFECTIVENESS_INPUTS) if cfg.yaw_effectiveness else None
     net = FaultCnn(
         CnnConfig(window=cfg.window, n_features=len(cfg.features), blocks=cfg.blocks, channels=cfg.channels,
-                  dense=cfg.dense, head=cfg.head, dropout=cfg.dropout),
+                  dense=cfg.dense, head=cfg.head, dropout=cfg.dropout, yaw_effectiveness=yaw_idx),
         mean=norm.mean, std=norm.std,
     )
+    if yaw_idx is not None:
+        sample = window_index(feats, cfg.window, max(1, cfg.train_stride // 2), train_f)
+        sample = sample[rng.permutation(len(sample))[:20000]]
+        net.fit_yaw_stats(torch.from_numpy(gather(feats, sample, cfg.window)))
     y_flight = targets(ds, cfg.head)
     label_index = ds.labels - 1  # per flight, computed once
     loss_fn = nn.CrossEntropyLoss(reduction="none") if cfg.head == "softmax16" else nn.BCEWithLogitsLoss(reduction="none")
