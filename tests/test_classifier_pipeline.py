@@ -142,9 +142,9 @@ def test_shipped_build_reuses_what_the_dataset_cli_makes():
     cli = specs_from_args(build_parser().parse_args(
         ["--sets", "A,B,C", "--fault", "bent,cracked", "--flights-per-label", "5", "--propellers", "quadratic"]))
     cli += specs_from_args(build_parser().parse_args(
-        ["--name", "R", "--waypoints", "random", "--payload", "0,0.6", "--wind", "3", "--variants", "8", "--fault", "mixed",
-         "--flights-per-label", "20", "--propellers", "quadratic", "--seed", "7"]))
-    shipped = data_specs("quadratic", 20, 5)
+        ["--name", "R", "--waypoints", "random", "--payload", "0,0.6", "--wind", "3", "--variants", "8", "--fault", "varied",
+         "--flights-per-label", "30", "--propellers", "quadratic", "--seed", "7"]))
+    shipped = data_specs("quadratic", 30, 5)
     assert sorted(map(str, map(to_mapping, cli))) == sorted(map(str, map(to_mapping, shipped)))
 
 
@@ -155,4 +155,4 @@ def test_shipped_configuration_is_the_ablations_last_row():
     from offline.classifier.experiments import EXPERIMENTS
 
     sets, changes = EXPERIMENTS[SHIPPED_ROW]
-    assert sets == ("R-mixed",) and dataclasses.replace(TrainConfig(), **changes) == SHIPPED
+    assert sets == ("R-varied",) and dataclasses.replace(TrainConfig(), **changes) == SHIPPED

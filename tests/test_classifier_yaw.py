@@ -84,14 +84,31 @@ def test_simulated_damage_moves_yaw_effectiveness_and_payload_does_not():
     assert abs(h[0]) < 0.25 * scale and abs(h[1]) < 0.25 * scale and abs(h[2]) < 0.25 * scale, h
 
 
+def test_robust_scaling_ignores_wild_windows_and_clips_them():
+    from offline.classifier.cnn import YAW_CLIP, CnnConfig, FaultCnn
+
+    rng = np.random.default_rng(4)
+    gains = np.where(rng.random(400) < 0.05, 0.05, 0.004 + 1e-4 * rng.standard_normal(400))  # 5 % wild windows
+    x = torch.from_numpy(np.concatenate([_window(g, 0.0, seed=i) for i, g in enumerate(gains)]))
+    nets = {r: FaultCnn(CnnConfig(n_features=3, channels=4, dense=8, yaw_effectiveness=IDX, yaw_robust=r)) for r in (False, True)}
+    for net in nets.values():
+        net.fit_yaw_stats(x)
+    assert nets[True].yaw_std[0] < 2e-4 < nets[False].yaw_std[0]  # the MAD sees the 1e-4 spread, the std the outliers
+    assert abs(nets[True].yaw_mean[0].item() - 0.004) < 3e-5
+    with torch.no_grad():  # a wild window lies beyond the clip, so the clamp in forward is what bounds it
+        z = (nets[True].yaw_stats(x[gains > 0.01][:1]) - nets[True].yaw_mean) / nets[True].yaw_std
+    assert z[0, 0] > YAW_CLIP
+
+
 def test_yaw_block_needs_its_features():
     with pytest.raises(ModelError, match="collective_krpm2"):
         TrainConfig(yaw_effectiveness=True, features=("rpm_1", "yaw_moment_krpm2", "yaw_rate_rad_s"))
 
 
-def test_yaw_model_exports_with_torch_parity_and_round_trips(tmp_path):
+@pytest.mark.parametrize("head,robust", [("multilabel4", False), ("softmax16", True)])
+def test_yaw_model_exports_with_torch_parity_and_round_trips(tmp_path, head, robust):
     data = synthetic_dataset(flights_per_label=2, n_steps=200, seed=2)
-    cfg = TrainConfig(features=YAW_FEATURES, head="multilabel4", yaw_effectiveness=True, channels=8, dense=16,
+    cfg = TrainConfig(features=YAW_FEATURES, head=head, yaw_effectiveness=True, yaw_robust=robust, channels=8, dense=16,
                       epochs=1, train_stride=4, test_fraction=0.0)
     m = train(data, cfg, log=lambda *_: None)
     assert m.net.yaw_std.min() > 0 and torch.isfinite(m.net.yaw_mean).all()
@@ -104,5 +121,5 @@ def test_yaw_model_exports_with_torch_parity_and_round_trips(tmp_path):
     np.testing.assert_allclose(lo, lt, atol=1e-4)
     np.testing.assert_allclose(fo, ft, atol=1e-4)
     m2 = load_checkpoint(save_checkpoint(tmp_path / "y.pt", m))
-    assert m2.net.cfg.yaw_effectiveness == m.net.cfg.yaw_effectiveness
+    assert m2.net.cfg == m.net.cfg
     np.testing.assert_array_equal(predict_probabilities(m2, w)[1], ft)

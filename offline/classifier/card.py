@@ -6,6 +6,11 @@ from pathlib import Path
 
 from offline.classifier.evaluate import Result, format_table
 
+_FAULT_MODES = {
+    "mixed": "each faulty propeller bent or cracked at random.",
+    "varied": "the faulty propellers of a flight all bent (1/3 of flights), all cracked (1/3) or each at random (1/3).",
+}
+
 
 def write_card(path: str | Path, manifest: dict, results: list[Result], ablation: str = "") -> Path:
     cfg = manifest["config"]
@@ -13,7 +18,7 @@ def write_card(path: str | Path, manifest: dict, results: list[Result], ablation
     fig = manifest["figures"]
     fa, det = fig["false_alarms"], fig["detection"]
     rule = fig["alert_rule"]
-    spec = next(s for s in cfg["data_specs"] if s["name"] == "R-mixed")
+    spec = cfg["data_specs"][0]  # the training set comes first (build_shipped.data_specs)
     lines = [
         "# propwatch classifier card (`models/classifier.onnx`)",
         "",
@@ -23,16 +28,22 @@ def write_card(path: str | Path, manifest: dict, results: list[Result], ablation
         "## What it does",
         f"- Input: `features` (N, {train['window']}, {len(train['features'])}) raw float32 at 20 Hz, in this order: "
         + ", ".join(f"`{f}`" for f in train["features"]) + ". The graph normalises (statistics in the metadata).",
-        "- Outputs: `fault_probability` (N, 4), one sigmoid per propeller (PX4 order 1..4); `label_probability` (N, 16) "
-        "is the product of the four Bernoullis over the paper's label masks.",
+        ("- Outputs: `fault_probability` (N, 4), one sigmoid per propeller (PX4 order 1..4); `label_probability` (N, 16) "
+         "is the product of the four Bernoullis over the paper's label masks." if train["head"] == "multilabel4" else
+         "- Outputs: `label_probability` (N, 16), the paper's softmax over labels; `fault_probability` (N, 4) is, per "
+         "propeller (PX4 order 1..4), the sum of the probabilities of the labels that include it."),
         f"- Network: the paper's CNN (3x3 kernels, {train['channels']} channels doubling over {train['blocks']} blocks, "
-        f"2x2 max-pool after each, dense {train['dense']}), head `{train['head']}`.",
+        f"2x2 max-pool after each, dense {train['dense']}), head `{train['head']}`"
+        + (". Beside the flattened convolutions the dense layer gets four yaw statistics of the window, computed in the "
+           "graph without weights (`offline.classifier.cnn.yaw_effectiveness`): the least-squares yaw acceleration per "
+           "commanded yaw moment (damaged blades drag more, a payload at the CG changes nothing), per collective (which "
+           "spin direction carries the damage) and their two excitations." if train.get("yaw_effectiveness") else "."),
         "",
         "## Training data",
         f"- {16 * spec['flights_per_label']} simulated {spec['duration_s']:.0f} s flights ({spec['flights_per_label']} per label), "
         f"random 5-waypoint routes, payload {spec['payload_kg'][0]}..{spec['payload_kg'][1]} kg on the 1.5 kg quad, "
         f"steady wind up to {spec['wind_max_m_s']} m/s over {spec['vehicle_variants']} vehicle variants, "
-        "each faulty propeller bent or cracked at random.",
+        + _FAULT_MODES.get(spec["fault"], f"faults `{spec['fault']}`."),
         f"- Propeller models: `{cfg['propellers']}`"
         + (" (analytic fault signatures of `offline/propellers/faults.py`: the LSTM weights were not built when this model was trained)."
            if cfg["propellers"] == "quadratic" else " (the paper's stacked LSTMs)."),

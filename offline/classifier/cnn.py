@@ -30,6 +30,7 @@ HEADS = ("softmax16", "multilabel4")
 # The features the yaw-effectiveness block reads, in this order (``CnnConfig.yaw_effectiveness`` holds their indices).
 YAW_EFFECTIVENESS_INPUTS = ("yaw_moment_krpm2", "collective_krpm2", "yaw_rate_rad_s")
 N_YAW_STATS = 4
+YAW_CLIP = 8.0
 
 
 @dataclass(frozen=True)
@@ -43,6 +44,9 @@ class CnnConfig:
     dropout: float = 0.0
     # Indices of YAW_EFFECTIVENESS_INPUTS in the feature list, or None for the paper's CNN alone.
     yaw_effectiveness: tuple[int, int, int] | None = None
+    # Standardise the yaw statistics by median and MAD and clip to +-YAW_CLIP (else mean and std, unclipped):
+    # a few windows with almost no yaw activity give wild g, h that inflate the std and hide the faults' shift.
+    yaw_robust: bool = False
 
     def __post_init__(self) -> None:
         if self.head not in HEADS:
@@ -129,16 +133,23 @@ class FaultCnn(nn.Module):
         with torch.no_grad():
             s = self.yaw_stats(x).double()
             s = s[torch.isfinite(s).all(dim=1)]
-            std = s.std(dim=0)
-            self.yaw_mean.copy_(s.mean(dim=0).float())
-            self.yaw_std.copy_(torch.where(std > 1e-12, std, torch.ones_like(std)).float())
+            if self.cfg.yaw_robust:
+                centre = s.median(dim=0).values
+                scale = 1.4826 * (s - centre).abs().median(dim=0).values
+            else:
+                centre, scale = s.mean(dim=0), s.std(dim=0)
+            self.yaw_mean.copy_(centre.float())
+            self.yaw_std.copy_(torch.where(scale > 1e-12, scale, torch.ones_like(scale)).float())
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         """(N, window, F) raw features -> logits (N, 16) or (N, 4)."""
         z = (x - self.mean) / self.std
         flat = self.features(z.unsqueeze(1)).flatten(1)
         if self.cfg.yaw_effectiveness is not None:
-            flat = torch.cat([flat, (self.yaw_stats(x) - self.yaw_mean) / self.yaw_std], dim=1)
+            z_yaw = (self.yaw_stats(x) - self.yaw_mean) / self.yaw_std
+            if self.cfg.yaw_robust:
+                z_yaw = torch.clamp(z_yaw, -YAW_CLIP, YAW_CLIP)
+            flat = torch.cat([flat, z_yaw], dim=1)
         return self.head(flat)
 
     def probabilities(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:

@@ -61,6 +61,10 @@ EXPERIMENTS: dict[str, tuple[tuple[str, ...], dict]] = {
                                                              "epochs": 12, "yaw_effectiveness": True}),
     "varied+rel x2 epochs +yaw": (("R-varied",), {**SHIFT_TRAINING, "features": YAW_FEATURES, "epochs": 12,
                                                   "yaw_effectiveness": True}),
+    "varied+rel x2 epochs +yaw robust": (("R-varied",), {**SHIFT_TRAINING, "features": YAW_FEATURES, "epochs": 12,
+                                                         "yaw_effectiveness": True, "yaw_robust": True}),
+    "varied+rel x3 epochs +yaw robust": (("R-varied",), {**SHIFT_TRAINING, "features": YAW_FEATURES, "epochs": 20,
+                                                         "yaw_effectiveness": True, "yaw_robust": True}),
 }
 EVAL_SETS = ("A-bent", "B-bent", "C-bent", "A-cracked", "B-cracked", "C-cracked")
 

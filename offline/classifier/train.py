@@ -46,6 +46,7 @@ class TrainConfig:
     # Add the yaw-effectiveness statistics (offline.classifier.cnn.yaw_effectiveness) to the dense layer;
     # the features must then include YAW_EFFECTIVENESS_INPUTS.
     yaw_effectiveness: bool = False
+    yaw_robust: bool = False  # median/MAD standardisation of the yaw statistics, clipped (CnnConfig.yaw_robust)
     seed: int = 0
     threads: int = 1
 
@@ -116,7 +117,8 @@ def train(ds: FaultDataset, cfg: TrainConfig, log=print) -> TrainedModel:
     yaw_idx = tuple(cfg.features.index(n) for n in YAW_EFFECTIVENESS_INPUTS) if cfg.yaw_effectiveness else None
     net = FaultCnn(
         CnnConfig(window=cfg.window, n_features=len(cfg.features), blocks=cfg.blocks, channels=cfg.channels,
-                  dense=cfg.dense, head=cfg.head, dropout=cfg.dropout, yaw_effectiveness=yaw_idx),
+                  dense=cfg.dense, head=cfg.head, dropout=cfg.dropout, yaw_effectiveness=yaw_idx,
+                  yaw_robust=cfg.yaw_robust),
         mean=norm.mean, std=norm.std,
     )
     if yaw_idx is not None:
