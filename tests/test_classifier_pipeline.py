@@ -143,8 +143,8 @@ def test_shipped_build_reuses_what_the_dataset_cli_makes():
         ["--sets", "A,B,C", "--fault", "bent,cracked", "--flights-per-label", "5", "--propellers", "quadratic"]))
     cli += specs_from_args(build_parser().parse_args(
         ["--name", "R", "--waypoints", "random", "--payload", "0,0.6", "--wind", "3", "--variants", "8", "--fault", "varied",
-         "--flights-per-label", "30", "--propellers", "quadratic", "--seed", "7"]))
-    shipped = data_specs("quadratic", 30, 5)
+         "--flights-per-label", "60", "--propellers", "quadratic", "--seed", "7"]))
+    shipped = data_specs("quadratic", 60, 5)
     assert sorted(map(str, map(to_mapping, cli))) == sorted(map(str, map(to_mapping, shipped)))
 
 

@@ -81,8 +81,16 @@ def write_card(path: str | Path, manifest: dict, results: list[Result], ablation
         lines.append("")
     if ablation:
         lines += ["## Ablation (window accuracy %, hop 10; `python -m offline.classifier.experiments`)",
-                  "Each row adds one change to the row above (paper rows: the paper's recipe on A of one fault type; "
-                  "A of that type is then scored on held-out flights, everything else on all flights).", "", ablation, ""]
+                  "Rows in the order they were tried; each adds one change to an earlier row, named in its label "
+                  "(paper rows: the paper's recipe on A of one fault type; A of that type is then scored on held-out "
+                  "flights, everything else on all flights). Legend: `random` = training set R-mixed (random routes, payload "
+                  "0..0.6 kg, wind, each faulty propeller bent or cracked at random), `rel` = relative-RPM features, "
+                  "`multilabel` = one sigmoid per propeller (else the paper's softmax over 16 labels), `moments` = per-axis "
+                  "moment features, `x2/x3 epochs` = 12/20 epochs (6 before), `healthy x4` = healthy windows weighted 4x, "
+                  "`+yaw` = the yaw-effectiveness block, `varied` = training set R-varied (a third of flights all bent, a "
+                  "third all cracked, a third mixed; 30 flights per label), `robust` = median/MAD-scaled, clipped yaw "
+                  "statistics, `x60 flights` = R-varied with 60 flights per label, `dropout` = dropout 0.3 before the "
+                  "output layer.", "", ablation, ""]
     lines += [
         "## Limits",
         "- Simulation only: no real bent or cracked propeller flight exists to test on (see ../shared/data/README.md).",
@@ -90,8 +98,20 @@ def write_card(path: str | Path, manifest: dict, results: list[Result], ablation
         "- Needs 100 consecutive valid 20 Hz samples (5 s) before the first decision, so detection takes seconds, not milliseconds.",
         "- Calibration terms (motor efficiency, CG offset) were not randomised here: a real airframe's imbalance can look like a fault;"
         " calibrate the vehicle first (issue 7).",
-        "",
     ]
+    if train.get("yaw_effectiveness"):
+        lines += [
+            "- What tells all four propellers damaged (label 16) from a heavier healthy vehicle (label 1) is the yaw "
+            "statistic, and it rests on the simulated blades' drag-torque rise (bent +5..10 %, cracked +2..6 %, "
+            "`offline/propellers/faults.py`), which comes from physical reasoning, not a measurement. If real damage "
+            "changes a blade's torque per RPM^2 differently, label 16 falls back to being confused with label 1; the "
+            "relative-RPM part (which propeller) does not depend on it.",
+            "- A payload is modelled as a point mass at the CG (no yaw inertia). A real payload's inertia lowers the yaw "
+            "statistic, the opposite way to damage: it can hide an all-four fault but not invent one.",
+            "- Cracked faults at hover cost only ~6 % thrust: all four cracked is the hardest case (the per-label "
+            "confusion matrices are written by `propwatch evaluate`).",
+        ]
+    lines.append("")
     path = Path(path)
     path.write_text("\n".join(lines), encoding="utf-8")
     return path

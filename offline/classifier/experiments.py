@@ -65,6 +65,11 @@ EXPERIMENTS: dict[str, tuple[tuple[str, ...], dict]] = {
                                                          "yaw_effectiveness": True, "yaw_robust": True}),
     "varied+rel x3 epochs +yaw robust": (("R-varied",), {**SHIFT_TRAINING, "features": YAW_FEATURES, "epochs": 20,
                                                          "yaw_effectiveness": True, "yaw_robust": True}),
+    # The rows below train on R-varied with 60 flights per label (`--data` pointing at that set): the same recipe, 2x flights.
+    "varied x60 flights +yaw robust": (("R-varied",), {**SHIFT_TRAINING, "features": YAW_FEATURES, "epochs": 20,
+                                                       "yaw_effectiveness": True, "yaw_robust": True}),
+    "varied x60 flights +yaw robust dropout": (("R-varied",), {**SHIFT_TRAINING, "features": YAW_FEATURES, "epochs": 20,
+                                                               "yaw_effectiveness": True, "yaw_robust": True, "dropout": 0.3}),
 }
 EVAL_SETS = ("A-bent", "B-bent", "C-bent", "A-cracked", "B-cracked", "C-cracked")
 
