@@ -116,6 +116,12 @@ def compute_features(signals: Signals, names: Sequence[str] = PAPER_FEATURES) ->
     return np.stack(cols, axis=-1).astype(np.float32)
 
 
+def signals_needed(feature: str) -> tuple[str, ...]:
+    """The canonical signals a named feature is computed from."""
+    check_feature_names([feature])
+    return tuple(s for s in SIGNALS if _needs(feature, s))
+
+
 def _needs(feature: str, signal: str) -> bool:
     if signal == "motor_rpm":
         return feature.startswith("rpm") or feature.endswith("_krpm2")

@@ -54,6 +54,16 @@ def test_verdict_names_the_faulty_propeller(capsys, model, logs, faulty):
     assert res["warnings"] == [] and res["hop_steps"] == 20
 
 
+def test_every_named_feature_is_fed_from_the_log(capsys, logs, tmp_path):
+    # A model may ask for any feature of monitor.features (derived ones such as the shipped model's
+    # yaw_moment_krpm2 and collective_krpm2 included): diagnose must find the signals each needs.
+    from monitor.features import FEATURES, PAPER_FEATURES
+
+    names = PAPER_FEATURES + tuple(n for n in FEATURES if n not in PAPER_FEATURES)
+    code, res = run(capsys, logs[3], "--model", build_model(tmp_path / "all.onnx", features=names), "--json")
+    assert code == 0 and res["verdict"]["faulty_propellers"] == [3], res
+
+
 def test_text_output_and_hop(capsys, model, logs):
     code, out = run(capsys, logs[2], "--model", model)
     assert code == 0 and "label 3" in out and "FAULTY" in out and "airborne" in out

@@ -21,7 +21,7 @@ import numpy as np
 
 from monitor.errors import ModelError
 from monitor.esc import EscCurve
-from monitor.features import compute_features, sliding_windows, valid_windows
+from monitor.features import compute_features, signals_needed, sliding_windows, valid_windows
 from monitor.flight import FlightTable
 from monitor.labels import LABEL_TABLE, label_for
 from monitor.model import Classifier
@@ -38,7 +38,6 @@ RPM_RATIO_REFUSE = (0.6, 1.6)
 # The paper's flights are gentle; beyond this attitude the model has not been trained.
 LARGE_ATTITUDE_RAD = np.deg2rad(45.0)
 RPM_FEATURES = ("rpm_1", "rpm_2", "rpm_3", "rpm_4", "rpm_mean")
-SIGNAL_OF_FEATURE = {"yaw_sin": "yaw_rad", "yaw_cos": "yaw_rad"}
 
 
 @dataclass
@@ -148,12 +147,11 @@ def envelope_checks(table: FlightTable, clf: Classifier, esc: EscCurve | None = 
         return warnings, "no airborne flight found (armed, throttle above idle, off the ground)"
     sig = table.signals()
     for f in clf.info.features:
-        name = "motor_rpm" if f.startswith("rpm") else SIGNAL_OF_FEATURE.get(f, f)
-        v = sig[name][air]
-        if not np.isfinite(v).any():
-            what = "motor RPM (commands not logged or in another unit than the model's ESC curve)" \
-                if name == "motor_rpm" else name
-            return warnings, f"{what} unknown during flight: the model needs it for feature {f}"
+        for name in signals_needed(f):
+            if not np.isfinite(sig[name][air]).any():
+                what = "motor RPM (commands not logged or in another unit than the model's ESC curve)" \
+                    if name == "motor_rpm" else name
+                return warnings, f"{what} unknown during flight: the model needs it for feature {f}"
     warn, refusal = rpm_envelope(table, clf, figures)
     if refusal:
         return warnings, refusal
