@@ -23,7 +23,10 @@ def write_card(path: str | Path, manifest: dict, results: list[Result], ablation
         "# propwatch classifier card (`models/classifier.onnx`)",
         "",
         f"Built by `make classifier` (`python -m offline.classifier.build_shipped`) at git {manifest['git_revision']}, "
-        f"{manifest['created_utc']}; seed {manifest['seed']}. Full provenance: `classifier.manifest.json`.",
+        f"{manifest['created_utc']}; seed {manifest['seed']}. Full provenance: `classifier.manifest.json`."
+        + (f" The network was trained by the ablation run and shipped from its {manifest['trained_by']} (`--checkpoint`; "
+           "config and training data checked equal to this build's)."
+           if str(manifest.get("trained_by", "this build")).startswith("checkpoint") else ""),
         "",
         "## What it does",
         f"- Input: `features` (N, {train['window']}, {len(train['features'])}) raw float32 at 20 Hz, in this order: "
