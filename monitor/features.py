@@ -66,16 +66,20 @@ def _moment(axis: str) -> Callable[[Signals], np.ndarray]:
     signs = np.array(_MOMENT_SIGNS[axis])
 
     def f(s: Signals) -> np.ndarray:
-        k = np.asarray(s["motor_rpm"], dtype=np.float64) / 1000.0
-        return (k * k) @ signs
+        return _krpm_squared(s) @ signs
 
     return f
 
 
-def _collective(s: Signals) -> np.ndarray:
-    # Sum of the four rotors' (kRPM)^2: what the rotors' collective thrust and drag torque scale with.
+def _krpm_squared(s: Signals) -> np.ndarray:
+    """(..., T, 4) each rotor's (kRPM)^2, what its thrust and drag torque scale with."""
     k = np.asarray(s["motor_rpm"], dtype=np.float64) / 1000.0
-    return np.sum(k * k, axis=-1)
+    return k * k
+
+
+def _collective(s: Signals) -> np.ndarray:
+    # Sum of the four rotors' (kRPM)^2: what the collective thrust and drag torque scale with.
+    return np.sum(_krpm_squared(s), axis=-1)
 
 
 def _plain(name: str) -> Callable[[Signals], np.ndarray]:

@@ -39,8 +39,11 @@ YAW_FEATURES = SHIFT_FEATURES + ("yaw_moment_krpm2", "collective_krpm2")
 
 # R has 4x the flights of A: a sparser window stride keeps an epoch the same size; 10 % of flights held out.
 SHIFT_TRAINING = {"train_stride": 32, "test_fraction": 0.1}
-# name -> (training data sets, config changes). Each row adds one change to the row above it; the last
-# full row is the shipped configuration (``build_shipped.SHIPPED``).
+# The yaw-effectiveness rows: relative RPM + the yaw block, softmax16, 12 epochs; then robust scaling and 20 epochs.
+_YAW = {**SHIFT_TRAINING, "features": YAW_FEATURES, "epochs": 12, "yaw_effectiveness": True}
+_YAW_ROBUST_20 = {**_YAW, "yaw_robust": True, "epochs": 20}
+# name -> (training data sets, config changes). Each row adds one change to an earlier row; the one named
+# by ``build_shipped.SHIPPED_ROW`` is the shipped configuration.
 EXPERIMENTS: dict[str, tuple[tuple[str, ...], dict]] = {
     "paper-bent": (("A-bent",), {}),
     "paper-cracked": (("A-cracked",), {}),
@@ -52,24 +55,16 @@ EXPERIMENTS: dict[str, tuple[tuple[str, ...], dict]] = {
                                                        "epochs": 12}),
     "random+rel+multilabel x2 epochs healthy x4": (("R-mixed",), {**SHIFT_TRAINING, "features": SHIFT_FEATURES,
                                                                   "head": "multilabel4", "epochs": 12, "healthy_weight": 4.0}),
-    "random+rel+multilabel x2 epochs +yaw": (("R-mixed",), {**SHIFT_TRAINING, "features": YAW_FEATURES, "head": "multilabel4",
-                                                            "epochs": 12, "yaw_effectiveness": True}),
-    "random+rel x2 epochs +yaw": (("R-mixed",), {**SHIFT_TRAINING, "features": YAW_FEATURES, "epochs": 12,
-                                                 "yaw_effectiveness": True}),
+    "random+rel+multilabel x2 epochs +yaw": (("R-mixed",), {**_YAW, "head": "multilabel4"}),
+    "random+rel x2 epochs +yaw": (("R-mixed",), _YAW),
     # R-varied: 30 flights per label, a third all bent, a third all cracked, a third mixed (R-mixed: 20, all mixed).
-    "varied+rel+multilabel x2 epochs +yaw": (("R-varied",), {**SHIFT_TRAINING, "features": YAW_FEATURES, "head": "multilabel4",
-                                                             "epochs": 12, "yaw_effectiveness": True}),
-    "varied+rel x2 epochs +yaw": (("R-varied",), {**SHIFT_TRAINING, "features": YAW_FEATURES, "epochs": 12,
-                                                  "yaw_effectiveness": True}),
-    "varied+rel x2 epochs +yaw robust": (("R-varied",), {**SHIFT_TRAINING, "features": YAW_FEATURES, "epochs": 12,
-                                                         "yaw_effectiveness": True, "yaw_robust": True}),
-    "varied+rel x3 epochs +yaw robust": (("R-varied",), {**SHIFT_TRAINING, "features": YAW_FEATURES, "epochs": 20,
-                                                         "yaw_effectiveness": True, "yaw_robust": True}),
+    "varied+rel+multilabel x2 epochs +yaw": (("R-varied",), {**_YAW, "head": "multilabel4"}),
+    "varied+rel x2 epochs +yaw": (("R-varied",), _YAW),
+    "varied+rel x2 epochs +yaw robust": (("R-varied",), {**_YAW, "yaw_robust": True}),
+    "varied+rel x3 epochs +yaw robust": (("R-varied",), _YAW_ROBUST_20),
     # The rows below train on R-varied with 60 flights per label (`--data` pointing at that set): the same recipe, 2x flights.
-    "varied x60 flights +yaw robust": (("R-varied",), {**SHIFT_TRAINING, "features": YAW_FEATURES, "epochs": 20,
-                                                       "yaw_effectiveness": True, "yaw_robust": True}),
-    "varied x60 flights +yaw robust dropout": (("R-varied",), {**SHIFT_TRAINING, "features": YAW_FEATURES, "epochs": 20,
-                                                               "yaw_effectiveness": True, "yaw_robust": True, "dropout": 0.3}),
+    "varied x60 flights +yaw robust": (("R-varied",), _YAW_ROBUST_20),
+    "varied x60 flights +yaw robust dropout": (("R-varied",), {**_YAW_ROBUST_20, "dropout": 0.3}),
 }
 EVAL_SETS = ("A-bent", "B-bent", "C-bent", "A-cracked", "B-cracked", "C-cracked")
 
