@@ -78,8 +78,19 @@ def run(args) -> dict:
         model, tlog = build_inputs(args, work)
         port = free_udp_port()
         report = work / "report.json"
-        cmd = [sys.executable, "-m", "monitor", "--connect", f"udpin:127.0.0.1:{port}", "--model", str(model),
-               "--report", str(report), "--events", str(work / "events.jsonl")]
+        cmd = [
+            sys.executable,
+            "-m",
+            "monitor",
+            "--connect",
+            f"udpin:127.0.0.1:{port}",
+            "--model",
+            str(model),
+            "--report",
+            str(report),
+            "--events",
+            str(work / "events.jsonl"),
+        ]
         t_spawn = time.monotonic()
         d = subprocess.Popen(cmd, cwd=REPO, stderr=subprocess.PIPE, text=True)
         ready = threading.Event()
@@ -98,8 +109,24 @@ def run(args) -> dict:
         startup_s = time.monotonic() - t_spawn
         cpu0, t0, rss_peak = cpu_seconds(d.pid), time.monotonic(), rss_mb(d.pid)
         linger_s = 0.5
-        r = subprocess.Popen([sys.executable, "-m", "monitor.cli", "replay", str(tlog), "--connect", f"udpout:127.0.0.1:{port}",
-                              "--speed", str(args.speed), "--linger", str(linger_s), "--log-level", "WARNING"], cwd=REPO)
+        r = subprocess.Popen(
+            [
+                sys.executable,
+                "-m",
+                "monitor.cli",
+                "replay",
+                str(tlog),
+                "--connect",
+                f"udpout:127.0.0.1:{port}",
+                "--speed",
+                str(args.speed),
+                "--linger",
+                str(linger_s),
+                "--log-level",
+                "WARNING",
+            ],
+            cwd=REPO,
+        )
         while r.poll() is None:
             time.sleep(0.2)
             rss_peak = max(rss_peak, rss_mb(d.pid))
@@ -109,10 +136,18 @@ def run(args) -> dict:
         rep = json.loads(report.read_text())
     lat = rep["latency_ms"]
     return {
-        "ran": {"replay_wall_s": round(t1 - t0 - linger_s, 1), "speed": args.speed,
-                "flight_minutes": args.minutes if not args.tlog else "see tlog", "model": str(model),
-                "tlog": str(args.tlog or "synthetic"), "messages": rep["messages"], "classified_steps": rep["pipeline"]["classified"]},
-        "latency_p50_ms": round(lat["p50"], 3), "latency_p99_ms": round(lat["p99"], 3), "latency_max_ms": round(lat["max"], 3),
+        "ran": {
+            "replay_wall_s": round(t1 - t0 - linger_s, 1),
+            "speed": args.speed,
+            "flight_minutes": args.minutes if not args.tlog else "see tlog",
+            "model": str(model),
+            "tlog": str(args.tlog or "synthetic"),
+            "messages": rep["messages"],
+            "classified_steps": rep["pipeline"]["classified"],
+        },
+        "latency_p50_ms": round(lat["p50"], 3),
+        "latency_p99_ms": round(lat["p99"], 3),
+        "latency_max_ms": round(lat["max"], 3),
         "cpu_percent": round(100.0 * (cpu1 - cpu0) / (t1 - t0), 2),
         "rss_mb": round(rss_peak, 1),
         "startup_s": round(startup_s, 3),

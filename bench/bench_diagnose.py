@@ -27,8 +27,24 @@ sys.path.insert(0, str(REPO / "tests"))  # the fixture model, when no shipped mo
 
 
 def simulate(minutes: float, out: Path) -> Path:
-    cmd = [sys.executable, "-m", "monitor.cli", "simulate", "--out", str(out), "--format", "tlog",
-           "--duration-s", str(int(minutes * 60)), "--label", "4", "--propellers", "quadratic", "--seed", "1"]
+    cmd = [
+        sys.executable,
+        "-m",
+        "monitor.cli",
+        "simulate",
+        "--out",
+        str(out),
+        "--format",
+        "tlog",
+        "--duration-s",
+        str(int(minutes * 60)),
+        "--label",
+        "4",
+        "--propellers",
+        "quadratic",
+        "--seed",
+        "1",
+    ]
     subprocess.run(cmd, check=True, cwd=REPO, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     return out / "flight_000.tlog"
 
@@ -87,8 +103,9 @@ def main(argv=None) -> int:
             print(f"simulated {args.minutes:g} min tlog in {time.perf_counter() - t0:.0f} s")
         size_mb = tlog.stat().st_size / 1e6
 
-        t_parse, c_parse, table = best(lambda: read_log(tlog, esc=esc, rate_hz=clf.info.sample_rate_hz, extras=False),
-                              args.repeat)
+        t_parse, c_parse, table = best(
+            lambda: read_log(tlog, esc=esc, rate_hz=clf.info.sample_rate_hz, extras=False), args.repeat
+        )
         flight_s = len(table) / table.rate_hz
         t_feat, c_feat, feats = best(lambda: compute_features(table.signals(), clf.info.features), args.repeat)
 
@@ -111,8 +128,10 @@ def main(argv=None) -> int:
     row(f"inference ({n_windows} windows, hop {args.hop})", t_inf, c_inf)
     row("total (target >= 500x)", total, ctotal)
     row("pymavlink parse-only (all msgs)", t_pm, c_pm)
-    print(f"features + inference: {100 * (t_feat + t_inf) / total:.1f} % of wall, "
-          f"{100 * (c_feat + c_inf) / ctotal:.1f} % of CPU (target <= 20 %)")
+    print(
+        f"features + inference: {100 * (t_feat + t_inf) / total:.1f} % of wall, "
+        f"{100 * (c_feat + c_inf) / ctotal:.1f} % of CPU (target <= 20 %)"
+    )
     print(f"pymavlink parse-only takes {c_pm / c_parse:.1f}x our parse CPU time")
     return 0
 

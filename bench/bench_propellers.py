@@ -59,8 +59,11 @@ def main(argv: list[str] | None = None) -> int:
         simulate(vehicle, wps, make(), cfg, seed=0)
         wall, cpu = time.perf_counter() - t0, time.process_time() - c0
         flight_s = args.batch * args.duration_s
-        print(f"{name:30s} wall {wall:6.2f} s ({flight_s / wall:6.0f}x)   cpu {cpu:6.2f} s ({flight_s / cpu:6.0f}x real time)   "
-              f"propeller step {per_call_us:6.1f} us cpu/call", flush=True)
+        print(
+            f"{name:30s} wall {wall:6.2f} s ({flight_s / wall:6.0f}x)   cpu {cpu:6.2f} s ({flight_s / cpu:6.0f}x real time)   "
+            f"propeller step {per_call_us:6.1f} us cpu/call",
+            flush=True,
+        )
     return 0
 
 

@@ -37,8 +37,14 @@ def time_sim(vehicle, n: int, duration_s: float) -> dict:
     simulate(vehicle, wps, prop, sim, seed=0)
     wall, cpu = time.perf_counter() - w0, time.process_time() - c0
     flown = n * duration_s
-    return {"flights": n, "duration_s": duration_s, "wall_s": round(wall, 3), "cpu_s": round(cpu, 3),
-            "rtf_wall": round(flown / wall, 1), "rtf_cpu": round(flown / cpu, 1)}
+    return {
+        "flights": n,
+        "duration_s": duration_s,
+        "wall_s": round(wall, 3),
+        "cpu_s": round(cpu, 3),
+        "rtf_wall": round(flown / wall, 1),
+        "rtf_cpu": round(flown / cpu, 1),
+    }
 
 
 def peak_memory(vehicle, n: int, duration_s: float) -> int:
@@ -60,8 +66,14 @@ def time_rotorpy(duration_s: float, t_step_s: float = 0.005) -> dict:
         from rotorpy.vehicles.multirotor import Multirotor
     except ImportError as exc:
         return {"error": f"rotorpy not installed ({exc}); pip install rotorpy"}
-    state = {"x": np.array([1.0, -1.0, 0.5]), "v": np.zeros(3), "q": np.array([0, 0, 0, 1.0]), "w": np.zeros(3),
-             "wind": np.zeros(3), "rotor_speeds": np.full(4, 1788.53)}
+    state = {
+        "x": np.array([1.0, -1.0, 0.5]),
+        "v": np.zeros(3),
+        "q": np.array([0, 0, 0, 1.0]),
+        "w": np.zeros(3),
+        "wind": np.zeros(3),
+        "rotor_speeds": np.full(4, 1788.53),
+    }
     vehicle = Multirotor(quad_params, initial_state=state)
     controller = SE3Control(quad_params)
     traj = HoverTraj()
@@ -72,9 +84,16 @@ def time_rotorpy(duration_s: float, t_step_s: float = 0.005) -> dict:
         control = controller.update(t, state, traj.update(t))
         state = vehicle.step(state, control, t_step_s)
     wall, cpu = time.perf_counter() - w0, time.process_time() - c0
-    return {"flights": 1, "duration_s": duration_s, "t_step_s": t_step_s, "wall_s": round(wall, 3), "cpu_s": round(cpu, 3),
-            "rtf_wall": round(duration_s / wall, 1), "rtf_cpu": round(duration_s / cpu, 1),
-            "final_error_m": float(np.linalg.norm(state["x"]))}
+    return {
+        "flights": 1,
+        "duration_s": duration_s,
+        "t_step_s": t_step_s,
+        "wall_s": round(wall, 3),
+        "cpu_s": round(cpu, 3),
+        "rtf_wall": round(duration_s / wall, 1),
+        "rtf_cpu": round(duration_s / cpu, 1),
+        "final_error_m": float(np.linalg.norm(state["x"])),
+    }
 
 
 def numpy_call_us() -> float:
@@ -97,8 +116,12 @@ def main(argv=None) -> int:
     big = 16 if args.quick else 256
     sim = SimConfig()
     out = {
-        "rates_hz": {"physics": sim.physics_rate_hz, "control": sim.control_rate_hz, "position": sim.position_rate_hz,
-                     "log": sim.log_rate_hz},
+        "rates_hz": {
+            "physics": sim.physics_rate_hz,
+            "control": sim.control_rate_hz,
+            "position": sim.position_rate_hz,
+            "log": sim.log_rate_hz,
+        },
         "batch_1": time_sim(vehicle, 1, dur),
         f"batch_{big}": time_sim(vehicle, big, dur),
     }
@@ -117,14 +140,20 @@ def main(argv=None) -> int:
     if args.json:
         print(json.dumps(out, indent=2))
         return 0
-    print(f"numpy reference: one small ufunc call = {out['numpy_call_us']:.2f} us of CPU (scales every figure below; compare runs by it)")
-    print(f"propwatch simulator, physics {sim.physics_rate_hz} Hz / control {sim.control_rate_hz} Hz / "
-          f"position {sim.position_rate_hz} Hz / log {sim.log_rate_hz} Hz, one thread")
+    print(
+        f"numpy reference: one small ufunc call = {out['numpy_call_us']:.2f} us of CPU (scales every figure below; compare runs by it)"
+    )
+    print(
+        f"propwatch simulator, physics {sim.physics_rate_hz} Hz / control {sim.control_rate_hz} Hz / "
+        f"position {sim.position_rate_hz} Hz / log {sim.log_rate_hz} Hz, one thread"
+    )
     for key in ("batch_1", f"batch_{big}"):
         r = out[key]
-        print(f"  {r['flights']:4d} x {r['duration_s']:.0f} s flights: wall {r['wall_s']:7.2f} s  cpu {r['cpu_s']:7.2f} s  "
-              f"real-time factor {r['rtf_wall']:8.1f} (wall)  {r['rtf_cpu']:8.1f} (cpu)"
-              + (f"  = {r['x_rotorpy_cpu']:.0f} x RotorPy" if "x_rotorpy_cpu" in r else ""))
+        print(
+            f"  {r['flights']:4d} x {r['duration_s']:.0f} s flights: wall {r['wall_s']:7.2f} s  cpu {r['cpu_s']:7.2f} s  "
+            f"real-time factor {r['rtf_wall']:8.1f} (wall)  {r['rtf_cpu']:8.1f} (cpu)"
+            + (f"  = {r['x_rotorpy_cpu']:.0f} x RotorPy" if "x_rotorpy_cpu" in r else "")
+        )
     print(f"  peak traced memory over {mem_dur:.0f} s flights:")
     for n, b in zip(sizes, per):
         print(f"    batch {n:4d}: {out['peak_memory'][f'batch_{n}'] / 2**20:8.2f} MiB  ({b / 2**10:7.1f} KiB per flight)")
@@ -132,9 +161,11 @@ def main(argv=None) -> int:
     if "error" in r:
         print(f"  RotorPy: {r['error']}")
     else:
-        print(f"  RotorPy Multirotor + SE3Control, {r['t_step_s'] * 1000:.0f} ms step, 1 x {r['duration_s']:.0f} s: "
-              f"wall {r['wall_s']:.2f} s  cpu {r['cpu_s']:.2f} s  real-time factor {r['rtf_wall']:.1f} (wall)  "
-              f"{r['rtf_cpu']:.1f} (cpu)")
+        print(
+            f"  RotorPy Multirotor + SE3Control, {r['t_step_s'] * 1000:.0f} ms step, 1 x {r['duration_s']:.0f} s: "
+            f"wall {r['wall_s']:.2f} s  cpu {r['cpu_s']:.2f} s  real-time factor {r['rtf_wall']:.1f} (wall)  "
+            f"{r['rtf_cpu']:.1f} (cpu)"
+        )
     return 0
 
 

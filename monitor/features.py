@@ -98,9 +98,16 @@ FEATURES: dict[str, Callable[[Signals], np.ndarray]] = {
 }
 
 PAPER_FEATURES: tuple[str, ...] = (
-    "rpm_1", "rpm_2", "rpm_3", "rpm_4",
-    "roll_rad", "pitch_rad", "yaw_rad",
-    "roll_rate_rad_s", "pitch_rate_rad_s", "yaw_rate_rad_s",
+    "rpm_1",
+    "rpm_2",
+    "rpm_3",
+    "rpm_4",
+    "roll_rad",
+    "pitch_rad",
+    "yaw_rad",
+    "roll_rate_rad_s",
+    "pitch_rate_rad_s",
+    "yaw_rate_rad_s",
 )
 
 

@@ -50,8 +50,16 @@ class FlightTable:
         for name in ("motor_cmd", "motor_rpm"):
             if getattr(self, name).shape != (n, 4):
                 raise LogFormatError(f"{self.source}: {name} must have shape ({n}, 4), got {getattr(self, name).shape}")
-        for name in ("roll_rad", "pitch_rad", "yaw_rad", "roll_rate_rad_s", "pitch_rate_rad_s",
-                     "yaw_rate_rad_s", "battery_v", "airborne"):
+        for name in (
+            "roll_rad",
+            "pitch_rad",
+            "yaw_rad",
+            "roll_rate_rad_s",
+            "pitch_rate_rad_s",
+            "yaw_rate_rad_s",
+            "battery_v",
+            "airborne",
+        ):
             if getattr(self, name).shape != (n,):
                 raise LogFormatError(f"{self.source}: {name} must have shape ({n},), got {getattr(self, name).shape}")
         for name in ("accel_frd_m_s2", "vel_ned_m_s", "pos_ned_m"):

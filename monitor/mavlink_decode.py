@@ -149,8 +149,13 @@ def _pwm(v: Any) -> float:
 class MavlinkDecoder:
     """Stateful decoder; feed it every received message in order with ``decode(msg)``."""
 
-    def __init__(self, system_id: int | None = None, component_id: int = MAV_COMP_ID_AUTOPILOT1,
-                 battery_id: int = 0, reboot_jump_us: int = 10_000_000):
+    def __init__(
+        self,
+        system_id: int | None = None,
+        component_id: int = MAV_COMP_ID_AUTOPILOT1,
+        battery_id: int = 0,
+        reboot_jump_us: int = 10_000_000,
+    ):
         self.system_id = system_id
         self.component_id = component_id
         self.battery_id = battery_id
@@ -182,8 +187,13 @@ class MavlinkDecoder:
     # -- dispatch ----------------------------------------------------------------
     def _is_autopilot(self, msg: Any) -> bool:
         sys_id, comp_id = msg.get_srcSystem(), msg.get_srcComponent()
-        if self.system_id is None and msg.get_type() == "HEARTBEAT" and comp_id == self.component_id \
-                and msg.autopilot != MAV_AUTOPILOT_INVALID and msg.type not in _NOT_AUTOPILOT_TYPES:
+        if (
+            self.system_id is None
+            and msg.get_type() == "HEARTBEAT"
+            and comp_id == self.component_id
+            and msg.autopilot != MAV_AUTOPILOT_INVALID
+            and msg.type not in _NOT_AUTOPILOT_TYPES
+        ):
             self.system_id = sys_id
         if sys_id == self.system_id and comp_id == self.component_id:
             return True
@@ -230,8 +240,11 @@ class MavlinkDecoder:
     # -- one handler per message type ---------------------------------------------
     def _attitude(self, m: Any, out: list[Sample]) -> None:
         t = self._stamp(int(m.time_boot_ms) * US_PER_MS, out)
-        out.append(Attitude(t, _float(m.roll), _float(m.pitch), _float(m.yaw),
-                            _float(m.rollspeed), _float(m.pitchspeed), _float(m.yawspeed)))
+        out.append(
+            Attitude(
+                t, _float(m.roll), _float(m.pitch), _float(m.yaw), _float(m.rollspeed), _float(m.pitchspeed), _float(m.yawspeed)
+            )
+        )
 
     def _servo(self, m: Any, out: list[Sample]) -> None:
         t = self._stamp(self.unwrap_u32_us(m.time_usec), out)

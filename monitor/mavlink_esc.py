@@ -104,8 +104,14 @@ def register(module=None) -> None:
             mod.MAVLink_esc_status_message = MAVLink_esc_status_message
 
 
-def encode_esc_status(mav, time_usec: int, rpm: Sequence[int], voltage: Sequence[float] = (0.0,) * 4,
-                      current: Sequence[float] = (0.0,) * 4, index: int = 0) -> bytes:
+def encode_esc_status(
+    mav,
+    time_usec: int,
+    rpm: Sequence[int],
+    voltage: Sequence[float] = (0.0,) * 4,
+    current: Sequence[float] = (0.0,) * 4,
+    index: int = 0,
+) -> bytes:
     """Packed bytes of one ESC_STATUS message from ``mav`` (a pymavlink MAVLink instance)."""
     msg = MAVLink_esc_status_message(index, int(time_usec), [int(r) for r in rpm], list(voltage), list(current))
     return msg.pack(mav)

@@ -68,12 +68,14 @@ class Classifier:
         for k, v in props.items():
             if k.startswith(META_PREFIX):
                 try:
-                    meta[k[len(META_PREFIX):]] = json.loads(v)
+                    meta[k[len(META_PREFIX) :]] = json.loads(v)
                 except json.JSONDecodeError as exc:
                     raise ModelError(f"{self.path}: metadata {k} is not JSON: {exc}") from exc
         missing = [k for k in REQUIRED_META if k not in meta]
         if missing:
-            raise ModelError(f"{self.path}: not a propwatch model, metadata missing {', '.join(META_PREFIX + k for k in missing)}")
+            raise ModelError(
+                f"{self.path}: not a propwatch model, metadata missing {', '.join(META_PREFIX + k for k in missing)}"
+            )
         if meta["format_version"] != 1:
             raise ModelError(f"{self.path}: unsupported format_version {meta['format_version']}")
         feats = tuple(meta["features"])

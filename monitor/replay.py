@@ -64,8 +64,11 @@ def read_tlog(path: str | Path) -> list[tuple[float, bytes, Any]]:
 def autopilot_ids(frames: list[tuple[float, bytes, Any]]) -> tuple[int, int]:
     """(system, component) of the first autopilot HEARTBEAT, as the monitor's decoder picks it."""
     for _, _, m in frames:
-        if m.get_type() == "HEARTBEAT" and m.autopilot != md.MAV_AUTOPILOT_INVALID \
-                and m.type not in (md.MAV_TYPE_GCS, md.MAV_TYPE_ONBOARD_CONTROLLER):
+        if (
+            m.get_type() == "HEARTBEAT"
+            and m.autopilot != md.MAV_AUTOPILOT_INVALID
+            and m.type not in (md.MAV_TYPE_GCS, md.MAV_TYPE_ONBOARD_CONTROLLER)
+        ):
             return m.get_srcSystem(), m.get_srcComponent()
     raise LogFormatError("log has no autopilot HEARTBEAT: a monitor would never see an armed vehicle")
 
@@ -79,8 +82,9 @@ class Replayer:
         self.system_id, self.component_id = autopilot_ids(frames)
         device, baud = split_serial(url)
         try:
-            self.conn = mavutil.mavlink_connection(device, baud=baud or 115200, source_system=self.system_id,
-                                                   source_component=self.component_id, dialect="common")
+            self.conn = mavutil.mavlink_connection(
+                device, baud=baud or 115200, source_system=self.system_id, source_component=self.component_id, dialect="common"
+            )
         except (OSError, ValueError) as exc:
             raise ConfigError(f"--connect {url}: cannot open: {exc}") from exc
         self.conn.mav.robust_parsing = True
@@ -128,8 +132,13 @@ class Replayer:
         result = MAV_RESULT_ACCEPTED if ok else MAV_RESULT_UNSUPPORTED
         self.conn.mav.command_ack_send(m.command, result)
         if self._requests is not None:
-            entry = {"command": int(m.command), "result": result, "from": [m.get_srcSystem(), m.get_srcComponent()],
-                     "message_id": int(m.param1), "interval_us": int(m.param2)}
+            entry = {
+                "command": int(m.command),
+                "result": result,
+                "from": [m.get_srcSystem(), m.get_srcComponent()],
+                "message_id": int(m.param1),
+                "interval_us": int(m.param2),
+            }
             self._requests.write(json.dumps(entry) + "\n")
             self._requests.flush()
 

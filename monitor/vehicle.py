@@ -65,9 +65,17 @@ class VehicleConfig:
     gyro_bias_frd_rad_s: Vec3 = (0.0, 0.0, 0.0)
 
     def __post_init__(self) -> None:
-        for name in ("mass_kg", "arm_length_m", "kf_n_per_rad_s2", "ktau_nm_per_rad_s2",
-                     "motor_time_constant_s", "omega_max_rad_s", "battery_full_v",
-                     "battery_empty_v", "battery_capacity_mah"):
+        for name in (
+            "mass_kg",
+            "arm_length_m",
+            "kf_n_per_rad_s2",
+            "ktau_nm_per_rad_s2",
+            "motor_time_constant_s",
+            "omega_max_rad_s",
+            "battery_full_v",
+            "battery_empty_v",
+            "battery_capacity_mah",
+        ):
             _positive(name, getattr(self, name))
         for i, v in enumerate(self.inertia_diag_kg_m2):
             _positive(f"inertia_diag_kg_m2[{i}]", v)

@@ -43,7 +43,9 @@ def _diagnose(log: Path, *extra: str) -> dict:
     try:
         res = json.loads(r.stdout)
     except json.JSONDecodeError:
-        res = {"error": (r.stderr or r.stdout).strip().splitlines()[-1] if (r.stderr or r.stdout).strip() else f"exit {r.returncode}"}
+        res = {
+            "error": (r.stderr or r.stdout).strip().splitlines()[-1] if (r.stderr or r.stdout).strip() else f"exit {r.returncode}"
+        }
     print("  -> " + _verdict_line(res))
     for w in res.get("warnings", [])[:3]:
         print(f"     warning: {w}")
@@ -56,8 +58,21 @@ def run(out: Path, data: Path, duration_s: float = 40.0) -> int:
     cases = [("healthy", "1", "bent"), ("prop3-bent", "4", "bent"), ("prop1-cracked", "2", "cracked")]
     failures = 0
     for name, label, fault in cases:
-        r = _propwatch("simulate", "--out", str(out / name), "--label", label, "--fault", fault, "--seed", "7",
-                       "--duration-s", str(duration_s), "--format", "tlog")
+        r = _propwatch(
+            "simulate",
+            "--out",
+            str(out / name),
+            "--label",
+            label,
+            "--fault",
+            fault,
+            "--seed",
+            "7",
+            "--duration-s",
+            str(duration_s),
+            "--format",
+            "tlog",
+        )
         if r.returncode != 0:
             print(r.stderr)
             return r.returncode

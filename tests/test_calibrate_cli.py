@@ -27,8 +27,9 @@ HIDDEN_CG = (-0.012, 0.022, 0.0)
 def run(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("calibrate")
     true = dataclasses.replace(NOM, cg_offset_frd_m=HIDDEN_CG)
-    log = simulate(true, random_waypoints(1, 5, seed=21), QuadraticPropeller.for_vehicle(true),
-                   SimConfig(duration_s=50.0), seed=21)
+    log = simulate(
+        true, random_waypoints(1, 5, seed=21), QuadraticPropeller.for_vehicle(true), SimConfig(duration_s=50.0), seed=21
+    )
     tlog = write_tlog(tmp / "measured.tlog", log, 0)
     out, report = tmp / "calibrated.yaml", tmp / "report"
     return tmp, tlog, out, report
@@ -62,8 +63,9 @@ def test_calibrated_yaml_loads_cites_the_calibration_and_drives_the_simulator(ru
 
     from offline.sim import cli as sim_cli
 
-    rc = sim_cli.main(["--out", str(tmp / "sim"), "--vehicle", str(out), "--duration-s", "2",
-                       "--propellers", "quadratic", "--format", "npz"])
+    rc = sim_cli.main(
+        ["--out", str(tmp / "sim"), "--vehicle", str(out), "--duration-s", "2", "--propellers", "quadratic", "--format", "npz"]
+    )
     assert rc == 0 and (tmp / "sim" / "flights.npz").is_file()
 
 

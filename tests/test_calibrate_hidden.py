@@ -142,17 +142,39 @@ def test_too_short_a_log_is_refused_by_name():
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("kind, changes, check", [
-    ("mass", {"mass_kg": 1.7}, lambda p: abs(p["mass_kg"] - 1.7) <= 0.25 * 0.2),
-    ("gyro_bias", {"gyro_bias_frd_rad_s": (0.02, -0.01, 0.01)},
-     lambda p: np.linalg.norm(np.array([p["bias_x_rad_s"], p["bias_y_rad_s"], p["bias_z_rad_s"]]) - (0.02, -0.01, 0.01))
-     <= 0.25 * np.linalg.norm((0.02, -0.01, 0.01))),
-    ("drag", {"linear_drag_n_per_m_s": (0.3, 0.3, 0.5)},
-     lambda p: np.allclose([p["drag_x_n_per_m_s"], p["drag_y_n_per_m_s"], p["drag_z_n_per_m_s"]], (0.3, 0.3, 0.5), rtol=0.25)),
-    ("esc_curve", {"esc": dataclasses.replace(NOM.esc, a_rpm_per_cmd2=0.95 * NOM.esc.a_rpm_per_cmd2,
-                                              b_rpm_per_cmd=0.95 * NOM.esc.b_rpm_per_cmd, c_rpm=0.95 * NOM.esc.c_rpm + 300.0)},
-     lambda p: abs(p["rpm_gain"] - 0.95) <= 0.25 * 0.05 and abs(p["rpm_offset"] - 300.0) <= 0.25 * 300.0),
-])
+@pytest.mark.parametrize(
+    "kind, changes, check",
+    [
+        ("mass", {"mass_kg": 1.7}, lambda p: abs(p["mass_kg"] - 1.7) <= 0.25 * 0.2),
+        (
+            "gyro_bias",
+            {"gyro_bias_frd_rad_s": (0.02, -0.01, 0.01)},
+            lambda p: (
+                np.linalg.norm(np.array([p["bias_x_rad_s"], p["bias_y_rad_s"], p["bias_z_rad_s"]]) - (0.02, -0.01, 0.01))
+                <= 0.25 * np.linalg.norm((0.02, -0.01, 0.01))
+            ),
+        ),
+        (
+            "drag",
+            {"linear_drag_n_per_m_s": (0.3, 0.3, 0.5)},
+            lambda p: np.allclose(
+                [p["drag_x_n_per_m_s"], p["drag_y_n_per_m_s"], p["drag_z_n_per_m_s"]], (0.3, 0.3, 0.5), rtol=0.25
+            ),
+        ),
+        (
+            "esc_curve",
+            {
+                "esc": dataclasses.replace(
+                    NOM.esc,
+                    a_rpm_per_cmd2=0.95 * NOM.esc.a_rpm_per_cmd2,
+                    b_rpm_per_cmd=0.95 * NOM.esc.b_rpm_per_cmd,
+                    c_rpm=0.95 * NOM.esc.c_rpm + 300.0,
+                )
+            },
+            lambda p: abs(p["rpm_gain"] - 0.95) <= 0.25 * 0.05 and abs(p["rpm_offset"] - 300.0) <= 0.25 * 300.0,
+        ),
+    ],
+)
 def test_other_library_terms_are_found_too(kind, changes, check):
     # One flight is enough for these: each acts on a channel the others leave alone.
     r = calibrate(measured(_key(changes), 9, n_flights=1), NOM)

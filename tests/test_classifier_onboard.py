@@ -57,7 +57,6 @@ def test_onset_flights_and_detection_with_an_rpm_rule():
         assert np.mean((after - before)[mask]) > 0.005
 
 
-
 def _rpm_rule(w):
     """A stand-in classifier: a rotor is faulty when its last second runs >1 % above the mean of the four."""
     r = w[:, -20:, :4].mean(axis=1)

@@ -57,8 +57,14 @@ def test_training_is_deterministic_by_seed(data):
 
 
 def test_learns_the_toy_signature_on_held_out_flights(trained, data):
-    r = evaluate_dataset(lambda w: predict_probabilities(trained, w), data, trained.config.features, 100, hop=10,
-                         flights=np.array(trained.test_flights))
+    r = evaluate_dataset(
+        lambda w: predict_probabilities(trained, w),
+        data,
+        trained.config.features,
+        100,
+        hop=10,
+        flights=np.array(trained.test_flights),
+    )
     assert r.windows > 0
     assert r.accuracy > 0.6, r.accuracy  # chance is 1/16
 
@@ -120,12 +126,32 @@ def test_cli_train_export_evaluate(tmp_path, data, capsys):
 
     save_dataset(tmp_path / "A.npz", data)
     ck = tmp_path / "m.pt"
-    assert train_cli.main([str(tmp_path / "A.npz"), "--out", str(ck), "--epochs", "1", "--channels", "8",
-                           "--dense", "16", "--test-fraction", "0.34"]) == 0
+    assert (
+        train_cli.main(
+            [
+                str(tmp_path / "A.npz"),
+                "--out",
+                str(ck),
+                "--epochs",
+                "1",
+                "--channels",
+                "8",
+                "--dense",
+                "16",
+                "--test-fraction",
+                "0.34",
+            ]
+        )
+        == 0
+    )
     assert export_cli.main([str(ck), "--out", str(tmp_path / "m.onnx")]) == 0
     capsys.readouterr()
-    assert evaluate_cli.main([str(tmp_path / "m.onnx"), str(tmp_path / "A.npz"), "--hop", "20", "--json",
-                              "--out", str(tmp_path / "ev")]) == 0
+    assert (
+        evaluate_cli.main(
+            [str(tmp_path / "m.onnx"), str(tmp_path / "A.npz"), "--hop", "20", "--json", "--out", str(tmp_path / "ev")]
+        )
+        == 0
+    )
     out = json.loads(capsys.readouterr().out)
     (res,) = out["results"]
     assert res["name"] == "synthetic (test split)"
@@ -139,11 +165,35 @@ def test_shipped_build_reuses_what_the_dataset_cli_makes():
     from offline.classifier.build_shipped import data_specs
     from offline.dataset.cli import build_parser, specs_from_args
 
-    cli = specs_from_args(build_parser().parse_args(
-        ["--sets", "A,B,C", "--fault", "bent,cracked", "--flights-per-label", "5", "--propellers", "quadratic"]))
-    cli += specs_from_args(build_parser().parse_args(
-        ["--name", "R", "--waypoints", "random", "--payload", "0,0.6", "--wind", "3", "--variants", "8", "--fault", "varied",
-         "--flights-per-label", "60", "--propellers", "quadratic", "--seed", "7"]))
+    cli = specs_from_args(
+        build_parser().parse_args(
+            ["--sets", "A,B,C", "--fault", "bent,cracked", "--flights-per-label", "5", "--propellers", "quadratic"]
+        )
+    )
+    cli += specs_from_args(
+        build_parser().parse_args(
+            [
+                "--name",
+                "R",
+                "--waypoints",
+                "random",
+                "--payload",
+                "0,0.6",
+                "--wind",
+                "3",
+                "--variants",
+                "8",
+                "--fault",
+                "varied",
+                "--flights-per-label",
+                "60",
+                "--propellers",
+                "quadratic",
+                "--seed",
+                "7",
+            ]
+        )
+    )
     shipped = data_specs("quadratic", 60, 5)
     assert sorted(map(str, map(to_mapping, cli))) == sorted(map(str, map(to_mapping, shipped)))
 

@@ -58,13 +58,19 @@ def _yaw_stats_of(conditions, payload_kg, seed=3):
     vehicle = load_vehicle(DEFAULT_VEHICLE)
     cond = np.asarray(conditions, np.int8)
     wps = np.repeat(random_waypoints(1, seed=seed), len(cond), axis=0)
-    log = simulate(vehicle, wps, build_propellers(vehicle, cond, kind="quadratic", rng_seed=seed),
-                   SimConfig(duration_s=30.0, log_rate_hz=20), payload_kg=np.asarray(payload_kg), seed=seed)
+    log = simulate(
+        vehicle,
+        wps,
+        build_propellers(vehicle, cond, kind="quadratic", rng_seed=seed),
+        SimConfig(duration_s=30.0, log_rate_hz=20),
+        payload_kg=np.asarray(payload_kg),
+        seed=seed,
+    )
     f = compute_features(log.signals(), YAW_EFFECTIVENESS_INPUTS)
     f = f[:, 40:]  # after take-off
     out = []
     for k in range(len(cond)):
-        w = gather(f[k:k + 1], window_index(f[k:k + 1], 100, 10), 100)
+        w = gather(f[k : k + 1], window_index(f[k : k + 1], 100, 10), 100)
         out.append(np.median(yaw_effectiveness(torch.from_numpy(w).double(), IDX).numpy()[:, :2], axis=0))
     return np.array(out)
 
@@ -108,8 +114,17 @@ def test_yaw_block_needs_its_features():
 @pytest.mark.parametrize("head,robust", [("multilabel4", False), ("softmax16", True)])
 def test_yaw_model_exports_with_torch_parity_and_round_trips(tmp_path, head, robust):
     data = synthetic_dataset(flights_per_label=2, n_steps=200, seed=2)
-    cfg = TrainConfig(features=YAW_FEATURES, head=head, yaw_effectiveness=True, yaw_robust=robust, channels=8, dense=16,
-                      epochs=1, train_stride=4, test_fraction=0.0)
+    cfg = TrainConfig(
+        features=YAW_FEATURES,
+        head=head,
+        yaw_effectiveness=True,
+        yaw_robust=robust,
+        channels=8,
+        dense=16,
+        epochs=1,
+        train_stride=4,
+        test_fraction=0.0,
+    )
     m = train(data, cfg, log=lambda *_: None)
     assert m.net.yaw_std.min() > 0 and torch.isfinite(m.net.yaw_mean).all()
     f = data.features(YAW_FEATURES)

@@ -15,8 +15,9 @@ from monitor.vehicle import REPO_ROOT, load_vehicle
 from offline.crazypad.data import DEFAULT_ROOT, cut_total_mm, load_manifest, select
 from offline.crazypad.vehicle import hover_cmd
 
-pytestmark = pytest.mark.skipif(not (DEFAULT_ROOT / "manifest.csv").is_file(),
-                                reason=f"CrazyPAD data not found at {DEFAULT_ROOT} (../shared/data/crazypad)")
+pytestmark = pytest.mark.skipif(
+    not (DEFAULT_ROOT / "manifest.csv").is_file(), reason=f"CrazyPAD data not found at {DEFAULT_ROOT} (../shared/data/crazypad)"
+)
 
 
 @pytest.fixture(scope="module")
@@ -29,10 +30,17 @@ def flights():
     return load_manifest()
 
 
-@pytest.mark.parametrize("name, mm", [
-    ("cut_propeller_M3_0.5mm_46.5mm", 0.5), ("cut_propeller_M3_1mm", 1.0), ("cut_propeller_M3_3mm", 3.0),
-    ("cut_propeller_M3_1mm_0.5mm_45.5mm", 1.5), ("cut_propeller_M3_4mm_4mm_39mm", 8.0), ("cut_m3_2mm_2mm", 4.0),
-])
+@pytest.mark.parametrize(
+    "name, mm",
+    [
+        ("cut_propeller_M3_0.5mm_46.5mm", 0.5),
+        ("cut_propeller_M3_1mm", 1.0),
+        ("cut_propeller_M3_3mm", 3.0),
+        ("cut_propeller_M3_1mm_0.5mm_45.5mm", 1.5),
+        ("cut_propeller_M3_4mm_4mm_39mm", 8.0),
+        ("cut_m3_2mm_2mm", 4.0),
+    ],
+)
 def test_cut_depth_from_folder_names(name, mm):
     assert cut_total_mm(name) == pytest.approx(mm)
 
@@ -78,8 +86,9 @@ def test_calibration_names_a_cause_and_helps_held_out_flights(flights, vehicle):
     for af in ("E8", "E9"):
         fit = [summarise(f, vehicle) for f in select(flights, role="calibration", airframe=af)]
         held = [summarise(f, vehicle) for f in select(flights, role="holdout", airframe=af)]
-        cal = calibrate_steady(af, vehicle, np.array([s.motor_cmd_mean for s in fit]),
-                               np.array([s.motor_cmd_mean for s in held]), [], [])
+        cal = calibrate_steady(
+            af, vehicle, np.array([s.motor_cmd_mean for s in fit]), np.array([s.motor_cmd_mean for s in held]), [], []
+        )
         # The static spread is a yaw-pair pattern (M1, M3 high): a CG offset cannot make it.
         assert cal.cause == "motor_efficiency"
         assert cal.calibrated_holdout_rms_cmd < 0.5 * cal.nominal_holdout_rms_cmd

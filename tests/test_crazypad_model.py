@@ -50,8 +50,9 @@ def test_controller_logs_get_no_verdict_and_say_why(capsys):
     """Controller-config flights carry no motor commands: the monitor must refuse, not guess."""
     from monitor.diagnose.cli import main
 
-    code = main([str(CONTROLLER_LOG), "--format", "crazypad-controller", "--vehicle", str(VEHICLE),
-                 "--model", str(MODEL), "--json"])
+    code = main(
+        [str(CONTROLLER_LOG), "--format", "crazypad-controller", "--vehicle", str(VEHICLE), "--model", str(MODEL), "--json"]
+    )
     out = json.loads(capsys.readouterr().out)
     assert code == 1 and out["verdict"] is None
     assert any("motor commands are not logged" in w for w in out["warnings"])

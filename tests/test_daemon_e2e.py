@@ -39,8 +39,24 @@ def flights(tmp_path_factory):
     out = {}
     for name, (label, fault, duration, seed) in FLIGHTS.items():
         d = tmp_path_factory.mktemp(name)
-        cmd = [PY, "-m", "monitor.cli", "simulate", "--out", str(d), "--flights", "1", "--label", str(label),
-               "--format", "tlog", "--duration-s", str(duration), "--seed", str(seed)]
+        cmd = [
+            PY,
+            "-m",
+            "monitor.cli",
+            "simulate",
+            "--out",
+            str(d),
+            "--flights",
+            "1",
+            "--label",
+            str(label),
+            "--format",
+            "tlog",
+            "--duration-s",
+            str(duration),
+            "--seed",
+            str(seed),
+        ]
         if fault:
             cmd += ["--fault", fault]
         p = subprocess.run(cmd, cwd=REPO, capture_output=True, text=True, timeout=300)

@@ -36,8 +36,14 @@ FAULT_PWM_US = 60.0  # the faulty rotor's extra command
 WALL_T0_S = 1.7e9
 
 
-def toy_model(path: Path, gain: float = 100.0, bias: float = 0.02, window: int = 100,
-              features: tuple[str, ...] = PAPER_FEATURES, sample_rate_hz: float = 20.0) -> Path:
+def toy_model(
+    path: Path,
+    gain: float = 100.0,
+    bias: float = 0.02,
+    window: int = 100,
+    features: tuple[str, ...] = PAPER_FEATURES,
+    sample_rate_hz: float = 20.0,
+) -> Path:
     n_f = len(features)
     m = np.concatenate([LABEL_MASKS.T, 1.0 - LABEL_MASKS.T], axis=0).astype(np.float32)  # (8, 16)
     inits = [
@@ -71,19 +77,28 @@ def toy_model(path: Path, gain: float = 100.0, bias: float = 0.02, window: int =
         helper.make_node("Exp", ["ll"], ["label_probability"]),
     ]
     graph = helper.make_graph(
-        nodes, "toy_rpm_spread",
+        nodes,
+        "toy_rpm_spread",
         [helper.make_tensor_value_info("features", TensorProto.FLOAT, ["N", window, n_f])],
-        [helper.make_tensor_value_info("label_probability", TensorProto.FLOAT, ["N", 16]),
-         helper.make_tensor_value_info("fault_probability", TensorProto.FLOAT, ["N", 4])],
-        inits)
+        [
+            helper.make_tensor_value_info("label_probability", TensorProto.FLOAT, ["N", 16]),
+            helper.make_tensor_value_info("fault_probability", TensorProto.FLOAT, ["N", 4]),
+        ],
+        inits,
+    )
     model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", 13)])
     model.ir_version = 8
     esc = {k: getattr(PAPER_ESC, k) for k in ("a_rpm_per_cmd2", "b_rpm_per_cmd", "c_rpm", "cmd_min", "cmd_max", "cmd_unit")}
     meta = {
-        "format_version": 1, "features": list(features), "sample_rate_hz": sample_rate_hz, "window": window,
-        "normalization": {"mean": [0.0] * n_f, "std": [1.0] * n_f}, "class_names": class_names(),
+        "format_version": 1,
+        "features": list(features),
+        "sample_rate_hz": sample_rate_hz,
+        "window": window,
+        "normalization": {"mean": [0.0] * n_f, "std": [1.0] * n_f},
+        "class_names": class_names(),
         "label_table": {str(k): list(v) for k, v in LABEL_TABLE.items()},
-        "vehicle": {"name": "toy", "esc": esc}, "training_manifest": {"kind": "test toy model"},
+        "vehicle": {"name": "toy", "esc": esc},
+        "training_manifest": {"kind": "test toy model"},
     }
     for k, v in meta.items():
         model.metadata_props.append(onnx.StringStringEntryProto(key=f"propwatch.{k}", value=json.dumps(v)))
@@ -93,9 +108,19 @@ def toy_model(path: Path, gain: float = 100.0, bias: float = 0.02, window: int =
     return path
 
 
-def synth_flight(duration_s: float, faulty: tuple[int, ...] = (), seed: int = 0, boot0_s: float = 100.0,
-                 servo_hz: float = 25.0, att_hz: float = 50.0, takeoff_s: float = 2.0, nan_window_s=None,
-                 hole_s=None, esc_index_offset: int = 0, servo_port: int = 0) -> list[tuple[float, bytes]]:
+def synth_flight(
+    duration_s: float,
+    faulty: tuple[int, ...] = (),
+    seed: int = 0,
+    boot0_s: float = 100.0,
+    servo_hz: float = 25.0,
+    att_hz: float = 50.0,
+    takeoff_s: float = 2.0,
+    nan_window_s=None,
+    hole_s=None,
+    esc_index_offset: int = 0,
+    servo_port: int = 0,
+) -> list[tuple[float, bytes]]:
     """(arrival wall time s, frame) in arrival order: PX4-like streams with jitter; armed, IN_AIR after takeoff_s.
 
     ``nan_window_s=(a, b)`` writes NaN attitude between flight times a and b; ``hole_s=(a, b)``
@@ -168,6 +193,7 @@ def write_tlog(path: Path, frames: list[tuple[float, bytes]], garbage: list[tupl
 
 
 # --- checks of the helpers themselves --------------------------------------------
+
 
 def test_toy_model_meets_the_contract_and_flags_the_high_rpm_rotor(tmp_path):
     clf = Classifier(toy_model(tmp_path / "toy.onnx"))

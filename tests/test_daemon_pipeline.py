@@ -35,7 +35,7 @@ def parse_all(frames, chunk_sizes=None, seed=0):
     out, i = [], 0
     while i < len(data):
         n = int(rng.integers(*chunk_sizes))
-        out += p.parse_buffer(data[i:i + n]) or []
+        out += p.parse_buffer(data[i : i + n]) or []
         i += n
     return [m for m in out if m.get_type() != "BAD_DATA"]
 
@@ -51,6 +51,7 @@ def toy(tmp_path_factory):
 
 
 # --- decoding ------------------------------------------------------------------------
+
 
 def test_servo_time_unwraps_across_the_32_bit_wrap():
     d = md.MavlinkDecoder()
@@ -96,6 +97,7 @@ def test_reboot_emits_a_clock_reset():
 
 
 # --- streaming hold == batch hold ------------------------------------------------------
+
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_streaming_hold_equals_batch_hold(seed):
@@ -145,6 +147,7 @@ def test_reordering_within_a_stream_is_exact_inside_the_reorder_window():
 
 # --- the pipeline ------------------------------------------------------------------------
 
+
 def run_pipeline(clf, msgs, cfg=None):
     p = Pipeline(clf, cfg or MonitorConfig(), PAPER_ESC)
     steps = []
@@ -166,7 +169,12 @@ def test_pipeline_equals_the_batch_path_on_the_same_messages(toy):
     for m in msgs:
         for s in d.decode(m):
             if isinstance(s, md.Attitude):
-                att.append((s.timestamp_us, [s.roll_rad, s.pitch_rad, s.yaw_rad, s.roll_rate_rad_s, s.pitch_rate_rad_s, s.yaw_rate_rad_s]))
+                att.append(
+                    (
+                        s.timestamp_us,
+                        [s.roll_rad, s.pitch_rad, s.yaw_rad, s.roll_rate_rad_s, s.pitch_rate_rad_s, s.yaw_rate_rad_s],
+                    )
+                )
             elif isinstance(s, md.ActuatorOutputs):
                 mot.append((s.timestamp_us, PAPER_ESC.cmd_to_rpm(np.array(s.values_us[:4]))))
             elif isinstance(s, md.Heartbeat) and s.timestamp_us is not None:
@@ -181,11 +189,18 @@ def test_pipeline_equals_the_batch_path_on_the_same_messages(toy):
     grid = np.array([s.timestamp_us for s in steps])
     a, r = held(att, 250_000), held(mot, 250_000)
     airborne = (held(arm, 3_000_000)[:, 0] == 1) & (held(land, 3_000_000)[:, 0] == md.MAV_LANDED_STATE_IN_AIR)
-    sig = {"motor_rpm": r, "roll_rad": a[:, 0], "pitch_rad": a[:, 1], "yaw_rad": a[:, 2],
-           "roll_rate_rad_s": a[:, 3], "pitch_rate_rad_s": a[:, 4], "yaw_rate_rad_s": a[:, 5]}
+    sig = {
+        "motor_rpm": r,
+        "roll_rad": a[:, 0],
+        "pitch_rad": a[:, 1],
+        "yaw_rad": a[:, 2],
+        "roll_rate_rad_s": a[:, 3],
+        "pitch_rate_rad_s": a[:, 4],
+        "yaw_rate_rad_s": a[:, 5],
+    }
     f = compute_features(sig, toy.info.features)
     win = sliding_windows(f, 100)
-    ok = np.array([airborne[i:i + 100].all() and np.isfinite(win[i]).all() for i in range(len(win))])
+    ok = np.array([airborne[i : i + 100].all() and np.isfinite(win[i]).all() for i in range(len(win))])
     ends = np.flatnonzero(ok) + 99
     assert [steps[i].timestamp_us for i in ends] == [s.timestamp_us for s in classified]
     _, faults = toy.predict(win[ok])
@@ -258,6 +273,7 @@ def test_model_metadata_mismatch_is_a_clear_error(tmp_path):
 
 # --- alerts ---------------------------------------------------------------------------------
 
+
 class FakeClock:
     def __init__(self):
         self.t = 1000.0
@@ -303,6 +319,7 @@ def test_rate_limiter_and_nan_probabilities():
 
 # --- config ---------------------------------------------------------------------------------
 
+
 def test_config_rejects_unknown_and_bad_keys_by_name(tmp_path):
     bad = tmp_path / "bad.yaml"
     bad.write_text("alerts:\n  treshold: 0.9\n")
@@ -325,6 +342,7 @@ def test_shipped_example_config_loads():
 
 
 # --- sd_notify ------------------------------------------------------------------------------
+
 
 def test_sd_notify_speaks_the_systemd_protocol(tmp_path):
     path = str(tmp_path / "notify.sock")

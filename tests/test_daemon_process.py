@@ -36,8 +36,9 @@ class Proc:
     """A subprocess whose stderr is collected by a thread, so the test can wait for a line."""
 
     def __init__(self, args: list[str], env: dict | None = None):
-        self.p = subprocess.Popen(args, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-                                  env={**os.environ, **(env or {})})
+        self.p = subprocess.Popen(
+            args, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env={**os.environ, **(env or {})}
+        )
         self.lines: list[str] = []
         self._t = threading.Thread(target=self._read, daemon=True)
         self._t.start()
@@ -94,11 +95,41 @@ def fly_over_udp(tmp_path, model, frames, speed, config_text="", extra=()):
     cfg = write_config(tmp_path / "monitor.yaml", config_text or "alerts:\n  refractory_s: 60\n")
     paths = {k: tmp_path / f"{k}.jsonl" for k in ("events", "requests", "received")}
     report = tmp_path / "report.json"
-    d = Proc(monitor_cmd("--connect", f"udpin:127.0.0.1:{port}", "--config", str(cfg), "--model", str(model),
-                         "--events", str(paths["events"]), "--report", str(report), *extra))
+    d = Proc(
+        monitor_cmd(
+            "--connect",
+            f"udpin:127.0.0.1:{port}",
+            "--config",
+            str(cfg),
+            "--model",
+            str(model),
+            "--events",
+            str(paths["events"]),
+            "--report",
+            str(report),
+            *extra,
+        )
+    )
     assert d.wait_for("ready:"), d.text
-    r = Proc([PY, "-m", "monitor.cli", "replay", str(tlog), "--connect", f"udpout:127.0.0.1:{port}", "--speed", str(speed),
-              "--requests", str(paths["requests"]), "--received", str(paths["received"]), "--linger", "1.5"])
+    r = Proc(
+        [
+            PY,
+            "-m",
+            "monitor.cli",
+            "replay",
+            str(tlog),
+            "--connect",
+            f"udpout:127.0.0.1:{port}",
+            "--speed",
+            str(speed),
+            "--requests",
+            str(paths["requests"]),
+            "--received",
+            str(paths["received"]),
+            "--linger",
+            "1.5",
+        ]
+    )
     assert r.p.wait(120) == 0, r.text
     rc = d.stop()
     assert rc == 0, d.text
@@ -165,12 +196,14 @@ def test_link_drop_and_return_and_a_stream_that_stops(tmp_path, model):
 def test_runs_without_torch_on_a_tlog(tmp_path, model):
     tlog = write_tlog(tmp_path / "f.tlog", synth_flight(10.0, faulty=(1,)))
     events = tmp_path / "ev.jsonl"
-    code = ("import sys; sys.modules['torch'] = None\n"
-            "from monitor.cli import main\n"
-            f"rc = main(['monitor', '--connect', {str(tlog)!r}, '--model', {str(model)!r}, '--tlog-speed', '0',"
-            f" '--events', {str(events)!r}])\n"
-            "assert 'offline' not in sys.modules and sys.modules['torch'] is None\n"
-            "sys.exit(rc)\n")
+    code = (
+        "import sys; sys.modules['torch'] = None\n"
+        "from monitor.cli import main\n"
+        f"rc = main(['monitor', '--connect', {str(tlog)!r}, '--model', {str(model)!r}, '--tlog-speed', '0',"
+        f" '--events', {str(events)!r}])\n"
+        "assert 'offline' not in sys.modules and sys.modules['torch'] is None\n"
+        "sys.exit(rc)\n"
+    )
     p = subprocess.run([PY, "-c", code], cwd=REPO, capture_output=True, text=True, timeout=120)
     assert p.returncode == 0, p.stderr
     ev = [json.loads(x) for x in events.read_text().splitlines()]
@@ -193,9 +226,24 @@ def test_garbage_corrupt_and_truncated_packets_and_nan_in_a_tlog(tmp_path, model
             frames[i - 1] = (t, f[: len(f) // 2])  # truncated
     tlog = write_tlog(tmp_path / "bad.tlog", frames, garbage=bad)
     report = tmp_path / "r.json"
-    p = subprocess.run(monitor_cmd("--connect", str(tlog), "--model", str(model), "--tlog-speed", "0",
-                                   "--events", str(tmp_path / "ev.jsonl"), "--report", str(report)),
-                       cwd=REPO, capture_output=True, text=True, timeout=120)
+    p = subprocess.run(
+        monitor_cmd(
+            "--connect",
+            str(tlog),
+            "--model",
+            str(model),
+            "--tlog-speed",
+            "0",
+            "--events",
+            str(tmp_path / "ev.jsonl"),
+            "--report",
+            str(report),
+        ),
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert p.returncode == 0 and "Traceback" not in p.stderr, p.stderr
     assert "attitude missing, stale or NaN" in p.stderr
     ev = [json.loads(x) for x in (tmp_path / "ev.jsonl").read_text().splitlines()]
@@ -220,11 +268,14 @@ def test_random_bytes_on_the_udp_port_do_not_crash_it(tmp_path, model):
     assert d.stop() == 0 and "Traceback" not in d.text
 
 
-@pytest.mark.parametrize("case,expect", [
-    ("missing", "model file not found"),
-    ("text", "not a loadable ONNX model"),
-    ("no_meta", "not a propwatch model"),
-])
+@pytest.mark.parametrize(
+    "case,expect",
+    [
+        ("missing", "model file not found"),
+        ("text", "not a loadable ONNX model"),
+        ("no_meta", "not a propwatch model"),
+    ],
+)
 def test_wrong_or_missing_model_is_one_clear_line(tmp_path, case, expect):
     path = tmp_path / "m.onnx"
     if case == "text":
@@ -235,20 +286,29 @@ def test_wrong_or_missing_model_is_one_clear_line(tmp_path, case, expect):
         m = onnx.load(str(toy_model(tmp_path / "src.onnx")))
         del m.metadata_props[:]
         onnx.save(m, str(path))
-    p = subprocess.run(monitor_cmd("--connect", "udpin:127.0.0.1:9", "--model", str(path)),
-                       cwd=REPO, capture_output=True, text=True, timeout=60)
+    p = subprocess.run(
+        monitor_cmd("--connect", "udpin:127.0.0.1:9", "--model", str(path)), cwd=REPO, capture_output=True, text=True, timeout=60
+    )
     assert p.returncode == 2 and expect in p.stderr and str(path) in p.stderr and "Traceback" not in p.stderr, p.stderr
 
 
-@pytest.mark.parametrize("text,expect", [
-    ("alerts:\n  treshold: 0.9\n", "treshold"),
-    ("link: [1, 2\n", "invalid YAML"),
-    ("input:\n  motor_source: pwm\n", "input.motor_source"),
-])
+@pytest.mark.parametrize(
+    "text,expect",
+    [
+        ("alerts:\n  treshold: 0.9\n", "treshold"),
+        ("link: [1, 2\n", "invalid YAML"),
+        ("input:\n  motor_source: pwm\n", "input.motor_source"),
+    ],
+)
 def test_bad_config_is_one_clear_line(tmp_path, model, text, expect):
     cfg = write_config(tmp_path / "bad.yaml", text)
-    p = subprocess.run(monitor_cmd("--connect", "udpin:127.0.0.1:9", "--config", str(cfg), "--model", str(model)),
-                       cwd=REPO, capture_output=True, text=True, timeout=60)
+    p = subprocess.run(
+        monitor_cmd("--connect", "udpin:127.0.0.1:9", "--config", str(cfg), "--model", str(model)),
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert p.returncode == 2 and expect in p.stderr and str(cfg) in p.stderr and "Traceback" not in p.stderr, p.stderr
 
 
@@ -259,8 +319,10 @@ def test_systemd_notify_watchdog_and_clean_sigterm(tmp_path, model):
     srv.bind(sock_path)
     srv.settimeout(10.0)
     port = free_udp_port()
-    d = Proc(monitor_cmd("--connect", f"udpin:127.0.0.1:{port}", "--model", str(model)),
-             env={"NOTIFY_SOCKET": sock_path, "WATCHDOG_USEC": "400000"})
+    d = Proc(
+        monitor_cmd("--connect", f"udpin:127.0.0.1:{port}", "--model", str(model)),
+        env={"NOTIFY_SOCKET": sock_path, "WATCHDOG_USEC": "400000"},
+    )
     try:
         got = []
         while not any(m.startswith(b"WATCHDOG=1") for m in got) or len(got) < 3:
@@ -291,8 +353,25 @@ def test_tcp_link_that_is_not_there_yet_then_comes_and_goes(tmp_path, model):
     d = Proc(monitor_cmd("--connect", f"tcp:127.0.0.1:{port}", "--model", str(model), "--events", str(events)))
     try:
         assert d.wait_for("cannot open"), d.text
-        r = subprocess.run([PY, "-m", "monitor.cli", "replay", str(tlog), "--connect", f"tcpin:127.0.0.1:{port}",
-                            "--speed", "5", "--linger", "0.5"], cwd=REPO, capture_output=True, text=True, timeout=60)
+        r = subprocess.run(
+            [
+                PY,
+                "-m",
+                "monitor.cli",
+                "replay",
+                str(tlog),
+                "--connect",
+                f"tcpin:127.0.0.1:{port}",
+                "--speed",
+                "5",
+                "--linger",
+                "0.5",
+            ],
+            cwd=REPO,
+            capture_output=True,
+            text=True,
+            timeout=60,
+        )
         assert r.returncode == 0, r.stderr
         assert d.wait_for("connection closed by the peer"), d.text
         assert d.p.poll() is None
@@ -347,8 +426,23 @@ def test_udpout_daemon_announces_itself_to_a_listening_autopilot(tmp_path, model
     tlog = write_tlog(tmp_path / "f.tlog", synth_flight(20.0, faulty=(4,)))
     received = tmp_path / "received.jsonl"
     events = tmp_path / "ev.jsonl"
-    r = Proc([PY, "-m", "monitor.cli", "replay", str(tlog), "--connect", f"udpin:127.0.0.1:{port}", "--speed", "5",
-              "--linger", "1.0", "--received", str(received)])
+    r = Proc(
+        [
+            PY,
+            "-m",
+            "monitor.cli",
+            "replay",
+            str(tlog),
+            "--connect",
+            f"udpin:127.0.0.1:{port}",
+            "--speed",
+            "5",
+            "--linger",
+            "1.0",
+            "--received",
+            str(received),
+        ]
+    )
     d = Proc(monitor_cmd("--connect", f"udpout:127.0.0.1:{port}", "--model", str(model), "--events", str(events)))
     try:
         assert r.p.wait(60) == 0, r.text

@@ -34,8 +34,18 @@ def test_shape_labels_and_manifest(small, vehicle):
 
 
 def test_chunked_generation_keeps_label_order(vehicle):
-    spec = DatasetSpec("R", fault="mixed", waypoints=("random", "B"), payload_kg=(0.0, 0.5), flights_per_label=1,
-                       duration_s=6.0, propellers="quadratic", chunk_flights=5, vehicle_variants=2, wind_max_m_s=2.0)
+    spec = DatasetSpec(
+        "R",
+        fault="mixed",
+        waypoints=("random", "B"),
+        payload_kg=(0.0, 0.5),
+        flights_per_label=1,
+        duration_s=6.0,
+        propellers="quadratic",
+        chunk_flights=5,
+        vehicle_variants=2,
+        wind_max_m_s=2.0,
+    )
     ds = generate(spec, vehicle, log=lambda *_: None)
     assert list(ds.labels) == list(range(1, 17))
     assert ds.waypoint_set[:2] == ("random", "B") and 0.0 <= ds.payload_kg.min() < ds.payload_kg.max() <= 0.5
@@ -57,7 +67,12 @@ def test_same_spec_same_data_and_payload_raises_rpm(small, vehicle):
     spec = DatasetSpec("A-bent", fault="bent", flights_per_label=1, duration_s=8.0, propellers="quadratic", seed=3)
     again = generate(spec, vehicle, log=lambda *_: None)
     np.testing.assert_array_equal(again.signals["motor_rpm"], small.signals["motor_rpm"])
-    heavy = generate(DatasetSpec("C-bent", fault="bent", flights_per_label=1, duration_s=8.0, propellers="quadratic",
-                                 payload_kg=(0.45, 0.45), seed=3), vehicle, log=lambda *_: None)
+    heavy = generate(
+        DatasetSpec(
+            "C-bent", fault="bent", flights_per_label=1, duration_s=8.0, propellers="quadratic", payload_kg=(0.45, 0.45), seed=3
+        ),
+        vehicle,
+        log=lambda *_: None,
+    )
     assert np.all(heavy.payload_kg == 0.45)
     assert heavy.signals["motor_rpm"][0, 40:].mean() > 1.05 * small.signals["motor_rpm"][0, 40:].mean()

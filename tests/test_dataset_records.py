@@ -34,7 +34,7 @@ def test_varied_faults_give_uniform_and_mixed_flights():
     # a third each of all-bent, all-cracked and per-propeller draws (of which 3/4+ mix on a 2+ fault set)
     assert 0.38 < uniform_bent / len(kinds) < 0.5 and 0.38 < uniform_cracked / len(kinds) < 0.5, (uniform_bent, uniform_cracked)
     assert 0.15 < mixed / len(kinds) < 0.3
-    label16 = cond[15 * 60:]
+    label16 = cond[15 * 60 :]
     assert ((label16 == 1).all(axis=1).mean() > 0.25) and ((label16 == 2).all(axis=1).mean() > 0.25)
 
 
@@ -104,4 +104,4 @@ def test_windows_are_views_and_skip_nan():
     idx = window_index(f, 100, stride=1)
     assert len(idx) == 16 * 101 - 50
     w = gather(f, idx[:5], 100)
-    np.testing.assert_array_equal(w[2], f[idx[2, 0], idx[2, 1]:idx[2, 1] + 100])
+    np.testing.assert_array_equal(w[2], f[idx[2, 0], idx[2, 1] : idx[2, 1] + 100])

@@ -142,9 +142,18 @@ def test_crazypad_with_a_px4_model_is_outside_the_envelope(capsys, model, tmp_pa
     assert "outside the model's envelope" in res["reason"] and "'cf16'" in res["reason"]
     assert any("'cf16'" in w for w in res["warnings"])
     # With a Crazyflie ESC curve the RPM is known, but pitch and body rates are not logged in this config.
-    cf = build_model(tmp_path / "cf.onnx", esc={"a_rpm_per_cmd2": 0.0, "b_rpm_per_cmd": 0.2685, "c_rpm": 4070.3,
-                                                  "cmd_min": 0.0, "cmd_max": 65535.0, "cmd_unit": "cf16"},
-                     trained_rpm=15000.0)
+    cf = build_model(
+        tmp_path / "cf.onnx",
+        esc={
+            "a_rpm_per_cmd2": 0.0,
+            "b_rpm_per_cmd": 0.2685,
+            "c_rpm": 4070.3,
+            "cmd_min": 0.0,
+            "cmd_max": 65535.0,
+            "cmd_unit": "cf16",
+        },
+        trained_rpm=15000.0,
+    )
     code, res = run(capsys, CRAZYPAD_HEALTHY, "--format", "crazypad", "--model", cf, "--json")
     assert code == 1 and "pitch_rad unknown during flight" in res["reason"]
 

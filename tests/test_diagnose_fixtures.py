@@ -26,8 +26,14 @@ HOVER_PWM_US = 1500.0
 RPM_STD = 1000.0  # the fixture's "training" spread of each rotor's RPM (the envelope check reads it)
 
 
-def build_model(path: Path, features=PAPER_FEATURES, window: int = 100, rate_hz: float = 20.0,
-                trained_rpm: float | None = None, esc: dict | None = None) -> Path:
+def build_model(
+    path: Path,
+    features=PAPER_FEATURES,
+    window: int = 100,
+    rate_hz: float = 20.0,
+    trained_rpm: float | None = None,
+    esc: dict | None = None,
+) -> Path:
     import onnx
     from onnx import TensorProto, helper, numpy_helper
 
@@ -40,9 +46,12 @@ def build_model(path: Path, features=PAPER_FEATURES, window: int = 100, rate_hz:
         b[1 + k] = 0.0
         for j in range(4):
             w[rpm_idx[j], 1 + k] = GAIN_PER_RPM * ((1.0 if j == k else 0.0) - 0.25)
-    inits = [numpy_helper.from_array(w, "W"), numpy_helper.from_array(b, "B"),
-             numpy_helper.from_array(LABEL_MASKS.astype(np.float32), "M"),
-             numpy_helper.from_array(np.array([1], np.int64), "axes")]
+    inits = [
+        numpy_helper.from_array(w, "W"),
+        numpy_helper.from_array(b, "B"),
+        numpy_helper.from_array(LABEL_MASKS.astype(np.float32), "M"),
+        numpy_helper.from_array(np.array([1], np.int64), "axes"),
+    ]
     nodes = [
         helper.make_node("ReduceMean", ["features", "axes"], ["m"], keepdims=0),
         helper.make_node("MatMul", ["m", "W"], ["mw"]),
@@ -51,23 +60,40 @@ def build_model(path: Path, features=PAPER_FEATURES, window: int = 100, rate_hz:
         helper.make_node("MatMul", ["label_probability", "M"], ["fault_probability"]),
     ]
     graph = helper.make_graph(
-        nodes, "fixture",
+        nodes,
+        "fixture",
         [helper.make_tensor_value_info("features", TensorProto.FLOAT, ["N", window, f])],
-        [helper.make_tensor_value_info("label_probability", TensorProto.FLOAT, ["N", 16]),
-         helper.make_tensor_value_info("fault_probability", TensorProto.FLOAT, ["N", 4])],
-        inits)
+        [
+            helper.make_tensor_value_info("label_probability", TensorProto.FLOAT, ["N", 16]),
+            helper.make_tensor_value_info("fault_probability", TensorProto.FLOAT, ["N", 4]),
+        ],
+        inits,
+    )
     model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", 18)])
     model.ir_version = 8
     hover_rpm = float(PAPER_ESC.cmd_to_rpm(HOVER_PWM_US)) if trained_rpm is None else trained_rpm
     mean = [hover_rpm if n.startswith("rpm_") else 0.0 for n in features]
     std = [RPM_STD if n.startswith("rpm_") else 1.0 for n in features]
     meta = {
-        "format_version": 1, "features": list(features), "sample_rate_hz": rate_hz, "window": window,
-        "normalization": {"mean": mean, "std": std}, "class_names": class_names(),
+        "format_version": 1,
+        "features": list(features),
+        "sample_rate_hz": rate_hz,
+        "window": window,
+        "normalization": {"mean": mean, "std": std},
+        "class_names": class_names(),
         "label_table": {str(k): [] for k in range(1, 17)},
-        "vehicle": {"name": "fixture", "esc": esc or {
-            "a_rpm_per_cmd2": PAPER_ESC.a_rpm_per_cmd2, "b_rpm_per_cmd": PAPER_ESC.b_rpm_per_cmd,
-            "c_rpm": PAPER_ESC.c_rpm, "cmd_min": PAPER_ESC.cmd_min, "cmd_max": PAPER_ESC.cmd_max, "cmd_unit": "us"}},
+        "vehicle": {
+            "name": "fixture",
+            "esc": esc
+            or {
+                "a_rpm_per_cmd2": PAPER_ESC.a_rpm_per_cmd2,
+                "b_rpm_per_cmd": PAPER_ESC.b_rpm_per_cmd,
+                "c_rpm": PAPER_ESC.c_rpm,
+                "cmd_min": PAPER_ESC.cmd_min,
+                "cmd_max": PAPER_ESC.cmd_max,
+                "cmd_unit": "us",
+            },
+        },
     }
     for k, v in meta.items():
         helper.set_model_props(model, {**{p.key: p.value for p in model.metadata_props}, f"propwatch.{k}": json.dumps(v)})
@@ -96,8 +122,15 @@ def flight_profile(duration_s: float, rate_hz: float, faulty: int | None, excess
     return t_us, pwm, att, np.ones(n, bool), landed
 
 
-def write_tlog(path: Path, duration_s: float = 30.0, faulty: int | None = None, rate_hz: float = 50.0,
-               excess_pwm: float = 60.0, seed: int = 0, with_extras: bool = True) -> Path:
+def write_tlog(
+    path: Path,
+    duration_s: float = 30.0,
+    faulty: int | None = None,
+    rate_hz: float = 50.0,
+    excess_pwm: float = 60.0,
+    seed: int = 0,
+    with_extras: bool = True,
+) -> Path:
     """A PX4-like telemetry log: ATTITUDE + SERVO_OUTPUT_RAW at rate_hz, 1 Hz HEARTBEAT/EXTENDED_SYS_STATE/SYS_STATUS."""
     from pymavlink.dialects.v20 import common
 

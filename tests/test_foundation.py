@@ -18,6 +18,7 @@ REPO = Path(__file__).resolve().parent.parent
 
 # --- vehicle file -----------------------------------------------------------------
 
+
 def test_paper_vehicle_loads_with_every_value_cited():
     lv = load_vehicle_with_sources(DEFAULT_VEHICLE)
     v = lv.config
@@ -27,7 +28,11 @@ def test_paper_vehicle_loads_with_every_value_cited():
     # every leaf has a non-empty source
     flat = to_mapping(v)
     n_leaves = sum(len(x) if isinstance(x, dict) else 1 for x in flat.values())
-    assert len(lv.sources) == n_leaves - sum(1 for k in flat if k in ("cg_offset_frd_m", "motor_efficiency", "linear_drag_n_per_m_s", "wind_ned_m_s", "gyro_bias_frd_rad_s"))
+    assert len(lv.sources) == n_leaves - sum(
+        1
+        for k in flat
+        if k in ("cg_offset_frd_m", "motor_efficiency", "linear_drag_n_per_m_s", "wind_ned_m_s", "gyro_bias_frd_rad_s")
+    )
 
 
 def test_hover_from_hand_calculation():
@@ -92,6 +97,7 @@ def test_config_round_trip_with_sources():
 
 # --- ESC curve --------------------------------------------------------------------
 
+
 def test_paper_esc_fit_values_and_inverse():
     # RPM = -0.0062 PWM^2 + 29.37 PWM - 22992, by hand at 1500 us: 7113 RPM
     assert float(esc.pwm_us_to_rpm(1500.0)) == pytest.approx(-0.0062 * 1500**2 + 29.37 * 1500 - 22992)
@@ -106,6 +112,7 @@ def test_non_invertible_esc_curve_is_rejected():
 
 
 # --- labels -----------------------------------------------------------------------
+
 
 def test_label_table_matches_the_paper():
     assert labels.faulty_for(1) == ()
@@ -126,6 +133,7 @@ def test_marginal_fault_probability():
 
 
 # --- features and windows ---------------------------------------------------------
+
 
 def _signals(b=2, t=150, seed=0):
     rng = np.random.default_rng(seed)
@@ -174,6 +182,7 @@ def test_unknown_feature_is_rejected():
 
 # --- resampling -------------------------------------------------------------------
 
+
 def test_hold_resampling_on_the_boot_clock_grid():
     grid = resample.grid_us(1_030_000, 1_260_000, 20.0)
     np.testing.assert_array_equal(grid, [1_050_000, 1_100_000, 1_150_000, 1_200_000, 1_250_000])
@@ -191,6 +200,7 @@ def test_rates_that_do_not_give_whole_microseconds_are_rejected():
 
 
 # --- CLI and the onboard/offline boundary -------------------------------------------
+
 
 def test_cli_lists_commands_and_rejects_unknown():
     r = subprocess.run([sys.executable, "-m", "monitor.cli", "--help"], capture_output=True, text=True)

@@ -84,8 +84,10 @@ def test_propwatch_csv_round_trip(tmp_path):
     n = 400
     t = 1_000_000 + np.arange(n) * 10_000
     pwm = np.column_stack([np.full(n, 1500.0 + 10 * k) for k in range(4)])
-    header = "timestamp_us,motor_pwm_us_1,motor_pwm_us_2,motor_pwm_us_3,motor_pwm_us_4,roll_rad,pitch_rad,yaw_rad," \
-             "roll_rate_rad_s,pitch_rate_rad_s,yaw_rate_rad_s"
+    header = (
+        "timestamp_us,motor_pwm_us_1,motor_pwm_us_2,motor_pwm_us_3,motor_pwm_us_4,roll_rad,pitch_rad,yaw_rad,"
+        "roll_rate_rad_s,pitch_rate_rad_s,yaw_rate_rad_s"
+    )
     lines = [header] + [",".join(map(str, [t[i], *pwm[i], 0.1, -0.1, 1.0, 0.01, 0.02, 0.03])) for i in range(n)]
     lines.append("123,1500")  # a cut-off last line
     path = tmp_path / "f.csv"
@@ -103,10 +105,12 @@ def test_propwatch_csv_round_trip(tmp_path):
 
 def test_format_file_rejects_unknown_keys(tmp_path):
     bad = tmp_path / "formats.yaml"
-    bad.write_text("x:\n  description: d\n  time: {column: t, unit: ms}\n  cmd_unit: us\n  motors: [a, b, c, d]\n"
-                   "  motor_names: ['1', '2', '3', '4']\n  roll: {column: r, unit: deg}\n  pitch: {column: p, unit: deg}\n"
-                   "  yaw: {column: y, unit: deg}\n  roll_rate: {column: null}\n  pitch_rate: {column: null}\n"
-                   "  yaw_rate: {column: null}\n  hieght: {column: z, unit: m}\n")
+    bad.write_text(
+        "x:\n  description: d\n  time: {column: t, unit: ms}\n  cmd_unit: us\n  motors: [a, b, c, d]\n"
+        "  motor_names: ['1', '2', '3', '4']\n  roll: {column: r, unit: deg}\n  pitch: {column: p, unit: deg}\n"
+        "  yaw: {column: y, unit: deg}\n  roll_rate: {column: null}\n  pitch_rate: {column: null}\n"
+        "  yaw_rate: {column: null}\n  hieght: {column: z, unit: m}\n"
+    )
     with pytest.raises(ConfigError, match="hieght"):
         load_formats(bad)
     assert {"crazypad", "crazypad-controller", "propwatch"} <= set(load_formats())

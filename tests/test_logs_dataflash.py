@@ -97,10 +97,21 @@ def test_motor_outputs_follow_servo_functions_and_frame_checks():
 
     p = Path("x.bin")
     assert motor_outputs({"FRAME": 1.0}, p) == (1, 2, 3, 4)  # Copter 3.3 quad X: motor k on output k
-    params = {"FRAME_CLASS": 1.0, "FRAME_TYPE": 1.0, "SERVO1_FUNCTION": 34.0, "SERVO2_FUNCTION": 33.0,
-              "SERVO5_FUNCTION": 35.0, "SERVO6_FUNCTION": 36.0, "SERVO3_FUNCTION": 0.0}
+    params = {
+        "FRAME_CLASS": 1.0,
+        "FRAME_TYPE": 1.0,
+        "SERVO1_FUNCTION": 34.0,
+        "SERVO2_FUNCTION": 33.0,
+        "SERVO5_FUNCTION": 35.0,
+        "SERVO6_FUNCTION": 36.0,
+        "SERVO3_FUNCTION": 0.0,
+    }
     assert motor_outputs(params, p) == (2, 1, 5, 6)
-    for bad, msg in (({"FRAME": 0.0}, "not X"), ({"FRAME_CLASS": 2.0}, "not a quadrotor"),
-                     ({"FRAME_CLASS": 1.0, "FRAME_TYPE": 3.0}, "not X"), ({"SERVO1_FUNCTION": 33.0}, "Motor1..Motor4")):
+    for bad, msg in (
+        ({"FRAME": 0.0}, "not X"),
+        ({"FRAME_CLASS": 2.0}, "not a quadrotor"),
+        ({"FRAME_CLASS": 1.0, "FRAME_TYPE": 3.0}, "not X"),
+        ({"SERVO1_FUNCTION": 33.0}, "Motor1..Motor4"),
+    ):
         with pytest.raises(LogFormatError, match=msg):
             motor_outputs(bad, p)

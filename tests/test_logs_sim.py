@@ -24,8 +24,9 @@ def flown(tmp_path_factory):
     vehicle = load_vehicle(DEFAULT_VEHICLE)
     cfg = dataclasses.replace(sim.SimConfig(), duration_s=12.0, log_rate_hz=TLOG_RATE_HZ)
     conditions = np.zeros((1, 4), dtype=np.int64)
-    log = sim.simulate(vehicle, random_waypoints(1, 5, seed=4), build_propellers(vehicle, conditions, "quadratic", 4),
-                       cfg, seed=4)
+    log = sim.simulate(
+        vehicle, random_waypoints(1, 5, seed=4), build_propellers(vehicle, conditions, "quadratic", 4), cfg, seed=4
+    )
     path = write_tlog(tmp_path_factory.mktemp("sim") / "f.tlog", log, 0)
     return log, path
 

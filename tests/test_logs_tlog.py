@@ -58,7 +58,7 @@ def test_corrupted_bytes_are_skipped_and_reading_goes_on(tmp_path):
     full = write_tlog(tmp_path / "full.tlog", duration_s=20.0)
     data = bytearray(full.read_bytes())
     mid = len(data) // 3
-    data[mid:mid + 300] = bytes(range(256)) + bytes(44)  # garbage over several frames
+    data[mid : mid + 300] = bytes(range(256)) + bytes(44)  # garbage over several frames
     bad = tmp_path / "bad.tlog"
     bad.write_bytes(bytes(data))
     whole, part = read_raw(full), read_raw(bad)
@@ -98,8 +98,18 @@ def test_unknown_format_is_a_clear_error(tmp_path):
 
 
 def _assert_same_streams(a, b):
-    for k in ("motor_cmd", "attitude_rad", "rates_rad_s", "battery_v", "armed", "landed", "esc_rpm",
-              "accel_frd_m_s2", "vel_ned_m_s", "pos_ned_m"):
+    for k in (
+        "motor_cmd",
+        "attitude_rad",
+        "rates_rad_s",
+        "battery_v",
+        "armed",
+        "landed",
+        "esc_rpm",
+        "accel_frd_m_s2",
+        "vel_ned_m_s",
+        "pos_ned_m",
+    ):
         x, y = getattr(a, k), getattr(b, k)
         assert (x is None) == (y is None), k
         if x is not None:
@@ -123,8 +133,9 @@ def test_bulk_unpacking_equals_pymavlink_frame_by_frame(tmp_path):
     for i in range(40):  # the receive clock jumps back by years here (a reset wall clock): still read
         t_ms = 14_000 + 20 * i
         extra += struct.pack(">Q", t_ms * 1000) + m1.attitude_encode(t_ms, 0.1, -0.2, 0.3, 0.0, 0.0, 0.0).pack(m1)
-        extra += struct.pack(">Q", t_ms * 1000) + m2.servo_output_raw_encode(t_ms * 1000, 0, 1500, 1510, 1520, 1530,
-                                                                              0, 0, 0, 0).pack(m2)
+        extra += struct.pack(">Q", t_ms * 1000) + m2.servo_output_raw_encode(
+            t_ms * 1000, 0, 1500, 1510, 1520, 1530, 0, 0, 0, 0
+        ).pack(m2)
     path.write_bytes(path.read_bytes() + bytes(extra))
     for extras in (True, False):
         fast, slow = read_tlog(path, extras=extras, bulk=True), read_tlog(path, extras=extras, bulk=False)
@@ -152,4 +163,4 @@ def test_slow_streams_are_held_and_flagged(tmp_path):
     assert any("motor_cmd logged at 8.0 Hz" in w for w in table.warnings)
     seg = table.airborne_segments()
     # 125 ms between samples, held up to 250 ms: the 20 Hz grid has no gaps in flight.
-    assert np.isfinite(table.roll_rad[seg[0][0]:seg[0][1]]).all()
+    assert np.isfinite(table.roll_rad[seg[0][0] : seg[0][1]]).all()

@@ -48,8 +48,14 @@ class ULogWriter:
 
 
 def quat_from_euler(roll, pitch, yaw):
-    cr, sr, cp, sp, cy, sy = (math.cos(roll / 2), math.sin(roll / 2), math.cos(pitch / 2), math.sin(pitch / 2),
-                              math.cos(yaw / 2), math.sin(yaw / 2))
+    cr, sr, cp, sp, cy, sy = (
+        math.cos(roll / 2),
+        math.sin(roll / 2),
+        math.cos(pitch / 2),
+        math.sin(pitch / 2),
+        math.cos(yaw / 2),
+        math.sin(yaw / 2),
+    )
     return (cr * cp * cy + sr * sp * sy, sr * cp * cy - cr * sp * sy, cr * sp * cy + sr * cp * sy, cr * cp * sy - sr * sp * cy)
 
 
@@ -58,8 +64,11 @@ def write_ulog(path, duration_s=20.0, rate_hz=50.0, faulty=None, with_attitude=T
     w.topic("actuator_outputs", [("uint64_t", "timestamp"), ("uint32_t", "noutputs"), ("float[16]", "output")])
     w.topic("actuator_outputs", [("uint64_t", "timestamp"), ("uint32_t", "noutputs"), ("float[16]", "output")], multi_id=1)
     if with_attitude:
-        w.topic("vehicle_attitude", [("uint64_t", "timestamp"), ("float[4]", "q")]
-                + ([("float", "rollspeed"), ("float", "pitchspeed"), ("float", "yawspeed")] if old_px4 else []))
+        w.topic(
+            "vehicle_attitude",
+            [("uint64_t", "timestamp"), ("float[4]", "q")]
+            + ([("float", "rollspeed"), ("float", "pitchspeed"), ("float", "yawspeed")] if old_px4 else []),
+        )
     if not old_px4:
         w.topic("vehicle_angular_velocity", [("uint64_t", "timestamp"), ("float[3]", "xyz")])
     w.topic("vehicle_status", [("uint64_t", "timestamp"), ("uint8_t", "arming_state")])

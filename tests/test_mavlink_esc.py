@@ -1,6 +1,5 @@
 """ESC_STATUS (291): definition-derived CRC, and round trips through pymavlink readers."""
 
-
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import common
 from pymavlink.generator import mavparse
@@ -33,7 +32,9 @@ def _write_tlog(path, n=5):
         for k in range(n):
             buf = mavlink_esc.encode_esc_status(mav, 1_000_000 + k * 50_000, [5000 + k, 5100, 5200, 5300], [15.0] * 4, [3.0] * 4)
             f.write((1_700_000_000_000_000 + k).to_bytes(8, "big") + buf)
-            f.write((1_700_000_000_000_000 + k).to_bytes(8, "big") + common.MAVLink_attitude_message(k, 0, 0, 0, 0, 0, 0).pack(mav))
+            f.write(
+                (1_700_000_000_000_000 + k).to_bytes(8, "big") + common.MAVLink_attitude_message(k, 0, 0, 0, 0, 0, 0).pack(mav)
+            )
 
 
 def test_stock_reader_does_not_know_291_but_registered_reader_decodes(tmp_path):

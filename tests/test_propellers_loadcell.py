@@ -48,12 +48,14 @@ def test_faults_differ_as_argued():
     assert bent_lo < 0.93 and crack_lo > 0.95  # bent loses thrust at once, a crack is closed at low speed
     assert crack_lo - crack_hi > 0.08  # and opens with RPM
     assert _ratio(RUNS["bent"], 0.5, 0.9)[1] > _ratio(RUNS["cracked"], 0.5, 0.9)[1] > 1.0  # more drag torque
+
     # Flutter makes the cracked sweep noisier at speed than the normal one.
     def scatter(run):
         s, y = run.normalised(VEHICLE)
         m = s > 0.8
         r = y[m, 0] / s[m] ** 2
         return np.std(np.diff(r))
+
     assert scatter(RUNS["cracked"]) > 2 * scatter(RUNS["normal"])
 
 

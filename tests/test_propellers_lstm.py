@@ -42,7 +42,7 @@ def test_stateful_equals_windowed(condition):
     stateful, _ = model.run(s[None, :])
     windowed = model.windowed(s[None, :])
     # Outputs are fractions of full-scale thrust/torque: within 1e-4 of full scale (measured: < 1e-5).
-    np.testing.assert_allclose(stateful[0, model.window_steps:], windowed[0, model.window_steps:], atol=1e-4)
+    np.testing.assert_allclose(stateful[0, model.window_steps :], windowed[0, model.window_steps :], atol=1e-4)
 
 
 @pytest.mark.parametrize("condition", CONDITIONS)
@@ -131,8 +131,9 @@ def test_sample_instants_equal_the_lstm_and_fast_part_is_instant():
 
 def test_other_vehicle_by_scaling():
     """A vehicle with 10x kF and 2x omega_max gets thrust scaled by kF·omega_max² at the same normalised speed."""
-    other = dataclasses.replace(VEHICLE, kf_n_per_rad_s2=VEHICLE.kf_n_per_rad_s2 * 10,
-                                omega_max_rad_s=VEHICLE.omega_max_rad_s * 2)
+    other = dataclasses.replace(
+        VEHICLE, kf_n_per_rad_s2=VEHICLE.kf_n_per_rad_s2 * 10, omega_max_rad_s=VEHICLE.omega_max_rad_s * 2
+    )
     s = np.full((1, 4), 0.6)
     a = build_propellers(VEHICLE, np.array([[0, 1, 2, 0]]), kind="lstm", vibration=False)
     b = build_propellers(other, np.array([[0, 1, 2, 0]]), kind="lstm", vibration=False)
@@ -171,12 +172,14 @@ def test_runtime_needs_no_torch():
     import subprocess
     import sys
 
-    code = ("import sys; sys.modules['torch'] = None\n"
-            "import numpy as np\n"
-            "from monitor.vehicle import DEFAULT_VEHICLE, load_vehicle\n"
-            "from offline.propellers import build_propellers\n"
-            "p = build_propellers(load_vehicle(DEFAULT_VEHICLE), np.array([[0, 1, 2, 0]]), kind='lstm')\n"
-            "w = np.full((1, 4), 600.0); p.reset(w); t, q = p(w, 0.0025)\n"
-            "assert t.shape == (1, 4) and (t > 0).all()\n")
+    code = (
+        "import sys; sys.modules['torch'] = None\n"
+        "import numpy as np\n"
+        "from monitor.vehicle import DEFAULT_VEHICLE, load_vehicle\n"
+        "from offline.propellers import build_propellers\n"
+        "p = build_propellers(load_vehicle(DEFAULT_VEHICLE), np.array([[0, 1, 2, 0]]), kind='lstm')\n"
+        "w = np.full((1, 4), 600.0); p.reset(w); t, q = p(w, 0.0025)\n"
+        "assert t.shape == (1, 4) and (t > 0).all()\n"
+    )
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert done.returncode == 0, done.stderr

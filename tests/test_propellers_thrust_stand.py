@@ -91,19 +91,27 @@ def test_latin1_cr_and_kgf(tmp_path):
     np.testing.assert_array_equal(run.rpm, [3000, 6000, 9000])
     # Thrust exactly k·ω² is recovered with R² = 1.
     w = run.rpm * RAD_S_PER_RPM
-    p2 = _write(tmp_path, "Time (s),ESC signal (us),Thrust (N),Motor Optical Speed (RPM)",
-                [f"{i},{1100 + 100 * i},{float(2e-6 * wi**2)!r},{r}" for i, (wi, r) in enumerate(zip(w, run.rpm))], "utf-8", "\n")
+    p2 = _write(
+        tmp_path,
+        "Time (s),ESC signal (us),Thrust (N),Motor Optical Speed (RPM)",
+        [f"{i},{1100 + 100 * i},{float(2e-6 * wi**2)!r},{r}" for i, (wi, r) in enumerate(zip(w, run.rpm))],
+        "utf-8",
+        "\n",
+    )
     fit = fit_kf(read_thrust_stand_csv(p2))
     assert fit.coefficients[0] == pytest.approx(2e-6, rel=1e-9) and fit.r2 == pytest.approx(1.0)
 
 
-@pytest.mark.parametrize(("header", "rows", "column"), [
-    ("Time (s),ESC signal (µs),Motor Optical Speed (RPM)", ["0,1100,3000", "1,1200,4000"], "Thrust"),
-    ("Time (s),ESC signal (µs),Thrust (stone),Motor Optical Speed (RPM)", ["0,1100,1,3000", "1,1200,2,4000"], "Thrust"),
-    ("Time (s),ESC signal (µs),Thrust (gf),Torque (kN·m)", ["0,1100,1,0.1", "1,1200,2,0.2"], "Torque"),
-    ("Time (s),ESC signal (µs),Thrust (gf)", ["0,1100,1", "2,1200,2", "1,1300,3"], "Time"),
-    ("Time (s),ESC signal (µs),Thrust (gf)", ["0,1100,1", "1,abc,2"], "ESC signal"),
-])
+@pytest.mark.parametrize(
+    ("header", "rows", "column"),
+    [
+        ("Time (s),ESC signal (µs),Motor Optical Speed (RPM)", ["0,1100,3000", "1,1200,4000"], "Thrust"),
+        ("Time (s),ESC signal (µs),Thrust (stone),Motor Optical Speed (RPM)", ["0,1100,1,3000", "1,1200,2,4000"], "Thrust"),
+        ("Time (s),ESC signal (µs),Thrust (gf),Torque (kN·m)", ["0,1100,1,0.1", "1,1200,2,0.2"], "Torque"),
+        ("Time (s),ESC signal (µs),Thrust (gf)", ["0,1100,1", "2,1200,2", "1,1300,3"], "Time"),
+        ("Time (s),ESC signal (µs),Thrust (gf)", ["0,1100,1", "1,abc,2"], "ESC signal"),
+    ],
+)
 def test_bad_files_name_file_and_column(tmp_path, header, rows, column):
     p = _write(tmp_path, header, rows, "utf-8", "\n")
     with pytest.raises(LogFormatError) as exc:

@@ -14,16 +14,19 @@ from offline.sim.controller import ControllerConfig
 from offline.sim.simulator import SimConfig
 
 
-@pytest.mark.parametrize("kw,key", [
-    ({"physics_rate_hz": 200, "control_rate_hz": 100, "position_rate_hz": 50}, "physics_rate_hz"),
-    ({"control_rate_hz": 300}, "control_rate_hz"),
-    ({"position_rate_hz": 30}, "position_rate_hz"),
-    ({"log_rate_hz": 30}, "log_rate_hz"),
-    ({"log_rate_hz": 0}, "log_rate_hz"),
-    ({"duration_s": -1.0}, "duration_s"),
-    ({"duration_s": 1.01}, "duration_s"),
-    ({"gyro_noise_std_rad_s": -0.1}, "gyro_noise_std_rad_s"),
-])
+@pytest.mark.parametrize(
+    "kw,key",
+    [
+        ({"physics_rate_hz": 200, "control_rate_hz": 100, "position_rate_hz": 50}, "physics_rate_hz"),
+        ({"control_rate_hz": 300}, "control_rate_hz"),
+        ({"position_rate_hz": 30}, "position_rate_hz"),
+        ({"log_rate_hz": 30}, "log_rate_hz"),
+        ({"log_rate_hz": 0}, "log_rate_hz"),
+        ({"duration_s": -1.0}, "duration_s"),
+        ({"duration_s": 1.01}, "duration_s"),
+        ({"gyro_noise_std_rad_s": -0.1}, "gyro_noise_std_rad_s"),
+    ],
+)
 def test_sim_config_names_the_bad_key(kw, key):
     with pytest.raises(ConfigError, match=key):
         SimConfig(**kw)
@@ -80,8 +83,11 @@ def test_every_vehicle_value_cites_a_source():
 
     loaded = load_vehicle_with_sources(DEFAULT_VEHICLE)
     names = [f.name for f in dataclasses.fields(loaded.config)]
-    required = [n for n in names if n not in ("cg_offset_frd_m", "motor_efficiency", "linear_drag_n_per_m_s",
-                                               "wind_ned_m_s", "gyro_bias_frd_rad_s")]
+    required = [
+        n
+        for n in names
+        if n not in ("cg_offset_frd_m", "motor_efficiency", "linear_drag_n_per_m_s", "wind_ned_m_s", "gyro_bias_frd_rad_s")
+    ]
     for n in required:
         assert any(k == n or k.startswith(n + ".") for k in loaded.sources), n
 

@@ -155,5 +155,9 @@ def test_bad_propeller_model_and_divergence_fail_by_name(vehicle):
             return t * np.array([[1.0], [np.nan]]), q
 
     with pytest.raises(ModelError, match=r"flight\(s\) \[1\] diverged"):
-        simulate(vehicle, hover_waypoints(2), Explodes(vehicle.kf_n_per_rad_s2, vehicle.ktau_nm_per_rad_s2),
-                 dataclasses.replace(QUIET, duration_s=1.0))
+        simulate(
+            vehicle,
+            hover_waypoints(2),
+            Explodes(vehicle.kf_n_per_rad_s2, vehicle.ktau_nm_per_rad_s2),
+            dataclasses.replace(QUIET, duration_s=1.0),
+        )

@@ -99,8 +99,28 @@ def test_tlog_round_trips_through_pymavlink(tmp_path, log50):
 
 def test_cli_writes_flights_and_ground_truth(tmp_path):
     out = tmp_path / "run"
-    rc = simulate_main(["--out", str(out), "--flights", "2", "--label", "7", "--fault", "cracked", "--payload-kg", "0.45",
-                        "--duration-s", "3", "--propellers", "quadratic", "--seed", "4", "--waypoints-seed", "8"])
+    rc = simulate_main(
+        [
+            "--out",
+            str(out),
+            "--flights",
+            "2",
+            "--label",
+            "7",
+            "--fault",
+            "cracked",
+            "--payload-kg",
+            "0.45",
+            "--duration-s",
+            "3",
+            "--propellers",
+            "quadratic",
+            "--seed",
+            "4",
+            "--waypoints-seed",
+            "8",
+        ]
+    )
     assert rc == 0
     log, embedded = read_npz(out / "flights.npz")
     sidecar = json.loads((out / "sidecar.json").read_text())

@@ -151,10 +151,13 @@ def test_quaternion_helpers_agree():
     np.testing.assert_allclose(quat_mul(quat_mul(qz, qy), qx), q, atol=1e-12)
 
 
-@pytest.mark.parametrize("term,value", [
-    ("cg_offset_frd_m", (0.01, 0.0, 0.0)),
-    ("motor_efficiency", (0.9, 1.0, 1.0, 1.0)),
-])
+@pytest.mark.parametrize(
+    "term,value",
+    [
+        ("cg_offset_frd_m", (0.01, 0.0, 0.0)),
+        ("motor_efficiency", (0.9, 1.0, 1.0, 1.0)),
+    ],
+)
 def test_calibration_terms_change_the_moments(vehicle, term, value):
     v = dataclasses.replace(vehicle, **{term: value})
     dyn = Dynamics(v, np.array([v.mass_kg]), DT)

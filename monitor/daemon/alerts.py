@@ -95,8 +95,9 @@ class AlertRule:
         """Streaks count consecutive windows: a gap in classification breaks them."""
         self._streak[:] = 0
 
-    def update(self, time_boot_ms: int, fault_probability: np.ndarray, label_probability: np.ndarray,
-               battery_v: float = float("nan")) -> Alert | None:
+    def update(
+        self, time_boot_ms: int, fault_probability: np.ndarray, label_probability: np.ndarray, battery_v: float = float("nan")
+    ) -> Alert | None:
         p = np.asarray(fault_probability, dtype=np.float64)
         hot = np.isfinite(p) & (p >= self.config.threshold)
         self._streak = np.where(hot, self._streak + 1, 0)
@@ -108,8 +109,15 @@ class AlertRule:
         props = tuple(int(i) + 1 for i in np.flatnonzero(firing))
         lp = np.asarray(label_probability, dtype=np.float64)
         critical = bool(max(p[i - 1] for i in props) >= self.config.critical_threshold)
-        return Alert(int(time_boot_ms), props, tuple(map(float, p)), int(np.argmax(lp)) + 1,
-                     tuple(map(float, lp)), critical, float(battery_v))
+        return Alert(
+            int(time_boot_ms),
+            props,
+            tuple(map(float, p)),
+            int(np.argmax(lp)) + 1,
+            tuple(map(float, lp)),
+            critical,
+            float(battery_v),
+        )
 
 
 class RateLimiter:
@@ -150,4 +158,3 @@ class EventWriter:
         if self._fh is not None:
             self._fh.close()
             self._fh = None
-

@@ -28,7 +28,11 @@ log = logging.getLogger("propwatch.monitor")
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p = argparse.ArgumentParser(prog="propwatch monitor", description="Onboard propeller-fault monitor (MAVLink).")
-    p.add_argument("--connect", required=True, help="pymavlink URL: udpin:0.0.0.0:14540, udpout:H:P, tcp:H:P, /dev/ttyAMA0,921600, or a .tlog")
+    p.add_argument(
+        "--connect",
+        required=True,
+        help="pymavlink URL: udpin:0.0.0.0:14540, udpout:H:P, tcp:H:P, /dev/ttyAMA0,921600, or a .tlog",
+    )
     p.add_argument("--config", help="monitor YAML (see deploy/monitor.yaml); defaults for every key")
     p.add_argument("--events", help="append one JSON line per alert here (overrides events_path)")
     p.add_argument("--model", help="classifier ONNX (overrides model_path)")
@@ -42,8 +46,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
 def main(argv: list[str] | None = None) -> int:
     started = time.monotonic()
     args = parse_args(argv)
-    logging.basicConfig(level=args.log_level, stream=sys.stderr,
-                        format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    logging.basicConfig(level=args.log_level, stream=sys.stderr, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     cfg = load_monitor_config(args.config)
     model_path = args.model or cfg.model_path
     classifier = Classifier(model_path, threads=cfg.inference.threads)

@@ -76,8 +76,15 @@ class Link:
             raise ConfigError(f"--connect {self.url}: log file not found")
         try:
             self.conn = mavutil.mavlink_connection(
-                device, baud=baud or 115200, source_system=self._system_id or 1, source_component=self.component_id,
-                dialect="common", robust_parsing=True, autoreconnect=False, retries=0)
+                device,
+                baud=baud or 115200,
+                source_system=self._system_id or 1,
+                source_component=self.component_id,
+                dialect="common",
+                robust_parsing=True,
+                autoreconnect=False,
+                retries=0,
+            )
         except ValueError as exc:
             raise ConfigError(f"--connect {self.url}: {exc}") from exc
         if not self.is_log:
@@ -189,13 +196,29 @@ class Link:
         self._send(lambda mav: mav.statustext_encode(severity, text[:50].encode("ascii", "replace")))
 
     def send_named_value_float(self, time_boot_ms: int, name: str, value: float) -> None:
-        self._send(lambda mav: mav.named_value_float_encode(int(time_boot_ms) & 0xFFFFFFFF, name[:NAMED_VALUE_MAX_CHARS].encode(),
-                                                            float(value)))
+        self._send(
+            lambda mav: mav.named_value_float_encode(
+                int(time_boot_ms) & 0xFFFFFFFF, name[:NAMED_VALUE_MAX_CHARS].encode(), float(value)
+            )
+        )
 
     def request_message_interval(self, target_system: int, target_component: int, message_id: int, rate_hz: float) -> None:
         interval_us = int(round(1e6 / rate_hz))
-        self._send(lambda mav: mav.command_long_encode(target_system, target_component, MAV_CMD_SET_MESSAGE_INTERVAL, 0,
-                                                       float(message_id), float(interval_us), 0, 0, 0, 0, 0))
+        self._send(
+            lambda mav: mav.command_long_encode(
+                target_system,
+                target_component,
+                MAV_CMD_SET_MESSAGE_INTERVAL,
+                0,
+                float(message_id),
+                float(interval_us),
+                0,
+                0,
+                0,
+                0,
+                0,
+            )
+        )
 
 
 class _BadData:

@@ -72,18 +72,29 @@ class Pipeline:
             battery_id=config.input.battery_id,
         )
         fast, state = _us(r.max_gap_s), _us(r.state_max_age_s)
-        self.hold = StreamingHold(period_us(r.rate_hz), {
-            "attitude": StreamSpec(6, fast, True),
-            "motor": StreamSpec(4, fast, True),
-            "armed": StreamSpec(1, state, False),
-            "landed": StreamSpec(1, state, False),
-            "battery": StreamSpec(1, _us(r.battery_max_age_s), False),
-        }, reorder_us=_us(r.reorder_s))
+        self.hold = StreamingHold(
+            period_us(r.rate_hz),
+            {
+                "attitude": StreamSpec(6, fast, True),
+                "motor": StreamSpec(4, fast, True),
+                "armed": StreamSpec(1, state, False),
+                "landed": StreamSpec(1, state, False),
+                "battery": StreamSpec(1, _us(r.battery_max_age_s), False),
+            },
+            reorder_us=_us(r.reorder_s),
+        )
         self._channels = np.asarray(config.input.motor_outputs, dtype=np.int64)
         self._source = {"servo": "SERVO_OUTPUT_RAW", "actuator": "ACTUATOR_OUTPUT_STATUS"}.get(config.input.motor_source)
         self.seen_landed = config.input.landed_state == "required"
-        self.stats = {"steps": 0, "valid_steps": 0, "classified": 0, "resets": 0, "skipped_steps": 0,
-                      "clock_resets": 0, "motor_msgs_unmapped": 0}
+        self.stats = {
+            "steps": 0,
+            "valid_steps": 0,
+            "classified": 0,
+            "resets": 0,
+            "skipped_steps": 0,
+            "clock_resets": 0,
+            "motor_msgs_unmapped": 0,
+        }
         # Ring of features, stored twice so any window is one contiguous slice.
         self._ring = np.zeros((2 * self.window, len(self.features)), dtype=np.float32)
         self._head = 0
@@ -173,8 +184,12 @@ class Pipeline:
         att = v["attitude"]
         signals = {
             "motor_rpm": v["motor"][None, :],
-            "roll_rad": att[0:1], "pitch_rad": att[1:2], "yaw_rad": att[2:3],
-            "roll_rate_rad_s": att[3:4], "pitch_rate_rad_s": att[4:5], "yaw_rate_rad_s": att[5:6],
+            "roll_rad": att[0:1],
+            "pitch_rad": att[1:2],
+            "yaw_rad": att[2:3],
+            "roll_rate_rad_s": att[3:4],
+            "pitch_rate_rad_s": att[4:5],
+            "yaw_rate_rad_s": att[5:6],
         }
         feats = compute_features(signals, self.features)[0]
         valid = airborne and bool(np.isfinite(feats).all())
@@ -194,8 +209,16 @@ class Pipeline:
         if self._since_inference > 0:
             return StepResult(g.timestamp_us, True, True, w, battery_v)
         self._since_inference = self.config.inference.every_k_steps
-        window = self._ring[self._head:self._head + w]  # oldest first
+        window = self._ring[self._head : self._head + w]  # oldest first
         labels, faults = self.classifier.predict(window[None])
         self.stats["classified"] += 1
-        return StepResult(g.timestamp_us, True, True, w, battery_v, faults[0].astype(np.float64),
-                          labels[0].astype(np.float64), time.perf_counter() - received_s)
+        return StepResult(
+            g.timestamp_us,
+            True,
+            True,
+            w,
+            battery_v,
+            faults[0].astype(np.float64),
+            labels[0].astype(np.float64),
+            time.perf_counter() - received_s,
+        )

@@ -104,8 +104,7 @@ class StreamingHold:
         horizon = max(s.spec.max_age_us for s in self._streams.values() if s.spec.paces) + self.reorder_us
         if self.clock_us is not None and self.clock_us >= g + horizon:
             return True
-        return all(s.last_t is not None and s.last_t > g + self.reorder_us
-                   for s in self._streams.values() if s.spec.paces)
+        return all(s.last_t is not None and s.last_t > g + self.reorder_us for s in self._streams.values() if s.spec.paces)
 
     def _emit(self, final_only: bool) -> list[GridStep]:
         out: list[GridStep] = []

@@ -46,8 +46,9 @@ class Counters:
 
 
 class Daemon:
-    def __init__(self, config: MonitorConfig, link: Link, pipeline: Pipeline, events: EventWriter,
-                 notifier: Notifier | None = None):
+    def __init__(
+        self, config: MonitorConfig, link: Link, pipeline: Pipeline, events: EventWriter, notifier: Notifier | None = None
+    ):
         self.cfg = config
         self.link = link
         self.pipeline = pipeline
@@ -78,8 +79,14 @@ class Daemon:
     # -- main loop ---------------------------------------------------------------------
     def run(self) -> int:
         self.notifier.ready(f"monitoring {self.link.url}")
-        log.info("ready: model %s, %d features, window %d at %.0f Hz, link %s", self.pipeline.classifier.path,
-                 len(self.pipeline.features), self.pipeline.window, self.cfg.resample.rate_hz, self.link.url)
+        log.info(
+            "ready: model %s, %d features, window %d at %.0f Hz, link %s",
+            self.pipeline.classifier.path,
+            len(self.pipeline.features),
+            self.pipeline.window,
+            self.cfg.resample.rate_hz,
+            self.link.url,
+        )
         while not self.stop.is_set():
             try:
                 batch = self.link.read(READ_TIMEOUT_S)
@@ -120,8 +127,7 @@ class Daemon:
             self._system_id = dec.system_id
             self.link.set_system_id(dec.system_id)
             log.info("autopilot: system %d component %d", dec.system_id, dec.component_id)
-        if self._system_id is not None and msg.get_srcSystem() == self._system_id \
-                and msg.get_srcComponent() == dec.component_id:
+        if self._system_id is not None and msg.get_srcSystem() == self._system_id and msg.get_srcComponent() == dec.component_id:
             self._rates[kind] += 1
             if kind == "HEARTBEAT":
                 self._last_autopilot_hb = time.monotonic()
@@ -161,8 +167,13 @@ class Daemon:
             return
         self.counters.alerts += 1
         text = alert.statustext()
-        log.warning("ALERT t=%d ms: %s (label %d, p=%s)", alert.time_boot_ms, text, alert.label,
-                    np.array2string(np.asarray(alert.fault_probability), precision=3))
+        log.warning(
+            "ALERT t=%d ms: %s (label %d, p=%s)",
+            alert.time_boot_ms,
+            text,
+            alert.label,
+            np.array2string(np.asarray(alert.fault_probability), precision=3),
+        )
         self.notifier.status(f"last alert: {text} at t={alert.time_boot_ms} ms")
         self.events.write(alert)
         self.statustexts.add(alert)
@@ -218,8 +229,11 @@ class Daemon:
         slow = set()
         if self._system_id is None:
             others = sum(self.pipeline.decoder.ignored.values())
-            log.warning("no autopilot HEARTBEAT yet (%d messages received, %d from other systems/components)",
-                        self.counters.messages, others)
+            log.warning(
+                "no autopilot HEARTBEAT yet (%d messages received, %d from other systems/components)",
+                self.counters.messages,
+                others,
+            )
         elif self._link_up:  # a link that is down is reported as such, not as slow streams
             for name in self.fast_streams():
                 hz = self._rates[name] / span
@@ -237,10 +251,15 @@ class Daemon:
         pct = (lambda q: float(np.percentile(lat, q))) if len(lat) else (lambda q: math.nan)
         c = self.counters
         return {
-            "messages": c.messages, "bad_data": c.bad_data, "alerts": c.alerts,
+            "messages": c.messages,
+            "bad_data": c.bad_data,
+            "alerts": c.alerts,
             "statustexts": c.statustexts,
-            "stream_requests": c.stream_requests, "internal_errors": c.internal_errors, "acks": {str(k): v for k, v in c.acks.items()},
-            "pipeline": dict(self.pipeline.stats), "late_samples": self.pipeline.hold.late,
+            "stream_requests": c.stream_requests,
+            "internal_errors": c.internal_errors,
+            "acks": {str(k): v for k, v in c.acks.items()},
+            "pipeline": dict(self.pipeline.stats),
+            "late_samples": self.pipeline.hold.late,
             "ignored": {f"{s}/{k}": n for (s, k), n in self.pipeline.decoder.ignored.items()},
             "undecodable": dict(self.pipeline.decoder.undecodable),
             "latency_ms": {"n": int(len(lat)), "p50": pct(50), "p99": pct(99), "max": float(lat.max()) if len(lat) else math.nan},
@@ -250,9 +269,15 @@ class Daemon:
         r = self.report()
         if self._system_id is None:
             log.warning("no autopilot HEARTBEAT was ever received: nothing was classified")
-        log.info("stopped: %d messages, %d steps (%d valid, %d classified), %d alerts, %d bad packets",
-                 r["messages"], r["pipeline"]["steps"], r["pipeline"]["valid_steps"], r["pipeline"]["classified"],
-                 r["alerts"], r["bad_data"])
+        log.info(
+            "stopped: %d messages, %d steps (%d valid, %d classified), %d alerts, %d bad packets",
+            r["messages"],
+            r["pipeline"]["steps"],
+            r["pipeline"]["valid_steps"],
+            r["pipeline"]["classified"],
+            r["alerts"],
+            r["bad_data"],
+        )
 
     def write_report(self, path: str | Path) -> None:
         Path(path).write_text(json.dumps(self.report(), indent=2, default=float) + "\n", encoding="utf-8")

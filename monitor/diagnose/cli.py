@@ -54,17 +54,28 @@ def default_model(vehicle_yaml: str | None) -> Path:
 
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
-    p = argparse.ArgumentParser(prog="propwatch diagnose", description=__doc__,
-                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = argparse.ArgumentParser(
+        prog="propwatch diagnose", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     p.add_argument("logs", nargs="+", metavar="LOG", help=".tlog, .ulg, DataFlash .bin, or CSV (with --format)")
-    p.add_argument("--format", dest="fmt", default=None,
-                   help="log format: tlog, ulog, dataflash, or a CSV mapping name from monitor/formats.yaml (e.g. crazypad)")
-    p.add_argument("--model", default=None,
-                   help="classifier ONNX file (default: models/NAME-classifier.onnx for --vehicle .../NAME.yaml when "
-                        "that file exists, else models/classifier.onnx)")
-    p.add_argument("--vehicle", default=None,
-                   help="vehicle YAML whose ESC curve converts motor commands to RPM "
-                        "(default: the model's metadata vehicle.esc, else the paper's fit = models/vehicle.yaml)")
+    p.add_argument(
+        "--format",
+        dest="fmt",
+        default=None,
+        help="log format: tlog, ulog, dataflash, or a CSV mapping name from monitor/formats.yaml (e.g. crazypad)",
+    )
+    p.add_argument(
+        "--model",
+        default=None,
+        help="classifier ONNX file (default: models/NAME-classifier.onnx for --vehicle .../NAME.yaml when "
+        "that file exists, else models/classifier.onnx)",
+    )
+    p.add_argument(
+        "--vehicle",
+        default=None,
+        help="vehicle YAML whose ESC curve converts motor commands to RPM "
+        "(default: the model's metadata vehicle.esc, else the paper's fit = models/vehicle.yaml)",
+    )
     # Windows are 5 s long; at a 1 s hop consecutive ones share 4 s: a finer hop costs
     # inference time without adding information to a post-flight verdict.
     p.add_argument("--hop", type=int, default=20, help="classify one window every HOP grid steps (default 20 = 1 s)")
@@ -84,12 +95,20 @@ def format_text(d: Diagnosis) -> str:
         lines.append(f"no verdict: {d.reason}")
     else:
         faulty = d.verdict["faulty_propellers"]
-        lines.append(f"verdict: label {d.verdict['label']} ("
-                     + ("no faulty propeller" if not faulty else "faulty propeller(s) " + ", ".join(
-                         d.propellers[i - 1]["name"] for i in faulty)) + f"), from {d.windows} windows")
+        lines.append(
+            f"verdict: label {d.verdict['label']} ("
+            + (
+                "no faulty propeller"
+                if not faulty
+                else "faulty propeller(s) " + ", ".join(d.propellers[i - 1]["name"] for i in faulty)
+            )
+            + f"), from {d.windows} windows"
+        )
         for p in d.propellers:
-            lines.append(f"  propeller {p['propeller']} ({p['name']}): P(faulty) = {p['fault_probability']:.3f}"
-                         + ("  <- FAULTY" if p["faulty"] else ""))
+            lines.append(
+                f"  propeller {p['propeller']} ({p['name']}): P(faulty) = {p['fault_probability']:.3f}"
+                + ("  <- FAULTY" if p["faulty"] else "")
+            )
     for s in d.segments:
         lines.append(f"  airborne {s['start_boot_s']:.1f}-{s['stop_boot_s']:.1f} s boot time ({s['steps']} steps)")
     lines += [f"  warning: {w}" for w in d.warnings]

@@ -85,6 +85,7 @@ def vehicle_numbers(names: list[str]) -> list[int] | None:
 
 def renumber(out: dict, own: list[int]) -> dict:
     """Express a diagnosis JSON in the vehicle's own propeller numbers (``own[i]`` for PX4 rotor i+1)."""
+
     def relabel(label: int) -> int:
         return label_for([own[i - 1] for i in LABEL_TABLE[label]])
 
@@ -97,11 +98,15 @@ def renumber(out: dict, own: list[int]) -> dict:
     out = dict(out)
     v = out["verdict"]
     if v is not None:
-        out["verdict"] = {"label": relabel(v["label"]),
-                          "faulty_propellers": sorted(own[i - 1] for i in v["faulty_propellers"]),
-                          "fault_probability": reorder(v["fault_probability"])}
-    out["propellers"] = sorted(({**p, "propeller": own[p["propeller"] - 1], "px4_rotor": p["propeller"]}
-                                for p in out["propellers"]), key=lambda p: p["propeller"])
+        out["verdict"] = {
+            "label": relabel(v["label"]),
+            "faulty_propellers": sorted(own[i - 1] for i in v["faulty_propellers"]),
+            "fault_probability": reorder(v["fault_probability"]),
+        }
+    out["propellers"] = sorted(
+        ({**p, "propeller": own[p["propeller"] - 1], "px4_rotor": p["propeller"]} for p in out["propellers"]),
+        key=lambda p: p["propeller"],
+    )
     if out["label_probability"] is not None:
         lp = [0.0] * 16
         for k, v_ in enumerate(out["label_probability"]):
@@ -112,8 +117,10 @@ def renumber(out: dict, own: list[int]) -> dict:
         t["fault_probability"] = [reorder(row) for row in t["fault_probability"]]
         t["label"] = [relabel(k) for k in t["label"]]
         out["timeline"] = t
-    out["propeller_numbering"] = {"names": [p["name"] for p in out["propellers"]],
-                                  "px4_rotor": [p["px4_rotor"] for p in out["propellers"]]}
+    out["propeller_numbering"] = {
+        "names": [p["name"] for p in out["propellers"]],
+        "px4_rotor": [p["px4_rotor"] for p in out["propellers"]],
+    }
     return out
 
 
@@ -133,15 +140,18 @@ def _t_s(table: FlightTable, i) -> np.ndarray:
     return np.asarray(table.timestamp_us)[i] / US_PER_S
 
 
-def envelope_checks(table: FlightTable, clf: Classifier, esc: EscCurve | None = None,
-                    figures: dict | None = None) -> tuple[list[str], str | None]:
+def envelope_checks(
+    table: FlightTable, clf: Classifier, esc: EscCurve | None = None, figures: dict | None = None
+) -> tuple[list[str], str | None]:
     """(warnings, refusal reason or None) for a log the model may not fit; ``figures`` gets the numbers."""
     warnings: list[str] = []
     figures = {} if figures is None else figures
     unit = table.extras.get("motor_cmd_unit")
     if esc is not None and unit is not None and unit != esc.cmd_unit:
-        return warnings, (f"vehicle outside the model's envelope: its motor commands are in '{unit}' but the model's "
-                          f"ESC curve takes '{esc.cmd_unit}' (another class of vehicle); use a model trained for it")
+        return warnings, (
+            f"vehicle outside the model's envelope: its motor commands are in '{unit}' but the model's "
+            f"ESC curve takes '{esc.cmd_unit}' (another class of vehicle); use a model trained for it"
+        )
     air = table.airborne
     if not air.any():
         return warnings, "no airborne flight found (armed, throttle above idle, off the ground)"
@@ -149,8 +159,11 @@ def envelope_checks(table: FlightTable, clf: Classifier, esc: EscCurve | None = 
     for f in clf.info.features:
         for name in signals_needed(f):
             if not np.isfinite(sig[name][air]).any():
-                what = "motor RPM (commands not logged or in another unit than the model's ESC curve)" \
-                    if name == "motor_rpm" else name
+                what = (
+                    "motor RPM (commands not logged or in another unit than the model's ESC curve)"
+                    if name == "motor_rpm"
+                    else name
+                )
                 return warnings, f"{what} unknown during flight: the model needs it for feature {f}"
     warn, refusal = rpm_envelope(table, clf, figures)
     if refusal:
@@ -161,8 +174,10 @@ def envelope_checks(table: FlightTable, clf: Classifier, esc: EscCurve | None = 
     big = float(np.mean(np.nan_to_num(tilt) > LARGE_ATTITUDE_RAD))
     figures["large_attitude_fraction"] = round(big, 4)
     if big > 0.01:
-        warnings.append(f"{100 * big:.1f} % of the airborne time has roll or pitch beyond 45 deg "
-                        "(aggressive flight, flip or crash): outside the model's training")
+        warnings.append(
+            f"{100 * big:.1f} % of the airborne time has roll or pitch beyond 45 deg "
+            "(aggressive flight, flip or crash): outside the model's training"
+        )
     return warnings, None
 
 
@@ -182,10 +197,13 @@ def rpm_envelope(table: FlightTable, clf: Classifier, figures: dict) -> tuple[st
     z = float(np.max(np.median(np.abs(feats - mean) / std, axis=0)))
     flown, trained = float(np.median(feats.mean(axis=1))), float(mean.mean())
     ratio = flown / trained if trained > 0 else float("inf")
-    figures.update(airborne_mean_rpm=round(flown, 1), trained_mean_rpm=round(trained, 1),
-                   rpm_ratio=round(ratio, 4), rpm_z=round(z, 3))
-    msg = (f"vehicle outside the model's envelope: median airborne RPM {flown:.0f} vs {trained:.0f} in the model's "
-           f"training data (x{ratio:.2f}; a rotor's typical RPM is {z:.1f} training std away)")
+    figures.update(
+        airborne_mean_rpm=round(flown, 1), trained_mean_rpm=round(trained, 1), rpm_ratio=round(ratio, 4), rpm_z=round(z, 3)
+    )
+    msg = (
+        f"vehicle outside the model's envelope: median airborne RPM {flown:.0f} vs {trained:.0f} in the model's "
+        f"training data (x{ratio:.2f}; a rotor's typical RPM is {z:.1f} training std away)"
+    )
     if z > RPM_Z_REFUSE or not RPM_RATIO_REFUSE[0] <= ratio <= RPM_RATIO_REFUSE[1]:
         return None, msg
     if z > RPM_Z_WARN or not RPM_RATIO_WARN[0] <= ratio <= RPM_RATIO_WARN[1]:
@@ -193,8 +211,9 @@ def rpm_envelope(table: FlightTable, clf: Classifier, figures: dict) -> tuple[st
     return None, None
 
 
-def diagnose_table(table: FlightTable, clf: Classifier, hop: int = 1, batch: int = 4096,
-                   esc: EscCurve | None = None) -> Diagnosis:
+def diagnose_table(
+    table: FlightTable, clf: Classifier, hop: int = 1, batch: int = 4096, esc: EscCurve | None = None
+) -> Diagnosis:
     """Classify every usable window of ``table`` (one every ``hop`` steps) and aggregate.
 
     ``esc``: the curve the table's RPM came from, to refuse a log of another vehicle class.
@@ -208,8 +227,14 @@ def diagnose_table(table: FlightTable, clf: Classifier, hop: int = 1, batch: int
     figures: dict = {}
     env_warn, refusal = envelope_checks(table, clf, esc, figures)
     warnings += env_warn
-    segs = [{"start_boot_s": float(_t_s(table, a)), "stop_boot_s": float(_t_s(table, b - 1)) + 1.0 / table.rate_hz,
-             "steps": int(b - a)} for a, b in table.airborne_segments()]
+    segs = [
+        {
+            "start_boot_s": float(_t_s(table, a)),
+            "stop_boot_s": float(_t_s(table, b - 1)) + 1.0 / table.rate_hz,
+            "steps": int(b - a),
+        }
+        for a, b in table.airborne_segments()
+    ]
     d = Diagnosis(table.source, None, 0, warnings, refusal, segments=segs, hop_steps=hop, envelope=figures)
     if refusal:
         return d
@@ -217,22 +242,32 @@ def diagnose_table(table: FlightTable, clf: Classifier, hop: int = 1, batch: int
     ends = window_ends(table, feats, info.window, hop)
     if len(ends) == 0:
         longest = max((s["steps"] for s in segs), default=0)
-        d.reason = (f"no usable window: {info.window} consecutive airborne steps with every signal measured are needed "
-                    f"({info.window / table.rate_hz:g} s); longest airborne segment has {longest} steps")
+        d.reason = (
+            f"no usable window: {info.window} consecutive airborne steps with every signal measured are needed "
+            f"({info.window / table.rate_hz:g} s); longest airborne segment has {longest} steps"
+        )
         return d
     labels, faults = predict_at(clf, feats, ends, info.window, batch)
     mean_labels = labels.mean(axis=0)
     label = int(np.argmax(mean_labels)) + 1
     p = faults.mean(axis=0)
     d.windows = len(ends)
-    d.verdict = {"label": label, "faulty_propellers": list(LABEL_TABLE[label]),
-                 "fault_probability": [float(x) for x in p]}
+    d.verdict = {"label": label, "faulty_propellers": list(LABEL_TABLE[label]), "fault_probability": [float(x) for x in p]}
     d.label_probability = [float(x) for x in mean_labels]
-    d.propellers = [{"propeller": i + 1, "name": table.motor_names[i], "fault_probability": float(p[i]),
-                     "faulty": (i + 1) in LABEL_TABLE[label]} for i in range(4)]
-    d.timeline = {"t_boot_s": [float(x) for x in _t_s(table, ends)],
-                  "fault_probability": np.round(faults, 5).tolist(),
-                  "label": (np.argmax(labels, axis=1) + 1).tolist()}
+    d.propellers = [
+        {
+            "propeller": i + 1,
+            "name": table.motor_names[i],
+            "fault_probability": float(p[i]),
+            "faulty": (i + 1) in LABEL_TABLE[label],
+        }
+        for i in range(4)
+    ]
+    d.timeline = {
+        "t_boot_s": [float(x) for x in _t_s(table, ends)],
+        "fault_probability": np.round(faults, 5).tolist(),
+        "label": (np.argmax(labels, axis=1) + 1).tolist(),
+    }
     return d
 
 
@@ -241,7 +276,7 @@ def predict_at(clf: Classifier, feats: np.ndarray, ends: np.ndarray, window: int
     starts = ends - window + 1
     out_l, out_f = [], []
     for i in range(0, len(ends), batch):
-        idx = starts[i:i + batch, None] + np.arange(window)[None, :]
+        idx = starts[i : i + batch, None] + np.arange(window)[None, :]
         lab, fau = clf.predict(feats[idx])
         out_l.append(lab)
         out_f.append(fau)

@@ -23,7 +23,8 @@ def _stem(source: str, out_dir: Path) -> str:
     base = re.sub(r"[^A-Za-z0-9_.-]", "_", p.name) or "log"
     stem, k = base, 1
     while (out_dir / f"{stem}.html").exists() and (out_dir / f"{stem}.html").read_text(encoding="utf-8").find(
-            html.escape(str(source)) + "<") < 0:
+        html.escape(str(source)) + "<"
+    ) < 0:
         k += 1
         stem = f"{base}-{k}"
     return stem
@@ -47,8 +48,11 @@ def plot(d: Diagnosis, table: FlightTable, png: Path) -> None:
     ax[0].set_ylim(-0.02, 1.02)
     ax[0].set_ylabel("P(faulty)")
     ax[0].legend(loc="upper right", fontsize=8)
-    title = "no verdict: " + (d.reason or "") if d.verdict is None else \
-        f"label {d.verdict['label']}, faulty {d.verdict['faulty_propellers'] or 'none'}"
+    title = (
+        "no verdict: " + (d.reason or "")
+        if d.verdict is None
+        else f"label {d.verdict['label']}, faulty {d.verdict['faulty_propellers'] or 'none'}"
+    )
     ax[0].set_title(f"{Path(d.source).name}: {title}", fontsize=10)
     rpm_known = np.isfinite(table.motor_rpm).any()
     motor = table.motor_rpm if rpm_known else table.motor_cmd
@@ -76,20 +80,29 @@ def plot(d: Diagnosis, table: FlightTable, png: Path) -> None:
 
 def page(d: Diagnosis, png_name: str) -> str:
     e = html.escape
-    rows = "".join(f"<tr><td>{p['propeller']}</td><td>{e(p['name'])}</td><td>{p['fault_probability']:.3f}</td>"
-                   f"<td>{'FAULTY' if p['faulty'] else 'ok'}</td></tr>" for p in d.propellers)
-    verdict = (f"<p><b>No verdict:</b> {e(d.reason or '')}</p>" if d.verdict is None else
-               f"<p><b>Label {d.verdict['label']}</b>, faulty propellers: {d.verdict['faulty_propellers'] or 'none'}"
-               f" ({d.windows} windows)</p><table border=1 cellpadding=4><tr><th>propeller (PX4)</th><th>name</th>"
-               f"<th>P(faulty)</th><th>verdict</th></tr>{rows}</table>")
-    segs = "".join(f"<li>{s['start_boot_s']:.1f} - {s['stop_boot_s']:.1f} s boot time ({s['steps']} steps)</li>"
-                   for s in d.segments)
+    rows = "".join(
+        f"<tr><td>{p['propeller']}</td><td>{e(p['name'])}</td><td>{p['fault_probability']:.3f}</td>"
+        f"<td>{'FAULTY' if p['faulty'] else 'ok'}</td></tr>"
+        for p in d.propellers
+    )
+    verdict = (
+        f"<p><b>No verdict:</b> {e(d.reason or '')}</p>"
+        if d.verdict is None
+        else f"<p><b>Label {d.verdict['label']}</b>, faulty propellers: {d.verdict['faulty_propellers'] or 'none'}"
+        f" ({d.windows} windows)</p><table border=1 cellpadding=4><tr><th>propeller (PX4)</th><th>name</th>"
+        f"<th>P(faulty)</th><th>verdict</th></tr>{rows}</table>"
+    )
+    segs = "".join(
+        f"<li>{s['start_boot_s']:.1f} - {s['stop_boot_s']:.1f} s boot time ({s['steps']} steps)</li>" for s in d.segments
+    )
     warns = "".join(f"<li>{e(w)}</li>" for w in d.warnings) or "<li>none</li>"
-    return (f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>propwatch: {e(Path(d.source).name)}</title></head>"
-            f"<body><h1>propwatch diagnosis</h1><p>{e(d.source)}</p>{verdict}"
-            f"<h2>Airborne segments used</h2><ul>{segs or '<li>none</li>'}</ul>"
-            f"<h2>Warnings</h2><ul>{warns}</ul>"
-            f"<h2>Timeline and signals</h2><img src='{e(png_name)}' alt='timeline and signals'></body></html>")
+    return (
+        f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>propwatch: {e(Path(d.source).name)}</title></head>"
+        f"<body><h1>propwatch diagnosis</h1><p>{e(d.source)}</p>{verdict}"
+        f"<h2>Airborne segments used</h2><ul>{segs or '<li>none</li>'}</ul>"
+        f"<h2>Warnings</h2><ul>{warns}</ul>"
+        f"<h2>Timeline and signals</h2><img src='{e(png_name)}' alt='timeline and signals'></body></html>"
+    )
 
 
 def write_report(d: Diagnosis, table: FlightTable, out_dir: Path) -> Path:

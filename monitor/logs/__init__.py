@@ -67,8 +67,9 @@ def read_raw(path: str | Path, fmt: str | None = None, extras: bool = True) -> R
     return read_csv(path, fmt)
 
 
-def read_log(path: str | Path, fmt: str | None = None, esc: EscCurve | None = None, rate_hz: float = 20.0,
-             extras: bool = True) -> FlightTable:
+def read_log(
+    path: str | Path, fmt: str | None = None, esc: EscCurve | None = None, rate_hz: float = 20.0, extras: bool = True
+) -> FlightTable:
     """Read any supported log onto the ``rate_hz`` grid; RPM from ``esc`` when its unit matches."""
     return to_flight_table(read_raw(path, fmt, extras), esc=esc, rate_hz=rate_hz)
 

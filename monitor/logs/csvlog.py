@@ -25,9 +25,20 @@ FORMATS_FILE = Path(__file__).resolve().parent.parent / "formats.yaml"
 
 # Unit -> factor into the project unit (rad, rad/s, V, m, m/s, m/s², µs).
 TO_PROJECT = {
-    "": 1.0, "rad": 1.0, "deg": RAD_PER_DEG, "rad_s": 1.0, "deg_s": RAD_PER_DEG,
-    "V": 1.0, "mV": V_PER_MV, "m": 1.0, "m_s": 1.0, "m_s2": 1.0, "g": M_S2_PER_G,
-    "us": 1.0, "ms": float(US_PER_MS), "s": float(US_PER_S),
+    "": 1.0,
+    "rad": 1.0,
+    "deg": RAD_PER_DEG,
+    "rad_s": 1.0,
+    "deg_s": RAD_PER_DEG,
+    "V": 1.0,
+    "mV": V_PER_MV,
+    "m": 1.0,
+    "m_s": 1.0,
+    "m_s2": 1.0,
+    "g": M_S2_PER_G,
+    "us": 1.0,
+    "ms": float(US_PER_MS),
+    "s": float(US_PER_S),
 }
 
 
@@ -132,7 +143,7 @@ def _read_text(path: Path) -> tuple[str, str | None]:
         parts = []
         for i in range(0, len(raw), 4096):
             try:
-                parts.append(d.decompress(raw[i:i + 4096]))
+                parts.append(d.decompress(raw[i : i + 4096]))
             except zlib.error:
                 break
         return b"".join(parts).decode("utf-8", errors="replace"), f"{path.name}: corrupt gzip data ({exc}): read up to the damage"
@@ -171,8 +182,10 @@ def read_csv(path: str | Path, fmt: str | CsvFormat, formats_path: str | Path = 
     missing = [c for c in spec.required_columns() if c not in header]
     if missing:
         hint = _matching_formats(header, formats_path)
-        raise LogFormatError(f"{path}: columns {missing} needed by format {_name(spec, formats_path)!r} are missing"
-                             + (f"; the header fits format(s) {hint}" if hint else ""))
+        raise LogFormatError(
+            f"{path}: columns {missing} needed by format {_name(spec, formats_path)!r} are missing"
+            + (f"; the header fits format(s) {hint}" if hint else "")
+        )
     if len(data) == 0:
         raise LogFormatError(f"{path}: no data rows")
     col = {h: i for i, h in enumerate(header)}
@@ -208,10 +221,16 @@ def read_csv(path: str | Path, fmt: str | CsvFormat, formats_path: str | Path = 
         source=str(path),
         cmd_unit=spec.cmd_unit,
         motor_cmd=Stream.build(t_us, motors),
-        attitude_rad=Stream.build(t_us, np.stack([values(spec.roll, "roll"), values(spec.pitch, "pitch"),
-                                                  values(spec.yaw, "yaw")], axis=1)),
-        rates_rad_s=Stream.build(t_us, np.stack([values(spec.roll_rate, "roll_rate"), values(spec.pitch_rate, "pitch_rate"),
-                                                 values(spec.yaw_rate, "yaw_rate")], axis=1)),
+        attitude_rad=Stream.build(
+            t_us, np.stack([values(spec.roll, "roll"), values(spec.pitch, "pitch"), values(spec.yaw, "yaw")], axis=1)
+        ),
+        rates_rad_s=Stream.build(
+            t_us,
+            np.stack(
+                [values(spec.roll_rate, "roll_rate"), values(spec.pitch_rate, "pitch_rate"), values(spec.yaw_rate, "yaw_rate")],
+                axis=1,
+            ),
+        ),
         battery_v=opt(spec.battery),
         armed=opt(spec.armed),
         height_m=height,

@@ -50,8 +50,9 @@ def motor_outputs(params: dict[str, float], path: Path) -> tuple[int, int, int, 
     frame_type = params.get("FRAME_TYPE", params.get("FRAME", OLD_FRAME_X) if "FRAME_CLASS" not in params else FRAME_TYPE_X)
     if frame_type != FRAME_TYPE_X:
         raise LogFormatError(f"{path}: frame type {frame_type:g} is not X (1): the model is for quad X")
-    by_function = {int(v): int(k[5:-9]) for k, v in params.items()
-                   if k.startswith("SERVO") and k.endswith("_FUNCTION") and k[5:-9].isdigit()}
+    by_function = {
+        int(v): int(k[5:-9]) for k, v in params.items() if k.startswith("SERVO") and k.endswith("_FUNCTION") and k[5:-9].isdigit()
+    }
     if any(SERVO_FUNCTION_MOTOR1 + i in by_function for i in range(4)):
         try:
             return tuple(by_function[SERVO_FUNCTION_MOTOR1 + i] for i in range(4))  # type: ignore[return-value]
@@ -218,4 +219,3 @@ def _collect(typ: str, d: dict, t: int, rows: dict) -> None:
         if typ == "XKF1" and d.get("C", 0) != 0:
             return  # XKF1 is logged per EKF core; keep the primary
         rows["ekf"].append((t, [d["VN"], d["VE"], d["VD"], d["PN"], d["PE"], d["PD"]]))
-

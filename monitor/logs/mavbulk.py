@@ -26,8 +26,20 @@ V2_MAGIC = 0xFD
 V1_HEADER, V2_HEADER = 6, 10
 X25_INIT = 0xFFFF
 # struct format character -> numpy little-endian type (pymavlink's native_format)
-NP_TYPE = {"B": "u1", "b": "i1", "H": "u2", "h": "i2", "I": "u4", "i": "i4", "Q": "u8", "q": "i8",
-           "f": "f4", "d": "f8", "c": "S1", "s": "S1"}
+NP_TYPE = {
+    "B": "u1",
+    "b": "i1",
+    "H": "u2",
+    "h": "i2",
+    "I": "u4",
+    "i": "i4",
+    "Q": "u8",
+    "q": "i8",
+    "f": "f4",
+    "d": "f8",
+    "c": "S1",
+    "s": "S1",
+}
 
 
 @functools.cache
@@ -84,8 +96,13 @@ def unpack_frames(buf: bytes, starts: np.ndarray, mavlink_map: dict) -> list | N
     p = np.asarray(starts, dtype=np.int64)
     v2 = data[p] == V2_MAGIC
     plen = data[p + 1].astype(np.int64)
-    msgid = np.where(v2, data[p + 7].astype(np.int64) | (data[p + 8].astype(np.int64) << 8)
-                     | (data[np.minimum(p + 9, len(data) - 1)].astype(np.int64) << 16), data[p + 5])
+    msgid = np.where(
+        v2,
+        data[p + 7].astype(np.int64)
+        | (data[p + 8].astype(np.int64) << 8)
+        | (data[np.minimum(p + 9, len(data) - 1)].astype(np.int64) << 16),
+        data[p + 5],
+    )
     sys_id = np.where(v2, data[p + 5], data[p + 3]).tolist()
     comp_id = np.where(v2, data[p + 6], data[p + 4]).tolist()
     out: list = [None] * len(p)
@@ -99,12 +116,12 @@ def unpack_frames(buf: bytes, starts: np.ndarray, mavlink_map: dict) -> list | N
         h = V2_HEADER if is_v2 else V1_HEADER
         frame = data[p[rows, None] + np.arange(h + n + 2)[None, :]]
         stored = frame[:, h + n].astype(np.uint32) | (frame[:, h + n + 1].astype(np.uint32) << 8)
-        if np.any(x25_crc(frame[:, 1:h + n], cls.crc_extra) != stored):
+        if np.any(x25_crc(frame[:, 1 : h + n], cls.crc_extra) != stored):
             return None
         dt = _dtype(cls)
         payload = np.zeros((len(rows), dt.itemsize), dtype=np.uint8)
         m = min(n, dt.itemsize)
-        payload[:, :m] = frame[:, h:h + m]
+        payload[:, :m] = frame[:, h : h + m]
         values = payload.view(dt).reshape(len(rows)).tolist()
         make = message_class(cls.msgname, tuple(dt.names))
         for r, vals in zip(rows.tolist(), values):

@@ -173,8 +173,10 @@ def to_flight_table(raw: RawFlight, esc: EscCurve | None = None, rate_hz: float 
         rpm = np.full_like(cmd, np.nan)
         why = "no ESC curve given" if esc is None else f"the ESC curve takes '{esc.cmd_unit}' commands"
         warnings.append(f"motor commands are in '{raw.cmd_unit}' but {why}: motor RPM unknown")
-    extras: dict = {"motor_cmd_unit": raw.cmd_unit,
-                    "stream_rates_hz": {n: getattr(raw, n).rate_hz() for n in ("motor_cmd", "attitude_rad", "rates_rad_s")}}
+    extras: dict = {
+        "motor_cmd_unit": raw.cmd_unit,
+        "stream_rates_hz": {n: getattr(raw, n).rate_hz() for n in ("motor_cmd", "attitude_rad", "rates_rad_s")},
+    }
     if raw.esc_rpm is not None and len(raw.esc_rpm):
         extras["esc_rpm"] = held(raw.esc_rpm, 4)
     if raw.height_m is not None and len(raw.height_m) and not (raw.landed is not None and len(raw.landed)):
@@ -182,8 +184,10 @@ def to_flight_table(raw: RawFlight, esc: EscCurve | None = None, rate_hz: float 
         extras["height_m"] = held(raw.height_m, None)
     for name, stream in raw.extra_streams.items():
         extras[name] = held(stream, None if stream.values.ndim == 1 else stream.values.shape[1])
-    opt = {n: (held(getattr(raw, n), 3) if getattr(raw, n) is not None and len(getattr(raw, n)) else None)
-           for n in ("accel_frd_m_s2", "vel_ned_m_s", "pos_ned_m")}
+    opt = {
+        n: (held(getattr(raw, n), 3) if getattr(raw, n) is not None and len(getattr(raw, n)) else None)
+        for n in ("accel_frd_m_s2", "vel_ned_m_s", "pos_ned_m")
+    }
     return FlightTable(
         timestamp_us=grid,
         motor_cmd=cmd,

@@ -68,7 +68,7 @@ def iter_frames(buf: bytes, wanted=WANTED_IDS):
                 return skipped, True
             off, skipped = off + 1, skipped + 1
             continue
-        ts = int.from_bytes(buf[off:off + TS_BYTES], "big")
+        ts = int.from_bytes(buf[off : off + TS_BYTES], "big")
         if last_ts is not None and abs(ts - last_ts) > MAX_TS_JUMP_US and not _next_is_frame(buf, p + flen):
             # A receive time far off and no frame after it: a false start inside damaged bytes.
             # (A real jump of the recording clock is followed by more frames and is kept.)
@@ -77,7 +77,7 @@ def iter_frames(buf: bytes, wanted=WANTED_IDS):
         if p + flen > n:
             return skipped, True
         if msgid in wanted:
-            ok = yield off, buf[p:p + flen]
+            ok = yield off, buf[p : p + flen]
             if ok is False:  # CRC failed: not a frame after all
                 off, skipped = off + 1, skipped + 1
                 continue
@@ -237,4 +237,3 @@ def _extras(msg, dec: md.MavlinkDecoder, col: _Collector) -> None:
         cur["vel"].append((t, (msg.vx, msg.vy, msg.vz)))
     else:
         cur["acc"].append((int(msg.time_usec), (msg.xacc, msg.yacc, msg.zacc)))
-

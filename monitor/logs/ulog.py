@@ -22,8 +22,17 @@ from monitor.errors import LogFormatError
 from monitor.logs.raw import RawFlight, Stream
 from monitor.logs.units import quat_wxyz_to_euler_zyx
 
-TOPICS = ["actuator_outputs", "vehicle_attitude", "vehicle_angular_velocity", "battery_status", "esc_status",
-          "vehicle_status", "vehicle_land_detected", "vehicle_local_position", "sensor_combined"]
+TOPICS = [
+    "actuator_outputs",
+    "vehicle_attitude",
+    "vehicle_angular_velocity",
+    "battery_status",
+    "esc_status",
+    "vehicle_status",
+    "vehicle_land_detected",
+    "vehicle_local_position",
+    "sensor_combined",
+]
 ARMING_STATE_ARMED = 2  # PX4 vehicle_status.arming_state
 
 

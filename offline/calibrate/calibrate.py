@@ -46,9 +46,18 @@ class CalibrationResult:
     notes: list[str] = field(default_factory=list)
 
     def to_json(self) -> dict:
-        return {"cause": self.cause, "confidence": self.confidence, "findings": self.findings, "gain": self.gain,
-                "candidates": self.candidates, "residuals_by_phase": self.residuals, "steady_state": self.steady,
-                "unbalance_ratio": self.unbalance, "logs": self.sources, "notes": self.notes}
+        return {
+            "cause": self.cause,
+            "confidence": self.confidence,
+            "findings": self.findings,
+            "gain": self.gain,
+            "candidates": self.candidates,
+            "residuals_by_phase": self.residuals,
+            "steady_state": self.steady,
+            "unbalance_ratio": self.unbalance,
+            "logs": self.sources,
+            "notes": self.notes,
+        }
 
 
 def residuals_by_phase(segments: list[Segment], res: list[dict[str, np.ndarray]]) -> dict[str, dict[str, float]]:
@@ -65,11 +74,16 @@ def _round(d: dict[str, float], nd: int = 6) -> dict[str, float]:
     return {k: float(f"{v:.{nd}g}") for k, v in d.items()}
 
 
-def _evidence(term: Term, before: dict[str, float], after: TermFit, sigma: dict[str, float], runner_up: tuple[str, float] | None,
-              delta_bic: float) -> list[str]:
+def _evidence(
+    term: Term,
+    before: dict[str, float],
+    after: TermFit,
+    sigma: dict[str, float],
+    runner_up: tuple[str, float] | None,
+    delta_bic: float,
+) -> list[str]:
     drops = sorted(before, key=lambda s: (after.held_rms[s] - before[s]) / sigma[s])
-    lines = [f"{s}: held-out RMS {before[s]:.4g} -> {after.held_rms[s]:.4g}" for s in drops[:3]
-             if after.held_rms[s] < before[s]]
+    lines = [f"{s}: held-out RMS {before[s]:.4g} -> {after.held_rms[s]:.4g}" for s in drops[:3] if after.held_rms[s] < before[s]]
     lines.append(f"held-out BIC improves by {delta_bic:.1f} over the model without it")
     if runner_up:
         lines.append(f"next best alternative {runner_up[0]} is {runner_up[1]:.1f} BIC worse")
@@ -94,14 +108,22 @@ def calibrate(tables: list[FlightTable], nominal: VehicleConfig, candidates: lis
         fit = step.trials[step.chosen]
         term = TERMS[step.chosen]
         others = sorted((f.bic - fit.bic, n) for n, f in step.trials.items() if n != step.chosen and all(f.identifiable.values()))
-        findings.append({
-            "effect": step.chosen, "params": _round(fit.params(term)), "std": _round(fit.stds(term), 3),
-            "residual_rms_before": round(combined_rms(before, sigma), 6),
-            "residual_rms_after": round(combined_rms(fit.held_rms, sigma), 6),
-            "score": round(step.base_bic - fit.bic, 3), "confidence": round(step.confidence, 4),
-            "residual_rms_by_signal_before": _round(before), "residual_rms_by_signal_after": _round(fit.held_rms),
-            "evidence": _evidence(term, before, fit, sigma, (others[0][1], others[0][0]) if others else None,
-                                  step.base_bic - fit.bic)})
+        findings.append(
+            {
+                "effect": step.chosen,
+                "params": _round(fit.params(term)),
+                "std": _round(fit.stds(term), 3),
+                "residual_rms_before": round(combined_rms(before, sigma), 6),
+                "residual_rms_after": round(combined_rms(fit.held_rms, sigma), 6),
+                "score": round(step.base_bic - fit.bic, 3),
+                "confidence": round(step.confidence, 4),
+                "residual_rms_by_signal_before": _round(before),
+                "residual_rms_by_signal_after": _round(fit.held_rms),
+                "evidence": _evidence(
+                    term, before, fit, sigma, (others[0][1], others[0][0]) if others else None, step.base_bic - fit.bic
+                ),
+            }
+        )
         before = fit.held_rms
     if final is not None:  # joint refit values replace the step-wise ones
         for f in findings:
@@ -114,21 +136,27 @@ def calibrate(tables: list[FlightTable], nominal: VehicleConfig, candidates: lis
         term = TERMS[name]
         ident = all(fit.identifiable.values())
         candidates_out[name] = {
-            "identifiable": ident, "score": round(first.base_bic - fit.bic, 3) if ident else None,
-            "params": _round(fit.params(term)) if ident else None, "std": _round(fit.stds(term), 3) if ident else None,
+            "identifiable": ident,
+            "score": round(first.base_bic - fit.bic, 3) if ident else None,
+            "params": _round(fit.params(term)) if ident else None,
+            "std": _round(fit.stds(term), 3) if ident else None,
             "residual_rms_after": round(combined_rms(fit.held_rms, sigma), 6) if ident else None,
-            "reason": fit.reasons.get(name, "")}
+            "reason": fit.reasons.get(name, ""),
+        }
 
     # The paper's unbalance ratio against the fitted motor_efficiency, same held-out data.
     ur = unbalance_ratio(segments, data.fit_masks, nominal)
     ur_res = data.residuals(nominal, ur.speed_scale)
-    eff_fit = first.trials.get("motor_efficiency") or fit_terms(data, nominal, [TERMS["motor_efficiency"]],
-                                                               TERMS["motor_efficiency"].get(nominal), sigma)
-    unbalance = {"ratio": _round(ur.params()),
-                 "residual_rms_nominal": round(combined_rms(nominal_held, sigma), 6),
-                 "residual_rms_unbalance_ratio": round(combined_rms(rms_by_signal(ur_res, data.held_masks), sigma), 6),
-                 "residual_rms_fitted_motor_efficiency": round(combined_rms(eff_fit.held_rms, sigma), 6),
-                 "steady_state_unbalance_ratio": steady_state(segments, nominal, data.held_masks, ur.speed_scale)}
+    eff_fit = first.trials.get("motor_efficiency") or fit_terms(
+        data, nominal, [TERMS["motor_efficiency"]], TERMS["motor_efficiency"].get(nominal), sigma
+    )
+    unbalance = {
+        "ratio": _round(ur.params()),
+        "residual_rms_nominal": round(combined_rms(nominal_held, sigma), 6),
+        "residual_rms_unbalance_ratio": round(combined_rms(rms_by_signal(ur_res, data.held_masks), sigma), 6),
+        "residual_rms_fitted_motor_efficiency": round(combined_rms(eff_fit.held_rms, sigma), 6),
+        "steady_state_unbalance_ratio": steady_state(segments, nominal, data.held_masks, ur.speed_scale),
+    }
 
     nominal_res = residuals_by_phase(segments, sel.nominal_residuals)
     calib_res = residuals_by_phase(segments, final.residuals) if final else nominal_res
@@ -142,15 +170,29 @@ def calibrate(tables: list[FlightTable], nominal: VehicleConfig, candidates: lis
         "heldout_residual_rms_by_signal_after": _round(after_held),
         "steady_state_cmd_error_rms_before": {p: round(v["error_rms"], 4) for p, v in steady_nom.items()},
         "steady_state_cmd_error_rms_after": {p: round(v["error_rms"], 4) for p, v in steady_cal.items()},
-        "classifier": {"done": False, "reason": "the measured logs carry no fault labels; with labelled flights, "
-                       "offline.calibrate.gain.classifier_gain compares nominal- and calibrated-sim classifiers "
-                       "(python -m offline.calibrate.gain runs it on a vehicle with hidden terms)"},
+        "classifier": {
+            "done": False,
+            "reason": "the measured logs carry no fault labels; with labelled flights, "
+            "offline.calibrate.gain.classifier_gain compares nominal- and calibrated-sim classifiers "
+            "(python -m offline.calibrate.gain runs it on a vehicle with hidden terms)",
+        },
     }
     gain["heldout_residual_reduction_pct"] = round(
-        100.0 * (1.0 - gain["heldout_residual_rms_after"] / gain["heldout_residual_rms_before"]), 3)
+        100.0 * (1.0 - gain["heldout_residual_rms_after"] / gain["heldout_residual_rms_before"]), 3
+    )
     return CalibrationResult(
-        sources=[t.source or f"flight {i}" for i, t in enumerate(tables)], nominal=nominal, calibrated=calibrated,
-        selection=sel, segments=segments, data=data, cause=findings[0]["effect"] if findings else None,
-        confidence=findings[0]["confidence"] if findings else 0.0, findings=findings, candidates=candidates_out,
+        sources=[t.source or f"flight {i}" for i, t in enumerate(tables)],
+        nominal=nominal,
+        calibrated=calibrated,
+        selection=sel,
+        segments=segments,
+        data=data,
+        cause=findings[0]["effect"] if findings else None,
+        confidence=findings[0]["confidence"] if findings else 0.0,
+        findings=findings,
+        candidates=candidates_out,
         residuals={"nominal": nominal_res, "calibrated": calib_res},
-        steady={"nominal": steady_nom, "calibrated": steady_cal}, unbalance=unbalance, gain=gain)
+        steady={"nominal": steady_nom, "calibrated": steady_cal},
+        unbalance=unbalance,
+        gain=gain,
+    )

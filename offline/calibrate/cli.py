@@ -41,19 +41,25 @@ def read_measured(path: Path, fmt: str | None, vehicle: VehicleConfig) -> list[F
 
 
 def summary(r: CalibrationResult) -> str:
-    lines = [f"cause: {r.cause or 'none (no discrepancy stands out above the noise)'}"
-             + (f"  (confidence {r.confidence:.3f})" if r.cause else "")]
+    lines = [
+        f"cause: {r.cause or 'none (no discrepancy stands out above the noise)'}"
+        + (f"  (confidence {r.confidence:.3f})" if r.cause else "")
+    ]
     for f in r.findings:
         params = ", ".join(f"{k}={v:.4g}±{f['std'][k]:.2g}" for k, v in f["params"].items())
-        lines.append(f"  {f['effect']}: {params}; held-out residual {f['residual_rms_before']:.4g} -> "
-                     f"{f['residual_rms_after']:.4g}; BIC gain {f['score']:.1f}")
+        lines.append(
+            f"  {f['effect']}: {params}; held-out residual {f['residual_rms_before']:.4g} -> "
+            f"{f['residual_rms_after']:.4g}; BIC gain {f['score']:.1f}"
+        )
     bad = [n for n, c in r.candidates.items() if not c["identifiable"]]
     if bad:
         lines.append("not identifiable from these logs: " + ", ".join(bad))
     g = r.gain
-    lines.append(f"gain: held-out residual RMS {g['heldout_residual_rms_before']:.4g} -> {g['heldout_residual_rms_after']:.4g} "
-                 f"({g['heldout_residual_reduction_pct']:.1f} % lower); steady-state command error "
-                 f"{g['steady_state_cmd_error_rms_before']} -> {g['steady_state_cmd_error_rms_after']}")
+    lines.append(
+        f"gain: held-out residual RMS {g['heldout_residual_rms_before']:.4g} -> {g['heldout_residual_rms_after']:.4g} "
+        f"({g['heldout_residual_reduction_pct']:.1f} % lower); steady-state command error "
+        f"{g['steady_state_cmd_error_rms_before']} -> {g['steady_state_cmd_error_rms_after']}"
+    )
     return "\n".join(lines)
 
 

@@ -107,7 +107,7 @@ def correlation_time(res: list[dict[str, np.ndarray]], masks: list[np.ndarray]) 
             v = np.where(m, r[name], np.nan)
             v = v - np.nanmean(v) if np.any(m) else v
             for lag in range(MAX_LAG + 1):
-                prod = v[lag:] * v[:len(v) - lag]
+                prod = v[lag:] * v[: len(v) - lag]
                 ok = np.isfinite(prod)
                 num[lag] += prod[ok].sum()
                 cnt[lag] += ok.sum()
@@ -139,8 +139,9 @@ def relative_rms(rms: dict[str, float], base: dict[str, float]) -> float:
 
 def worst_signal(rms: dict[str, float], base: dict[str, float]) -> float:
     """Largest held-out RMS ratio over signals (each floored at its noise level)."""
-    return float(max(np.sqrt((rms[s] ** 2 + noise_floor(s) ** 2) / (base[s] ** 2 + noise_floor(s) ** 2))
-                     for s in base if s in rms))
+    return float(
+        max(np.sqrt((rms[s] ** 2 + noise_floor(s) ** 2) / (base[s] ** 2 + noise_floor(s) ** 2)) for s in base if s in rms)
+    )
 
 
 def combined_rms(rms: dict[str, float], sigma: dict[str, float]) -> float:
@@ -194,9 +195,15 @@ def fit_terms(data: Data, nominal: VehicleConfig, terms: list[Term], x0: np.ndar
     # nominal model got badly wrong count for little once it is fixed, and bias the joint fit.
     w = dict(sigma)
     for _ in range(REWEIGHT_PASSES):
-        sol = least_squares(lambda z, w=w, x0=x0: vec(x0 + z * scale, w), np.zeros(len(x0)),
-                            bounds=((lo - x0) / scale, (hi - x0) / scale), method="trf", x_scale=1.0,
-                            max_nfev=60 * max(len(x0), 1), diff_step=1e-3)
+        sol = least_squares(
+            lambda z, w=w, x0=x0: vec(x0 + z * scale, w),
+            np.zeros(len(x0)),
+            bounds=((lo - x0) / scale, (hi - x0) / scale),
+            method="trf",
+            x_scale=1.0,
+            max_nfev=60 * max(len(x0), 1),
+            diff_step=1e-3,
+        )
         x0 = np.clip(x0 + sol.x * scale, lo + 1e-9 * scale, hi - 1e-9 * scale)
         res = data.residuals(apply_terms(nominal, terms, x0))
         w = {k: max(v, noise_floor(k)) for k, v in rms_by_signal(res, data.fit_masks).items()}
@@ -219,8 +226,15 @@ def fit_terms(data: Data, nominal: VehicleConfig, terms: list[Term], x0: np.ndar
         std = np.full(len(x), np.inf)
     vehicle = apply_terms(nominal, terms, x)
     res = data.residuals(vehicle)
-    fit = TermFit(terms, x, std, vehicle, res, bic(res, data.held_masks, len(x), data.n_fit, data.corr_time),
-                  rms_by_signal(res, data.held_masks))
+    fit = TermFit(
+        terms,
+        x,
+        std,
+        vehicle,
+        res,
+        bic(res, data.held_masks, len(x), data.n_fit, data.corr_time),
+        rms_by_signal(res, data.held_masks),
+    )
     eiv = _gain_bias(data, vehicle) if any(t.name == "inertia" for t in terms) else None
     for t in terms:
         if t.name == "inertia" and eiv is not None and np.any(eiv > INERTIA_MAX_BIAS):
@@ -228,15 +242,18 @@ def fit_terms(data: Data, nominal: VehicleConfig, terms: list[Term], x0: np.ndar
             fit.reasons[t.name] = (
                 "not identifiable: the predicted angular acceleration is too noisy at this log rate "
                 f"(errors-in-variables would bias the inertia by about {', '.join(f'{100 * b:.0f} %' for b in eiv)} "
-                "on roll, pitch, yaw); log the motor outputs faster or fly more aggressively")
+                "on roll, pitch, yaw); log the motor outputs faster or fly more aggressively"
+            )
             continue
         s, sc = fit.stds(t), t.scale(nominal)
         bad = [p for j, p in enumerate(t.params) if not np.isfinite(s[p]) or s[p] > sc[j]]
         fit.identifiable[t.name] = not bad
         if bad:
-            fit.reasons[t.name] = ("not identifiable: standard error of " + ", ".join(
-                f"{p} {s[p]:.3g} > resolution {sc[t.params.index(p)]:.3g}" for p in bad)
-                + " (too short or too little excitation for this term)")
+            fit.reasons[t.name] = (
+                "not identifiable: standard error of "
+                + ", ".join(f"{p} {s[p]:.3g} > resolution {sc[t.params.index(p)]:.3g}" for p in bad)
+                + " (too short or too little excitation for this term)"
+            )
     return fit
 
 
@@ -294,13 +311,17 @@ def select_terms(data: Data, nominal: VehicleConfig, candidates: list[Term]) -> 
     steps: list[Step] = []
     remaining = list(candidates)
     while remaining:
-        trials = {t.name: fit_terms(data, nominal, chosen + [t], np.concatenate([x_cur, t.get(nominal)]), sigma)
-                  for t in remaining}
+        trials = {
+            t.name: fit_terms(data, nominal, chosen + [t], np.concatenate([x_cur, t.get(nominal)]), sigma) for t in remaining
+        }
         ok = {n: f for n, f in trials.items() if all(f.identifiable.values())}
         best = min(ok, key=lambda n: ok[n].bic) if ok else None
-        worth = (best is not None and base_bic - ok[best].bic > MIN_DELTA_BIC
-                 and relative_rms(ok[best].held_rms, base_rms) < 1.0 - MIN_RMS_REDUCTION
-                 and worst_signal(ok[best].held_rms, base_rms) <= MAX_SIGNAL_WORSENING)
+        worth = (
+            best is not None
+            and base_bic - ok[best].bic > MIN_DELTA_BIC
+            and relative_rms(ok[best].held_rms, base_rms) < 1.0 - MIN_RMS_REDUCTION
+            and worst_signal(ok[best].held_rms, base_rms) <= MAX_SIGNAL_WORSENING
+        )
         conf = 0.0
         if worth:
             scores = np.array([base_bic] + [f.bic for f in ok.values()])
@@ -314,7 +335,7 @@ def select_terms(data: Data, nominal: VehicleConfig, candidates: list[Term]) -> 
         # Later rounds try only the terms the first round found identifiable and promising: a term
         # that neither the data can pin down nor helps alone rarely helps jointly, and each try is a fit.
         if len(steps) == 1:
-            promising = sorted(ok, key=lambda n: ok[n].bic)[:LATER_ROUND_CANDIDATES + 1]
+            promising = sorted(ok, key=lambda n: ok[n].bic)[: LATER_ROUND_CANDIDATES + 1]
             remaining = [t for t in remaining if t.name in promising]
         remaining = [t for t in remaining if t.name != best]
         x_cur = current.x

@@ -28,16 +28,28 @@ from offline.dataset.generate import DatasetSpec, generate
 from offline.dataset.records import FaultDataset
 
 
-def classifier_gain(measured: FaultDataset, nominal: VehicleConfig, calibrated: VehicleConfig, spec: DatasetSpec,
-                    cfg: TrainConfig, hop: int = 10, log=print) -> dict:
+def classifier_gain(
+    measured: FaultDataset,
+    nominal: VehicleConfig,
+    calibrated: VehicleConfig,
+    spec: DatasetSpec,
+    cfg: TrainConfig,
+    hop: int = 10,
+    log=print,
+) -> dict:
     out: dict = {"measured_flights": measured.n_flights, "train_spec": dataclasses.asdict(spec)}
     for name, vehicle in (("nominal", nominal), ("calibrated", calibrated)):
         ds = generate(dataclasses.replace(spec, name=f"{spec.name}-{name}"), vehicle, log=log)
         model = train(ds, cfg, log=log)
-        r = evaluate_dataset(lambda x, m=model: predict_probabilities(m, x), measured, cfg.features, cfg.window, hop,
-                             name=f"{measured.name} by {name}-sim classifier")
-        out[name] = {"accuracy": r.accuracy, "windows": r.windows,
-                     "per_propeller_accuracy": list(r.per_propeller_accuracy)}
+        r = evaluate_dataset(
+            lambda x, m=model: predict_probabilities(m, x),
+            measured,
+            cfg.features,
+            cfg.window,
+            hop,
+            name=f"{measured.name} by {name}-sim classifier",
+        )
+        out[name] = {"accuracy": r.accuracy, "windows": r.windows, "per_propeller_accuracy": list(r.per_propeller_accuracy)}
     out["accuracy_gain"] = out["calibrated"]["accuracy"] - out["nominal"]["accuracy"]
     return out
 
@@ -45,23 +57,37 @@ def classifier_gain(measured: FaultDataset, nominal: VehicleConfig, calibrated: 
 def experiment(flights_per_label: int = 2, duration_s: float = 40.0, epochs: int = 4, seed: int = 0, log=print) -> dict:
     nominal = load_vehicle(DEFAULT_VEHICLE)
     truth = dataclasses.replace(nominal, cg_offset_frd_m=(0.02, -0.015, 0.0), motor_efficiency=(1.0, 0.92, 1.0, 1.0))
-    base = DatasetSpec(name="gain", fault="bent", waypoints=("random",), flights_per_label=flights_per_label,
-                       duration_s=duration_s, propellers="quadratic", seed=seed)
+    base = DatasetSpec(
+        name="gain",
+        fault="bent",
+        waypoints=("random",),
+        flights_per_label=flights_per_label,
+        duration_s=duration_s,
+        propellers="quadratic",
+        seed=seed,
+    )
     # Calibration flights: two healthy flights of the "real" vehicle.
     from offline.sim.mission import random_waypoints
     from offline.sim.propeller import QuadraticPropeller
     from offline.sim.simulator import SimConfig, simulate
 
-    sim = simulate(truth, random_waypoints(2, 5, seed=seed + 100), QuadraticPropeller.for_vehicle(truth),
-                   SimConfig(duration_s=60.0), seed=seed + 100)
+    sim = simulate(
+        truth,
+        random_waypoints(2, 5, seed=seed + 100),
+        QuadraticPropeller.for_vehicle(truth),
+        SimConfig(duration_s=60.0),
+        seed=seed + 100,
+    )
     result = calibrate([sim.to_flight_table(i, source=f"healthy-{i}") for i in range(2)], nominal)
     log(f"calibration: cause {result.cause}, findings {[(f['effect'], f['params']) for f in result.findings]}")
     measured = generate(dataclasses.replace(base, name="measured", seed=seed + 200), truth, log=log)
     cfg = TrainConfig(epochs=epochs, seed=seed)
     gain = classifier_gain(measured, nominal, result.calibrated, dataclasses.replace(base, seed=seed + 300), cfg, log=log)
-    gain["calibration"] = {"cause": result.cause, "findings": [{k: f[k] for k in ("effect", "params", "score")}
-                                                               for f in result.findings],
-                           "hidden": {"cg_offset_frd_m": truth.cg_offset_frd_m, "motor_efficiency": truth.motor_efficiency}}
+    gain["calibration"] = {
+        "cause": result.cause,
+        "findings": [{k: f[k] for k in ("effect", "params", "score")} for f in result.findings],
+        "hidden": {"cg_offset_frd_m": truth.cg_offset_frd_m, "motor_efficiency": truth.motor_efficiency},
+    }
     return gain
 
 

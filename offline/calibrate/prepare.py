@@ -113,7 +113,7 @@ def _sg(x: np.ndarray, deriv: int, dt_s: float, window: int) -> np.ndarray:
     if len(x) < window:
         return out
     win = np.lib.stride_tricks.sliding_window_view(x, window, axis=0)  # (T-w+1, ..., w)
-    out[h:len(x) - h] = win @ c
+    out[h : len(x) - h] = win @ c
     return out
 
 
@@ -191,8 +191,10 @@ def prepare(tables: list[FlightTable], vehicle: VehicleConfig) -> list[Segment]:
                 segs.append(seg)
     if not segs:
         names = ", ".join(t.source or f"flight {i}" for i, t in enumerate(tables))
-        raise LogFormatError(f"{names}: no airborne stretch of at least {MIN_SEGMENT_S + 2 * EDGE_TRIM_S:.0f} s "
-                             "with motor commands, attitude and rates; nothing to calibrate against")
+        raise LogFormatError(
+            f"{names}: no airborne stretch of at least {MIN_SEGMENT_S + 2 * EDGE_TRIM_S:.0f} s "
+            "with motor commands, attitude and rates; nothing to calibrate against"
+        )
     return segs
 
 
@@ -228,12 +230,27 @@ def _segment(tab: FlightTable, k: int, a: int, b: int, dt: float, vehicle: Vehic
     h = SG_WINDOW // 2
     h = max(h, SG_WINDOW_TRANSLATION // 2)
     valid[:h] = False
-    valid[len(valid) - h:] = False
-    return Segment(flight=k, source=tab.source or f"flight {k}", dt_s=dt, time_s=t, motor_cmd=cmd, motor_rpm=rpm,
-                   rates_rad_s=rates, euler_rad=euler, R_world_body=rotation_world_body(euler), vel_ned_m_s=vel,
-                   accel_frd_m_s2=acc, euler_deriv_rad_s=sg_deriv(euler, dt), rates_deriv_rad_s2=sg_deriv(rates, dt),
-                   vel_deriv_ned_m_s2=None if vel is None else sg_deriv(vel, dt, SG_WINDOW_TRANSLATION),
-                   phase=flight_phases(vel, euler, rates), valid=valid,
-                   motor_cmd_fine=upsample(cmd), motor_rpm_fine=upsample(rpm), rates_fine_rad_s=upsample(rates),
-                   R_world_body_fine=rotation_world_body(upsample(euler)),
-                   vel_ned_fine_m_s=None if vel is None else upsample(vel))
+    valid[len(valid) - h :] = False
+    return Segment(
+        flight=k,
+        source=tab.source or f"flight {k}",
+        dt_s=dt,
+        time_s=t,
+        motor_cmd=cmd,
+        motor_rpm=rpm,
+        rates_rad_s=rates,
+        euler_rad=euler,
+        R_world_body=rotation_world_body(euler),
+        vel_ned_m_s=vel,
+        accel_frd_m_s2=acc,
+        euler_deriv_rad_s=sg_deriv(euler, dt),
+        rates_deriv_rad_s2=sg_deriv(rates, dt),
+        vel_deriv_ned_m_s2=None if vel is None else sg_deriv(vel, dt, SG_WINDOW_TRANSLATION),
+        phase=flight_phases(vel, euler, rates),
+        valid=valid,
+        motor_cmd_fine=upsample(cmd),
+        motor_rpm_fine=upsample(rpm),
+        rates_fine_rad_s=upsample(rates),
+        R_world_body_fine=rotation_world_body(upsample(euler)),
+        vel_ned_fine_m_s=None if vel is None else upsample(vel),
+    )

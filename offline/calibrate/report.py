@@ -25,8 +25,7 @@ def write_report(out_dir: str | Path, result: CalibrationResult) -> list[Path]:
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    files = [_timeseries(out, result, plt), _by_phase(out, result, plt), _steady(out, result, plt),
-             _candidates(out, result, plt)]
+    files = [_timeseries(out, result, plt), _by_phase(out, result, plt), _steady(out, result, plt), _candidates(out, result, plt)]
     (out / "calibration.json").write_text(json.dumps(result.to_json(), indent=2) + "\n", encoding="utf-8")
     (out / "report.md").write_text(markdown(result), encoding="utf-8")
     return [f for f in files if f] + [out / "calibration.json", out / "report.md"]
@@ -102,8 +101,9 @@ def _candidates(out: Path, r: CalibrationResult, plt) -> Path:
     names = list(r.candidates)
     scores = [r.candidates[n]["score"] if r.candidates[n]["identifiable"] else 0.0 for n in names]
     fig, ax = plt.subplots(figsize=(8, 3.2))
-    colors = ["tab:green" if n == r.cause else ("tab:gray" if not r.candidates[n]["identifiable"] else "tab:orange")
-              for n in names]
+    colors = [
+        "tab:green" if n == r.cause else ("tab:gray" if not r.candidates[n]["identifiable"] else "tab:orange") for n in names
+    ]
     ax.bar(names, np.sign(scores) * np.log10(1 + np.abs(scores)), color=colors)
     ax.set_ylabel("sign * log10(1 + held-out BIC gain)")
     ax.set_title("candidate terms alone on the nominal model (grey: not identifiable)")
@@ -116,32 +116,67 @@ def _candidates(out: Path, r: CalibrationResult, plt) -> Path:
 
 
 def markdown(r: CalibrationResult) -> str:
-    lines = ["# Calibration report", "", f"Logs: {', '.join(r.sources)}", "",
-             f"**Cause: {r.cause or 'none stands out above the noise'}**"
-             + (f" (confidence {r.confidence:.3f})" if r.cause else ""), ""]
+    lines = [
+        "# Calibration report",
+        "",
+        f"Logs: {', '.join(r.sources)}",
+        "",
+        f"**Cause: {r.cause or 'none stands out above the noise'}**" + (f" (confidence {r.confidence:.3f})" if r.cause else ""),
+        "",
+    ]
     for f in r.findings:
-        lines += [f"## {f['effect']}", "", f"params: {f['params']} (standard errors {f['std']})",
-                  f"held-out residual RMS {f['residual_rms_before']:.4g} -> {f['residual_rms_after']:.4g}, "
-                  f"BIC gain {f['score']:.1f}", ""] + [f"- {e}" for e in f["evidence"]] + [""]
-    lines += ["## Candidates (each alone on the nominal model)", "", "| term | identifiable | BIC gain | params | note |",
-              "|---|---|---|---|---|"]
+        lines += (
+            [
+                f"## {f['effect']}",
+                "",
+                f"params: {f['params']} (standard errors {f['std']})",
+                f"held-out residual RMS {f['residual_rms_before']:.4g} -> {f['residual_rms_after']:.4g}, "
+                f"BIC gain {f['score']:.1f}",
+                "",
+            ]
+            + [f"- {e}" for e in f["evidence"]]
+            + [""]
+        )
+    lines += [
+        "## Candidates (each alone on the nominal model)",
+        "",
+        "| term | identifiable | BIC gain | params | note |",
+        "|---|---|---|---|---|",
+    ]
     for n, c in r.candidates.items():
         lines.append(f"| {n} | {c['identifiable']} | {c['score']} | {c['params']} | {c['reason']} |")
     for which in ("nominal", "calibrated"):
         res = r.residuals[which]
         names = list(next(iter(res.values())))
-        lines += ["", f"## Residual RMS per phase, {which} model", "", "| phase | " + " | ".join(names) + " |",
-                  "|---" * (len(names) + 1) + "|"]
+        lines += [
+            "",
+            f"## Residual RMS per phase, {which} model",
+            "",
+            "| phase | " + " | ".join(names) + " |",
+            "|---" * (len(names) + 1) + "|",
+        ]
         lines += [f"| {p} | " + " | ".join(f"{v[s]:.4g}" for s in names) + " |" for p, v in res.items()]
     lines += ["", "## Steady state (held-out samples)", ""]
     for which in ("nominal", "calibrated"):
         for p, v in r.steady[which].items():
-            lines.append(f"- {which} {p}: measured {np.round(v['measured'], 1).tolist()}, predicted "
-                         f"{np.round(v['predicted'], 1).tolist()}, error RMS {v['error_rms']:.2f}")
+            lines.append(
+                f"- {which} {p}: measured {np.round(v['measured'], 1).tolist()}, predicted "
+                f"{np.round(v['predicted'], 1).tolist()}, error RMS {v['error_rms']:.2f}"
+            )
     u = r.unbalance
-    lines += ["", "## Paper's unbalance ratio (eqs. 14-17) vs fitted motor_efficiency", "",
-              f"ratios {u['ratio']}; held-out residual RMS nominal {u['residual_rms_nominal']:.4g}, "
-              f"unbalance ratio {u['residual_rms_unbalance_ratio']:.4g}, fitted motor_efficiency "
-              f"{u['residual_rms_fitted_motor_efficiency']:.4g}", "", "## Gain", "", "```",
-              json.dumps(r.gain, indent=1), "```", ""]
+    lines += [
+        "",
+        "## Paper's unbalance ratio (eqs. 14-17) vs fitted motor_efficiency",
+        "",
+        f"ratios {u['ratio']}; held-out residual RMS nominal {u['residual_rms_nominal']:.4g}, "
+        f"unbalance ratio {u['residual_rms_unbalance_ratio']:.4g}, fitted motor_efficiency "
+        f"{u['residual_rms_fitted_motor_efficiency']:.4g}",
+        "",
+        "## Gain",
+        "",
+        "```",
+        json.dumps(r.gain, indent=1),
+        "```",
+        "",
+    ]
     return "\n".join(lines)

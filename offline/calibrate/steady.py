@@ -22,8 +22,9 @@ def command_unit(segments: list[Segment]) -> str:
     return "rpm" if all(np.all(np.isnan(s.motor_cmd)) for s in segments) else "cmd"
 
 
-def steady_state(segments: list[Segment], vehicle: VehicleConfig, masks: list[np.ndarray] | None = None,
-                 speed_scale: SpeedScale = None) -> dict[str, dict]:
+def steady_state(
+    segments: list[Segment], vehicle: VehicleConfig, masks: list[np.ndarray] | None = None, speed_scale: SpeedScale = None
+) -> dict[str, dict]:
     """Per steady phase: measured and predicted mean per-motor command (RPM when the log has no command)."""
     use_rpm = command_unit(segments) == "rpm"
     out: dict[str, dict] = {}
@@ -45,8 +46,13 @@ def steady_state(segments: list[Segment], vehicle: VehicleConfig, masks: list[np
         if not meas:
             continue
         mm, pp = np.concatenate(meas).mean(axis=0), np.concatenate(pred).mean(axis=0)
-        out[phase] = {"n_samples": int(sum(len(x) for x in meas)), "measured": mm.tolist(), "predicted": pp.tolist(),
-                      "error": (mm - pp).tolist(), "error_rms": float(np.sqrt(np.mean((mm - pp) ** 2))),
-                      # Differential part: what a mass or ESC-scale error (common to all motors) cannot explain.
-                      "spread_error_rms": float(np.sqrt(np.mean(((mm - mm.mean()) - (pp - pp.mean())) ** 2)))}
+        out[phase] = {
+            "n_samples": int(sum(len(x) for x in meas)),
+            "measured": mm.tolist(),
+            "predicted": pp.tolist(),
+            "error": (mm - pp).tolist(),
+            "error_rms": float(np.sqrt(np.mean((mm - pp) ** 2))),
+            # Differential part: what a mass or ESC-scale error (common to all motors) cannot explain.
+            "spread_error_rms": float(np.sqrt(np.mean(((mm - mm.mean()) - (pp - pp.mean())) ** 2))),
+        }
     return out

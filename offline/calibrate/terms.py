@@ -43,8 +43,9 @@ def _set_esc(v: VehicleConfig, x: np.ndarray) -> VehicleConfig:
     """RPM_true = gain * RPM_curve(cmd) + offset: rewritten as the same quadratic's coefficients."""
     e = v.esc
     gain, offset = float(x[0]), float(x[1])
-    esc = dataclasses.replace(e, a_rpm_per_cmd2=gain * e.a_rpm_per_cmd2, b_rpm_per_cmd=gain * e.b_rpm_per_cmd,
-                              c_rpm=gain * e.c_rpm + offset)
+    esc = dataclasses.replace(
+        e, a_rpm_per_cmd2=gain * e.a_rpm_per_cmd2, b_rpm_per_cmd=gain * e.b_rpm_per_cmd, c_rpm=gain * e.c_rpm + offset
+    )
     w_max = float(esc.cmd_to_omega_rad_s(esc.cmd_max))
     return dataclasses.replace(v, esc=esc, omega_max_rad_s=max(w_max, v.omega_min_rad_s + 1.0))
 
@@ -52,46 +53,94 @@ def _set_esc(v: VehicleConfig, x: np.ndarray) -> VehicleConfig:
 TERMS: dict[str, Term] = {
     t.name: t
     for t in (
-        Term("cg_offset", ("cg_x_m", "cg_y_m"),
-             lambda v: np.array(v.cg_offset_frd_m[:2]), _set_cg,
-             _const(0.004, 0.004), _const(-0.1, -0.1), _const(0.1, 0.1),
-             ("cg_offset_frd_m",), "centre of gravity off the rotor centroid: a moment proportional to total thrust"),
-        Term("motor_efficiency", ("eff_1", "eff_2", "eff_3", "eff_4"),
-             lambda v: np.array(v.motor_efficiency),
-             lambda v, x: dataclasses.replace(v, motor_efficiency=tuple(float(e) for e in x)),
-             _const(0.01, 0.01, 0.01, 0.01), _const(0.5, 0.5, 0.5, 0.5), _const(1.5, 1.5, 1.5, 1.5),
-             ("motor_efficiency",), "unequal motors/ESCs: each rotor reaches a scaled speed for its command"),
-        Term("mass", ("mass_kg",),
-             lambda v: np.array([v.mass_kg]),
-             lambda v, x: dataclasses.replace(v, mass_kg=float(x[0])),
-             lambda v: np.array([0.02 * v.mass_kg]), lambda v: np.array([0.3 * v.mass_kg]),
-             lambda v: np.array([3.0 * v.mass_kg]),
-             ("mass_kg",), "mass differs from the nominal (payload, battery): all rotors work harder alike"),
-        Term("inertia", ("ixx_kg_m2", "iyy_kg_m2", "izz_kg_m2"),
-             lambda v: np.array(v.inertia_diag_kg_m2),
-             lambda v, x: dataclasses.replace(v, inertia_diag_kg_m2=tuple(float(i) for i in x)),
-             lambda v: 0.1 * np.array(v.inertia_diag_kg_m2), lambda v: 0.2 * np.array(v.inertia_diag_kg_m2),
-             lambda v: 5.0 * np.array(v.inertia_diag_kg_m2),
-             ("inertia_diag_kg_m2",), "moments of inertia differ: angular accelerations scale per axis"),
-        Term("motor_time_constant", ("motor_time_constant_s",),
-             lambda v: np.array([v.motor_time_constant_s]),
-             lambda v, x: dataclasses.replace(v, motor_time_constant_s=float(x[0])),
-             _const(0.01), _const(0.003), _const(0.3),
-             ("motor_time_constant_s",), "rotors lag the ESC command: moments trail the commands"),
-        Term("drag", ("drag_x_n_per_m_s", "drag_y_n_per_m_s", "drag_z_n_per_m_s"),
-             lambda v: np.array(v.linear_drag_n_per_m_s),
-             lambda v, x: dataclasses.replace(v, linear_drag_n_per_m_s=tuple(float(d) for d in x)),
-             _const(0.03, 0.03, 0.03), _const(0.0, 0.0, 0.0), _const(5.0, 5.0, 5.0),
-             ("linear_drag_n_per_m_s",), "airframe drag: a force against the body velocity"),
-        Term("esc_curve", ("rpm_gain", "rpm_offset"),
-             lambda v: np.array([1.0, 0.0]), _set_esc,
-             _const(0.02, 200.0), _const(0.5, -3000.0), _const(1.5, 3000.0),
-             ("esc", "omega_max_rad_s"), "the ESC command-to-speed map differs from the load-cell fit"),
-        Term("gyro_bias", ("bias_x_rad_s", "bias_y_rad_s", "bias_z_rad_s"),
-             lambda v: np.array(v.gyro_bias_frd_rad_s),
-             lambda v, x: dataclasses.replace(v, gyro_bias_frd_rad_s=tuple(float(b) for b in x)),
-             _const(0.003, 0.003, 0.003), _const(-0.5, -0.5, -0.5), _const(0.5, 0.5, 0.5),
-             ("gyro_bias_frd_rad_s",), "the gyro reads a constant offset"),
+        Term(
+            "cg_offset",
+            ("cg_x_m", "cg_y_m"),
+            lambda v: np.array(v.cg_offset_frd_m[:2]),
+            _set_cg,
+            _const(0.004, 0.004),
+            _const(-0.1, -0.1),
+            _const(0.1, 0.1),
+            ("cg_offset_frd_m",),
+            "centre of gravity off the rotor centroid: a moment proportional to total thrust",
+        ),
+        Term(
+            "motor_efficiency",
+            ("eff_1", "eff_2", "eff_3", "eff_4"),
+            lambda v: np.array(v.motor_efficiency),
+            lambda v, x: dataclasses.replace(v, motor_efficiency=tuple(float(e) for e in x)),
+            _const(0.01, 0.01, 0.01, 0.01),
+            _const(0.5, 0.5, 0.5, 0.5),
+            _const(1.5, 1.5, 1.5, 1.5),
+            ("motor_efficiency",),
+            "unequal motors/ESCs: each rotor reaches a scaled speed for its command",
+        ),
+        Term(
+            "mass",
+            ("mass_kg",),
+            lambda v: np.array([v.mass_kg]),
+            lambda v, x: dataclasses.replace(v, mass_kg=float(x[0])),
+            lambda v: np.array([0.02 * v.mass_kg]),
+            lambda v: np.array([0.3 * v.mass_kg]),
+            lambda v: np.array([3.0 * v.mass_kg]),
+            ("mass_kg",),
+            "mass differs from the nominal (payload, battery): all rotors work harder alike",
+        ),
+        Term(
+            "inertia",
+            ("ixx_kg_m2", "iyy_kg_m2", "izz_kg_m2"),
+            lambda v: np.array(v.inertia_diag_kg_m2),
+            lambda v, x: dataclasses.replace(v, inertia_diag_kg_m2=tuple(float(i) for i in x)),
+            lambda v: 0.1 * np.array(v.inertia_diag_kg_m2),
+            lambda v: 0.2 * np.array(v.inertia_diag_kg_m2),
+            lambda v: 5.0 * np.array(v.inertia_diag_kg_m2),
+            ("inertia_diag_kg_m2",),
+            "moments of inertia differ: angular accelerations scale per axis",
+        ),
+        Term(
+            "motor_time_constant",
+            ("motor_time_constant_s",),
+            lambda v: np.array([v.motor_time_constant_s]),
+            lambda v, x: dataclasses.replace(v, motor_time_constant_s=float(x[0])),
+            _const(0.01),
+            _const(0.003),
+            _const(0.3),
+            ("motor_time_constant_s",),
+            "rotors lag the ESC command: moments trail the commands",
+        ),
+        Term(
+            "drag",
+            ("drag_x_n_per_m_s", "drag_y_n_per_m_s", "drag_z_n_per_m_s"),
+            lambda v: np.array(v.linear_drag_n_per_m_s),
+            lambda v, x: dataclasses.replace(v, linear_drag_n_per_m_s=tuple(float(d) for d in x)),
+            _const(0.03, 0.03, 0.03),
+            _const(0.0, 0.0, 0.0),
+            _const(5.0, 5.0, 5.0),
+            ("linear_drag_n_per_m_s",),
+            "airframe drag: a force against the body velocity",
+        ),
+        Term(
+            "esc_curve",
+            ("rpm_gain", "rpm_offset"),
+            lambda v: np.array([1.0, 0.0]),
+            _set_esc,
+            _const(0.02, 200.0),
+            _const(0.5, -3000.0),
+            _const(1.5, 3000.0),
+            ("esc", "omega_max_rad_s"),
+            "the ESC command-to-speed map differs from the load-cell fit",
+        ),
+        Term(
+            "gyro_bias",
+            ("bias_x_rad_s", "bias_y_rad_s", "bias_z_rad_s"),
+            lambda v: np.array(v.gyro_bias_frd_rad_s),
+            lambda v, x: dataclasses.replace(v, gyro_bias_frd_rad_s=tuple(float(b) for b in x)),
+            _const(0.003, 0.003, 0.003),
+            _const(-0.5, -0.5, -0.5),
+            _const(0.5, 0.5, 0.5),
+            ("gyro_bias_frd_rad_s",),
+            "the gyro reads a constant offset",
+        ),
     )
 }
 
@@ -101,7 +150,7 @@ def apply_terms(vehicle: VehicleConfig, terms: list[Term], x: np.ndarray) -> Veh
     i = 0
     for t in terms:
         k = len(t.params)
-        vehicle = t.set(vehicle, x[i:i + k])
+        vehicle = t.set(vehicle, x[i : i + k])
         i += k
     return vehicle
 

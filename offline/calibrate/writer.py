@@ -27,9 +27,11 @@ def calibrated_mapping(result: CalibrationResult, nominal_sources: dict[str, str
     sources = dict(nominal_sources)
     logs = ", ".join(Path(s).name for s in result.sources)
     for f in result.findings:
-        src = (f"calibration: propwatch calibrate on {logs}, term {f['effect']} "
-               f"(held-out residual RMS {f['residual_rms_before']:.4g} -> {f['residual_rms_after']:.4g}, "
-               f"BIC gain {f['score']:.1f})")
+        src = (
+            f"calibration: propwatch calibrate on {logs}, term {f['effect']} "
+            f"(held-out residual RMS {f['residual_rms_before']:.4g} -> {f['residual_rms_after']:.4g}, "
+            f"BIC gain {f['score']:.1f})"
+        )
         for name in TERMS[f["effect"]].fields:
             for key in [k for k in list(sources) if k == name or k.startswith(name + ".")] or [name]:
                 sources[key] = src
@@ -43,9 +45,11 @@ def calibrated_mapping(result: CalibrationResult, nominal_sources: dict[str, str
         logs=list(result.sources),
         terms=[{"effect": f["effect"], "params": f["params"], "std": f["std"], "score": f["score"]} for f in result.findings],
         cause=result.cause,
-        fit={"heldout_residual_rms_before": result.gain["heldout_residual_rms_before"],
-             "heldout_residual_rms_after": result.gain["heldout_residual_rms_after"],
-             "heldout_residual_reduction_pct": result.gain["heldout_residual_reduction_pct"]},
+        fit={
+            "heldout_residual_rms_before": result.gain["heldout_residual_rms_before"],
+            "heldout_residual_rms_after": result.gain["heldout_residual_rms_after"],
+            "heldout_residual_reduction_pct": result.gain["heldout_residual_reduction_pct"],
+        },
         not_identifiable={n: c["reason"] for n, c in result.candidates.items() if not c["identifiable"]},
     )
     return data
@@ -54,9 +58,9 @@ def calibrated_mapping(result: CalibrationResult, nominal_sources: dict[str, str
 def write_calibrated(path: str | Path, result: CalibrationResult, nominal_sources: dict[str, str], nominal_path: str) -> Path:
     """Write the YAML, then load it back with the project's loader so a bad file never stays on disk."""
     path = Path(path)
-    text = ("# Calibrated vehicle written by `propwatch calibrate`; see provenance at the end.\n"
-            + yaml.safe_dump(calibrated_mapping(result, nominal_sources, nominal_path), sort_keys=False,
-                             default_flow_style=None, width=140))
+    text = "# Calibrated vehicle written by `propwatch calibrate`; see provenance at the end.\n" + yaml.safe_dump(
+        calibrated_mapping(result, nominal_sources, nominal_path), sort_keys=False, default_flow_style=None, width=140
+    )
     tmp = path.with_suffix(path.suffix + ".tmp")
     tmp.write_text(text, encoding="utf-8")
     try:

@@ -49,13 +49,31 @@ def propeller_kind() -> str:
 
 def data_specs(kind: str, flights_per_label: int, eval_flights_per_label: int) -> list[DatasetSpec]:
     fault = TRAIN_SET.split("-", 1)[1]
-    specs = [DatasetSpec(TRAIN_SET, fault=fault, waypoints=("random",), payload_kg=(0.0, 0.6), wind_max_m_s=3.0,
-                         vehicle_variants=8, flights_per_label=flights_per_label, propellers=kind,
-                         seed=57)]  # = `propwatch dataset --name R ... --seed 7` (custom sets add 50), so --reuse finds it
+    specs = [
+        DatasetSpec(
+            TRAIN_SET,
+            fault=fault,
+            waypoints=("random",),
+            payload_kg=(0.0, 0.6),
+            wind_max_m_s=3.0,
+            vehicle_variants=8,
+            flights_per_label=flights_per_label,
+            propellers=kind,
+            seed=57,
+        )
+    ]  # = `propwatch dataset --name R ... --seed 7` (custom sets add 50), so --reuse finds it
     for i, fault in enumerate(("bent", "cracked")):
         for j, s in enumerate(("A", "B", "C")):
-            specs.append(DatasetSpec(f"{s}-{fault}", fault=fault, flights_per_label=eval_flights_per_label, propellers=kind,
-                                     seed=100 * i + j, **PRESETS[s]))
+            specs.append(
+                DatasetSpec(
+                    f"{s}-{fault}",
+                    fault=fault,
+                    flights_per_label=eval_flights_per_label,
+                    propellers=kind,
+                    seed=100 * i + j,
+                    **PRESETS[s],
+                )
+            )
     return specs
 
 
@@ -73,8 +91,15 @@ def obtain(spec: DatasetSpec, vehicle, data_dir: Path, reuse: bool):
 
 
 def result_from_dict(d: dict) -> Result:
-    return Result(d["name"], d["windows"], d["accuracy"], d["fault_precision"], d["fault_recall"], np.zeros((16, 16), np.int64),
-                  tuple(d["per_propeller_accuracy"]))
+    return Result(
+        d["name"],
+        d["windows"],
+        d["accuracy"],
+        d["fault_precision"],
+        d["fault_recall"],
+        np.zeros((16, 16), np.int64),
+        tuple(d["per_propeller_accuracy"]),
+    )
 
 
 def ablation_from(folder: Path) -> str:
@@ -87,8 +112,11 @@ def ablation_from(folder: Path) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="python -m offline.classifier.build_shipped", description=__doc__,
-                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = argparse.ArgumentParser(
+        prog="python -m offline.classifier.build_shipped",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     p.add_argument("--out", type=Path, default=Path("models"))
     p.add_argument("--data", type=Path, default=Path("out/shipped-data"))
     p.add_argument("--reuse", action="store_true", help="reuse data sets in --data made with the same spec")
@@ -98,12 +126,21 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--hop", type=int, default=10, help="evaluation window hop (10: every 0.5 s; 1 is 10x the time)")
     p.add_argument("--onboard-flights", type=int, default=32)
     p.add_argument("--vehicle", type=Path, default=DEFAULT_VEHICLE)
-    p.add_argument("--ablation", type=Path, default=Path("out/experiments"),
-                   help="folder of experiments JSON (python -m offline.classifier.experiments) to quote in the card")
-    p.add_argument("--checkpoint", type=Path,
-                   help="ship this checkpoint of the shipped row (python -m offline.classifier.experiments --only ROW writes "
-                        "out/experiments/ROW.pt) instead of training it again; its config and training data must match")
-    p.add_argument("--card-only", action="store_true", help="rewrite the card from the existing manifest (e.g. after new ablation runs)")
+    p.add_argument(
+        "--ablation",
+        type=Path,
+        default=Path("out/experiments"),
+        help="folder of experiments JSON (python -m offline.classifier.experiments) to quote in the card",
+    )
+    p.add_argument(
+        "--checkpoint",
+        type=Path,
+        help="ship this checkpoint of the shipped row (python -m offline.classifier.experiments --only ROW writes "
+        "out/experiments/ROW.pt) instead of training it again; its config and training data must match",
+    )
+    p.add_argument(
+        "--card-only", action="store_true", help="rewrite the card from the existing manifest (e.g. after new ablation runs)"
+    )
     a = p.parse_args(argv)
     if a.card_only:
         manifest = json.loads((a.out / "classifier.manifest.json").read_text(encoding="utf-8"))
@@ -125,37 +162,63 @@ def main(argv: list[str] | None = None) -> int:
             raise SystemExit(f"{a.checkpoint}: trained on another data set than {TRAIN_SET} of this build")
     else:
         m = train(data[TRAIN_SET], cfg)
-    m.training_manifest = {"train_config": {**dataclasses.asdict(cfg), "features": list(cfg.features)},
-                           "data": data[TRAIN_SET].manifest, "propellers": kind}
+    m.training_manifest = {
+        "train_config": {**dataclasses.asdict(cfg), "features": list(cfg.features)},
+        "data": data[TRAIN_SET].manifest,
+        "propellers": kind,
+    }
     onnx_path = export_onnx(m, a.out / "classifier.onnx")
     clf = Classifier(onnx_path)
     results = []
     for name, ds in data.items():
         if name == TRAIN_SET:
-            results.append(evaluate_dataset(clf.predict, ds, cfg.features, cfg.window, a.hop, m.test_flights, f"{name} (test split)"))
+            results.append(
+                evaluate_dataset(clf.predict, ds, cfg.features, cfg.window, a.hop, m.test_flights, f"{name} (test split)")
+            )
         else:
             ds.check_model(clf.info.metadata["vehicle"]["name"], clf.info.sample_rate_hz, clf.info.features)
             results.append(evaluate_dataset(clf.predict, ds, cfg.features, cfg.window, a.hop))
     print(format_table(results))
     # The shipped configuration is the ablation's last row: record it there instead of training it twice.
     a.ablation.mkdir(parents=True, exist_ok=True)
-    row = {"name": SHIPPED_ROW, "train_sets": [TRAIN_SET], "config": m.training_manifest["train_config"], "history": m.history,
-           "results": [{k: v for k, v in r.to_dict().items() if k != "confusion"} for r in results]}
+    row = {
+        "name": SHIPPED_ROW,
+        "train_sets": [TRAIN_SET],
+        "config": m.training_manifest["train_config"],
+        "history": m.history,
+        "results": [{k: v for k, v in r.to_dict().items() if k != "confusion"} for r in results],
+    }
     (a.ablation / f"{SHIPPED_ROW}.json").write_text(json.dumps(row, indent=2) + "\n", encoding="utf-8")
     onboard_cfg = ShiftFlights(n_flights=a.onboard_flights, propellers=kind)
-    sweep = rule_sweep(clf.predict, simulate_onset(vehicle, onboard_cfg, healthy=True),
-                       simulate_onset(vehicle, onboard_cfg, healthy=False), cfg.features, cfg.window, RULES)
+    sweep = rule_sweep(
+        clf.predict,
+        simulate_onset(vehicle, onboard_cfg, healthy=True),
+        simulate_onset(vehicle, onboard_cfg, healthy=False),
+        cfg.features,
+        cfg.window,
+        RULES,
+    )
     alarms, detect = sweep["daemon default"]["false_alarms"], sweep["daemon default"]["detection"]
     print(json.dumps(sweep, indent=1))
-    figures = {"results": [{k: v for k, v in r.to_dict().items() if k != "confusion"} for r in results],
-               "hop": a.hop, "false_alarms": alarms, "detection": detect, "alert_rule": dataclasses.asdict(DAEMON_ALERTS),
-               "rule_sweep": sweep,
-               "onboard_flights": dataclasses.asdict(onboard_cfg)}
-    manifest = make_manifest("classifier", {"train": m.training_manifest["train_config"], "propellers": kind,
-                                            "data_specs": [to_mapping(s) for s in specs]}, cfg.seed,
-                             model=str(onnx_path), history=m.history, figures=figures,
-                             trained_by="checkpoint " + str(a.checkpoint) if a.checkpoint else "this build",
-                             build_seconds=round(time.time() - t0, 1))
+    figures = {
+        "results": [{k: v for k, v in r.to_dict().items() if k != "confusion"} for r in results],
+        "hop": a.hop,
+        "false_alarms": alarms,
+        "detection": detect,
+        "alert_rule": dataclasses.asdict(DAEMON_ALERTS),
+        "rule_sweep": sweep,
+        "onboard_flights": dataclasses.asdict(onboard_cfg),
+    }
+    manifest = make_manifest(
+        "classifier",
+        {"train": m.training_manifest["train_config"], "propellers": kind, "data_specs": [to_mapping(s) for s in specs]},
+        cfg.seed,
+        model=str(onnx_path),
+        history=m.history,
+        figures=figures,
+        trained_by="checkpoint " + str(a.checkpoint) if a.checkpoint else "this build",
+        build_seconds=round(time.time() - t0, 1),
+    )
     write_manifest(a.out / "classifier.manifest.json", manifest)
     write_card(a.out / "classifier.card.md", manifest, results, ablation_from(a.ablation))
     print(f"wrote {onnx_path}, classifier.card.md, classifier.manifest.json in {time.time() - t0:.0f} s")

@@ -24,23 +24,34 @@ def write_card(path: str | Path, manifest: dict, results: list[Result], ablation
         "",
         f"Built by `make classifier` (`python -m offline.classifier.build_shipped`) at git {manifest['git_revision']}, "
         f"{manifest['created_utc']}; seed {manifest['seed']}. Full provenance: `classifier.manifest.json`."
-        + (f" The network was trained by the ablation run and shipped from its {manifest['trained_by']} (`--checkpoint`; "
-           "config and training data checked equal to this build's)."
-           if str(manifest.get("trained_by", "this build")).startswith("checkpoint") else ""),
+        + (
+            f" The network was trained by the ablation run and shipped from its {manifest['trained_by']} (`--checkpoint`; "
+            "config and training data checked equal to this build's)."
+            if str(manifest.get("trained_by", "this build")).startswith("checkpoint")
+            else ""
+        ),
         "",
         "## What it does",
         f"- Input: `features` (N, {train['window']}, {len(train['features'])}) raw float32 at 20 Hz, in this order: "
-        + ", ".join(f"`{f}`" for f in train["features"]) + ". The graph normalises (statistics in the metadata).",
-        ("- Outputs: `fault_probability` (N, 4), one sigmoid per propeller (PX4 order 1..4); `label_probability` (N, 16) "
-         "is the product of the four Bernoullis over the paper's label masks." if train["head"] == "multilabel4" else
-         "- Outputs: `label_probability` (N, 16), the paper's softmax over labels; `fault_probability` (N, 4) is, per "
-         "propeller (PX4 order 1..4), the sum of the probabilities of the labels that include it."),
+        + ", ".join(f"`{f}`" for f in train["features"])
+        + ". The graph normalises (statistics in the metadata).",
+        (
+            "- Outputs: `fault_probability` (N, 4), one sigmoid per propeller (PX4 order 1..4); `label_probability` (N, 16) "
+            "is the product of the four Bernoullis over the paper's label masks."
+            if train["head"] == "multilabel4"
+            else "- Outputs: `label_probability` (N, 16), the paper's softmax over labels; `fault_probability` (N, 4) is, per "
+            "propeller (PX4 order 1..4), the sum of the probabilities of the labels that include it."
+        ),
         f"- Network: the paper's CNN (3x3 kernels, {train['channels']} channels doubling over {train['blocks']} blocks, "
         f"2x2 max-pool after each, dense {train['dense']}), head `{train['head']}`"
-        + (". Beside the flattened convolutions the dense layer gets four yaw statistics of the window, computed in the "
-           "graph without weights (`offline.classifier.cnn.yaw_effectiveness`): the least-squares yaw acceleration per "
-           "commanded yaw moment (damaged blades drag more, a payload at the CG changes nothing), per collective (which "
-           "spin direction carries the damage) and their two excitations." if train.get("yaw_effectiveness") else "."),
+        + (
+            ". Beside the flattened convolutions the dense layer gets four yaw statistics of the window, computed in the "
+            "graph without weights (`offline.classifier.cnn.yaw_effectiveness`): the least-squares yaw acceleration per "
+            "commanded yaw moment (damaged blades drag more, a payload at the CG changes nothing), per collective (which "
+            "spin direction carries the damage) and their two excitations."
+            if train.get("yaw_effectiveness")
+            else "."
+        ),
         "",
         "## Training data",
         f"- {16 * spec['flights_per_label']} simulated {spec['duration_s']:.0f} s flights ({spec['flights_per_label']} per label), "
@@ -48,8 +59,11 @@ def write_card(path: str | Path, manifest: dict, results: list[Result], ablation
         f"steady wind up to {spec['wind_max_m_s']} m/s over {spec['vehicle_variants']} vehicle variants, "
         + _FAULT_MODES.get(spec["fault"], f"faults `{spec['fault']}`."),
         f"- Propeller models: `{cfg['propellers']}`"
-        + (" (analytic fault signatures of `offline/propellers/faults.py`: the LSTM weights were not built when this model was trained)."
-           if cfg["propellers"] == "quadratic" else " (the paper's stacked LSTMs)."),
+        + (
+            " (analytic fault signatures of `offline/propellers/faults.py`: the LSTM weights were not built when this model was trained)."
+            if cfg["propellers"] == "quadratic"
+            else " (the paper's stacked LSTMs)."
+        ),
         f"- Split: whole flights held out ({train['test_fraction']:.0%} per label); no window shares a sample across the split. "
         "(The paper split *windows* 80/20 at random, so its test windows share up to 99 of 100 samples with training ones.) "
         f"Each epoch uses every {train['train_stride']}-th window start (random offset), {train['epochs']} epochs.",
@@ -73,27 +87,37 @@ def write_card(path: str | Path, manifest: dict, results: list[Result], ablation
         "",
     ]
     if fig.get("rule_sweep"):
-        lines += ["Alert rule trade-off (same classifier outputs):", "",
-                  "| rule | false alarms / healthy flight-hour | detected | median / p90 to first correct alert | alerts before onset |",
-                  "|---|---|---|---|---|"]
+        lines += [
+            "Alert rule trade-off (same classifier outputs):",
+            "",
+            "| rule | false alarms / healthy flight-hour | detected | median / p90 to first correct alert | alerts before onset |",
+            "|---|---|---|---|---|",
+        ]
         for name, v in fig["rule_sweep"].items():
             c = v["detection"]["first_correct_alert"]
-            lines.append(f"| {name} (P >= {v['rule']['threshold']}, {v['rule']['consecutive']} windows) | "
-                         f"{v['false_alarms']['alarms_per_hour']:.1f} | {100 * c['detected']:.0f} % | "
-                         f"{_s(c['median_s'])} / {_s(c['p90_s'])} | {v['detection']['alerts_before_onset']} |")
+            lines.append(
+                f"| {name} (P >= {v['rule']['threshold']}, {v['rule']['consecutive']} windows) | "
+                f"{v['false_alarms']['alarms_per_hour']:.1f} | {100 * c['detected']:.0f} % | "
+                f"{_s(c['median_s'])} / {_s(c['p90_s'])} | {v['detection']['alerts_before_onset']} |"
+            )
         lines.append("")
     if ablation:
-        lines += ["## Ablation (window accuracy %, hop 10; `python -m offline.classifier.experiments`)",
-                  "Rows in the order they were tried; each adds one change to an earlier row, named in its label "
-                  "(paper rows: the paper's recipe on A of one fault type; A of that type is then scored on held-out "
-                  "flights, everything else on all flights). Legend: `random` = training set R-mixed (random routes, payload "
-                  "0..0.6 kg, wind, each faulty propeller bent or cracked at random), `rel` = relative-RPM features, "
-                  "`multilabel` = one sigmoid per propeller (else the paper's softmax over 16 labels), `moments` = per-axis "
-                  "moment features, `x2/x3 epochs` = 12/20 epochs (6 before), `healthy x4` = healthy windows weighted 4x, "
-                  "`+yaw` = the yaw-effectiveness block, `varied` = training set R-varied (a third of flights all bent, a "
-                  "third all cracked, a third mixed; 30 flights per label), `robust` = median/MAD-scaled, clipped yaw "
-                  "statistics, `x60 flights` = R-varied with 60 flights per label, `dropout` = dropout 0.3 before the "
-                  "output layer.", "", ablation, ""]
+        lines += [
+            "## Ablation (window accuracy %, hop 10; `python -m offline.classifier.experiments`)",
+            "Rows in the order they were tried; each adds one change to an earlier row, named in its label "
+            "(paper rows: the paper's recipe on A of one fault type; A of that type is then scored on held-out "
+            "flights, everything else on all flights). Legend: `random` = training set R-mixed (random routes, payload "
+            "0..0.6 kg, wind, each faulty propeller bent or cracked at random), `rel` = relative-RPM features, "
+            "`multilabel` = one sigmoid per propeller (else the paper's softmax over 16 labels), `moments` = per-axis "
+            "moment features, `x2/x3 epochs` = 12/20 epochs (6 before), `healthy x4` = healthy windows weighted 4x, "
+            "`+yaw` = the yaw-effectiveness block, `varied` = training set R-varied (a third of flights all bent, a "
+            "third all cracked, a third mixed; 30 flights per label), `robust` = median/MAD-scaled, clipped yaw "
+            "statistics, `x60 flights` = R-varied with 60 flights per label, `dropout` = dropout 0.3 before the "
+            "output layer.",
+            "",
+            ablation,
+            "",
+        ]
     lines += [
         "## Limits",
         "- Simulation only: no real bent or cracked propeller flight exists to test on (see ../shared/data/README.md).",

@@ -121,7 +121,11 @@ class FaultCnn(nn.Module):
         n_out = 16 if cfg.head == "softmax16" else 4
         n_extra = N_YAW_STATS if cfg.yaw_effectiveness is not None else 0
         self.head = nn.Sequential(  # the Flatten is a no-op on the (N, D) input; kept so checkpoints keep their keys
-            nn.Flatten(), nn.Linear(c_in * h * w + n_extra, cfg.dense), nn.ReLU(), nn.Dropout(cfg.dropout), nn.Linear(cfg.dense, n_out)
+            nn.Flatten(),
+            nn.Linear(c_in * h * w + n_extra, cfg.dense),
+            nn.ReLU(),
+            nn.Dropout(cfg.dropout),
+            nn.Linear(cfg.dense, n_out),
         )
 
     def yaw_stats(self, x: torch.Tensor) -> torch.Tensor:

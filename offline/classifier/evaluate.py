@@ -59,13 +59,14 @@ def paper_key(name: str) -> str | None:
     return k if k in PAPER_RESULTS and (len(name) == 1 or not name[1].isalnum()) else None
 
 
-def predict_dataset(predict: Predictor, feats: np.ndarray, window: int, hop: int = 1, flights=None,
-                    batch: int = 1024) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def predict_dataset(
+    predict: Predictor, feats: np.ndarray, window: int, hop: int = 1, flights=None, batch: int = 1024
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(index (M,2), label_probability (M,16), fault_probability (M,4)) over valid windows."""
     idx = window_index(feats, window, hop, flights)
     lp, fp = [], []
     for i in range(0, len(idx), batch):
-        a, b = predict(gather(feats, idx[i:i + batch], window))
+        a, b = predict(gather(feats, idx[i : i + batch], window))
         lp.append(a)
         fp.append(b)
     if not lp:
@@ -86,8 +87,9 @@ def score(name: str, true_label: np.ndarray, true_mask: np.ndarray, label_prob: 
     return Result(name, len(pred), acc, precision, recall, conf, tuple(float(v) for v in per_prop))
 
 
-def evaluate_dataset(predict: Predictor, ds: FaultDataset, features, window: int, hop: int = 1, flights=None,
-                     name: str | None = None) -> Result:
+def evaluate_dataset(
+    predict: Predictor, ds: FaultDataset, features, window: int, hop: int = 1, flights=None, name: str | None = None
+) -> Result:
     feats = ds.features(features)
     idx, lp, fp = predict_dataset(predict, feats, window, hop, flights)
     return score(name or ds.name, ds.labels[idx[:, 0]], ds.fault_mask[idx[:, 0]], lp, fp)
@@ -95,15 +97,19 @@ def evaluate_dataset(predict: Predictor, ds: FaultDataset, features, window: int
 
 def format_table(results: list[Result]) -> str:
     """Our figures beside the paper's (percent)."""
-    rows = ["| data set | windows | accuracy | paper accuracy | precision / recall | paper precision / recall |",
-            "|---|---|---|---|---|---|"]
+    rows = [
+        "| data set | windows | accuracy | paper accuracy | precision / recall | paper precision / recall |",
+        "|---|---|---|---|---|---|",
+    ]
     for r in results:
         key = paper_key(r.name)
         paper = PAPER_RESULTS.get(key) if key else None
         pa = f"{paper[0]:.2f} %" if paper else "—"
         ppr = f"{paper[1]} / {paper[2]}" if paper and paper[1] is not None else "—"
-        rows.append(f"| {r.name} | {r.windows} | {100 * r.accuracy:.2f} % | {pa} | "
-                    f"{100 * r.precision:.2f} / {100 * r.recall:.2f} | {ppr} |")
+        rows.append(
+            f"| {r.name} | {r.windows} | {100 * r.accuracy:.2f} % | {pa} | "
+            f"{100 * r.precision:.2f} / {100 * r.recall:.2f} | {ppr} |"
+        )
     return "\n".join(rows)
 
 
@@ -122,8 +128,15 @@ def plot_confusion(r: Result, path: str | Path) -> Path:
     for i in range(16):
         for j in range(16):
             if r.confusion[i, j]:
-                ax.text(j, i, f"{100 * frac[i, j]:.0f}", ha="center", va="center", fontsize=6,
-                        color="white" if frac[i, j] > 0.5 else "black")
+                ax.text(
+                    j,
+                    i,
+                    f"{100 * frac[i, j]:.0f}",
+                    ha="center",
+                    va="center",
+                    fontsize=6,
+                    color="white" if frac[i, j] > 0.5 else "black",
+                )
     ticks = np.arange(16)
     ax.set_xticks(ticks, [str(k + 1) for k in ticks])
     ax.set_yticks(ticks, [f"{k + 1} {n}" for k, n in enumerate(class_names())], fontsize=6)

@@ -26,13 +26,39 @@ from offline.dataset.records import FaultDataset, concat, load_dataset
 
 # Relative RPM replaces absolute RPM (payload moves every rotor alike); yaw enters as sin/cos so
 # the heading of a route is not a feature; the mean RPM is kept so the net can still see load.
-SHIFT_FEATURES = ("rpm_rel_1", "rpm_rel_2", "rpm_rel_3", "rpm_rel_4", "rpm_mean", "roll_rad", "pitch_rad",
-                  "yaw_sin", "yaw_cos", "roll_rate_rad_s", "pitch_rate_rad_s", "yaw_rate_rad_s")
+SHIFT_FEATURES = (
+    "rpm_rel_1",
+    "rpm_rel_2",
+    "rpm_rel_3",
+    "rpm_rel_4",
+    "rpm_mean",
+    "roll_rad",
+    "pitch_rad",
+    "yaw_sin",
+    "yaw_cos",
+    "roll_rate_rad_s",
+    "pitch_rate_rad_s",
+    "yaw_rate_rad_s",
+)
 # Each moment proxy sits next to the body rate it drives, so the first 3x3 convolutions see both: the
 # rate response per (kRPM)^2 is the rotors' leverage, which payload does not change and a fault does.
-MOMENT_FEATURES = ("rpm_rel_1", "rpm_rel_2", "rpm_rel_3", "rpm_rel_4", "rpm_mean", "roll_rad", "pitch_rad",
-                   "yaw_sin", "yaw_cos", "roll_moment_krpm2", "roll_rate_rad_s", "pitch_moment_krpm2",
-                   "pitch_rate_rad_s", "yaw_moment_krpm2", "yaw_rate_rad_s")
+MOMENT_FEATURES = (
+    "rpm_rel_1",
+    "rpm_rel_2",
+    "rpm_rel_3",
+    "rpm_rel_4",
+    "rpm_mean",
+    "roll_rad",
+    "pitch_rad",
+    "yaw_sin",
+    "yaw_cos",
+    "roll_moment_krpm2",
+    "roll_rate_rad_s",
+    "pitch_moment_krpm2",
+    "pitch_rate_rad_s",
+    "yaw_moment_krpm2",
+    "yaw_rate_rad_s",
+)
 # The yaw-effectiveness block (offline.classifier.cnn.yaw_effectiveness) reads the yaw moment and the collective
 # the rotors are asked for beside the yaw rate; they sit next to it so the convolutions see them together too.
 YAW_FEATURES = SHIFT_FEATURES + ("yaw_moment_krpm2", "collective_krpm2")
@@ -51,10 +77,14 @@ EXPERIMENTS: dict[str, tuple[tuple[str, ...], dict]] = {
     "random+rel": (("R-mixed",), {**SHIFT_TRAINING, "features": SHIFT_FEATURES}),
     "random+rel+multilabel": (("R-mixed",), {**SHIFT_TRAINING, "features": SHIFT_FEATURES, "head": "multilabel4"}),
     "random+rel+moments+multilabel": (("R-mixed",), {**SHIFT_TRAINING, "features": MOMENT_FEATURES, "head": "multilabel4"}),
-    "random+rel+multilabel x2 epochs": (("R-mixed",), {**SHIFT_TRAINING, "features": SHIFT_FEATURES, "head": "multilabel4",
-                                                       "epochs": 12}),
-    "random+rel+multilabel x2 epochs healthy x4": (("R-mixed",), {**SHIFT_TRAINING, "features": SHIFT_FEATURES,
-                                                                  "head": "multilabel4", "epochs": 12, "healthy_weight": 4.0}),
+    "random+rel+multilabel x2 epochs": (
+        ("R-mixed",),
+        {**SHIFT_TRAINING, "features": SHIFT_FEATURES, "head": "multilabel4", "epochs": 12},
+    ),
+    "random+rel+multilabel x2 epochs healthy x4": (
+        ("R-mixed",),
+        {**SHIFT_TRAINING, "features": SHIFT_FEATURES, "head": "multilabel4", "epochs": 12, "healthy_weight": 4.0},
+    ),
     "random+rel+multilabel x2 epochs +yaw": (("R-mixed",), {**_YAW, "head": "multilabel4"}),
     "random+rel x2 epochs +yaw": (("R-mixed",), _YAW),
     # R-varied: 30 flights per label, a third all bent, a third all cracked, a third mixed (R-mixed: 20, all mixed).
@@ -111,9 +141,14 @@ def run_one(name: str, data: Path, out: Path, base: TrainConfig, hop: int, cache
             flights, label = mine, f"{e} (test split)"
         results.append(evaluate_dataset(predict, ev, cfg.features, cfg.window, hop, flights, label))
     print(format_table(results), flush=True)
-    return {"name": name, "train_sets": list(sets), "config": {**dataclasses.asdict(cfg), "features": list(cfg.features)},
-            "train_seconds": train_s, "history": m.history,
-            "results": [{k: v for k, v in r.to_dict().items() if k != "confusion"} for r in results]}
+    return {
+        "name": name,
+        "train_sets": list(sets),
+        "config": {**dataclasses.asdict(cfg), "features": list(cfg.features)},
+        "train_seconds": train_s,
+        "history": m.history,
+        "results": [{k: v for k, v in r.to_dict().items() if k != "confusion"} for r in results],
+    }
 
 
 def ablation_table(rows: list[dict]) -> str:

@@ -48,9 +48,15 @@ def export_onnx(m: TrainedModel, path: str | Path, extra_metadata: dict | None =
     # The TorchScript exporter: a small static CNN needs nothing from the dynamo path,
     # and it writes one self-contained file (no external data).
     torch.onnx.export(
-        module, (example,), buf, dynamo=False, input_names=[INPUT_NAME], output_names=[OUTPUT_LABELS, OUTPUT_FAULTS],
+        module,
+        (example,),
+        buf,
+        dynamo=False,
+        input_names=[INPUT_NAME],
+        output_names=[OUTPUT_LABELS, OUTPUT_FAULTS],
         dynamic_axes={INPUT_NAME: {0: "batch"}, OUTPUT_LABELS: {0: "batch"}, OUTPUT_FAULTS: {0: "batch"}},
-        opset_version=OPSET, do_constant_folding=True,
+        opset_version=OPSET,
+        do_constant_folding=True,
     )
     model = onnx.load_from_string(buf.getvalue())
     meta = {**metadata(m), **(extra_metadata or {})}

@@ -56,8 +56,9 @@ def simulate_onset(vehicle: VehicleConfig, cfg: ShiftFlights, healthy: bool) -> 
         kinds = rng.integers(1, 3, (n, 4)) if cfg.fault == "mixed" else np.full((n, 4), 1 if cfg.fault == "bent" else 2)
         cond = (masks * kinds).astype(np.int8)
     payload = rng.uniform(*cfg.payload_kg, n)
-    spec = DatasetSpec("onset", fault=cfg.fault, waypoints=("random",), duration_s=cfg.duration_s, propellers=cfg.propellers,
-                       seed=cfg.seed)
+    spec = DatasetSpec(
+        "onset", fault=cfg.fault, waypoints=("random",), duration_s=cfg.duration_s, propellers=cfg.propellers, seed=cfg.seed
+    )
     wps, names = routes(spec, n, seed=cfg.seed + (0 if healthy else 1))
     onset_s = np.full(n, np.inf) if healthy else rng.uniform(*cfg.onset_s, n)
     from offline.propellers import build_propellers
@@ -71,11 +72,21 @@ def simulate_onset(vehicle: VehicleConfig, cfg: ShiftFlights, healthy: bool) -> 
     log = simulate_flights(vehicle, wps, cond, payload, spec, seed, propellers=props)
     rate = log.log_rate_hz
     onset_step = np.where(np.isfinite(onset_s), np.ceil(onset_s * rate) - 1, log.n_samples).astype(np.int64)
-    return from_log(log, "healthy" if healthy else "onset", vehicle, cond, payload, names,
-                    {"kind": "onset-flights", "config": cfg.__dict__}, onset_step)
+    return from_log(
+        log,
+        "healthy" if healthy else "onset",
+        vehicle,
+        cond,
+        payload,
+        names,
+        {"kind": "onset-flights", "config": cfg.__dict__},
+        onset_step,
+    )
 
 
-def replay_alerts(fault_prob: np.ndarray, rate_hz: float, window: int, config: AlertConfig) -> list[tuple[float, tuple[int, ...]]]:
+def replay_alerts(
+    fault_prob: np.ndarray, rate_hz: float, window: int, config: AlertConfig
+) -> list[tuple[float, tuple[int, ...]]]:
     """The daemon's rule over one flight's consecutive windows -> [(time_s, faulty propellers)].
 
     Window k (hop 1) ends at log sample k + window - 1, whose time is (k + window) / rate.
@@ -99,24 +110,41 @@ def flight_fault_probabilities(predict: Predictor, ds: FaultDataset, features, w
         idx = window_index(feats, window, 1, np.array([b]))
         probs = []
         for i in range(0, len(idx), 2048):
-            probs.append(predict(gather(feats, idx[i:i + 2048], window))[1])
+            probs.append(predict(gather(feats, idx[i : i + 2048], window))[1])
         out.append(np.concatenate(probs))
     return out
 
 
-def false_alarms_per_hour(predict: Predictor, healthy: FaultDataset, features, window: int,
-                          config: AlertConfig = DAEMON_ALERTS, probs: list[np.ndarray] | None = None) -> dict:
+def false_alarms_per_hour(
+    predict: Predictor,
+    healthy: FaultDataset,
+    features,
+    window: int,
+    config: AlertConfig = DAEMON_ALERTS,
+    probs: list[np.ndarray] | None = None,
+) -> dict:
     if probs is None:
         probs = flight_fault_probabilities(predict, healthy, features, window)
     alarms = sum(len(replay_alerts(p, healthy.sample_rate_hz, window, config)) for p in probs)
     classified_s = sum(len(p) for p in probs) / healthy.sample_rate_hz
     hot_windows = float(np.mean(np.concatenate(probs) >= config.threshold))
-    return {"alarms": alarms, "classified_hours": classified_s / 3600.0, "alarms_per_hour": alarms / (classified_s / 3600.0),
-            "windows_over_threshold": hot_windows, "flights": healthy.n_flights}
+    return {
+        "alarms": alarms,
+        "classified_hours": classified_s / 3600.0,
+        "alarms_per_hour": alarms / (classified_s / 3600.0),
+        "windows_over_threshold": hot_windows,
+        "flights": healthy.n_flights,
+    }
 
 
-def detection_times(predict: Predictor, onset: FaultDataset, features, window: int,
-                    config: AlertConfig = DAEMON_ALERTS, probs: list[np.ndarray] | None = None) -> dict:
+def detection_times(
+    predict: Predictor,
+    onset: FaultDataset,
+    features,
+    window: int,
+    config: AlertConfig = DAEMON_ALERTS,
+    probs: list[np.ndarray] | None = None,
+) -> dict:
     """Seconds from fault onset to the first alert, and to the first alert naming only truly faulty propellers."""
     if probs is None:
         probs = flight_fault_probabilities(predict, onset, features, window)
@@ -135,19 +163,31 @@ def detection_times(predict: Predictor, onset: FaultDataset, features, window: i
 
     def summary(x: np.ndarray) -> dict:
         hit = np.isfinite(x)
-        return {"detected": float(hit.mean()), "median_s": float(np.median(x[hit])) if hit.any() else None,
-                "p90_s": float(np.percentile(x[hit], 90)) if hit.any() else None}
+        return {
+            "detected": float(hit.mean()),
+            "median_s": float(np.median(x[hit])) if hit.any() else None,
+            "p90_s": float(np.percentile(x[hit], 90)) if hit.any() else None,
+        }
 
-    return {"flights": onset.n_flights, "first_alert": summary(first), "first_correct_alert": summary(correct),
-            "alerts_before_onset": early}
+    return {
+        "flights": onset.n_flights,
+        "first_alert": summary(first),
+        "first_correct_alert": summary(correct),
+        "alerts_before_onset": early,
+    }
 
 
-def rule_sweep(predict: Predictor, healthy: FaultDataset, onset: FaultDataset, features, window: int,
-               rules: dict[str, AlertConfig]) -> dict[str, dict]:
+def rule_sweep(
+    predict: Predictor, healthy: FaultDataset, onset: FaultDataset, features, window: int, rules: dict[str, AlertConfig]
+) -> dict[str, dict]:
     """False alarms and detection for several alert rules on the same classifier outputs (classified once)."""
     ph = flight_fault_probabilities(predict, healthy, features, window)
     po = flight_fault_probabilities(predict, onset, features, window)
-    return {name: {"rule": {"threshold": r.threshold, "consecutive": r.consecutive, "refractory_s": r.refractory_s},
-                   "false_alarms": false_alarms_per_hour(predict, healthy, features, window, r, ph),
-                   "detection": detection_times(predict, onset, features, window, r, po)}
-            for name, r in rules.items()}
+    return {
+        name: {
+            "rule": {"threshold": r.threshold, "consecutive": r.consecutive, "refractory_s": r.refractory_s},
+            "false_alarms": false_alarms_per_hour(predict, healthy, features, window, r, ph),
+            "detection": detection_times(predict, onset, features, window, r, po),
+        }
+        for name, r in rules.items()
+    }

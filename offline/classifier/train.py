@@ -116,10 +116,19 @@ def train(ds: FaultDataset, cfg: TrainConfig, log=print) -> TrainedModel:
     norm = Normalizer.fit(feats[train_f])
     yaw_idx = tuple(cfg.features.index(n) for n in YAW_EFFECTIVENESS_INPUTS) if cfg.yaw_effectiveness else None
     net = FaultCnn(
-        CnnConfig(window=cfg.window, n_features=len(cfg.features), blocks=cfg.blocks, channels=cfg.channels,
-                  dense=cfg.dense, head=cfg.head, dropout=cfg.dropout, yaw_effectiveness=yaw_idx,
-                  yaw_robust=cfg.yaw_robust),
-        mean=norm.mean, std=norm.std,
+        CnnConfig(
+            window=cfg.window,
+            n_features=len(cfg.features),
+            blocks=cfg.blocks,
+            channels=cfg.channels,
+            dense=cfg.dense,
+            head=cfg.head,
+            dropout=cfg.dropout,
+            yaw_effectiveness=yaw_idx,
+            yaw_robust=cfg.yaw_robust,
+        ),
+        mean=norm.mean,
+        std=norm.std,
     )
     if yaw_idx is not None:
         sample = window_index(feats, cfg.window, max(1, cfg.train_stride // 2), train_f)
@@ -144,7 +153,7 @@ def train(ds: FaultDataset, cfg: TrainConfig, log=print) -> TrainedModel:
         net.train()
         tot, correct, count = 0.0, 0, 0
         for b in range(n_batches):
-            bi = idx[b * cfg.batch_size:(b + 1) * cfg.batch_size]
+            bi = idx[b * cfg.batch_size : (b + 1) * cfg.batch_size]
             x = torch.from_numpy(gather(feats, bi, cfg.window))
             y = torch.as_tensor(y_flight[bi[:, 0]])
             opt.zero_grad()
@@ -160,10 +169,13 @@ def train(ds: FaultDataset, cfg: TrainConfig, log=print) -> TrainedModel:
             correct += int((_predicted_labels(net, logits) == label_index[bi[:, 0]]).sum())
         row = {"epoch": epoch + 1, "loss": tot / count, "train_accuracy": correct / count, "windows": count}
         history.append(row)
-        log(f"epoch {epoch + 1}/{cfg.epochs}: loss {row['loss']:.4f}, train accuracy {100 * row['train_accuracy']:.2f} % on {count} windows")
+        log(
+            f"epoch {epoch + 1}/{cfg.epochs}: loss {row['loss']:.4f}, train accuracy {100 * row['train_accuracy']:.2f} % on {count} windows"
+        )
     net.eval()
-    return TrainedModel(net, cfg, vehicle_info(ds), ds.sample_rate_hz, norm, ds.manifest,
-                        train_f.tolist(), test_f.tolist(), history, ds.name)
+    return TrainedModel(
+        net, cfg, vehicle_info(ds), ds.sample_rate_hz, norm, ds.manifest, train_f.tolist(), test_f.tolist(), history, ds.name
+    )
 
 
 def _predicted_labels(net: FaultCnn, logits: torch.Tensor) -> np.ndarray:
@@ -190,7 +202,7 @@ def predict_probabilities(model: TrainedModel | FaultCnn, windows: np.ndarray, b
     outs_l, outs_f = [], []
     with torch.no_grad():
         for i in range(0, len(windows), batch):
-            lp, fp = net.probabilities(torch.from_numpy(np.ascontiguousarray(windows[i:i + batch], np.float32)))
+            lp, fp = net.probabilities(torch.from_numpy(np.ascontiguousarray(windows[i : i + batch], np.float32)))
             outs_l.append(lp.numpy())
             outs_f.append(fp.numpy())
     if not outs_l:
@@ -200,23 +212,27 @@ def predict_probabilities(model: TrainedModel | FaultCnn, windows: np.ndarray, b
 
 # --- checkpoint (torch) -----------------------------------------------------------------
 
+
 def save_checkpoint(path: str | Path, m: TrainedModel) -> Path:
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    torch.save({
-        "format": "propwatch-cnn-1",
-        "state_dict": m.net.state_dict(),
-        "cnn_config": asdict(m.net.cfg),
-        "train_config": {**asdict(m.config), "features": list(m.config.features)},
-        "vehicle": m.vehicle,
-        "sample_rate_hz": m.sample_rate_hz,
-        "normalization": m.normalizer.to_dict(),
-        "training_manifest": m.training_manifest,
-        "train_flights": m.train_flights,
-        "test_flights": m.test_flights,
-        "history": m.history,
-        "dataset_name": m.dataset_name,
-    }, path)
+    torch.save(
+        {
+            "format": "propwatch-cnn-1",
+            "state_dict": m.net.state_dict(),
+            "cnn_config": asdict(m.net.cfg),
+            "train_config": {**asdict(m.config), "features": list(m.config.features)},
+            "vehicle": m.vehicle,
+            "sample_rate_hz": m.sample_rate_hz,
+            "normalization": m.normalizer.to_dict(),
+            "training_manifest": m.training_manifest,
+            "train_flights": m.train_flights,
+            "test_flights": m.test_flights,
+            "history": m.history,
+            "dataset_name": m.dataset_name,
+        },
+        path,
+    )
     return path
 
 
@@ -236,5 +252,15 @@ def load_checkpoint(path: str | Path) -> TrainedModel:
     net = FaultCnn(CnnConfig(**d["cnn_config"]), mean=norm.mean, std=norm.std)
     net.load_state_dict(d["state_dict"])
     net.eval()
-    return TrainedModel(net, TrainConfig(**tc), d["vehicle"], float(d["sample_rate_hz"]), norm,
-                        d["training_manifest"], d["train_flights"], d["test_flights"], d["history"], d.get("dataset_name", ""))
+    return TrainedModel(
+        net,
+        TrainConfig(**tc),
+        d["vehicle"],
+        float(d["sample_rate_hz"]),
+        norm,
+        d["training_manifest"],
+        d["train_flights"],
+        d["test_flights"],
+        d["history"],
+        d.get("dataset_name", ""),
+    )

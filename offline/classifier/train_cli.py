@@ -15,7 +15,9 @@ def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="propwatch train", description=__doc__)
     p.add_argument("datasets", nargs="+", type=Path, help="data set .npz files (same vehicle); flights are pooled")
     p.add_argument("--out", type=Path, required=True, help="checkpoint path (.pt)")
-    p.add_argument("--features", default=",".join(PAPER_FEATURES), help="comma-separated feature names (default: the paper's ten)")
+    p.add_argument(
+        "--features", default=",".join(PAPER_FEATURES), help="comma-separated feature names (default: the paper's ten)"
+    )
     p.add_argument("--head", choices=("softmax16", "multilabel4"), default="softmax16")
     p.add_argument("--epochs", type=int, default=TrainConfig.epochs)
     p.add_argument("--train-stride", type=int, default=TrainConfig.train_stride, help="use every k-th window per epoch")
@@ -34,15 +36,35 @@ def main(argv: list[str] | None = None) -> int:
     check_feature_names(features)
     parts = [load_dataset(p) for p in a.datasets]
     ds = parts[0] if len(parts) == 1 else concat(parts, "+".join(d.name for d in parts))
-    cfg = TrainConfig(features=features, head=a.head, epochs=a.epochs, train_stride=a.train_stride,
-                      test_fraction=a.test_fraction, channels=a.channels, dense=a.dense,
-                      learning_rate=a.learning_rate, seed=a.seed, threads=a.threads)
+    cfg = TrainConfig(
+        features=features,
+        head=a.head,
+        epochs=a.epochs,
+        train_stride=a.train_stride,
+        test_fraction=a.test_fraction,
+        channels=a.channels,
+        dense=a.dense,
+        learning_rate=a.learning_rate,
+        seed=a.seed,
+        threads=a.threads,
+    )
     m = train(ds, cfg)
-    m.training_manifest = {"datasets": [str(p) for p in a.datasets], "manifests": [d.manifest for d in parts],
-                           "train_config": {**cfg.__dict__, "features": list(features)}}
+    m.training_manifest = {
+        "datasets": [str(p) for p in a.datasets],
+        "manifests": [d.manifest for d in parts],
+        "train_config": {**cfg.__dict__, "features": list(features)},
+    }
     save_checkpoint(a.out, m)
-    print(json.dumps({"checkpoint": str(a.out), "train_flights": len(m.train_flights), "test_flights": len(m.test_flights),
-                      "final": m.history[-1]}))
+    print(
+        json.dumps(
+            {
+                "checkpoint": str(a.out),
+                "train_flights": len(m.train_flights),
+                "test_flights": len(m.test_flights),
+                "final": m.history[-1],
+            }
+        )
+    )
     return 0
 
 

@@ -19,11 +19,12 @@ def valid_starts(features: np.ndarray, window: int) -> np.ndarray:
     n = bad.shape[1] - window + 1
     if n <= 0:
         return np.zeros((bad.shape[0], 0), bool)
-    return (c[:, window:window + n] - c[:, :n]) == 0
+    return (c[:, window : window + n] - c[:, :n]) == 0
 
 
-def window_index(features: np.ndarray, window: int, stride: int = 1, flights: np.ndarray | None = None,
-                 offset: int = 0) -> np.ndarray:
+def window_index(
+    features: np.ndarray, window: int, stride: int = 1, flights: np.ndarray | None = None, offset: int = 0
+) -> np.ndarray:
     """(M, 2) int64 [flight, start] pairs of valid windows, every ``stride`` steps from ``offset``."""
     ok = valid_starts(features, window)
     if flights is None:

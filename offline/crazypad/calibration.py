@@ -49,9 +49,13 @@ class TermResult:
     vehicle: VehicleConfig = field(repr=False)
 
     def to_dict(self) -> dict:
-        return {"term": self.name, "params": {k: round(v, 6) for k, v in self.params.items()},
-                "fit_rms_cmd": round(self.fit_rms_cmd, 1), "holdout_rms_cmd": round(self.holdout_rms_cmd, 1),
-                "bic": round(self.bic, 2)}
+        return {
+            "term": self.name,
+            "params": {k: round(v, 6) for k, v in self.params.items()},
+            "fit_rms_cmd": round(self.fit_rms_cmd, 1),
+            "holdout_rms_cmd": round(self.holdout_rms_cmd, 1),
+            "bic": round(self.bic, 2),
+        }
 
 
 def _rms(vehicle: VehicleConfig, measured: np.ndarray) -> float:
@@ -96,20 +100,35 @@ class SteadyCalibration:
     holdout_files: list[str]
 
     def to_dict(self) -> dict:
-        return {"airframe": self.airframe, "cause": self.cause,
-                "why": TERMS[self.cause].why if self.cause else "no term beats the nominal model",
-                "ranking": [r.to_dict() for r in self.ranking],
-                "nominal_fit_rms_cmd": round(self.nominal_fit_rms_cmd, 1),
-                "holdout_rms_cmd": {"nominal": round(self.nominal_holdout_rms_cmd, 1),
-                                    "calibrated": round(self.calibrated_holdout_rms_cmd, 1)},
-                "calibrated_terms": {"motor_efficiency": list(self.calibrated.motor_efficiency),
-                                     "cg_offset_frd_m": list(self.calibrated.cg_offset_frd_m),
-                                     "mass_kg": self.calibrated.mass_kg},
-                "fit_files": self.fit_files, "holdout_files": self.holdout_files}
+        return {
+            "airframe": self.airframe,
+            "cause": self.cause,
+            "why": TERMS[self.cause].why if self.cause else "no term beats the nominal model",
+            "ranking": [r.to_dict() for r in self.ranking],
+            "nominal_fit_rms_cmd": round(self.nominal_fit_rms_cmd, 1),
+            "holdout_rms_cmd": {
+                "nominal": round(self.nominal_holdout_rms_cmd, 1),
+                "calibrated": round(self.calibrated_holdout_rms_cmd, 1),
+            },
+            "calibrated_terms": {
+                "motor_efficiency": list(self.calibrated.motor_efficiency),
+                "cg_offset_frd_m": list(self.calibrated.cg_offset_frd_m),
+                "mass_kg": self.calibrated.mass_kg,
+            },
+            "fit_files": self.fit_files,
+            "holdout_files": self.holdout_files,
+        }
 
 
-def calibrate_steady(airframe: str, nominal: VehicleConfig, fit_cmd: np.ndarray, holdout_cmd: np.ndarray,
-                     fit_files: list[str], holdout_files: list[str], candidates=CANDIDATES) -> SteadyCalibration:
+def calibrate_steady(
+    airframe: str,
+    nominal: VehicleConfig,
+    fit_cmd: np.ndarray,
+    holdout_cmd: np.ndarray,
+    fit_files: list[str],
+    holdout_files: list[str],
+    candidates=CANDIDATES,
+) -> SteadyCalibration:
     """Fit each candidate on ``fit_cmd`` (F, 4 mean commands, PX4 order), rank, keep the cause.
 
     The calibrated vehicle carries the cause; a second term is added when it
@@ -122,8 +141,11 @@ def calibrate_steady(airframe: str, nominal: VehicleConfig, fit_cmd: np.ndarray,
     for name in candidates:
         v = fit_terms(nominal, [TERMS[name]], fit_cmd)
         k = len(TERMS[name].params)
-        ranking.append(TermResult(name, param_dict(v, [TERMS[name]]), _rms(v, fit_cmd), _rms(v, holdout_cmd),
-                                  _bic(_rms(v, fit_cmd), n, k), v))
+        ranking.append(
+            TermResult(
+                name, param_dict(v, [TERMS[name]]), _rms(v, fit_cmd), _rms(v, holdout_cmd), _bic(_rms(v, fit_cmd), n, k), v
+            )
+        )
     ranking.sort(key=lambda r: r.bic)
     chosen: list[str] = []
     best_bic, calibrated = base_bic, nominal
@@ -134,8 +156,18 @@ def calibrate_steady(airframe: str, nominal: VehicleConfig, fit_cmd: np.ndarray,
         if b < best_bic - MIN_DELTA_BIC:
             chosen.append(r.name)
             best_bic, calibrated = b, v
-    return SteadyCalibration(airframe, nominal, calibrated, chosen[0] if chosen else None, ranking, base_rms,
-                             _rms(nominal, holdout_cmd), _rms(calibrated, holdout_cmd), fit_files, holdout_files)
+    return SteadyCalibration(
+        airframe,
+        nominal,
+        calibrated,
+        chosen[0] if chosen else None,
+        ranking,
+        base_rms,
+        _rms(nominal, holdout_cmd),
+        _rms(calibrated, holdout_cmd),
+        fit_files,
+        holdout_files,
+    )
 
 
 def equivalent_speed_ratios(calibrated: VehicleConfig, fault_cmd: np.ndarray) -> np.ndarray:

@@ -73,9 +73,12 @@ def analyse(root: Path, vehicle_path: str) -> dict:
     out = {}
     for (group, af), rows in sorted(groups.items()):
         sh = np.array([r.shares_bitcraze for r in rows])
-        out[f"{group} / {af}"] = {"flights": len(rows), "shares_M1_M4_mean": sh.mean(axis=0).round(4).tolist(),
-                                  "shares_M1_M4_std": sh.std(axis=0).round(4).tolist(),
-                                  "mean_cmd": round(float(np.mean([r.mean_cmd for r in rows])), 1)}
+        out[f"{group} / {af}"] = {
+            "flights": len(rows),
+            "shares_M1_M4_mean": sh.mean(axis=0).round(4).tolist(),
+            "shares_M1_M4_std": sh.std(axis=0).round(4).tolist(),
+            "mean_cmd": round(float(np.mean([r.mean_cmd for r in rows])), 1),
+        }
         if cal[af] is not None:
             ratio = equivalent_speed_ratios(cal[af], np.array([r.motor_cmd_mean for r in rows]))
             out[f"{group} / {af}"]["thrust_factor_M1_M4"] = [round(float(x) ** 2, 3) for x in bitcraze_order(ratio)]
@@ -91,8 +94,10 @@ def main(argv: list[str] | None = None) -> int:
             json.dump(res, sys.stdout, indent=2)
             print()
         else:
-            print(f"{'condition / airframe':30s} flights  command share M1..M4 (core phases)"
-                  "   thrust factor M1..M4 vs own calibrated airframe")
+            print(
+                f"{'condition / airframe':30s} flights  command share M1..M4 (core phases)"
+                "   thrust factor M1..M4 vs own calibrated airframe"
+            )
             for k, r in res.items():
                 tf = "  ".join(f"{x:.2f}" for x in r.get("thrust_factor_M1_M4", []))
                 print(f"{k:30s} {r['flights']:5d}  " + "  ".join(f"{x:.3f}" for x in r["shares_M1_M4_mean"]) + f"    {tf}")
@@ -111,15 +116,18 @@ def main(argv: list[str] | None = None) -> int:
             print()
         else:
             for af, c in res.items():
-                print(f"{af}: cause {c['cause']} ({c['why']}); held-out RMS command error "
-                      f"{c['holdout_rms_cmd']['nominal']} -> {c['holdout_rms_cmd']['calibrated']}")
+                print(
+                    f"{af}: cause {c['cause']} ({c['why']}); held-out RMS command error "
+                    f"{c['holdout_rms_cmd']['nominal']} -> {c['holdout_rms_cmd']['calibrated']}"
+                )
         return 0
     from offline.crazypad.experiment import run
     from offline.crazypad.simdata import Recipe
 
     out = Path(args.out)
-    report = run(out, root, Path(args.vehicle), Recipe(flights_per_label=args.flights_per_label, seed=args.seed),
-                 epochs=args.epochs)
+    report = run(
+        out, root, Path(args.vehicle), Recipe(flights_per_label=args.flights_per_label, seed=args.seed), epochs=args.epochs
+    )
     if args.ship:
         ship(Path(report["models"]["calibrated"]), out / "crazypad-report.json")
     return 0
@@ -130,9 +138,16 @@ def ship(model: Path, report_json: Path) -> Path:
     shutil.copyfile(model, SHIPPED_MODEL)
     manifest = json.loads(report_json.read_text(encoding="utf-8"))
     rep = manifest.pop("report")
-    manifest["shipped"] = {"model": SHIPPED_MODEL.name, "variant": "calibrated (both airframes)",
-                           "table": rep["table"], "calibration": rep["calibration"], "split": rep["split"],
-                           "recipe": rep["recipe"], "features": rep["features"], "window_steps": rep["window_steps"]}
+    manifest["shipped"] = {
+        "model": SHIPPED_MODEL.name,
+        "variant": "calibrated (both airframes)",
+        "table": rep["table"],
+        "calibration": rep["calibration"],
+        "split": rep["split"],
+        "recipe": rep["recipe"],
+        "features": rep["features"],
+        "window_steps": rep["window_steps"],
+    }
     path = SHIPPED_MODEL.with_suffix(".manifest.json")
     path.write_text(json.dumps(manifest, indent=2, sort_keys=True, default=str) + "\n", encoding="utf-8")
     return path

@@ -116,16 +116,25 @@ def load_manifest(root: str | Path = DEFAULT_ROOT) -> list[CrazypadFlight]:
         try:
             stem = Path(r["file"]).name.split(".")[0]  # E8_log03
             airframe, num = stem.split("_log")
-            flights.append(CrazypadFlight(
-                file=r["file"], log_type=r["log_type"], log_config=r["log_config"], condition=r["condition"],
-                fault_kind=r["fault_kind"], faulty=tuple(r[f"M{k}_faulty"] == "1" for k in range(1, 5)),
-                airframe=airframe, log_number=int(num)))
+            flights.append(
+                CrazypadFlight(
+                    file=r["file"],
+                    log_type=r["log_type"],
+                    log_config=r["log_config"],
+                    condition=r["condition"],
+                    fault_kind=r["fault_kind"],
+                    faulty=tuple(r[f"M{k}_faulty"] == "1" for k in range(1, 5)),
+                    airframe=airframe,
+                    log_number=int(num),
+                )
+            )
         except (KeyError, ValueError) as exc:
             raise LogFormatError(f"{path}: row {i + 2}: {exc}") from exc
     return flights
 
 
-def select(flights: list[CrazypadFlight], *, role: str | None = None, airframe: str | None = None,
-           motor_only: bool = True) -> list[CrazypadFlight]:
+def select(
+    flights: list[CrazypadFlight], *, role: str | None = None, airframe: str | None = None, motor_only: bool = True
+) -> list[CrazypadFlight]:
     out = [f for f in flights if (role is None or f.role == role) and (airframe is None or f.airframe == airframe)]
     return [f for f in out if f.has_motor_commands] if motor_only else out

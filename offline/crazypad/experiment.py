@@ -70,8 +70,9 @@ def load_real(vehicle: VehicleConfig, root: Path, log=print) -> list[RealFlight]
     for i, f in enumerate(flights):
         tab = read_flight(f, vehicle, root)
         m = core_mask(tab)
-        s = FlightSummary(f, int(m.sum()), tuple(map(float, np.nanmean(tab.motor_cmd[m], axis=0))),
-                          float(np.nanmean(tab.roll_rad[m])))
+        s = FlightSummary(
+            f, int(m.sum()), tuple(map(float, np.nanmean(tab.motor_cmd[m], axis=0))), float(np.nanmean(tab.roll_rad[m]))
+        )
         out.append(RealFlight(f, tab, s))
         if (i + 1) % 40 == 0:
             log(f"read {i + 1}/{len(flights)} flights")
@@ -83,9 +84,14 @@ def calibrate_airframes(nominal: VehicleConfig, real: list[RealFlight]) -> dict[
     for af in AIRFRAMES:
         fit = [r for r in real if r.flight.airframe == af and r.flight.role == "calibration"]
         held = [r for r in real if r.flight.airframe == af and r.flight.role == "holdout"]
-        out[af] = calibrate_steady(af, nominal, np.array([r.summary.motor_cmd_mean for r in fit]),
-                                   np.array([r.summary.motor_cmd_mean for r in held]),
-                                   [r.flight.file for r in fit], [r.flight.file for r in held])
+        out[af] = calibrate_steady(
+            af,
+            nominal,
+            np.array([r.summary.motor_cmd_mean for r in fit]),
+            np.array([r.summary.motor_cmd_mean for r in held]),
+            [r.flight.file for r in fit],
+            [r.flight.file for r in held],
+        )
     return out
 
 
@@ -95,7 +101,7 @@ def simulated_shares(vehicle: VehicleConfig, n: int = 4, seed: int = 7) -> np.nd
     from offline.sim.simulator import simulate
 
     log = simulate(vehicle, batch_waypoints(n), QuadraticPropeller.for_vehicle(vehicle), sim_config(), seed=seed)
-    cmd = log.pwm_us[:, int(sim_config().log_rate_hz):]  # after the start transient
+    cmd = log.pwm_us[:, int(sim_config().log_rate_hz) :]  # after the start transient
     m = cmd.mean(axis=(0, 1))
     return m / m.mean()
 
@@ -105,14 +111,22 @@ def simulator_gain(nominal: VehicleConfig, cals: dict[str, SteadyCalibration], r
     nom = simulated_shares(nominal)
     out = {}
     for af, cal in cals.items():
-        held = np.array([np.asarray(r.summary.motor_cmd_mean) / np.mean(r.summary.motor_cmd_mean)
-                         for r in real if r.flight.airframe == af and r.flight.role == "holdout"])
+        held = np.array(
+            [
+                np.asarray(r.summary.motor_cmd_mean) / np.mean(r.summary.motor_cmd_mean)
+                for r in real
+                if r.flight.airframe == af and r.flight.role == "holdout"
+            ]
+        )
         cal_sh = simulated_shares(cal.calibrated)
-        out[af] = {"holdout_flights": len(held),
-                   "share_rms_nominal_sim": float(np.sqrt(np.mean((held - nom) ** 2))),
-                   "share_rms_calibrated_sim": float(np.sqrt(np.mean((held - cal_sh) ** 2))),
-                   "real_holdout_shares_M1_M4": _bitcraze(held.mean(axis=0)),
-                   "nominal_sim_shares_M1_M4": _bitcraze(nom), "calibrated_sim_shares_M1_M4": _bitcraze(cal_sh)}
+        out[af] = {
+            "holdout_flights": len(held),
+            "share_rms_nominal_sim": float(np.sqrt(np.mean((held - nom) ** 2))),
+            "share_rms_calibrated_sim": float(np.sqrt(np.mean((held - cal_sh) ** 2))),
+            "real_holdout_shares_M1_M4": _bitcraze(held.mean(axis=0)),
+            "nominal_sim_shares_M1_M4": _bitcraze(nom),
+            "calibrated_sim_shares_M1_M4": _bitcraze(cal_sh),
+        }
     return out
 
 
@@ -154,15 +168,35 @@ def diagnose_real(model_paths: dict[str, Path], real: list[RealFlight], esc=None
         d = diagnose_table(r.table, clfs.get(r.flight.airframe) or clfs["*"], hop=1, esc=esc)
         truth = truth_label(r.flight)
         pred = d.verdict["label"] if d.verdict else None
-        rows.append({"file": r.flight.file, "group": r.flight.group, "airframe": r.flight.airframe,
-                     "truth_label": truth, "label": pred, "windows": d.windows,
-                     "fault_probability": d.verdict["fault_probability"] if d.verdict else None,
-                     "reason": d.reason})
+        rows.append(
+            {
+                "file": r.flight.file,
+                "group": r.flight.group,
+                "airframe": r.flight.airframe,
+                "truth_label": truth,
+                "label": pred,
+                "windows": d.windows,
+                "fault_probability": d.verdict["fault_probability"] if d.verdict else None,
+                "reason": d.reason,
+            }
+        )
     return rows
 
 
-GROUP_ORDER = ("healthy", "cut <=1 mm", "cut 1.5-2.5 mm", "cut 3-4.5 mm", "cut 5-8 mm", "tape M3", "tape M3+M4",
-               "mass W1 near M3", "mass W1 near M3+M4", "mass W3 near M3", "string W2 near M3", "string W3 near M3")
+GROUP_ORDER = (
+    "healthy",
+    "cut <=1 mm",
+    "cut 1.5-2.5 mm",
+    "cut 3-4.5 mm",
+    "cut 5-8 mm",
+    "tape M3",
+    "tape M3+M4",
+    "mass W1 near M3",
+    "mass W1 near M3+M4",
+    "mass W3 near M3",
+    "string W2 near M3",
+    "string W3 near M3",
+)
 
 
 def table_by_group(rows: list[dict]) -> dict[str, dict]:
@@ -176,16 +210,23 @@ def table_by_group(rows: list[dict]) -> dict[str, dict]:
         if not rs:
             continue
         ok = [r for r in rs if r["label"] is not None]
-        out[name] = {"flights": len(rs), "diagnosed": len(ok),
-                     "accuracy": float(np.mean([r["label"] == r["truth_label"] for r in ok])) if ok else float("nan"),
-                     "called_faulty": float(np.mean([r["label"] != 1 for r in ok])) if ok else float("nan"),
-                     "M3_called_faulty": float(np.mean([r["label"] is not None and 2 in _props(r["label"]) for r in ok]))
-                     if ok else float("nan")}
+        out[name] = {
+            "flights": len(rs),
+            "diagnosed": len(ok),
+            "accuracy": float(np.mean([r["label"] == r["truth_label"] for r in ok])) if ok else float("nan"),
+            "called_faulty": float(np.mean([r["label"] != 1 for r in ok])) if ok else float("nan"),
+            "M3_called_faulty": float(np.mean([r["label"] is not None and 2 in _props(r["label"]) for r in ok]))
+            if ok
+            else float("nan"),
+        }
     allok = [r for r in rows if r["label"] is not None]
-    out["all"] = {"flights": len(rows), "diagnosed": len(allok),
-                  "accuracy": float(np.mean([r["label"] == r["truth_label"] for r in allok])) if allok else float("nan"),
-                  "called_faulty": float(np.mean([r["label"] != 1 for r in allok])) if allok else float("nan"),
-                  "M3_called_faulty": float("nan")}
+    out["all"] = {
+        "flights": len(rows),
+        "diagnosed": len(allok),
+        "accuracy": float(np.mean([r["label"] == r["truth_label"] for r in allok])) if allok else float("nan"),
+        "called_faulty": float(np.mean([r["label"] != 1 for r in allok])) if allok else float("nan"),
+        "M3_called_faulty": float("nan"),
+    }
     return out
 
 
@@ -204,16 +245,24 @@ VARIANTS = {
 
 def format_markdown(report: dict) -> str:
     t = report["table"]
-    head = "| condition (real CrazyPAD motor logs) | flights | " + " | ".join(f"accuracy: {k}" for k in t) + \
-        " | called faulty: " + " / ".join(t) + " |"
+    head = (
+        "| condition (real CrazyPAD motor logs) | flights | "
+        + " | ".join(f"accuracy: {k}" for k in t)
+        + " | called faulty: "
+        + " / ".join(t)
+        + " |"
+    )
     lines = [head, "|" + "---|" * (3 + len(t))]
     first = next(iter(t.values()))
     for name in first:
         cells = [f"{100 * t[k].get(name, {}).get('accuracy', float('nan')):.1f} %" for k in t]
         faulty = " / ".join(f"{100 * t[k].get(name, {}).get('called_faulty', float('nan')):.0f} %" for k in t)
         lines.append(f"| {name} | {first[name]['flights']} | " + " | ".join(cells) + f" | {faulty} |")
-    lines.append("| paper (Tong et al., real flights, calibrated) | | " + " | ".join("" for _ in t)
-                 + f" {100 * PAPER_REAL_ACCURACY:.2f} % | |")
+    lines.append(
+        "| paper (Tong et al., real flights, calibrated) | | "
+        + " | ".join("" for _ in t)
+        + f" {100 * PAPER_REAL_ACCURACY:.2f} % | |"
+    )
     lines += ["", *(f"- {k}: {VARIANTS.get(k, k)}" for k in t)]
     return "\n".join(lines)
 
@@ -221,8 +270,14 @@ def format_markdown(report: dict) -> str:
 DEFAULT_RECIPE = Recipe(flights_per_label=20)
 
 
-def run(out: Path, root: Path = DEFAULT_ROOT, vehicle_path: Path | None = None, recipe: Recipe = DEFAULT_RECIPE,
-        epochs: int = 8, log=print) -> dict:
+def run(
+    out: Path,
+    root: Path = DEFAULT_ROOT,
+    vehicle_path: Path | None = None,
+    recipe: Recipe = DEFAULT_RECIPE,
+    epochs: int = 8,
+    log=print,
+) -> dict:
     from monitor.vehicle import REPO_ROOT
     from offline.classifier.export import export_onnx
     from offline.classifier.train import TrainConfig, train
@@ -236,11 +291,15 @@ def run(out: Path, root: Path = DEFAULT_ROOT, vehicle_path: Path | None = None, 
     cals = calibrate_airframes(nominal, real)
     for af, cal in cals.items():
         write_vehicle(cal, loaded.sources, out / f"crazyflie-{af}-calibrated.yaml")
-        log(f"{af}: cause {cal.cause}; held-out RMS command error {cal.nominal_holdout_rms_cmd:.0f} -> "
-            f"{cal.calibrated_holdout_rms_cmd:.0f}")
+        log(
+            f"{af}: cause {cal.cause}; held-out RMS command error {cal.nominal_holdout_rms_cmd:.0f} -> "
+            f"{cal.calibrated_holdout_rms_cmd:.0f}"
+        )
     sim_gain = simulator_gain(nominal, cals, real)
-    log("simulator gain: " + json.dumps({k: {kk: round(vv, 4) for kk, vv in v.items() if kk.startswith("share_rms")}
-                                         for k, v in sim_gain.items()}))
+    log(
+        "simulator gain: "
+        + json.dumps({k: {kk: round(vv, 4) for kk, vv in v.items() if kk.startswith("share_rms")} for k, v in sim_gain.items()})
+    )
     cfg = TrainConfig(features=FEATURES, window=WINDOW, epochs=epochs, train_stride=4, test_fraction=0.2, seed=recipe.seed)
     trainings = [("nominal", [nominal]), ("calibrated", [cals[af].calibrated for af in AIRFRAMES])]
     trainings += [(f"calibrated-{af}", [cals[af].calibrated]) for af in AIRFRAMES]
@@ -252,26 +311,49 @@ def run(out: Path, root: Path = DEFAULT_ROOT, vehicle_path: Path | None = None, 
         m = train(ds, cfg, log=lambda s: None)
         log(f"{kind}: final train accuracy {100 * m.history[-1]['train_accuracy']:.1f} % (simulated windows)")
         sims[kind] = {"flights": ds.n_flights, "history": m.history, "sim_test_flights": m.test_flights}
-        paths[kind] = export_onnx(m, out / f"crazyflie-classifier-{kind}.onnx", extra_metadata={"crazypad": {
-            "trained_on": kind, "window_s": WINDOW / 20.0, "signals": "motor commands only (shares of the mean)",
-            "airframes": [af for af in AIRFRAMES if kind in ("calibrated", f"calibrated-{af}")]}})
+        paths[kind] = export_onnx(
+            m,
+            out / f"crazyflie-classifier-{kind}.onnx",
+            extra_metadata={
+                "crazypad": {
+                    "trained_on": kind,
+                    "window_s": WINDOW / 20.0,
+                    "signals": "motor commands only (shares of the mean)",
+                    "airframes": [af for af in AIRFRAMES if kind in ("calibrated", f"calibrated-{af}")],
+                }
+            },
+        )
     esc = nominal.esc
-    results = {"nominal": diagnose_real({"*": paths["nominal"]}, real, esc),
-               "calibrated": diagnose_real({"*": paths["calibrated"]}, real, esc),
-               "calibrated_own": diagnose_real({af: paths[f"calibrated-{af}"] for af in AIRFRAMES}, real, esc)}
+    results = {
+        "nominal": diagnose_real({"*": paths["nominal"]}, real, esc),
+        "calibrated": diagnose_real({"*": paths["calibrated"]}, real, esc),
+        "calibrated_own": diagnose_real({af: paths[f"calibrated-{af}"] for af in AIRFRAMES}, real, esc),
+    }
     report = {
-        "split": {role: sorted(r.flight.file for r in real if r.flight.role == role) if role != "evaluation"
-                  else len([r for r in real if r.flight.role == role]) for role in ("calibration", "holdout", "evaluation")},
-        "features": list(FEATURES), "window_steps": WINDOW, "rate_hz": 20.0,
-        "recipe": dataclasses.asdict(recipe), "epochs": epochs, "mission": dataclasses.asdict(CRAZYPAD),
-        "calibration": {af: c.to_dict() for af, c in cals.items()}, "simulator_gain": sim_gain, "training": sims,
+        "split": {
+            role: sorted(r.flight.file for r in real if r.flight.role == role)
+            if role != "evaluation"
+            else len([r for r in real if r.flight.role == role])
+            for role in ("calibration", "holdout", "evaluation")
+        },
+        "features": list(FEATURES),
+        "window_steps": WINDOW,
+        "rate_hz": 20.0,
+        "recipe": dataclasses.asdict(recipe),
+        "epochs": epochs,
+        "mission": dataclasses.asdict(CRAZYPAD),
+        "calibration": {af: c.to_dict() for af, c in cals.items()},
+        "simulator_gain": sim_gain,
+        "training": sims,
         "table": {k: table_by_group(v) for k, v in results.items()},
-        "flights": results, "paper_real_accuracy": PAPER_REAL_ACCURACY,
+        "flights": results,
+        "paper_real_accuracy": PAPER_REAL_ACCURACY,
         "models": {k: str(p) for k, p in paths.items()},
     }
     report["markdown"] = format_markdown(report)
-    write_manifest(out / "crazypad-report.json", make_manifest("crazypad-experiment", {"root": str(root)}, recipe.seed,
-                                                               report=report))
+    write_manifest(
+        out / "crazypad-report.json", make_manifest("crazypad-experiment", {"root": str(root)}, recipe.seed, report=report)
+    )
     (out / "crazypad-report.md").write_text(report["markdown"] + "\n", encoding="utf-8")
     log(report["markdown"])
     return report

@@ -55,16 +55,28 @@ def crazyflie_controller(cruise_m_s: float = CRAZYPAD.cruise_m_s) -> ControllerC
     at walking pace, so cruise speed and horizontal acceleration are the
     high-level commander's, and waypoints count as reached within 10 cm.
     """
-    return replace(ControllerConfig(), mpc_xy_cruise_m_s=cruise_m_s, mpc_acc_hor_m_s2=1.0,
-                   mpc_z_vel_max_up_m_s=0.3, mpc_z_vel_max_dn_m_s=0.3, nav_acc_rad_m=0.05,
-                   mpc_yaw_mode_heading_min_m=1e3)
+    return replace(
+        ControllerConfig(),
+        mpc_xy_cruise_m_s=cruise_m_s,
+        mpc_acc_hor_m_s2=1.0,
+        mpc_z_vel_max_up_m_s=0.3,
+        mpc_z_vel_max_dn_m_s=0.3,
+        nav_acc_rad_m=0.05,
+        mpc_yaw_mode_heading_min_m=1e3,
+    )
 
 
 def sim_config(mission: CrazypadMission = CRAZYPAD, **overrides) -> SimConfig:
     """Rates for a Crazyflie: its rate loop runs at 500 Hz (firmware stabilizer), physics at 1 kHz."""
-    cfg = SimConfig(physics_rate_hz=1000, control_rate_hz=500, position_rate_hz=100, log_rate_hz=20,
-                    duration_s=mission.duration_s, start_ned_m=mission.start_ned_m(),
-                    controller=crazyflie_controller(mission.cruise_m_s))
+    cfg = SimConfig(
+        physics_rate_hz=1000,
+        control_rate_hz=500,
+        position_rate_hz=100,
+        log_rate_hz=20,
+        duration_s=mission.duration_s,
+        start_ned_m=mission.start_ned_m(),
+        controller=crazyflie_controller(mission.cruise_m_s),
+    )
     return replace(cfg, **overrides) if overrides else cfg
 
 

@@ -40,7 +40,7 @@ def core_mask(table: FlightTable, trim_start_s: float = TRIM_START_S, trim_end_s
     mask = np.zeros(len(table), dtype=bool)
     for a, b in table.airborne_segments():
         if b - a1 > a + a0:
-            mask[a + a0:b - a1] = True
+            mask[a + a0 : b - a1] = True
     return mask
 
 
@@ -72,13 +72,21 @@ class FlightSummary:
 
     def to_dict(self) -> dict:
         f = self.flight
-        return {"file": f.file, "airframe": f.airframe, "group": f.group, "role": f.role, "n_core": self.n_core,
-                "mean_cmd": round(self.mean_cmd, 1), "shares_M1_M4": [round(s, 4) for s in self.shares_bitcraze],
-                "roll_mean_deg": round(float(np.degrees(self.roll_mean_rad)), 3)}
+        return {
+            "file": f.file,
+            "airframe": f.airframe,
+            "group": f.group,
+            "role": f.role,
+            "n_core": self.n_core,
+            "mean_cmd": round(self.mean_cmd, 1),
+            "shares_M1_M4": [round(s, 4) for s in self.shares_bitcraze],
+            "roll_mean_deg": round(float(np.degrees(self.roll_mean_rad)), 3),
+        }
 
 
 def summarise(flight: CrazypadFlight, vehicle: VehicleConfig, root: str | Path = DEFAULT_ROOT) -> FlightSummary:
     tab = read_flight(flight, vehicle, root)
     m = core_mask(tab)
-    return FlightSummary(flight, int(m.sum()), tuple(map(float, np.nanmean(tab.motor_cmd[m], axis=0))),
-                         float(np.nanmean(tab.roll_rad[m])))
+    return FlightSummary(
+        flight, int(m.sum()), tuple(map(float, np.nanmean(tab.motor_cmd[m], axis=0))), float(np.nanmean(tab.roll_rad[m]))
+    )

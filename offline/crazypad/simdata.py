@@ -69,46 +69,81 @@ def draw_flights(recipe: Recipe, rng: np.random.Generator) -> dict[str, np.ndarr
     torque = thrust.copy()
     thrust = np.where(masks, 1.0 - loss, thrust)
     torque = np.where(masks, 1.0 - np.minimum(loss * ratio, 0.9), torque)
-    return {"mask": masks, "thrust_scale": thrust, "torque_scale": torque,
-            "payload_kg": rng.uniform(*recipe.payload_kg, size=b), "noise": rng.uniform(*recipe.cmd_noise, size=b)}
+    return {
+        "mask": masks,
+        "thrust_scale": thrust,
+        "torque_scale": torque,
+        "payload_kg": rng.uniform(*recipe.payload_kg, size=b),
+        "noise": rng.uniform(*recipe.cmd_noise, size=b),
+    }
 
 
-def simulate_dataset(vehicle: VehicleConfig, recipe: Recipe, name: str, mission: CrazypadMission = CRAZYPAD,
-                     seed_offset: int = 0) -> FaultDataset:
+def simulate_dataset(
+    vehicle: VehicleConfig, recipe: Recipe, name: str, mission: CrazypadMission = CRAZYPAD, seed_offset: int = 0
+) -> FaultDataset:
     rng = np.random.default_rng([recipe.seed, seed_offset])
     d = draw_flights(recipe, rng)
     sim = sim_config(mission)
     props = QuadraticPropeller.for_vehicle(vehicle, thrust_scale=d["thrust_scale"], torque_scale=d["torque_scale"])
-    log = simulate(vehicle, batch_waypoints(len(d["mask"]), mission), props, sim, payload_kg=d["payload_kg"],
-                   seed=recipe.seed * 1000 + seed_offset)
+    log = simulate(
+        vehicle,
+        batch_waypoints(len(d["mask"]), mission),
+        props,
+        sim,
+        payload_kg=d["payload_kg"],
+        seed=recipe.seed * 1000 + seed_offset,
+    )
     signals = {k: np.array(v, dtype=np.float64) for k, v in log.signals().items()}
     rpm = signals["motor_rpm"] * (1.0 + d["noise"][:, None, None] * rng.standard_normal(signals["motor_rpm"].shape))
     settle = int(round(SETTLE_S * sim.log_rate_hz))
     rpm[:, :settle] = np.nan
     signals["motor_rpm"] = rpm
-    manifest = make_manifest("crazypad-sim-dataset", {"recipe": asdict(recipe), "mission": asdict(mission),
-                                                        "sim": {"physics_rate_hz": sim.physics_rate_hz,
-                                                                "control_rate_hz": sim.control_rate_hz,
-                                                                "duration_s": sim.duration_s}},
-                             recipe.seed, vehicle={"name": vehicle.name, "esc": asdict(vehicle.esc),
-                                                   "motor_efficiency": list(vehicle.motor_efficiency),
-                                                   "cg_offset_frd_m": list(vehicle.cg_offset_frd_m)},
-                             fault_code_1="cut propeller (thrust and drag-torque loss)",
-                             thrust_scale=d["thrust_scale"].round(4).tolist())
-    return FaultDataset(name=name, vehicle_name=vehicle.name, sample_rate_hz=float(sim.log_rate_hz), signals=signals,
-                        conditions=d["mask"].astype(np.int8), payload_kg=d["payload_kg"],
-                        waypoint_set=("crazypad",) * len(d["mask"]), manifest=manifest)
+    manifest = make_manifest(
+        "crazypad-sim-dataset",
+        {
+            "recipe": asdict(recipe),
+            "mission": asdict(mission),
+            "sim": {"physics_rate_hz": sim.physics_rate_hz, "control_rate_hz": sim.control_rate_hz, "duration_s": sim.duration_s},
+        },
+        recipe.seed,
+        vehicle={
+            "name": vehicle.name,
+            "esc": asdict(vehicle.esc),
+            "motor_efficiency": list(vehicle.motor_efficiency),
+            "cg_offset_frd_m": list(vehicle.cg_offset_frd_m),
+        },
+        fault_code_1="cut propeller (thrust and drag-torque loss)",
+        thrust_scale=d["thrust_scale"].round(4).tolist(),
+    )
+    return FaultDataset(
+        name=name,
+        vehicle_name=vehicle.name,
+        sample_rate_hz=float(sim.log_rate_hz),
+        signals=signals,
+        conditions=d["mask"].astype(np.int8),
+        payload_kg=d["payload_kg"],
+        waypoint_set=("crazypad",) * len(d["mask"]),
+        manifest=manifest,
+    )
 
 
 def training_set(vehicles: list[VehicleConfig], recipe: Recipe, name: str) -> FaultDataset:
     """The recipe on each vehicle; ``flights_per_label`` is split between them so sizes match."""
     per = max(1, recipe.flights_per_label // len(vehicles))
-    parts = [simulate_dataset(v, Recipe(**{**asdict(recipe), "flights_per_label": per}), f"{name}-{i}", seed_offset=i)
-             for i, v in enumerate(vehicles)]
+    parts = [
+        simulate_dataset(v, Recipe(**{**asdict(recipe), "flights_per_label": per}), f"{name}-{i}", seed_offset=i)
+        for i, v in enumerate(vehicles)
+    ]
     if len(parts) == 1:
         return replace(parts[0], name=name)
     # concat() keeps only the parts' manifests; the classifier reads the vehicle (name, ESC curve)
     # from the top level, and every part shares the nominal ESC curve (calibration leaves it).
     first = parts[0].manifest
-    return replace(concat(parts, name), manifest={**first, "vehicle": {**first["vehicle"], "parts": [
-        p.manifest["vehicle"] for p in parts]}, "parts": [p.manifest for p in parts]})
+    return replace(
+        concat(parts, name),
+        manifest={
+            **first,
+            "vehicle": {**first["vehicle"], "parts": [p.manifest["vehicle"] for p in parts]},
+            "parts": [p.manifest for p in parts],
+        },
+    )

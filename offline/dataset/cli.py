@@ -27,9 +27,13 @@ def _range(text: str) -> tuple[float, float]:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="propwatch dataset", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = argparse.ArgumentParser(
+        prog="propwatch dataset", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     p.add_argument("--out", type=Path, default=Path("out/data"), help="folder for <name>-<fault>.npz and .manifest.json")
-    p.add_argument("--sets", default="", help="comma-separated paper presets: A (1.5 kg, route A), B (1.5 kg, route B), C (1.95 kg, route A)")
+    p.add_argument(
+        "--sets", default="", help="comma-separated paper presets: A (1.5 kg, route A), B (1.5 kg, route B), C (1.95 kg, route A)"
+    )
     p.add_argument("--name", default="", help="a custom data set (use with --waypoints/--payload/...)")
     p.add_argument("--fault", default="bent", help=f"comma-separated, each one of {', '.join(FAULTS)}")
     p.add_argument("--waypoints", default="A", help="custom set: comma-separated routes A, B, random (cycled over flights)")
@@ -49,9 +53,16 @@ def build_parser() -> argparse.ArgumentParser:
 
 def specs_from_args(a: argparse.Namespace) -> list[DatasetSpec]:
     faults = [f.strip() for f in a.fault.split(",") if f.strip()]
-    common = dict(flights_per_label=a.flights_per_label, duration_s=a.duration, propellers=a.propellers,
-                  wind_max_m_s=a.wind, motor_efficiency_spread=a.motor_efficiency_spread, cg_offset_max_m=a.cg_offset,
-                  vehicle_variants=a.variants, sensor_noise_scale=a.sensor_noise)
+    common = dict(
+        flights_per_label=a.flights_per_label,
+        duration_s=a.duration,
+        propellers=a.propellers,
+        wind_max_m_s=a.wind,
+        motor_efficiency_spread=a.motor_efficiency_spread,
+        cg_offset_max_m=a.cg_offset,
+        vehicle_variants=a.variants,
+        sensor_noise_scale=a.sensor_noise,
+    )
     specs = []
     sets = [s.strip() for s in a.sets.split(",") if s.strip()]
     unknown = [s for s in sets if s not in PRESETS]
@@ -64,8 +75,16 @@ def specs_from_args(a: argparse.Namespace) -> list[DatasetSpec]:
         for j, s in enumerate(sets):
             specs.append(DatasetSpec(name=f"{s}-{fault}", fault=fault, seed=a.seed + 100 * i + j, **PRESETS[s], **common))
         if a.name:
-            specs.append(DatasetSpec(name=f"{a.name}-{fault}", fault=fault, seed=a.seed + 100 * i + 50,
-                                     waypoints=tuple(w.strip() for w in a.waypoints.split(",")), payload_kg=a.payload, **common))
+            specs.append(
+                DatasetSpec(
+                    name=f"{a.name}-{fault}",
+                    fault=fault,
+                    seed=a.seed + 100 * i + 50,
+                    waypoints=tuple(w.strip() for w in a.waypoints.split(",")),
+                    payload_kg=a.payload,
+                    **common,
+                )
+            )
     return specs
 
 

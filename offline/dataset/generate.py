@@ -110,13 +110,24 @@ def sim_config(spec: DatasetSpec):
     from offline.sim.simulator import SimConfig
 
     base = SimConfig()
-    return dataclasses.replace(base, duration_s=spec.duration_s, log_rate_hz=int(SAMPLE_RATE_HZ),
-                               gyro_noise_std_rad_s=base.gyro_noise_std_rad_s * spec.sensor_noise_scale,
-                               attitude_noise_std_rad=base.attitude_noise_std_rad * spec.sensor_noise_scale)
+    return dataclasses.replace(
+        base,
+        duration_s=spec.duration_s,
+        log_rate_hz=int(SAMPLE_RATE_HZ),
+        gyro_noise_std_rad_s=base.gyro_noise_std_rad_s * spec.sensor_noise_scale,
+        attitude_noise_std_rad=base.attitude_noise_std_rad * spec.sensor_noise_scale,
+    )
 
 
-def simulate_flights(vehicle: VehicleConfig, waypoints: np.ndarray, conditions: np.ndarray, payload_kg: np.ndarray,
-                     spec: DatasetSpec, seed: int, propellers=None):
+def simulate_flights(
+    vehicle: VehicleConfig,
+    waypoints: np.ndarray,
+    conditions: np.ndarray,
+    payload_kg: np.ndarray,
+    spec: DatasetSpec,
+    seed: int,
+    propellers=None,
+):
     """One simulator call; returns the FlightLog. ``propellers`` overrides the condition-built model (onset runs)."""
     from offline.propellers import build_propellers
     from offline.sim.simulator import simulate
@@ -126,15 +137,32 @@ def simulate_flights(vehicle: VehicleConfig, waypoints: np.ndarray, conditions: 
     return simulate(vehicle, waypoints, propellers, sim_config(spec), payload_kg=payload_kg, seed=seed)
 
 
-def from_log(log, name: str, vehicle: VehicleConfig, conditions: np.ndarray, payload_kg: np.ndarray,
-             waypoint_names: tuple[str, ...], manifest: dict, onset_step: np.ndarray | None = None) -> FaultDataset:
+def from_log(
+    log,
+    name: str,
+    vehicle: VehicleConfig,
+    conditions: np.ndarray,
+    payload_kg: np.ndarray,
+    waypoint_names: tuple[str, ...],
+    manifest: dict,
+    onset_step: np.ndarray | None = None,
+) -> FaultDataset:
     """A FlightLog-like object (``.signals()`` -> canonical 20 Hz signals) -> FaultDataset."""
     rate = float(getattr(log, "log_rate_hz", SAMPLE_RATE_HZ))
     if abs(rate - SAMPLE_RATE_HZ) > 1e-9:
         raise ConfigError(f"{name}: flights logged at {rate} Hz; the classifier's features are at {SAMPLE_RATE_HZ} Hz")
     sig = {k: np.asarray(v, dtype=np.float32) for k, v in log.signals().items()}
-    return FaultDataset(name, vehicle.name, SAMPLE_RATE_HZ, sig, np.asarray(conditions, np.int8),
-                        np.asarray(payload_kg, np.float64), tuple(waypoint_names), manifest, onset_step)
+    return FaultDataset(
+        name,
+        vehicle.name,
+        SAMPLE_RATE_HZ,
+        sig,
+        np.asarray(conditions, np.int8),
+        np.asarray(payload_kg, np.float64),
+        tuple(waypoint_names),
+        manifest,
+        onset_step,
+    )
 
 
 def generate(spec: DatasetSpec, vehicle: VehicleConfig, log=print) -> FaultDataset:
@@ -144,20 +172,28 @@ def generate(spec: DatasetSpec, vehicle: VehicleConfig, log=print) -> FaultDatas
     payload = rng.uniform(spec.payload_kg[0], spec.payload_kg[1], n)
     wps, names = routes(spec, n, seed=spec.seed)
     variant_of = rng.permutation(np.arange(n) % spec.vehicle_variants)
-    variants = [vehicle if spec.vehicle_variants == 1 and not _randomised(spec) else vehicle_variant(vehicle, spec, rng)
-                for _ in range(spec.vehicle_variants)]
-    manifest = make_manifest("fault-dataset", to_mapping(spec), spec.seed, name=spec.name,
-                             vehicle={"name": vehicle.name, "esc": to_mapping(vehicle.esc)},
-                             variants=[to_mapping(v) for v in variants] if _randomised(spec) else None)
+    variants = [
+        vehicle if spec.vehicle_variants == 1 and not _randomised(spec) else vehicle_variant(vehicle, spec, rng)
+        for _ in range(spec.vehicle_variants)
+    ]
+    manifest = make_manifest(
+        "fault-dataset",
+        to_mapping(spec),
+        spec.seed,
+        name=spec.name,
+        vehicle={"name": vehicle.name, "esc": to_mapping(vehicle.esc)},
+        variants=[to_mapping(v) for v in variants] if _randomised(spec) else None,
+    )
     parts, order = [], []
     for v, veh in enumerate(variants):
         idx = np.flatnonzero(variant_of == v)
         for c0 in range(0, len(idx), spec.chunk_flights):
-            chunk = idx[c0:c0 + spec.chunk_flights]
+            chunk = idx[c0 : c0 + spec.chunk_flights]
             seed = int(np.random.default_rng([spec.seed, 1, v, c0]).integers(2**31))
             flight_log = simulate_flights(veh, wps[chunk], cond[chunk], payload[chunk], spec, seed)
-            parts.append(from_log(flight_log, spec.name, vehicle, cond[chunk], payload[chunk],
-                                  tuple(names[i] for i in chunk), manifest))
+            parts.append(
+                from_log(flight_log, spec.name, vehicle, cond[chunk], payload[chunk], tuple(names[i] for i in chunk), manifest)
+            )
             order.append(chunk)
             log(f"{spec.name}: simulated {sum(len(o) for o in order)}/{n} flights")
     ds = parts[0] if len(parts) == 1 else concat(parts, spec.name)

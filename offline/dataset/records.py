@@ -95,10 +95,14 @@ class FaultDataset:
     def check_model(self, vehicle_name: str, sample_rate_hz: float, features: Sequence[str], where: str = "model") -> None:
         """Raise ModelError naming the mismatch if this data set cannot feed a model with these settings."""
         if vehicle_name != self.vehicle_name:
-            raise ModelError(f"data set {self.name!r} was simulated for vehicle {self.vehicle_name!r}, "
-                             f"but {where} was trained for {vehicle_name!r}")
+            raise ModelError(
+                f"data set {self.name!r} was simulated for vehicle {self.vehicle_name!r}, "
+                f"but {where} was trained for {vehicle_name!r}"
+            )
         if abs(float(sample_rate_hz) - self.sample_rate_hz) > 1e-9:
-            raise ModelError(f"data set {self.name!r} is sampled at {self.sample_rate_hz} Hz, {where} expects {sample_rate_hz} Hz")
+            raise ModelError(
+                f"data set {self.name!r} is sampled at {self.sample_rate_hz} Hz, {where} expects {sample_rate_hz} Hz"
+            )
         if len(features):
             compute_features({k: v[:1, :1] for k, v in self.signals.items()}, features)  # raises on unknown names
 
@@ -156,7 +160,7 @@ def load_dataset(path: str | Path) -> FaultDataset:
     try:
         with np.load(path, allow_pickle=False) as z:
             meta = json.loads(str(z["meta"]))
-            signals = {k[len("signal_"):]: z[k] for k in z.files if k.startswith("signal_")}
+            signals = {k[len("signal_") :]: z[k] for k in z.files if k.startswith("signal_")}
             conditions = z["conditions"].astype(np.int8)
             payload = z["payload_kg"]
             onset = z["onset_step"] if "onset_step" in z.files else None

@@ -47,9 +47,16 @@ def check_conditions(conditions: np.ndarray) -> np.ndarray:
     return cond.astype(np.int64)
 
 
-def build_propellers(vehicle: VehicleConfig, conditions: np.ndarray, kind: str = "lstm",
-                     models_dir: str | Path = MODELS_DIR, rng_seed: int | None = None, *,
-                     vibration: bool = True, signatures: dict[str, FaultSignature] | None = None):
+def build_propellers(
+    vehicle: VehicleConfig,
+    conditions: np.ndarray,
+    kind: str = "lstm",
+    models_dir: str | Path = MODELS_DIR,
+    rng_seed: int | None = None,
+    *,
+    vibration: bool = True,
+    signatures: dict[str, FaultSignature] | None = None,
+):
     """A batched ``PropellerModel`` for ``conditions`` (B, 4).
 
     ``rng_seed`` seeds the blade phases and flutter (None means seed 0, so runs

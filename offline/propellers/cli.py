@@ -23,8 +23,11 @@ from offline.propellers import CONDITIONS, MODELS_DIR
 from offline.propellers.thrust_stand import fit_esc_to_rpm, fit_kf, fit_ktau, noise_at_rest, read_thrust_stand_csv
 
 # Tong et al., Sec. V-A: test-set mean error of their LSTMs, percent.
-PAPER_MAPE_PCT = {"normal": {"torque": 2.29, "thrust": 0.613}, "bent": {"torque": 1.37, "thrust": 0.689},
-                  "cracked": {"torque": 2.47, "thrust": 4.27}}
+PAPER_MAPE_PCT = {
+    "normal": {"torque": 2.29, "thrust": 0.613},
+    "bent": {"torque": 1.37, "thrust": 0.689},
+    "cracked": {"torque": 2.47, "thrust": 4.27},
+}
 
 
 def fit_stand_files(paths: list[str]) -> list[dict]:
@@ -56,14 +59,18 @@ def _print_fits(rows: list[dict]) -> None:
         name = Path(r["file"]).name
         if "noise_at_rest_thrust_n" in r:
             q = r["noise_at_rest_torque_nm"]
-            print(f"{name}: noise at rest: thrust {r['noise_at_rest_thrust_n']:.3g} N"
-                  + ("" if q is None else f", torque {q:.3g} N·m"))
+            print(
+                f"{name}: noise at rest: thrust {r['noise_at_rest_thrust_n']:.3g} N"
+                + ("" if q is None else f", torque {q:.3g} N·m")
+            )
         if "skipped" in r:
             print(f"{name}: skipped ({r['skipped'].split(': ', 1)[-1]})")
             continue
         e, k = r["esc_to_rpm"], r["kf_n_per_rad_s2"]
-        line = (f"{name}: rpm = {e['coefficients'][0]:.4g}·esc² + {e['coefficients'][1]:.4g}·esc + {e['coefficients'][2]:.5g}"
-                f" (R² {e['r2']:.4f}, RMSE {e['rmse']:.0f} RPM); kF {k['coefficients'][0]:.4g} (R² {k['r2']:.4f}, RMSE {k['rmse']:.3g} N)")
+        line = (
+            f"{name}: rpm = {e['coefficients'][0]:.4g}·esc² + {e['coefficients'][1]:.4g}·esc + {e['coefficients'][2]:.5g}"
+            f" (R² {e['r2']:.4f}, RMSE {e['rmse']:.0f} RPM); kF {k['coefficients'][0]:.4g} (R² {k['r2']:.4f}, RMSE {k['rmse']:.3g} N)"
+        )
         if "ktau_nm_per_rad_s2" in r:
             q = r["ktau_nm_per_rad_s2"]
             line += f"; kτ {q['coefficients'][0]:.4g} (R² {q['r2']:.3f}, RMSE {q['rmse']:.2g} N·m)"
@@ -72,12 +79,16 @@ def _print_fits(rows: list[dict]) -> None:
 
 def metrics_markdown(metrics: dict) -> str:
     """The test-split MAPE table beside the paper's figures and the kF·ω² / kτ·ω² fit."""
-    lines = ["| condition | thrust LSTM | thrust paper | thrust kF·ω² | torque LSTM | torque paper | torque kτ·ω² |",
-             "|---|---|---|---|---|---|---|"]
+    lines = [
+        "| condition | thrust LSTM | thrust paper | thrust kF·ω² | torque LSTM | torque paper | torque kτ·ω² |",
+        "|---|---|---|---|---|---|---|",
+    ]
     for c, m in metrics.items():
-        lines.append(f"| {c} | {m['lstm_thrust_mape_pct']:.3f} % | {m['paper_thrust_mape_pct']} % | "
-                     f"{m['quadratic_thrust_mape_pct']:.3f} % | {m['lstm_torque_mape_pct']:.3f} % | "
-                     f"{m['paper_torque_mape_pct']} % | {m['quadratic_torque_mape_pct']:.3f} % |")
+        lines.append(
+            f"| {c} | {m['lstm_thrust_mape_pct']:.3f} % | {m['paper_thrust_mape_pct']} % | "
+            f"{m['quadratic_thrust_mape_pct']:.3f} % | {m['lstm_torque_mape_pct']:.3f} % | "
+            f"{m['paper_torque_mape_pct']} % | {m['quadratic_torque_mape_pct']:.3f} % |"
+        )
     return "\n".join(lines) + "\n"
 
 
@@ -98,27 +109,42 @@ def train_all(out_dir: Path, vehicle_path: Path, seed: int, epochs: int | None) 
         s, y = run_load_cell(vehicle, condition, cell_cfg).normalised(vehicle)
         model, history = train_condition(s, y, condition, cell_cfg.sample_period_s, train_cfg)
         model = reload_as_shipped(model, out_dir / f"{condition}.npz")
-        metrics[condition] = {**evaluate(model, s, y, train_cfg),
-                              **{f"paper_{k}_mape_pct": v for k, v in PAPER_MAPE_PCT[condition].items()}}
+        metrics[condition] = {
+            **evaluate(model, s, y, train_cfg),
+            **{f"paper_{k}_mape_pct": v for k, v in PAPER_MAPE_PCT[condition].items()},
+        }
         histories[condition] = history
         m = metrics[condition]
-        print(f"{condition:8s} thrust MAPE {m['lstm_thrust_mape_pct']:.3f} % (paper {m['paper_thrust_mape_pct']}, "
-              f"kF·ω² {m['quadratic_thrust_mape_pct']:.3f})  torque MAPE {m['lstm_torque_mape_pct']:.3f} % "
-              f"(paper {m['paper_torque_mape_pct']}, kτ·ω² {m['quadratic_torque_mape_pct']:.3f})  "
-              f"epochs {len(history['epochs'])}", flush=True)
+        print(
+            f"{condition:8s} thrust MAPE {m['lstm_thrust_mape_pct']:.3f} % (paper {m['paper_thrust_mape_pct']}, "
+            f"kF·ω² {m['quadratic_thrust_mape_pct']:.3f})  torque MAPE {m['lstm_torque_mape_pct']:.3f} % "
+            f"(paper {m['paper_torque_mape_pct']}, kτ·ω² {m['quadratic_torque_mape_pct']:.3f})  "
+            f"epochs {len(history['epochs'])}",
+            flush=True,
+        )
     manifest = make_manifest(
-        "propeller-lstm", {"load_cell": dataclasses.asdict(cell_cfg), "training": config_dict(train_cfg),
-                           "vehicle": str(vehicle_path), "vehicle_kf_n_per_rad_s2": vehicle.kf_n_per_rad_s2,
-                           "vehicle_ktau_nm_per_rad_s2": vehicle.ktau_nm_per_rad_s2,
-                           "vehicle_omega_max_rad_s": vehicle.omega_max_rad_s},
-        seed, files=[f"{c}.npz" for c in CONDITIONS], metrics=metrics, training_history=histories,
+        "propeller-lstm",
+        {
+            "load_cell": dataclasses.asdict(cell_cfg),
+            "training": config_dict(train_cfg),
+            "vehicle": str(vehicle_path),
+            "vehicle_kf_n_per_rad_s2": vehicle.kf_n_per_rad_s2,
+            "vehicle_ktau_nm_per_rad_s2": vehicle.ktau_nm_per_rad_s2,
+            "vehicle_omega_max_rad_s": vehicle.omega_max_rad_s,
+        },
+        seed,
+        files=[f"{c}.npz" for c in CONDITIONS],
+        metrics=metrics,
+        training_history=histories,
         units="input omega/omega_max; outputs thrust/(kF·omega_max²), torque/(kτ·omega_max²)",
         mape_note=f"test = last {train_cfg.test_fraction:.0%} of each sweep, samples whose measured value is "
-                  f">= {train_cfg.mape_min_fraction:.0%} of full scale; LSTM run statefully over the whole sweep")
+        f">= {train_cfg.mape_min_fraction:.0%} of full scale; LSTM run statefully over the whole sweep",
+    )
     write_manifest(out_dir / "manifest.json", manifest)
     (out_dir / "metrics.md").write_text(
-        f"# Propeller LSTMs: test-split MAPE (seed {seed})\n\n{manifest['mape_note']}.\n\n"
-        + metrics_markdown(metrics), encoding="utf-8")
+        f"# Propeller LSTMs: test-split MAPE (seed {seed})\n\n{manifest['mape_note']}.\n\n" + metrics_markdown(metrics),
+        encoding="utf-8",
+    )
     return manifest
 
 

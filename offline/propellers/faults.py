@@ -68,16 +68,31 @@ class FaultSignature:
 
     @property
     def has_vibration(self) -> bool:
-        return any(v > 0 for v in (self.ripple_1p_thrust, self.ripple_1p_torque,
-                                   self.flutter_thrust_std, self.flutter_torque_std))
+        return any(
+            v > 0 for v in (self.ripple_1p_thrust, self.ripple_1p_torque, self.flutter_thrust_std, self.flutter_torque_std)
+        )
 
 
 NORMAL = FaultSignature()
-BENT = FaultSignature(thrust_loss_low=0.08, thrust_loss_high=0.12, torque_gain_low=0.05, torque_gain_high=0.10,
-                      ripple_1p_thrust=0.04, ripple_1p_torque=0.03)
-CRACKED = FaultSignature(thrust_loss_low=0.03, thrust_loss_high=0.15, torque_gain_low=0.02, torque_gain_high=0.06,
-                         ripple_1p_thrust=0.01, ripple_1p_torque=0.01,
-                         flutter_thrust_std=0.03, flutter_torque_std=0.02, flutter_time_constant_s=0.01)
+BENT = FaultSignature(
+    thrust_loss_low=0.08,
+    thrust_loss_high=0.12,
+    torque_gain_low=0.05,
+    torque_gain_high=0.10,
+    ripple_1p_thrust=0.04,
+    ripple_1p_torque=0.03,
+)
+CRACKED = FaultSignature(
+    thrust_loss_low=0.03,
+    thrust_loss_high=0.15,
+    torque_gain_low=0.02,
+    torque_gain_high=0.06,
+    ripple_1p_thrust=0.01,
+    ripple_1p_torque=0.01,
+    flutter_thrust_std=0.03,
+    flutter_torque_std=0.02,
+    flutter_time_constant_s=0.01,
+)
 
 SIGNATURES: dict[str, FaultSignature] = {"normal": NORMAL, "bent": BENT, "cracked": CRACKED}
 

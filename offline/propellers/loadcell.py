@@ -101,8 +101,9 @@ class LoadCellRun:
         """(s (T,), y (T, 2)): speed / omega_max and [thrust / (kF·omega_max²), torque / (kτ·omega_max²)]."""
         w_max2 = vehicle.omega_max_rad_s**2
         s = self.omega_rad_s / vehicle.omega_max_rad_s
-        y = np.stack([self.thrust_n / (vehicle.kf_n_per_rad_s2 * w_max2),
-                      self.torque_nm / (vehicle.ktau_nm_per_rad_s2 * w_max2)], axis=-1)
+        y = np.stack(
+            [self.thrust_n / (vehicle.kf_n_per_rad_s2 * w_max2), self.torque_nm / (vehicle.ktau_nm_per_rad_s2 * w_max2)], axis=-1
+        )
         return s, y
 
 
@@ -152,10 +153,18 @@ def run_load_cell(vehicle: VehicleConfig, condition: str, cfg: LoadCellConfig = 
     ripple = np.sin(angle)
     flutter_t = _flutter(t_fine.size, dt, sig.flutter_time_constant_s, rng)
     flutter_q = _flutter(t_fine.size, dt, sig.flutter_time_constant_s, rng)
-    thrust = vehicle.kf_n_per_rad_s2 * w2 * sig.thrust_factor(s) * (
-        1.0 + sig.ripple_1p_thrust * ripple + sig.flutter_thrust_std * s**2 * flutter_t)
-    torque = vehicle.ktau_nm_per_rad_s2 * w2 * sig.torque_factor(s) * (
-        1.0 + sig.ripple_1p_torque * ripple + sig.flutter_torque_std * s**2 * flutter_q)
+    thrust = (
+        vehicle.kf_n_per_rad_s2
+        * w2
+        * sig.thrust_factor(s)
+        * (1.0 + sig.ripple_1p_thrust * ripple + sig.flutter_thrust_std * s**2 * flutter_t)
+    )
+    torque = (
+        vehicle.ktau_nm_per_rad_s2
+        * w2
+        * sig.torque_factor(s)
+        * (1.0 + sig.ripple_1p_torque * ripple + sig.flutter_torque_std * s**2 * flutter_q)
+    )
 
     def sample(x: np.ndarray) -> np.ndarray:  # the stand's average over each sample period
         return x.reshape(n_samples, k).mean(axis=1)

@@ -54,8 +54,11 @@ def _fast_layer(w_ih: np.ndarray, w_hh: np.ndarray, b: np.ndarray) -> tuple[np.n
     i, f, g, o = (np.arange(k * hsz, (k + 1) * hsz) for k in range(4))  # torch's gate order
     rows = np.concatenate([i, f, o, g])  # sigmoid gates first, contiguous
     half = np.r_[np.full(3 * hsz, 0.5), np.ones(hsz)]
-    return ((w_ih[rows] * half[:, None]).astype(np.float32), (w_hh[rows] * half[:, None]).astype(np.float32),
-            (b[rows] * half)[:, None].astype(np.float32))
+    return (
+        (w_ih[rows] * half[:, None]).astype(np.float32),
+        (w_hh[rows] * half[:, None]).astype(np.float32),
+        (b[rows] * half)[:, None].astype(np.float32),
+    )
 
 
 @dataclass(frozen=True)
@@ -80,9 +83,16 @@ class StackedLstm:
         (w0, b0), (w1, b1) = self.dense
         fast = tuple(_fast_layer(*layer) for layer in self.lstm)
         object.__setattr__(self, "_fast", fast)
-        object.__setattr__(self, "_dense_fast", (w0.astype(np.float32), b0[:, None].astype(np.float32),
-                                                 (w1 * self.output_std[:, None]).astype(np.float32),
-                                                 (b1 * self.output_std + self.output_mean)[:, None].astype(np.float32)))
+        object.__setattr__(
+            self,
+            "_dense_fast",
+            (
+                w0.astype(np.float32),
+                b0[:, None].astype(np.float32),
+                (w1 * self.output_std[:, None]).astype(np.float32),
+                (b1 * self.output_std + self.output_mean)[:, None].astype(np.float32),
+            ),
+        )
 
     def zero_state(self, n: int) -> State:
         return [(np.zeros((h, n), np.float32), np.zeros((h, n), np.float32)) for h in self.hidden_sizes]
@@ -100,10 +110,10 @@ class StackedLstm:
             gates = z[: 3 * hs]  # i, f, o were pre-halved: sigmoid = (1 + tanh) / 2
             gates += 1.0
             gates *= 0.5
-            c = c * z[hs:2 * hs]  # forget
-            c += z[:hs] * z[3 * hs:]  # input * candidate
+            c = c * z[hs : 2 * hs]  # forget
+            c += z[:hs] * z[3 * hs :]  # input * candidate
             h = np.tanh(c)
-            h *= z[2 * hs:3 * hs]  # output
+            h *= z[2 * hs : 3 * hs]  # output
             new_state.append((h, c))
             x = h
         w0, b0, w1, b1 = self._dense_fast
@@ -153,9 +163,17 @@ def load_stacked_lstm(path: str | Path) -> StackedLstm:
         n_layers = int(d["num_lstm_layers"])
         lstm = tuple((d[f"lstm{k}_w_ih"], d[f"lstm{k}_w_hh"], d[f"lstm{k}_b"]) for k in range(n_layers))
         dense = tuple((d[f"dense{k}_w"], d[f"dense{k}_b"]) for k in range(2))
-        model = StackedLstm(lstm, dense, float(d["input_mean"]), float(d["input_std"]),
-                            d["output_mean"].astype(np.float64), d["output_std"].astype(np.float64),
-                            float(d["sample_period_s"]), int(d["window_steps"]), str(d["condition"]))
+        model = StackedLstm(
+            lstm,
+            dense,
+            float(d["input_mean"]),
+            float(d["input_std"]),
+            d["output_mean"].astype(np.float64),
+            d["output_std"].astype(np.float64),
+            float(d["sample_period_s"]),
+            int(d["window_steps"]),
+            str(d["condition"]),
+        )
     except KeyError as exc:
         raise ModelError(f"{path}: propeller model lacks array {exc.args[0]!r}") from None
     if model.dense[-1][0].shape[0] != 2:
@@ -182,8 +200,15 @@ def load_condition_models(models_dir: str | Path) -> dict[str, StackedLstm]:
 class LstmPropeller:
     """Batched ``PropellerModel``: each rotor runs its condition's LSTM; groups are fixed at build time."""
 
-    def __init__(self, vehicle: VehicleConfig, conditions: np.ndarray, models_dir: Path,
-                 signatures: tuple[FaultSignature, ...], rng: np.random.Generator, vibration: bool = True):
+    def __init__(
+        self,
+        vehicle: VehicleConfig,
+        conditions: np.ndarray,
+        models_dir: Path,
+        signatures: tuple[FaultSignature, ...],
+        rng: np.random.Generator,
+        vibration: bool = True,
+    ):
         self.conditions = np.asarray(conditions, dtype=np.int64)
         models = load_condition_models(models_dir)
         self.kf = vehicle.kf_n_per_rad_s2

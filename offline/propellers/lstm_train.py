@@ -78,15 +78,20 @@ def _windows(x: np.ndarray, y: np.ndarray, length: int) -> tuple[torch.Tensor, t
     return xt, yt
 
 
-def train_condition(s: np.ndarray, y: np.ndarray, condition: str, sample_period_s: float,
-                    cfg: TrainConfig = TrainConfig()) -> tuple[StackedLstm, dict]:
+def train_condition(
+    s: np.ndarray, y: np.ndarray, condition: str, sample_period_s: float, cfg: TrainConfig = TrainConfig()
+) -> tuple[StackedLstm, dict]:
     """Fit one condition on the first (1 - test_fraction) of the sweep; returns the numpy model and a history."""
     torch.manual_seed(cfg.seed)
     rng = np.random.default_rng(cfg.seed)
     n_train = split_index(len(s), cfg.test_fraction)
     n_fit = split_index(n_train, cfg.val_fraction)
-    norm = Normalisation(float(s[:n_fit].mean()), float(s[:n_fit].std()),
-                         tuple(float(v) for v in y[:n_fit].mean(axis=0)), tuple(float(v) for v in y[:n_fit].std(axis=0)))
+    norm = Normalisation(
+        float(s[:n_fit].mean()),
+        float(s[:n_fit].std()),
+        tuple(float(v) for v in y[:n_fit].mean(axis=0)),
+        tuple(float(v) for v in y[:n_fit].std(axis=0)),
+    )
     xs = (s - norm.input_mean) / norm.input_std
     ys = (y - np.array(norm.output_mean)) / np.array(norm.output_std)
     x_fit, y_fit = _windows(xs[:n_fit], ys[:n_fit], cfg.window_steps)
@@ -102,7 +107,7 @@ def train_condition(s: np.ndarray, y: np.ndarray, condition: str, sample_period_
         order = torch.as_tensor(rng.permutation(len(x_fit)))
         total = 0.0
         for start in range(0, len(order), cfg.batch_size):
-            idx = order[start:start + cfg.batch_size]
+            idx = order[start : start + cfg.batch_size]
             loss = nn.functional.mse_loss(net(x_fit[idx])[:, b:], y_fit[idx][:, b:])
             opt.zero_grad()
             loss.backward()
@@ -123,17 +128,30 @@ def train_condition(s: np.ndarray, y: np.ndarray, condition: str, sample_period_
     return to_numpy(net, norm, condition, sample_period_s, cfg.window_steps), {"epochs": history, "best_val_mse": best_loss}
 
 
-def to_numpy(net: StackedLstmNet, norm: Normalisation, condition: str, sample_period_s: float,
-             window_steps: int) -> StackedLstm:
+def to_numpy(net: StackedLstmNet, norm: Normalisation, condition: str, sample_period_s: float, window_steps: int) -> StackedLstm:
     def a(t: torch.Tensor) -> np.ndarray:
         return t.detach().cpu().numpy().astype(np.float64)
 
-    lstm = tuple((a(getattr(net.lstm, f"weight_ih_l{k}")), a(getattr(net.lstm, f"weight_hh_l{k}")),
-                  a(getattr(net.lstm, f"bias_ih_l{k}") + getattr(net.lstm, f"bias_hh_l{k}")))
-                 for k in range(net.lstm.num_layers))
+    lstm = tuple(
+        (
+            a(getattr(net.lstm, f"weight_ih_l{k}")),
+            a(getattr(net.lstm, f"weight_hh_l{k}")),
+            a(getattr(net.lstm, f"bias_ih_l{k}") + getattr(net.lstm, f"bias_hh_l{k}")),
+        )
+        for k in range(net.lstm.num_layers)
+    )
     dense = ((a(net.dense0.weight), a(net.dense0.bias)), (a(net.dense1.weight), a(net.dense1.bias)))
-    return StackedLstm(lstm, dense, norm.input_mean, norm.input_std, np.array(norm.output_mean),
-                       np.array(norm.output_std), sample_period_s, window_steps, condition)
+    return StackedLstm(
+        lstm,
+        dense,
+        norm.input_mean,
+        norm.input_std,
+        np.array(norm.output_mean),
+        np.array(norm.output_std),
+        sample_period_s,
+        window_steps,
+        condition,
+    )
 
 
 def save_npz(model: StackedLstm, path: str | Path) -> Path:
@@ -144,10 +162,15 @@ def save_npz(model: StackedLstm, path: str | Path) -> Path:
     for k, (w, b) in enumerate(model.dense):
         arrays.update({f"dense{k}_w": w, f"dense{k}_b": b})
     arrays = {k: v.astype(np.float32) if v.dtype.kind == "f" else v for k, v in arrays.items()}
-    arrays.update(input_mean=np.array(model.input_mean), input_std=np.array(model.input_std),
-                  output_mean=model.output_mean, output_std=model.output_std,
-                  sample_period_s=np.array(model.sample_period_s), window_steps=np.array(model.window_steps),
-                  condition=np.array(model.condition))
+    arrays.update(
+        input_mean=np.array(model.input_mean),
+        input_std=np.array(model.input_std),
+        output_mean=model.output_mean,
+        output_std=model.output_std,
+        sample_period_s=np.array(model.sample_period_s),
+        window_steps=np.array(model.window_steps),
+        condition=np.array(model.condition),
+    )
     path = Path(path)
     with path.open("wb") as f:
         np.savez_compressed(f, **arrays)

@@ -21,8 +21,14 @@ def _per_rotor(signatures: tuple[FaultSignature, ...], conditions: np.ndarray, a
 
 
 class QuadraticFaultPropeller:
-    def __init__(self, vehicle: VehicleConfig, conditions: np.ndarray, signatures: tuple[FaultSignature, ...],
-                 rng: np.random.Generator, vibration: bool = True):
+    def __init__(
+        self,
+        vehicle: VehicleConfig,
+        conditions: np.ndarray,
+        signatures: tuple[FaultSignature, ...],
+        rng: np.random.Generator,
+        vibration: bool = True,
+    ):
         cond = np.asarray(conditions, dtype=np.int64)
         self.conditions = cond
         self.kf = vehicle.kf_n_per_rad_s2

@@ -32,10 +32,8 @@ from monitor.errors import LogFormatError
 from monitor.esc import RAD_S_PER_RPM, EscCurve
 from monitor.vehicle import GRAVITY_M_S2
 
-THRUST_UNITS_TO_N = {"gf": GRAVITY_M_S2 / 1000.0, "kgf": GRAVITY_M_S2, "N": 1.0,
-                     "lbf": 4.4482216152605, "ozf": 0.27801385095378}
-TORQUE_UNITS_TO_NM = {"N·m": 1.0, "N.m": 1.0, "Nm": 1.0, "N m": 1.0, "ozf·in": 0.00706155183333,
-                      "ozf.in": 0.00706155183333}
+THRUST_UNITS_TO_N = {"gf": GRAVITY_M_S2 / 1000.0, "kgf": GRAVITY_M_S2, "N": 1.0, "lbf": 4.4482216152605, "ozf": 0.27801385095378}
+TORQUE_UNITS_TO_NM = {"N·m": 1.0, "N.m": 1.0, "Nm": 1.0, "N m": 1.0, "ozf·in": 0.00706155183333, "ozf.in": 0.00706155183333}
 TIME_JITTER_S = 0.05
 _HEADER = re.compile(r"^(?P<name>.*?)\s*\((?P<unit>[^)]*)\)\s*$")
 
@@ -132,11 +130,14 @@ def read_thrust_stand_csv(path: str | Path) -> ThrustStandRun:
 
     for name, arr in (("Time", time_s), ("ESC signal", esc_us), ("Thrust", thrust_n)):
         if not np.all(np.isfinite(arr)):
-            raise LogFormatError(f"{path}: column {name!r}: empty or non-finite value at row {int(np.argmin(np.isfinite(arr))) + 2}")
+            raise LogFormatError(
+                f"{path}: column {name!r}: empty or non-finite value at row {int(np.argmin(np.isfinite(arr))) + 2}"
+            )
     back = np.flatnonzero(np.diff(time_s) < -TIME_JITTER_S)
     if back.size:
-        raise LogFormatError(f"{path}: column 'Time': time goes backwards at row {back[0] + 3} "
-                             f"({time_s[back[0]]} s -> {time_s[back[0] + 1]} s)")
+        raise LogFormatError(
+            f"{path}: column 'Time': time goes backwards at row {back[0] + 3} ({time_s[back[0]]} s -> {time_s[back[0] + 1]} s)"
+        )
 
     rpm = None
     for name in ("Motor Optical Speed", "Motor Electrical Speed"):

@@ -25,8 +25,9 @@ class FaultVibration:
     rotors only.
     """
 
-    def __init__(self, conditions: np.ndarray, signatures: tuple[FaultSignature, ...], omega_max_rad_s: float,
-                 rng: np.random.Generator):
+    def __init__(
+        self, conditions: np.ndarray, signatures: tuple[FaultSignature, ...], omega_max_rad_s: float, rng: np.random.Generator
+    ):
         cond = np.asarray(conditions)
         self._rng = rng
         self._inv_omega_max2 = 1.0 / float(omega_max_rad_s) ** 2

@@ -45,8 +45,9 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument("--duration-s", type=float, default=80.0, help="flight duration (default 80 s, as the paper)")
     p.add_argument("--format", choices=("npz", "tlog"), default="npz")
     p.add_argument("--vehicle", type=Path, default=DEFAULT_VEHICLE, help="vehicle YAML (default models/vehicle.yaml)")
-    p.add_argument("--propellers", choices=("lstm", "quadratic"), default="lstm",
-                   help="propeller model (offline.propellers; default lstm)")
+    p.add_argument(
+        "--propellers", choices=("lstm", "quadratic"), default="lstm", help="propeller model (offline.propellers; default lstm)"
+    )
     return p.parse_args(argv)
 
 
@@ -94,11 +95,21 @@ def run(args: argparse.Namespace) -> list[Path]:
         files = [args.out / "flights.npz"]
     else:
         files = [args.out / f"flight_{i:03d}.tlog" for i in range(n)]
-    sidecar = make_sidecar(vehicle, sim, waypoints, conditions, payload, args.seed, args.propellers,
-                           waypoints_seed=None if args.waypoint_set else wseed,
-                           vehicle_path=str(args.vehicle), vehicle_sources=loaded.sources,
-                           files=[f.name for f in files] if args.format == "tlog" else [f"flights.npz[{i}]" for i in range(n)],
-                           waypoint_set=args.waypoint_set, format=args.format)
+    sidecar = make_sidecar(
+        vehicle,
+        sim,
+        waypoints,
+        conditions,
+        payload,
+        args.seed,
+        args.propellers,
+        waypoints_seed=None if args.waypoint_set else wseed,
+        vehicle_path=str(args.vehicle),
+        vehicle_sources=loaded.sources,
+        files=[f.name for f in files] if args.format == "tlog" else [f"flights.npz[{i}]" for i in range(n)],
+        waypoint_set=args.waypoint_set,
+        format=args.format,
+    )
     if args.format == "npz":
         write_npz(files[0], log, sidecar)
     else:

@@ -112,8 +112,9 @@ class ControllerState:
 
 
 class Controller:
-    def __init__(self, cfg: ControllerConfig, vehicle: VehicleConfig, mass_kg: np.ndarray,
-                 position_dt_s: float, control_dt_s: float):
+    def __init__(
+        self, cfg: ControllerConfig, vehicle: VehicleConfig, mass_kg: np.ndarray, position_dt_s: float, control_dt_s: float
+    ):
         self.cfg = cfg
         self.vehicle = vehicle
         self.mass_kg = np.asarray(mass_kg, dtype=np.float64).reshape(-1)
@@ -173,16 +174,39 @@ class Controller:
         k = lambda x: np.array(float(x))  # noqa: E731
         self.dmax_h = k(cfg.mpc_acc_hor_m_s2 * dt)
         self.dv_z_lo, self.dv_z_hi = k(-cfg.mpc_acc_up_max_m_s2 * dt), k(cfg.mpc_acc_down_max_m_s2 * dt)
-        self.yaw_step, self.neg_yaw_step = k(math.radians(cfg.mpc_yawrauto_max_deg_s) * dt), k(-(math.radians(cfg.mpc_yawrauto_max_deg_s) * dt))
-        self._k = {name: k(value) for name, value in (
-            ("cruise", cfg.mpc_xy_cruise_m_s), ("vz_lo", -cfg.mpc_z_vel_max_up_m_s), ("vz_hi", cfg.mpc_z_vel_max_dn_m_s),
-            ("dt", dt), ("fz_lo", -self.thrust_max_n), ("fz_hi", -self.thrust_min_n), ("tmax2", self.thrust_max_n**2),
-            ("tan", self.tan_tilt_max), ("zero", 0.0), ("eps", 1e-12), ("one", 1.0), ("neg_one", -1.0), ("half", 0.5),
-            ("quarter", 0.25), ("pi", math.pi), ("two_pi", 2 * math.pi), ("heading_min", cfg.mpc_yaw_mode_heading_min_m),
-            ("acc_rad2", cfg.nav_acc_rad_m**2), ("inv_kf", self.inv_kf), ("lo", self.rotor_thrust_min_n),
-            ("hi", self.rotor_thrust_max_n))}
+        self.yaw_step, self.neg_yaw_step = (
+            k(math.radians(cfg.mpc_yawrauto_max_deg_s) * dt),
+            k(-(math.radians(cfg.mpc_yawrauto_max_deg_s) * dt)),
+        )
+        self._k = {
+            name: k(value)
+            for name, value in (
+                ("cruise", cfg.mpc_xy_cruise_m_s),
+                ("vz_lo", -cfg.mpc_z_vel_max_up_m_s),
+                ("vz_hi", cfg.mpc_z_vel_max_dn_m_s),
+                ("dt", dt),
+                ("fz_lo", -self.thrust_max_n),
+                ("fz_hi", -self.thrust_min_n),
+                ("tmax2", self.thrust_max_n**2),
+                ("tan", self.tan_tilt_max),
+                ("zero", 0.0),
+                ("eps", 1e-12),
+                ("one", 1.0),
+                ("neg_one", -1.0),
+                ("half", 0.5),
+                ("quarter", 0.25),
+                ("pi", math.pi),
+                ("two_pi", 2 * math.pi),
+                ("heading_min", cfg.mpc_yaw_mode_heading_min_m),
+                ("acc_rad2", cfg.nav_acc_rad_m**2),
+                ("inv_kf", self.inv_kf),
+                ("lo", self.rotor_thrust_min_n),
+                ("hi", self.rotor_thrust_max_n),
+            )
+        }
         self._quarter_k, self._lo_k, self._hi_k, self._inv_kf_k, self._neg_one_k, self._one_k = (
-            self._k[name] for name in ("quarter", "lo", "hi", "inv_kf", "neg_one", "one"))
+            self._k[name] for name in ("quarter", "lo", "hi", "inv_kf", "neg_one", "one")
+        )
         self.neg_vel_int_lim = -self.vel_int_lim
         self.weight_n = self.mass_kg * GRAVITY_M_S2
         self.mass_col = self.mass_kg[:, None]
@@ -217,8 +241,9 @@ class Controller:
         )
 
     # -- position and velocity (MulticopterPositionControl) ------------------------------------
-    def update_position(self, c: ControllerState, pos_ned_m: np.ndarray, vel_ned_m_s: np.ndarray,
-                        waypoints_ned_m: np.ndarray) -> np.ndarray:
+    def update_position(
+        self, c: ControllerState, pos_ned_m: np.ndarray, vel_ned_m_s: np.ndarray, waypoints_ned_m: np.ndarray
+    ) -> np.ndarray:
         """Advance the mission, run the position/velocity loops; sets q_sp and thrust_sp_n.
 
         Returns the waypoint error (target - position), (B, 3).
@@ -374,8 +399,10 @@ class Controller:
         # Whole-batch check first: when every rotor of every flight fits (NaN does not), nothing else
         # is needed. Comparisons and counts: cheaper than min/max reductions on a few flights.
         ok = self._ok4
-        if np.count_nonzero(np.greater_equal(cmd, self._lo_k, ok)) + np.count_nonzero(
-                np.less_equal(cmd, self._hi_k, ok)) != 2 * cmd.size:
+        if (
+            np.count_nonzero(np.greater_equal(cmd, self._lo_k, ok)) + np.count_nonzero(np.less_equal(cmd, self._hi_k, ok))
+            != 2 * cmd.size
+        ):
             fits = (np.minimum.reduce(cmd, axis=1) >= lo) & (np.maximum.reduce(cmd, axis=1) <= hi)
             cmd = np.where(fits[:, None], cmd, self._desaturate(thrust_n, torque_norm))
         cmd *= self._inv_kf_k

@@ -34,9 +34,13 @@ from offline.sim.quat import rotate_world_to_body
 # 2024-06-01T12:00:00Z: a fixed wall clock at boot keeps files byte-for-byte reproducible.
 DEFAULT_WALL_BOOT_US = 1_717_243_200_000_000
 PX4_CUSTOM_MODE_AUTO_MISSION = (4 << 16) | (4 << 24)  # PX4 main mode AUTO (4), sub mode MISSION (4)
-BASE_MODE_ARMED_AUTO = (mavlink2.MAV_MODE_FLAG_SAFETY_ARMED | mavlink2.MAV_MODE_FLAG_STABILIZE_ENABLED
-                        | mavlink2.MAV_MODE_FLAG_GUIDED_ENABLED | mavlink2.MAV_MODE_FLAG_AUTO_ENABLED
-                        | mavlink2.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED)
+BASE_MODE_ARMED_AUTO = (
+    mavlink2.MAV_MODE_FLAG_SAFETY_ARMED
+    | mavlink2.MAV_MODE_FLAG_STABILIZE_ENABLED
+    | mavlink2.MAV_MODE_FLAG_GUIDED_ENABLED
+    | mavlink2.MAV_MODE_FLAG_AUTO_ENABLED
+    | mavlink2.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
+)
 EARTH_FIELD_NED_GAUSS = np.array([0.21, 0.0, 0.43])  # mid-latitude field, for a plausible magnetometer
 SLOW_RATE_HZ = 2.0
 N_CELLS = 4  # 4S pack (models/vehicle.yaml battery_full_v 16.8 V)
@@ -47,8 +51,15 @@ def _pressure_hpa(alt_m: np.ndarray) -> np.ndarray:
     return 1013.25 * (1.0 - 2.25577e-5 * alt_m) ** 5.25588
 
 
-def write_tlog(path: str | Path, log: FlightLog, i: int, *, wall_boot_us: int = DEFAULT_WALL_BOOT_US,
-               battery_full_v: float = 16.8, battery_capacity_mah: float = 5000.0) -> Path:
+def write_tlog(
+    path: str | Path,
+    log: FlightLog,
+    i: int,
+    *,
+    wall_boot_us: int = DEFAULT_WALL_BOOT_US,
+    battery_full_v: float = 16.8,
+    battery_capacity_mah: float = 5000.0,
+) -> Path:
     """Write flight ``i`` of ``log`` as a .tlog at ``path`` (temp file, then rename)."""
     path = Path(path)
     tmp = path.with_name(path.name + ".tmp")
@@ -95,15 +106,47 @@ def _write(fh, log: FlightLog, i: int, wall_boot_us: int, battery_full_v: float,
         # messages, then the untimed ones, so a reader's boot clock is set before they arrive.
         heartbeat_due = next_hb is None or t >= next_hb
         if heartbeat_due:
-            emit(t, mav.heartbeat_encode(mavlink2.MAV_TYPE_QUADROTOR, mavlink2.MAV_AUTOPILOT_PX4, BASE_MODE_ARMED_AUTO,
-                                         PX4_CUSTOM_MODE_AUTO_MISSION, mavlink2.MAV_STATE_ACTIVE, 3))
+            emit(
+                t,
+                mav.heartbeat_encode(
+                    mavlink2.MAV_TYPE_QUADROTOR,
+                    mavlink2.MAV_AUTOPILOT_PX4,
+                    BASE_MODE_ARMED_AUTO,
+                    PX4_CUSTOM_MODE_AUTO_MISSION,
+                    mavlink2.MAV_STATE_ACTIVE,
+                    3,
+                ),
+            )
             next_hb = (t // 1_000_000 + 1) * 1_000_000
         t_ms = t // 1000
-        emit(t, mav.attitude_encode(t_ms, float(log.roll_rad[i, j]), float(log.pitch_rad[i, j]), float(log.yaw_rad[i, j]),
-                                    float(rates[j, 0]), float(rates[j, 1]), float(rates[j, 2])))
+        emit(
+            t,
+            mav.attitude_encode(
+                t_ms,
+                float(log.roll_rad[i, j]),
+                float(log.pitch_rad[i, j]),
+                float(log.yaw_rad[i, j]),
+                float(rates[j, 0]),
+                float(rates[j, 1]),
+                float(rates[j, 2]),
+            ),
+        )
         emit(t, mav.local_position_ned_encode(t_ms, *map(float, pos[j]), *map(float, vel[j])))
-        emit(t, mav.highres_imu_encode(t, *map(float, acc[j]), *map(float, rates[j]), *map(float, mag[j]),
-                                       float(pressure[j]), 0.0, float(alt[j]), 25.0, 0x1FFF, 0))
+        emit(
+            t,
+            mav.highres_imu_encode(
+                t,
+                *map(float, acc[j]),
+                *map(float, rates[j]),
+                *map(float, mag[j]),
+                float(pressure[j]),
+                0.0,
+                float(alt[j]),
+                25.0,
+                0x1FFF,
+                0,
+            ),
+        )
         emit(t, mav.servo_output_raw_encode(t & 0xFFFFFFFF, 0, *map(int, pwm[j]), 0, 0, 0, 0))
         emit_bytes(t, encode_esc_status(mav, t, esc_rpm[j], [esc_volt[j]] * 4, [float(amp[j]) / 4] * 4))
         if heartbeat_due:
@@ -113,7 +156,23 @@ def _write(fh, log: FlightLog, i: int, wall_boot_us: int, battery_full_v: float,
             ca = int(round(amp[j] * 100))
             cells = [int(round(volt[j] * 1000 / N_CELLS))] * N_CELLS + [65535] * (10 - N_CELLS)
             emit(t, mav.sys_status_encode(0, 0, 0, 0, mv, ca, int(remaining[j]), 0, 0, 0, 0, 0, 0))
-            emit(t, mav.battery_status_encode(0, mavlink2.MAV_BATTERY_FUNCTION_ALL, mavlink2.MAV_BATTERY_TYPE_LIPO, 32767,
-                                              cells, ca, int(round(consumed_mah[j])), -1, int(remaining[j]), 0,
-                                              mavlink2.MAV_BATTERY_CHARGE_STATE_OK, [0, 0, 0, 0], 0, 0))
+            emit(
+                t,
+                mav.battery_status_encode(
+                    0,
+                    mavlink2.MAV_BATTERY_FUNCTION_ALL,
+                    mavlink2.MAV_BATTERY_TYPE_LIPO,
+                    32767,
+                    cells,
+                    ca,
+                    int(round(consumed_mah[j])),
+                    -1,
+                    int(remaining[j]),
+                    0,
+                    mavlink2.MAV_BATTERY_CHARGE_STATE_OK,
+                    [0, 0, 0, 0],
+                    0,
+                    0,
+                ),
+            )
             next_slow = (t // slow_period_us + 1) * slow_period_us

@@ -99,6 +99,8 @@ class FlightLog:
         for lg in logs[1:]:
             if lg.n_samples != first.n_samples or lg.log_rate_hz != first.log_rate_hz:
                 raise ValueError("FlightLog.concatenate: logs differ in length or rate")
-        kw = {n: (getattr(first, n) if n in TIME_FIELDS else np.concatenate([getattr(lg, n) for lg in logs]))
-              for n in first.array_fields()}
+        kw = {
+            n: (getattr(first, n) if n in TIME_FIELDS else np.concatenate([getattr(lg, n) for lg in logs]))
+            for n in first.array_fields()
+        }
         return FlightLog(log_rate_hz=first.log_rate_hz, **kw)

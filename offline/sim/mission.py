@@ -20,8 +20,7 @@ DEFAULT_BOX_NED_M = ((-15.0, 15.0), (-15.0, 15.0), (-16.0, -4.0))
 _NAMED_SEEDS = {"A": 20240601, "B": 20240602}
 
 
-def random_waypoints(n_flights: int, n_waypoints: int = 5, seed: int = 0,
-                     box_ned_m=DEFAULT_BOX_NED_M) -> np.ndarray:
+def random_waypoints(n_flights: int, n_waypoints: int = 5, seed: int = 0, box_ned_m=DEFAULT_BOX_NED_M) -> np.ndarray:
     """(n_flights, n_waypoints, 3) uniform in ``box_ned_m`` ((lo, hi) per NED axis).
 
     Flight i's waypoints depend only on (seed, i), so asking for more flights

@@ -33,8 +33,13 @@ class QuadraticPropeller:
     rotors: a crude damaged propeller, or a test's known imbalance.
     """
 
-    def __init__(self, kf_n_per_rad_s2: float, ktau_nm_per_rad_s2: float,
-                 thrust_scale: np.ndarray | None = None, torque_scale: np.ndarray | None = None):
+    def __init__(
+        self,
+        kf_n_per_rad_s2: float,
+        ktau_nm_per_rad_s2: float,
+        thrust_scale: np.ndarray | None = None,
+        torque_scale: np.ndarray | None = None,
+    ):
         self.kf_n_per_rad_s2 = float(kf_n_per_rad_s2)
         self.ktau_nm_per_rad_s2 = float(ktau_nm_per_rad_s2)
         self.thrust_scale = None if thrust_scale is None else np.asarray(thrust_scale, dtype=np.float64)
@@ -49,7 +54,9 @@ class QuadraticPropeller:
         shape = np.shape(omega_rad_s)
         # Fold the per-rotor scales into per-rotor coefficients once, so a step costs 3 ops.
         self._kf = np.broadcast_to(self.kf_n_per_rad_s2 * (1.0 if self.thrust_scale is None else self.thrust_scale), shape).copy()
-        self._ktau = np.broadcast_to(self.ktau_nm_per_rad_s2 * (1.0 if self.torque_scale is None else self.torque_scale), shape).copy()
+        self._ktau = np.broadcast_to(
+            self.ktau_nm_per_rad_s2 * (1.0 if self.torque_scale is None else self.torque_scale), shape
+        ).copy()
 
     def __call__(self, omega_rad_s: np.ndarray, dt_s: float) -> tuple[np.ndarray, np.ndarray]:
         if self._kf is None or self._kf.shape != omega_rad_s.shape:

@@ -15,24 +15,37 @@ from offline.manifest import make_manifest
 CONDITION_NAMES = ("normal", "bent", "cracked")  # codes 0, 1, 2, as offline.propellers
 
 
-def make_sidecar(vehicle: VehicleConfig, sim, waypoints_ned_m: np.ndarray, conditions: np.ndarray,
-                 payload_kg: np.ndarray, seed: int, propellers: str, *, waypoints_seed: int | None = None,
-                 vehicle_path: str = "", vehicle_sources: dict[str, str] | None = None,
-                 files: list[str] | None = None, **extra: Any) -> dict[str, Any]:
+def make_sidecar(
+    vehicle: VehicleConfig,
+    sim,
+    waypoints_ned_m: np.ndarray,
+    conditions: np.ndarray,
+    payload_kg: np.ndarray,
+    seed: int,
+    propellers: str,
+    *,
+    waypoints_seed: int | None = None,
+    vehicle_path: str = "",
+    vehicle_sources: dict[str, str] | None = None,
+    files: list[str] | None = None,
+    **extra: Any,
+) -> dict[str, Any]:
     conditions = np.asarray(conditions, dtype=np.int64)
     payload = np.broadcast_to(np.asarray(payload_kg, dtype=np.float64), (len(conditions),))
     flights = []
     for i, cond in enumerate(conditions):
-        flights.append({
-            "index": i,
-            "file": files[i] if files else None,
-            "propeller_conditions": [CONDITION_NAMES[c] for c in cond],
-            "faulty_propellers": [p + 1 for p in range(4) if cond[p] != 0],
-            "label": label_from_mask(cond != 0),
-            "payload_kg": float(payload[i]),
-            "total_mass_kg": float(vehicle.mass_kg + payload[i]),
-            "waypoints_ned_m": np.asarray(waypoints_ned_m[i]).tolist(),
-        })
+        flights.append(
+            {
+                "index": i,
+                "file": files[i] if files else None,
+                "propeller_conditions": [CONDITION_NAMES[c] for c in cond],
+                "faulty_propellers": [p + 1 for p in range(4) if cond[p] != 0],
+                "label": label_from_mask(cond != 0),
+                "payload_kg": float(payload[i]),
+                "total_mass_kg": float(vehicle.mass_kg + payload[i]),
+                "waypoints_ned_m": np.asarray(waypoints_ned_m[i]).tolist(),
+            }
+        )
     config = {
         "vehicle": to_mapping(vehicle),
         "vehicle_path": vehicle_path,

@@ -54,8 +54,11 @@ class SimConfig:
                 raise ConfigError(f"{name}: must be a positive integer, got {getattr(self, name)}")
         if self.physics_rate_hz < 250:
             raise ConfigError(f"physics_rate_hz: must be at least 250 Hz, got {self.physics_rate_hz}")
-        for name, outer in (("control_rate_hz", self.physics_rate_hz), ("position_rate_hz", self.control_rate_hz),
-                            ("log_rate_hz", self.physics_rate_hz)):
+        for name, outer in (
+            ("control_rate_hz", self.physics_rate_hz),
+            ("position_rate_hz", self.control_rate_hz),
+            ("log_rate_hz", self.physics_rate_hz),
+        ):
             if outer % getattr(self, name):
                 raise ConfigError(f"{name}: {getattr(self, name)} Hz must divide {outer} Hz")
         if not (self.duration_s > 0 and math.isfinite(self.duration_s)):
@@ -102,15 +105,24 @@ def _checked(propellers, shape: tuple[int, int]):
             raise ModelError(f"propeller model {type(propellers).__name__}: must return (thrust_n, torque_nm)")
         for name, arr in zip(("thrust_n", "torque_nm"), out):
             if np.shape(arr) != shape:
-                raise ModelError(f"propeller model {type(propellers).__name__}: {name} has shape {np.shape(arr)}, "
-                                 f"expected {shape}")
+                raise ModelError(
+                    f"propeller model {type(propellers).__name__}: {name} has shape {np.shape(arr)}, expected {shape}"
+                )
         return out
 
     return call
 
 
-def simulate(vehicle: VehicleConfig, waypoints_ned_m: np.ndarray, propellers, sim: SimConfig = SimConfig(), *,
-             payload_kg: np.ndarray | float = 0.0, seed=0, progress: bool = False) -> FlightLog:
+def simulate(
+    vehicle: VehicleConfig,
+    waypoints_ned_m: np.ndarray,
+    propellers,
+    sim: SimConfig = SimConfig(),
+    *,
+    payload_kg: np.ndarray | float = 0.0,
+    seed=0,
+    progress: bool = False,
+) -> FlightLog:
     """Simulate B flights through ``waypoints_ned_m`` (B, N, 3); see the module doc for seeds."""
     wps = np.asarray(waypoints_ned_m, dtype=np.float64)
     if wps.ndim != 3 or wps.shape[2] != 3 or wps.shape[1] < 1 or not np.all(np.isfinite(wps)):
@@ -219,17 +231,28 @@ def simulate(vehicle: VehicleConfig, waypoints_ned_m: np.ndarray, propellers, si
     # In place and by blocks of samples, so peak memory stays that of the logs themselves.
     block = sim.log_rate_hz  # one second of samples
     for j0 in range(0, T, block):
-        log_cmd[:, j0:j0 + block] = esc.omega_rad_s_to_cmd(log_cmd[:, j0:j0 + block])
+        log_cmd[:, j0 : j0 + block] = esc.omega_rad_s_to_cmd(log_cmd[:, j0 : j0 + block])
     wp_error = wps[np.arange(n)[:, None], wp_index]
     wp_error -= log_pos
-    log = {"pos_ned_m": log_pos, "vel_ned_m_s": log_vel, "q_world_body": log_q, "rates_frd_rad_s": log_rates,
-           "accel_frd_m_s2": log_accel, "motor_omega_rad_s": log_omega, "thrust_n": log_thrust, "torque_nm": log_torque,
-           "pwm_us": log_cmd, "waypoint_error_ned_m": wp_error}
+    log = {
+        "pos_ned_m": log_pos,
+        "vel_ned_m_s": log_vel,
+        "q_world_body": log_q,
+        "rates_frd_rad_s": log_rates,
+        "accel_frd_m_s2": log_accel,
+        "motor_omega_rad_s": log_omega,
+        "thrust_n": log_thrust,
+        "torque_nm": log_torque,
+        "pwm_us": log_cmd,
+        "waypoint_error_ned_m": wp_error,
+    }
 
     bad = ~np.all(np.isfinite(log["pos_ned_m"]), axis=(1, 2))
     if bad.any():
-        raise ModelError(f"simulate: flight(s) {np.flatnonzero(bad).tolist()} diverged (non-finite state); "
-                         "check the propeller model and the vehicle terms")
+        raise ModelError(
+            f"simulate: flight(s) {np.flatnonzero(bad).tolist()} diverged (non-finite state); "
+            "check the propeller model and the vehicle terms"
+        )
 
     roll, pitch, yaw = quat_to_euler(log["q_world_body"])
     if sim.attitude_noise_std_rad > 0:
@@ -239,7 +262,15 @@ def simulate(vehicle: VehicleConfig, waypoints_ned_m: np.ndarray, propellers, si
     time_s = np.arange(1, T + 1) / sim.log_rate_hz
     timestamp_us = BOOT_OFFSET_US + np.round(np.arange(1, T + 1) * (1e6 / sim.log_rate_hz)).astype(np.int64)
     return FlightLog(
-        time_s=time_s, timestamp_us=timestamp_us, roll_rad=roll, pitch_rad=pitch, yaw_rad=yaw,
-        motor_rpm=esc.cmd_to_rpm(log["pwm_us"]), battery_v=battery_v, battery_current_a=battery_a, waypoint_index=wp_index,
-        log_rate_hz=float(sim.log_rate_hz), **log,
+        time_s=time_s,
+        timestamp_us=timestamp_us,
+        roll_rad=roll,
+        pitch_rad=pitch,
+        yaw_rad=yaw,
+        motor_rpm=esc.cmd_to_rpm(log["pwm_us"]),
+        battery_v=battery_v,
+        battery_current_a=battery_a,
+        waypoint_index=wp_index,
+        log_rate_hz=float(sim.log_rate_hz),
+        **log,
     )
