@@ -88,18 +88,20 @@ class Priors:
 
     Defaults follow the assumption register (offline/sim/assumptions.py; a test keeps them in
     step): damaged-blade thrust loss 5-20 % (uniform: mean 0.125, std 0.045), torque-per-thrust
-    change of a damaged blade of either sign (std 0.06), healthy per-motor spread ±4-8 % (std 0.04;
-    real Crazyflies), CG offset up to a few mm (std 3 mm -> ``4·0.003/L`` in roll/pitch units), yaw
+    change of a damaged blade of either sign (std 0.10: the register's -10..+10 % and the +15..+25 %
+    that offline/propellers/faults.py's fixed signatures imply both lie within 2 std), healthy
+    per-motor spread ±4-8 % (std 0.04; real Crazyflies), CG offset of a built airframe whose
+    balance was never measured (std 2 mm -> ``4·0.002/L`` in roll/pitch units), yaw
     trim from motor tilt (std 0.02 of one rotor's drag torque). The noise floor (0.01) is the
     balance scatter of healthy 5 s windows on our simulator at 20 Hz.
     """
 
     loss_mean: float = 0.125
     loss_std: float = 0.045
-    torque_per_thrust_std: float = 0.06
+    torque_per_thrust_std: float = 0.10
     healthy_spread_std: float = 0.04
     healthy_torque_spread_std: float = 0.02  # torque coefficient spread beyond the speed spread
-    cg_offset_std_m: float = 0.003
+    cg_offset_std_m: float = 0.002
     yaw_trim_std: float = 0.02
     noise_floor: float = 0.01  # per-window balance noise never below this (snapshot sampling, lag)
     noise_inflation: float = 1.0  # calibrated on randomised flights (windows are not independent)
@@ -117,6 +119,51 @@ class Baseline:
     disturbance_mean: tuple[float, float, float] = (0.0, 0.0, 0.0)
     disturbance_std: tuple[float, float, float] | None = None
     healthy_spread_std: float | None = None
+    flights: int = 0
+
+    def to_dict(self) -> dict:
+        return {
+            "disturbance_mean": list(self.disturbance_mean),
+            "disturbance_std": None if self.disturbance_std is None else list(self.disturbance_std),
+            "healthy_spread_std": self.healthy_spread_std,
+            "flights": self.flights,
+        }
+
+    @classmethod
+    def from_dict(cls, d: dict, origin: str = "baseline") -> Baseline:
+        from monitor.errors import ConfigError
+
+        try:
+            mean = tuple(float(x) for x in d["disturbance_mean"])
+            std = None if d.get("disturbance_std") is None else tuple(float(x) for x in d["disturbance_std"])
+            spread = None if d.get("healthy_spread_std") is None else float(d["healthy_spread_std"])
+            flights = int(d.get("flights", 0))
+        except (KeyError, TypeError, ValueError) as exc:
+            raise ConfigError(f"{origin}: not a rotor-balance baseline ({exc!r})") from None
+        vals = list(mean) + list(std or []) + ([spread] if spread is not None else [])
+        if len(mean) != 3 or (std is not None and len(std) != 3) or not np.all(np.isfinite(vals)):
+            raise ConfigError(f"{origin}: disturbance_mean/std must be 3 finite numbers each")
+        if (std is not None and min(std) <= 0) or (spread is not None and spread <= 0):
+            raise ConfigError(f"{origin}: disturbance_std and healthy_spread_std must be > 0")
+        return cls(mean, std, spread, flights)
+
+
+# What a healthy baseline can still not pin down: the residual balance scatter between flights and
+# the rotor-to-rotor spread of a measured airframe (efficiency drift with battery and temperature).
+BASELINE_DISTURBANCE_FLOOR = 0.01
+BASELINE_SPREAD_STD = 0.01
+
+
+def baseline_from_flights(flight_z: list[np.ndarray]) -> Baseline:
+    """The airframe's balance from its healthy flights: ``flight_z`` holds each flight's window
+    balances z (n_windows, 3). Mean over flights; spread = flight-to-flight std, never below the floor."""
+    means = np.array([np.nanmean(np.asarray(z, dtype=np.float64).reshape(-1, 3), axis=0) for z in flight_z])
+    means = means[np.isfinite(means).all(axis=1)]
+    if len(means) == 0:
+        raise ValueError("baseline_from_flights: no flight with a usable window")
+    std = means.std(axis=0, ddof=1) if len(means) > 1 else np.zeros(3)
+    std = np.maximum(std, BASELINE_DISTURBANCE_FLOOR)
+    return Baseline(tuple(map(float, means.mean(axis=0))), tuple(map(float, std)), BASELINE_SPREAD_STD, len(means))
 
 
 def window_balance(
