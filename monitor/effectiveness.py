@@ -86,25 +86,35 @@ class RotorGeometry:
 class Priors:
     """Prior ranges, as standard deviations of the linear-Gaussian model (fractions of nominal).
 
-    Defaults follow the assumption register (offline/sim/assumptions.py; a test keeps them in
-    step): damaged-blade thrust loss 5-20 % (uniform: mean 0.125, std 0.045), torque-per-thrust
-    change of a damaged blade of either sign (std 0.10: the register's -10..+10 % and the +15..+25 %
-    that offline/propellers/faults.py's fixed signatures imply both lie within 2 std), healthy
-    per-motor spread ±4-8 % (std 0.04; real Crazyflies), CG offset of a built airframe whose
-    balance was never measured (std 2 mm -> ``4·0.002/L`` in roll/pitch units), yaw
-    trim from motor tilt (std 0.02 of one rotor's drag torque). The noise floor (0.01) is the
+    Damaged blades follow the assumption register (offline/sim/assumptions.py): thrust loss 5-20 %
+    (uniform: mean 0.125, std 0.045) and a torque-per-thrust change of either sign (std 0.10: the
+    register's -10..+10 % and the +15..+25 % that offline/propellers/faults.py's fixed signatures
+    imply both lie within 2 std).
+
+    The airframe is taken as nominal as its vehicle file says: rotors matched to 1 % and the CG
+    within 0.5 mm (``4·0.0005/L`` in roll/pitch units). That is what makes a single flight
+    decisive, and it is an assumption about the vehicle, not a measurement: real airframes spread
+    their motors by 4-8 % (CrazyPAD) and carry CG offsets of millimetres, each worth a 10-20 %
+    loss of one rotor. ``propwatch adapt`` measures them from the airframe's healthy flights and
+    passes a ``Baseline``; with ``Priors.unmeasured_airframe()`` the verdict hedges instead.
+    Yaw trim from motor tilt: std 0.02 of one rotor's drag torque. The noise floor (0.01) is the
     balance scatter of healthy 5 s windows on our simulator at 20 Hz.
     """
 
     loss_mean: float = 0.125
     loss_std: float = 0.045
     torque_per_thrust_std: float = 0.10
-    healthy_spread_std: float = 0.04
+    healthy_spread_std: float = 0.01
     healthy_torque_spread_std: float = 0.02  # torque coefficient spread beyond the speed spread
-    cg_offset_std_m: float = 0.002
+    cg_offset_std_m: float = 0.0005
     yaw_trim_std: float = 0.02
     noise_floor: float = 0.01  # per-window balance noise never below this (snapshot sampling, lag)
     noise_inflation: float = 1.0  # calibrated on randomised flights (windows are not independent)
+
+    @classmethod
+    def unmeasured_airframe(cls) -> Priors:
+        """An airframe nobody balanced or measured: motors spread 4 % (std), CG offset 2 mm (std)."""
+        return cls(healthy_spread_std=0.04, cg_offset_std_m=0.002)
 
     def disturbance_std(self, geometry: RotorGeometry) -> np.ndarray:
         rp = 4.0 * self.cg_offset_std_m / geometry.arm_m
