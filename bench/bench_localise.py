@@ -18,8 +18,7 @@ import time
 
 import numpy as np
 
-from monitor.effectiveness import HYPOTHESES, HypothesisBank, Priors, RotorGeometry, credible_set, window_balance
-from monitor.effectiveness import Evidence
+from monitor.effectiveness import HYPOTHESES, Evidence, HypothesisBank, Priors, RotorGeometry, credible_set, window_balance
 from monitor.features import compute_features, sliding_windows
 from monitor.labels import LABEL_TABLE
 from monitor.model import Classifier
