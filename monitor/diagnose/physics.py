@@ -110,3 +110,20 @@ def physics_evidence(
         windows=int(ev.windows),
         fault_probability=[round(float(x), 4) for x in v.fault_probability()],
     ), None
+
+
+def predict_table(table: FlightTable, vehicle, priors: Priors | None = None, baseline: Baseline | None = None) -> dict:
+    """A scoring predictor: the most probable set, the credible set and P(faulty) per rotor (PX4 order).
+
+    A flight without usable evidence gets ``faulty_propellers: None`` and the reason.
+    """
+    ev, why_not = physics_evidence(table, vehicle, priors, baseline)
+    if ev is None:
+        return {"faulty_propellers": None, "hypotheses": [], "fault_probability": None, "reason": why_not}
+    return {
+        "faulty_propellers": ev.hypotheses[0]["faulty_propellers"],
+        "hypotheses": ev.hypotheses,
+        "fault_probability": ev.fault_probability,
+        "rotor_effectiveness": ev.rotor_effectiveness,
+        "rotor_effectiveness_std": ev.rotor_effectiveness_std,
+    }
