@@ -10,10 +10,18 @@ from __future__ import annotations
 
 import numpy as np
 
-from offline.propellers.faults import FaultSignature
-
 NOISE_BLOCK_STEPS = 256  # flutter noise is drawn for this many steps at once (one RNG call, not one per step)
 WRAP_EVERY_STEPS = 256  # blade angles wrapped to [0, 2π) this often: < 800 rad, so the float32 sine errs < 1e-4
+
+
+def per_rotor(signatures, conditions: np.ndarray, attr: str) -> np.ndarray:
+    """(B, 4) float64 values of ``attr``: ``signatures`` is a table indexed by condition code (0, 1, 2) or a
+    (B, 4) grid with one signature per rotor."""
+    if isinstance(signatures, np.ndarray) and signatures.dtype == object:
+        if signatures.shape != np.shape(conditions):
+            raise ValueError(f"signatures: grid {signatures.shape} does not match conditions {np.shape(conditions)}")
+        return np.array([[getattr(x, attr) for x in row] for row in signatures], dtype=np.float64)
+    return np.array([getattr(s, attr) for s in signatures], dtype=np.float64)[conditions]
 
 
 class FaultVibration:
@@ -25,21 +33,19 @@ class FaultVibration:
     rotors only.
     """
 
-    def __init__(
-        self, conditions: np.ndarray, signatures: tuple[FaultSignature, ...], omega_max_rad_s: float, rng: np.random.Generator
-    ):
+    def __init__(self, conditions: np.ndarray, signatures, omega_max_rad_s: float, rng: np.random.Generator):
         cond = np.asarray(conditions)
         self._rng = rng
         self._inv_omega_max2 = 1.0 / float(omega_max_rad_s) ** 2
 
-        def per_rotor(attr: str) -> np.ndarray:
-            return np.array([getattr(s, attr) for s in signatures])[cond]
+        def rotor_values(attr: str) -> np.ndarray:
+            return per_rotor(signatures, cond, attr)
 
-        self._rip_t, self._rip_q = per_rotor("ripple_1p_thrust"), per_rotor("ripple_1p_torque")
-        flt = np.stack([per_rotor("flutter_thrust_std"), per_rotor("flutter_torque_std")]).reshape(2, -1)
+        self._rip_t, self._rip_q = rotor_values("ripple_1p_thrust"), rotor_values("ripple_1p_torque")
+        flt = np.stack([rotor_values("flutter_thrust_std"), rotor_values("flutter_torque_std")]).reshape(2, -1)
         self._flt_idx = np.flatnonzero(np.any(flt > 0, axis=0))
         self._flt_std = flt[:, self._flt_idx]
-        self._flt_tau = per_rotor("flutter_time_constant_s").reshape(-1)[self._flt_idx]
+        self._flt_tau = rotor_values("flutter_time_constant_s").reshape(-1)[self._flt_idx]
         self._has_flutter = bool(self._flt_idx.size)
         self.active = bool(self._has_flutter or np.any(self._rip_t > 0) or np.any(self._rip_q > 0))
         self._angle = np.zeros(cond.shape)

@@ -30,7 +30,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from monitor.vehicle import GRAVITY_M_S2, VehicleConfig
-from offline.sim.quat import rotate_body_to_world, rotate_world_to_body, state_products_map
+from offline.sim.quat import rotate_body_to_world, rotate_world_to_body, rotation_matrices, state_products_map
 
 
 @dataclass
@@ -200,7 +200,16 @@ class Dynamics:
         self.last_total_thrust_n = self._total_thrust
 
         # Linear, with the attitude at the start of the step: dv = dt (R f_body / m + g).
-        if self.has_drag:
+        if self.has_drag and self.per_flight is not None:
+            # The same formula through one rotation matrix per flight (np.cross is slow on small batches).
+            q, v = s.q_world_body, s.vel_ned_m_s
+            rot = rotation_matrices(q)
+            f_body = self.force_body_n
+            f_body[:, :2] = 0.0
+            f_body[:, 2] = -out[:, 10]
+            f_body -= self.drag * np.matmul((v - self.wind_ned_m_s)[:, None, :], rot)[:, 0]
+            dv = np.matmul(rot, f_body[:, :, None])[:, :, 0] * (self.inv_mass * dt)
+        elif self.has_drag:
             q, v = s.q_world_body, s.vel_ned_m_s
             f_body = self.force_body_n
             f_body[:, :2] = 0.0
