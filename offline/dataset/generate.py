@@ -260,7 +260,7 @@ def simulate_randomised(
         for r, c in enumerate(row):
             grid[b, r] = NORMAL if c == 0 else f.signature(r, "bent" if c == 1 else "cracked")
     seeds = np.array([flight_sim_seed(spec.seed, i) for i in idx])
-    props = build_propellers(vehicle, cond, kind="quadratic", rng_seed=int(seeds[0]), rotor_signatures=grid)
+    props = build_propellers(vehicle, cond, kind="quadratic", rng_seed=seeds, rotor_signatures=grid)
     flog = simulate(
         vehicle,
         wps,

@@ -33,9 +33,14 @@ class FaultVibration:
     rotors only.
     """
 
-    def __init__(self, conditions: np.ndarray, signatures, omega_max_rad_s: float, rng: np.random.Generator):
+    def __init__(self, conditions: np.ndarray, signatures, omega_max_rad_s: float, rng):
+        """``rng``: one Generator for the batch, or a sequence of B (one per flight, so a flight's vibration
+        does not depend on the batch it is simulated in)."""
         cond = np.asarray(conditions)
         self._rng = rng
+        self._per_flight_rng = not isinstance(rng, np.random.Generator)
+        if self._per_flight_rng and len(rng) != cond.shape[0]:
+            raise ValueError(f"rng: {len(rng)} generators for {cond.shape[0]} flights")
         self._inv_omega_max2 = 1.0 / float(omega_max_rad_s) ** 2
 
         def rotor_values(attr: str) -> np.ndarray:
@@ -58,8 +63,23 @@ class FaultVibration:
 
     def reset(self) -> None:
         # Random blade phase per rotor: rotors are not synchronised in flight.
-        self._angle = self._rng.uniform(0.0, 2.0 * np.pi, self._angle.shape)
+        if self._per_flight_rng:
+            self._angle = np.stack([g.uniform(0.0, 2.0 * np.pi, self._angle.shape[1:]) for g in self._rng])
+        else:
+            self._angle = self._rng.uniform(0.0, 2.0 * np.pi, self._angle.shape)
         self._flutter[:] = 0.0
+
+    def _noise_block(self) -> np.ndarray:
+        shape = (NOISE_BLOCK_STEPS,) + self._flutter.shape
+        if not self._per_flight_rng:
+            return self._rng.standard_normal(shape)
+        # Fluttering rotors are sorted by flight, so each flight's columns are one contiguous run.
+        flight = self._flt_idx // self._angle.shape[1]
+        out = np.empty(shape)
+        for b in np.unique(flight):
+            cols = np.flatnonzero(flight == b)
+            out[:, :, cols] = self._rng[b].standard_normal((NOISE_BLOCK_STEPS, 2, cols.size))
+        return out
 
     def step(self, omega_rad_s: np.ndarray, dt_s: float) -> tuple[np.ndarray, np.ndarray]:
         """Advance by dt; returns (thrust_factor, torque_factor), each shaped like omega, mean 1."""
@@ -75,7 +95,7 @@ class FaultVibration:
                 a = np.exp(-dt_s / self._flt_tau)
                 self._decay_dt, self._decay = dt_s, (a, np.sqrt(1.0 - a * a))
             if self._noise_pos >= len(self._noise):
-                self._noise = self._rng.standard_normal((NOISE_BLOCK_STEPS,) + self._flutter.shape)
+                self._noise = self._noise_block()
                 self._noise_pos = 0
             a, b = self._decay
             self._flutter *= a
