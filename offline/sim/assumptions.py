@@ -167,8 +167,8 @@ def _default_register() -> tuple[Assumption, ...]:
             0.08,
             0.0,
             "half-width of the per-motor speed spread (each motor draws uniform in +-spread): healthy CrazyPAD "
-            "Crazyflies spread their hover motor commands by 4-8 % (offline/crazypad calibration); ESCs and motors "
-            "of one batch differ alike.",
+            "Crazyflies hold static hover shares of omega^2 such as 1.083 0.864 1.143 0.910 (offline/crazypad/README.md, "
+            "E8), i.e. about +-4-7 % in speed; issue 12 quotes +-4-8 %. ESCs and motors of one batch differ alike.",
             group="healthy airframe",
         ),
         Assumption(
@@ -204,8 +204,9 @@ def _default_register() -> tuple[Assumption, ...]:
             0.1,
             0.7,
             0.0,
-            "body-axis linear (rotor) drag; the fixed vehicle has none, so wind does nothing there. Faessler et al. "
-            "2018 (RA-L, rotor drag) identify ~0.3-0.5 N/(m/s) per kg-class quad; z is the same order.",
+            "body-axis linear (rotor) drag; the fixed vehicle has none, so wind does nothing there. Rotor drag of "
+            "a few tenths of (m/s^2)/(m/s) is reported for small quads (e.g. Faessler et al. 2018, RA-L), i.e. "
+            "0.3-0.7 N/(m/s) at 1.5 kg; not measured for this airframe.",
             (3,),
             group="healthy airframe",
         ),
@@ -278,18 +279,53 @@ def _default_register() -> tuple[Assumption, ...]:
             f"MC_ROLLRATE_D (= pitch), default 0.003, doc range 0-0.01 ({PX4_DOCS}).",
             group=gains,
         ),
-        Assumption("mc_yawrate_p", 0.12, 0.30, 0.2, f"MC_YAWRATE_P, default 0.2, doc range 0-0.6 ({PX4_DOCS}).", group=gains),
+        Assumption(
+            "mc_yawrate_p",
+            0.12,
+            0.30,
+            0.2,
+            f"MC_YAWRATE_P, default 0.2 ({PX4_DOCS}); a band around the default (documented min 0).",
+            group=gains,
+        ),
         Assumption("mc_yawrate_i", 0.05, 0.20, 0.1, f"MC_YAWRATE_I, default 0.1, doc min 0 ({PX4_DOCS}).", group=gains),
-        Assumption("mc_roll_p", 5.0, 8.0, 6.5, f"MC_ROLL_P (= pitch), default 6.5, doc range 0-8 ({PX4_DOCS}).", group=gains),
-        Assumption("mc_yaw_p", 2.0, 4.0, 2.8, f"MC_YAW_P, default 2.8, doc range 0-5 ({PX4_DOCS}).", group=gains),
         Assumption(
-            "mpc_xy_vel_p_acc", 1.4, 2.6, 1.8, f"MPC_XY_VEL_P_ACC, default 1.8, doc range 1.2-5 ({PX4_DOCS}).", group=gains
+            "mc_roll_p",
+            5.0,
+            8.0,
+            6.5,
+            f"MC_ROLL_P (= pitch), default 6.5, documented 0-8 in mc_att_control_params.c ({PX4_DOCS}).",
+            group=gains,
         ),
         Assumption(
-            "mpc_xy_vel_i_acc", 0.2, 0.8, 0.4, f"MPC_XY_VEL_I_ACC, default 0.4, doc range 0-60 ({PX4_DOCS}).", group=gains
+            "mc_yaw_p",
+            2.0,
+            4.0,
+            2.8,
+            f"MC_YAW_P, default 2.8 ({PX4_DOCS}); a band around the default (documented min 0).",
+            group=gains,
         ),
-        Assumption("mpc_z_vel_p_acc", 3.0, 6.0, 4.0, f"MPC_Z_VEL_P_ACC, default 4, doc range 2-15 ({PX4_DOCS}).", group=gains),
-        Assumption("mpc_z_vel_i_acc", 1.0, 3.0, 2.0, f"MPC_Z_VEL_I_ACC, default 2, doc range 0.2-3 ({PX4_DOCS}).", group=gains),
+        Assumption(
+            "mpc_xy_vel_p_acc",
+            1.4,
+            2.6,
+            1.8,
+            f"MPC_XY_VEL_P_ACC, default 1.8 ({PX4_DOCS}); a band around the default.",
+            group=gains,
+        ),
+        Assumption(
+            "mpc_xy_vel_i_acc",
+            0.2,
+            0.8,
+            0.4,
+            f"MPC_XY_VEL_I_ACC, default 0.4 ({PX4_DOCS}); a band around the default.",
+            group=gains,
+        ),
+        Assumption(
+            "mpc_z_vel_p_acc", 3.0, 6.0, 4.0, f"MPC_Z_VEL_P_ACC, default 4 ({PX4_DOCS}); a band around the default.", group=gains
+        ),
+        Assumption(
+            "mpc_z_vel_i_acc", 1.0, 3.0, 2.0, f"MPC_Z_VEL_I_ACC, default 2 ({PX4_DOCS}); a band around the default.", group=gains
+        ),
         # Sensors.
         Assumption(
             "gyro_bias_frd_rad_s",
