@@ -28,6 +28,7 @@ REQUIRED = [
         )
     ),
     "motor_efficiency_spread_frac",
+    "healthy_torque_per_thrust_spread_frac",
     "cg_offset_frd_m",
     "arm_position_error_m",
     "inertia_error_frac",

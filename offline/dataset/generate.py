@@ -248,7 +248,6 @@ def simulate_randomised(
     Everything per flight comes from (spec.seed, index): a shard of indices gives the same flights as the whole.
     """
     from offline.propellers import build_propellers
-    from offline.propellers.faults import NORMAL
     from offline.sim.assumptions import draw_flights
     from offline.sim.perflight import PerFlightTerms
     from offline.sim.simulator import simulate
@@ -258,7 +257,7 @@ def simulate_randomised(
     grid = np.empty((len(idx), 4), dtype=object)
     for b, (f, row) in enumerate(zip(phys, cond)):
         for r, c in enumerate(row):
-            grid[b, r] = NORMAL if c == 0 else f.signature(r, "bent" if c == 1 else "cracked")
+            grid[b, r] = f.healthy_signature(r) if c == 0 else f.signature(r, "bent" if c == 1 else "cracked")
     seeds = np.array([flight_sim_seed(spec.seed, i) for i in idx])
     props = build_propellers(vehicle, cond, kind="quadratic", rng_seed=seeds, rotor_signatures=grid)
     flog = simulate(

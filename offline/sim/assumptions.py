@@ -172,6 +172,16 @@ def _default_register() -> tuple[Assumption, ...]:
             group="healthy airframe",
         ),
         Assumption(
+            "healthy_torque_per_thrust_spread_frac",
+            -0.03,
+            0.03,
+            0.0,
+            "per-rotor drag torque per unit thrust of healthy props: props of one batch differ in pitch and finish "
+            "by a few %, which moves the yaw balance as damage does; not measured here.",
+            (4,),
+            group="healthy airframe",
+        ),
+        Assumption(
             "cg_offset_frd_m",
             -0.01,
             0.01,
@@ -504,6 +514,11 @@ class FlightPhysics:
             flutter_torque_std=v("flutter_thrust_std_frac") * 2.0 / 3.0,
             flutter_time_constant_s=v("flutter_time_constant_s"),
         )
+
+    def healthy_signature(self, rotor: int) -> FaultSignature:
+        """A healthy rotor: kF·ω², and kτ·ω² times its drawn torque-per-thrust spread."""
+        c = float(np.asarray(self.values["healthy_torque_per_thrust_spread_frac"])[rotor])
+        return FaultSignature(torque_gain_low=c, torque_gain_high=c)
 
     def motor_efficiency(self) -> np.ndarray:
         """(4,) speed scale per motor: 1 + uniform(-1, 1) x the drawn spread."""
