@@ -148,6 +148,11 @@ def test_same_spin_pair_without_yaw_signature_is_reported_ambiguous():
     rpm, rates = steady_window(u)
     ev = Evidence()
     ev.add(*window_balance(rpm, rates, GEOM, RATE_HZ), Priors())
-    v = HypothesisBank(Priors(), GEOM).posterior(ev)
-    names = [HYPOTHESES[k] for k in credible_set(v, 0.95)]
+    v = HypothesisBank(Priors(), GEOM).posterior(ev, set_prior=np.full(16, 1 / 16))  # evidence alone
+    names = [HYPOTHESES[k] for k in credible_set(v, 0.99)]
     assert () in names and (1, 2) in names and (3, 4) in names  # healthy, or either same-spin pair
+    ll = dict(zip(HYPOTHESES, v.log_likelihood))
+    # each same-spin pair explains the balance better than any single rotor or cross-spin pair does
+    assert min(ll[(1, 2)], ll[(3, 4)]) > max(ll[(1,)], ll[(2,)], ll[(3,)], ll[(4,)], ll[(1, 3)], ll[(2, 4)])
+    # with the monitor's prior (healthy as likely as all damage together) the verdict stays healthy
+    assert HYPOTHESES[HypothesisBank(Priors(), GEOM).posterior(ev).best] == ()
