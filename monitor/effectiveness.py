@@ -118,8 +118,9 @@ class Priors:
 
     @classmethod
     def unmeasured_airframe(cls) -> Priors:
-        """An airframe nobody balanced or measured: motors spread 4 % (std), CG offset 2 mm (std)."""
-        return cls(healthy_spread_std=0.04, cg_offset_std_m=0.002)
+        """An airframe nobody balanced or measured, at the register's ranges: motor speed spread
+        uniform in ±4-8 % (thrust ±8-16 %: std 0.07) and CG uniform in ±1 cm (std 5.8 mm)."""
+        return cls(healthy_spread_std=0.07, cg_offset_std_m=0.0058)
 
     def disturbance_std(self, geometry: RotorGeometry) -> np.ndarray:
         rp = 4.0 * self.cg_offset_std_m / geometry.arm_m
