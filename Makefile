@@ -6,7 +6,7 @@ STAMP := $(VENV)/.installed
 DATA ?= ../shared/data
 OUT ?= out
 
-.PHONY: setup demo test lint bench models propellers classifier crazypad clean dataset-randomised card card-text
+.PHONY: setup demo test lint bench models propellers classifier crazypad clean calibrate-physics evaluate-physics dataset-randomised card card-text
 
 $(STAMP): pyproject.toml
 	$(PY) -m venv $(VENV)
@@ -79,3 +79,11 @@ crazypad: $(STAMP)
 
 clean:
 	rm -rf $(VENV) $(OUT) .pytest_cache
+
+# Credible-set coverage of the moment-balance verdict on randomised flights of OUR simulator (about 1 min).
+calibrate-physics: $(STAMP)
+	$(BIN)/python -m offline.physics_calibration --json $(OUT)/physics-calibration.json
+
+# Localisation on our paper sets (physics, CNN, omega^2-share side by side; a few minutes).
+evaluate-physics: $(STAMP)
+	$(BIN)/python bench/bench_localise.py --json $(OUT)/localise-ours.json
