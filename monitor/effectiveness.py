@@ -91,8 +91,10 @@ class RotorGeometry:
 class Priors:
     """Prior ranges, as standard deviations of the linear-Gaussian model (fractions of nominal).
 
-    Damaged blades follow the assumption register (offline/sim/assumptions.py): thrust loss 5-20 %
-    (uniform: mean 0.125, std 0.045) and a torque-per-thrust change of either sign (std 0.10: the
+    Damaged blades follow the assumption register (offline/sim/assumptions.py): thrust loss at hover
+    speed (the register's low- and high-speed ranges of bent and cracked blades, read at the paper
+    quad's hover, s² = 0.26: mean 0.07, std 0.025, 90 % within 3-11 %; the std is widened to 0.035
+    for heavier vehicles hovering faster) and a torque-per-thrust change of either sign (std 0.10: the
     register's -10..+10 % and the +15..+25 % that offline/propellers/faults.py's fixed signatures
     imply both lie within 2 std).
 
@@ -106,8 +108,8 @@ class Priors:
     balance scatter of healthy 5 s windows on our simulator at 20 Hz.
     """
 
-    loss_mean: float = 0.125
-    loss_std: float = 0.045
+    loss_mean: float = 0.07
+    loss_std: float = 0.035
     torque_per_thrust_std: float = 0.10
     healthy_spread_std: float = 0.01
     healthy_torque_spread_std: float = 0.02  # torque coefficient spread beyond the speed spread

@@ -7,7 +7,8 @@ sets hold the truth in at least 95 % of randomised flights (split-conformal in s
 flights the verdict never saw, and never on the evaluation-only simulator).
 
 Two airframe regimes, each with its own register:
-- ``nominal``: the register with the airframe's own terms (CG, motor spread, arm errors) at their
+- ``nominal``: the register with the airframe's own terms (CG, motor spread, arm errors, per-ESC offset,
+  healthy props' torque spread) at their
   nominal values: the vehicle is as its file says; every fault, sensor, wind, gain, lag and battery
   term drawn;
 - ``unmeasured``: the whole register, with ``Priors.unmeasured_airframe()``.
@@ -29,7 +30,13 @@ from monitor.vehicle import DEFAULT_VEHICLE, load_vehicle
 from offline.dataset.generate import DatasetSpec, generate
 from offline.sim.assumptions import REGISTER
 
-AIRFRAME_TERMS = ("cg_offset_frd_m", "motor_efficiency_spread_frac", "arm_position_error_m")
+AIRFRAME_TERMS = (
+    "cg_offset_frd_m",
+    "motor_efficiency_spread_frac",
+    "arm_position_error_m",
+    "esc_offset_rpm",
+    "healthy_torque_per_thrust_spread_frac",
+)
 INFLATIONS = (1.0, 1.5, 2.0, 3.0, 4.0, 6.0)
 WARMUP_STEPS = 100
 TARGET_COVERAGE = 0.95
