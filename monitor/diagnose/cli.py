@@ -34,9 +34,9 @@ from monitor.errors import PropwatchError
 from monitor.esc import EscCurve
 from monitor.logs import read_log
 from monitor.model import Classifier, choose_esc
-from monitor.vehicle import REPO_ROOT
+from monitor.resources import shipped
 
-DEFAULT_MODEL = REPO_ROOT / "models" / "classifier.onnx"
+DEFAULT_MODEL = shipped("classifier.onnx")
 
 
 def default_model(vehicle_yaml: str | None) -> Path:
@@ -47,7 +47,7 @@ def default_model(vehicle_yaml: str | None) -> Path:
     envelope checks then say whether the log fits it.
     """
     if vehicle_yaml:
-        own = REPO_ROOT / "models" / f"{Path(vehicle_yaml).stem}-classifier.onnx"
+        own = shipped(f"{Path(vehicle_yaml).stem}-classifier.onnx")
         if own.is_file():
             return own
     return DEFAULT_MODEL

@@ -22,11 +22,12 @@ from pathlib import Path
 import numpy as np
 
 from monitor.errors import LogFormatError
-from monitor.vehicle import REPO_ROOT, load_vehicle, load_vehicle_with_sources
+from monitor.resources import shipped
+from monitor.vehicle import load_vehicle, load_vehicle_with_sources
 from offline.crazypad.data import DEFAULT_ROOT, load_manifest, select
 
-DEFAULT_VEHICLE = REPO_ROOT / "models" / "crazyflie.yaml"
-SHIPPED_MODEL = REPO_ROOT / "models" / "crazyflie-classifier.onnx"
+DEFAULT_VEHICLE = shipped("crazyflie.yaml")
+SHIPPED_MODEL = shipped("crazyflie-classifier.onnx")
 
 
 def build_parser() -> argparse.ArgumentParser:
