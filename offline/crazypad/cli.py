@@ -42,9 +42,11 @@ def build_parser() -> argparse.ArgumentParser:
         if name != "analyse":
             s.add_argument("--out", required=name == "run", default=None, help="output folder")
         if name == "run":
-            s.add_argument("--flights-per-label", type=int, default=20)
-            s.add_argument("--epochs", type=int, default=8)
-            s.add_argument("--seed", type=int, default=0)
+            s.add_argument(
+                "--flights-per-label", type=int, default=20, help="simulated flights per label for training (default 20)"
+            )
+            s.add_argument("--epochs", type=int, default=8, help="training epochs (default 8)")
+            s.add_argument("--seed", type=int, default=0, help="seed of simulation and training (default 0)")
             s.add_argument("--ship", action="store_true", help=f"copy the calibrated model to {SHIPPED_MODEL}")
     return p
 
