@@ -1,21 +1,29 @@
 """``propwatch diagnose LOG [LOG...] [--json] [--report DIR]``.
 
-Output with ``--json`` (stdout), for one LOG::
+Numbering, one for every output (text, HTML, PNG, JSON): propellers are in PX4
+quad-X order (1 front-right CCW, 2 rear-left CCW, 3 front-left CW, 4 rear-right
+CW); ``label`` is 1..16 over PX4 rotor sets (1 none, 2-5 rotor 1..4 alone, 6-11
+pairs, 12-15 triples, 16 all; monitor/labels.py). Each rotor is shown by the
+vehicle's own name with its PX4 number beside it, e.g. CrazyPAD's
+``M3 (PX4 rotor 2)``.
+
+Output with ``--json`` (stdout), for one LOG (every key: docs/diagnose-json.md)::
 
     {"log": PATH,
-     "verdict": {"label": N, "faulty_propellers": [...], "fault_probability": [p1, p2, p3, p4]} | null,
+     "verdict": {"label": N, "faulty_propellers": [PX4 numbers], "faulty_names": [...],
+                 "fault_probability": [p1, p2, p3, p4]} | null,
      "windows": n, "warnings": [...], "reason": null | "why there is no verdict",
-     "propellers": [{"propeller": 1, "name": "M1", "fault_probability": p, "faulty": bool}, ...],
+     "propellers": [{"propeller": 1, "px4_rotor": 1, "name": "M1", "fault_probability": p, "faulty": bool}, ...],
      "label_probability": [16 values] | null,
      "airborne_segments": [{"start_boot_s", "stop_boot_s", "steps"}, ...],
      "timeline": {"t_boot_s": [...], "fault_probability": [[p1..p4], ...], "label": [...]},
      "hop_steps": k,
-     "envelope": {"airborne_mean_rpm", "trained_mean_rpm", "rpm_ratio", "large_attitude_fraction"}}
+     "envelope": {"airborne_mean_rpm", "trained_mean_rpm", "rpm_ratio", "rpm_z", "large_attitude_fraction"}}
 
 For several LOGs: ``{"results": [one object as above per LOG, in order]}``;
 a log that cannot be read appears as ``{"log": PATH, "error": "..."}``.
-Propellers are in PX4 order; ``name`` is the vehicle's own numbering. Times are
-seconds on the autopilot's boot clock; a timeline point is the end of its window.
+Times are seconds on the autopilot's boot clock; a timeline point is the end of
+its window. Floats are rounded to 6 decimals.
 
 Exit code: 0 every log got a verdict; 1 some log got no verdict (the reason
 says why: outside the model's envelope, no airborne flight, ...); 2 some log
@@ -29,7 +37,7 @@ import json
 import sys
 from pathlib import Path
 
-from monitor.diagnose.engine import Diagnosis, diagnose_table
+from monitor.diagnose.engine import Diagnosis, describe_label, diagnose_table, rotor_name, round_floats
 from monitor.errors import PropwatchError
 from monitor.esc import EscCurve
 from monitor.logs import read_log
@@ -91,22 +99,14 @@ def diagnose_file(path: str, clf: Classifier, esc: EscCurve, fmt: str | None, ho
 
 def format_text(d: Diagnosis) -> str:
     lines = [f"== {d.source}"]
+    names = [p["name"] for p in d.propellers]
     if d.verdict is None:
         lines.append(f"no verdict: {d.reason}")
     else:
-        faulty = d.verdict["faulty_propellers"]
-        lines.append(
-            f"verdict: label {d.verdict['label']} ("
-            + (
-                "no faulty propeller"
-                if not faulty
-                else "faulty propeller(s) " + ", ".join(d.propellers[i - 1]["name"] for i in faulty)
-            )
-            + f"), from {d.windows} windows"
-        )
+        lines.append(f"verdict: {describe_label(d.verdict['label'], names)}, from {d.windows} windows")
         for p in d.propellers:
             lines.append(
-                f"  propeller {p['propeller']} ({p['name']}): P(faulty) = {p['fault_probability']:.3f}"
+                f"  {rotor_name(p['name'], p['propeller'])}: P(faulty) = {p['fault_probability']:.3f}"
                 + ("  <- FAULTY" if p["faulty"] else "")
             )
     for s in d.segments:
@@ -143,7 +143,7 @@ def main(argv: list[str] | None = None) -> int:
             print(format_text(d))
     if args.json:
         out = results[0] if len(results) == 1 else {"results": results}
-        json.dump(out, sys.stdout, allow_nan=False)
+        json.dump(round_floats(out), sys.stdout, allow_nan=False)
         sys.stdout.write("\n")
     return code
 
