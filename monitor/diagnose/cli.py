@@ -137,7 +137,8 @@ def main(argv: list[str] | None = None) -> int:
         if args.report:
             from monitor.diagnose.report import write_report
 
-            write_report(d, table, Path(args.report))
+            page = write_report(d, table, Path(args.report))
+            print(f"report: {page} and {page.with_suffix('.png')}", file=sys.stderr)
         results.append(d.to_json())
         if not args.json:
             print(format_text(d))

@@ -83,8 +83,13 @@ def rotor_name(name: str, px4_rotor: int) -> str:
 def describe_label(label: int, names) -> str:
     """``label 3: M3 (PX4 rotor 2) faulty``; labels are PX4 rotor sets (monitor.labels)."""
     faulty = LABEL_TABLE[label]
-    what = ", ".join(rotor_name(names[i - 1], i) for i in faulty) + " faulty" if faulty else "no faulty propeller"
-    return f"label {label}: {what}"
+    if not faulty:
+        return f"label {label}: no faulty propeller"
+    if all(names[i - 1] == str(i) for i in faulty):  # the vehicle numbers its rotors as PX4 does
+        what = ("propeller " if len(faulty) == 1 else "propellers ") + ", ".join(map(str, faulty))
+    else:
+        what = ", ".join(rotor_name(names[i - 1], i) for i in faulty)
+    return f"label {label}: {what} faulty"
 
 
 def round_floats(obj, digits: int = 6):
