@@ -28,3 +28,26 @@ def models_dir() -> Path:
 def shipped(name: str) -> Path:
     """Path of one shipped artefact (``"classifier.onnx"``, ``"crazyflie.yaml"``, ``"propellers"``)."""
     return models_dir() / name
+
+
+def vehicles_for_cmd_unit(unit: str) -> list[Path]:
+    """Shipped vehicle YAMLs whose ESC curve takes motor commands in ``unit`` (and that ship their own classifier)."""
+    from monitor.errors import PropwatchError
+    from monitor.vehicle import load_vehicle
+
+    found = []
+    for path in sorted(models_dir().glob("*.yaml")):
+        try:
+            if load_vehicle(path).esc.cmd_unit == unit and path.with_name(f"{path.stem}-classifier.onnx").is_file():
+                found.append(path)
+        except PropwatchError:
+            continue
+    return found
+
+
+def display_path(path: Path) -> str:
+    """``models/crazyflie.yaml`` in a checkout (what a user types from its root); the full path when installed."""
+    try:
+        return str(path.relative_to(REPO_ROOT))
+    except ValueError:
+        return str(path)

@@ -127,9 +127,13 @@ def envelope_checks(
     figures = {} if figures is None else figures
     unit = table.extras.get("motor_cmd_unit")
     if esc is not None and unit is not None and unit != esc.cmd_unit:
+        from monitor.resources import display_path, vehicles_for_cmd_unit
+
+        fits = [f"--vehicle {display_path(p)}" for p in vehicles_for_cmd_unit(unit)]
         return warnings, (
             f"vehicle outside the model's envelope: its motor commands are in '{unit}' but the model's "
             f"ESC curve takes '{esc.cmd_unit}' (another class of vehicle); use a model trained for it"
+            + (f": try {' or '.join(fits)}" if fits else "")
         )
     air = table.airborne
     if not air.any():
