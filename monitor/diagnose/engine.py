@@ -36,6 +36,7 @@ RPM_RATIO_WARN = (0.85, 1.15)
 RPM_RATIO_REFUSE = (0.6, 1.6)
 # The paper's flights are gentle; beyond this attitude the model has not been trained.
 LARGE_ATTITUDE_RAD = np.deg2rad(45.0)
+QUADROTOR = "MAV_TYPE_QUADROTOR"  # the one vehicle type the models are for (pymavlink's MAV_TYPE name)
 RPM_FEATURES = ("rpm_1", "rpm_2", "rpm_3", "rpm_4", "rpm_mean")
 
 
@@ -134,6 +135,11 @@ def envelope_checks(
             f"vehicle outside the model's envelope: its motor commands are in '{unit}' but the model's "
             f"ESC curve takes '{esc.cmd_unit}' (another class of vehicle); use a model trained for it"
             + (f": try {' or '.join(fits)}" if fits else "")
+        )
+    vehicle_type = table.extras.get("vehicle_type", "")
+    if vehicle_type and not vehicle_type.startswith(QUADROTOR + " "):
+        return warnings, (
+            f"not a quad-X multicopter: the log says {vehicle_type}; the model knows four rotors in PX4 quad-X order"
         )
     air = table.airborne
     if not air.any():
