@@ -24,6 +24,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "calibrate": ("offline.calibrate.cli", "fit model extensions to measured flights"),
     "crazypad": ("offline.crazypad.cli", "sim-to-real experiment on CrazyPAD"),
     "diagnose": ("monitor.diagnose.cli", "diagnose recorded flight logs"),
+    "inspect": ("monitor.inspect_cli", "what propwatch read from a log: messages, rates, gaps, motors, CSV"),
     "monitor": ("monitor.daemon.cli", "run the onboard monitor daemon"),
     "replay": ("monitor.replay", "replay a .tlog as if it were PX4"),
 }
