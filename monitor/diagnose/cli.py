@@ -42,9 +42,11 @@ from monitor.errors import PropwatchError
 from monitor.esc import EscCurve
 from monitor.logs import read_log
 from monitor.model import Classifier, choose_esc
+from monitor.progress import bar
 from monitor.resources import shipped
 
 DEFAULT_MODEL = shipped("classifier.onnx")
+BIG_LOG_BYTES = 1_000_000  # a single log this large takes seconds to read: show a bar
 
 
 def default_model(vehicle_yaml: str | None) -> Path:
@@ -124,13 +126,20 @@ def main(argv: list[str] | None = None) -> int:
     # The daemon's rule, so both convert commands identically: --vehicle, else the model's own ESC curve.
     esc = choose_esc(clf, args.vehicle or "")
     results, code = [], 0
-    for path in args.logs:
+    # Several or long logs: a bar in bytes read (rate and ETA), on a terminal only; reading dominates the time.
+    sizes = [Path(p).stat().st_size if Path(p).is_file() else 0 for p in args.logs]
+    progress = bar(sum(sizes), "B", "diagnose", unit_scale=True) if len(args.logs) > 1 or sum(sizes) > BIG_LOG_BYTES else None
+    for path, size in zip(args.logs, sizes):
+        if progress is not None:
+            progress.set_postfix_str(Path(path).name)
         try:
             table, d = diagnose_file(path, clf, esc, args.fmt, args.hop)
         except PropwatchError as exc:
             results.append({"log": path, "error": str(exc)})
             print(f"propwatch diagnose: error: {exc}", file=sys.stderr)
             code = 2
+            if progress is not None:
+                progress.update(size)
             continue
         if d.verdict is None:
             code = max(code, 1)
@@ -140,8 +149,12 @@ def main(argv: list[str] | None = None) -> int:
             page = write_report(d, table, Path(args.report))
             print(f"report: {page} and {page.with_suffix('.png')}", file=sys.stderr)
         results.append(d.to_json())
+        if progress is not None:
+            progress.update(size)
         if not args.json:
             print(format_text(d))
+    if progress is not None:
+        progress.close()
     if args.json:
         out = results[0] if len(results) == 1 else {"results": results}
         json.dump(round_floats(out), sys.stdout, allow_nan=False)

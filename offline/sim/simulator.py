@@ -175,7 +175,10 @@ def simulate(
     if progress:
         from tqdm import tqdm
 
-        bar = tqdm(total=T, unit="log", desc=f"simulate {n} flight(s)", leave=False)
+        # The n flights advance together, one log step at a time: the bar counts flights done (fractions
+        # of each), so its rate and ETA are in flights.
+        bar = tqdm(total=n, unit="flight", unit_scale=True, desc="simulate", leave=False)
+        per_step = n / T
 
     # The ESC turns PWM into speed through its fit; the command is the speed the controller
     # asks for, inside the ESC's range. PWM itself (its inverse) is only needed for the log.
@@ -225,7 +228,7 @@ def simulate(
             battery_v[:, j] = battery.update(np.einsum("ij,ij->i", torque, omega), log_dt)
             battery_a[:, j] = battery.current_a
             if bar is not None:
-                bar.update(1)
+                bar.update(per_step)
     if bar is not None:
         bar.close()
     # In place and by blocks of samples, so peak memory stays that of the logs themselves.
