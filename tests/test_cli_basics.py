@@ -66,3 +66,19 @@ def test_help_does_not_import_torch(name):
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=REPO, timeout=60)
     assert r.returncode == 0, r.stderr
     assert "usage: propwatch" in r.stdout
+
+
+def test_microseconds_are_converted_through_one_constant():
+    """One ``US_PER_S`` (monitor/resample.py); no inline 1e6 / 1e-6 / 1_000_000 next to a µs quantity."""
+    import re as _re
+
+    defs, inline = [], []
+    for path in sorted((REPO / "monitor").rglob("*.py")) + sorted((REPO / "offline").rglob("*.py")):
+        for n, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1):
+            code = line.split("#")[0]
+            if _re.match(r"\s*US_PER_S\s*=", code):
+                defs.append(str(path.relative_to(REPO)))
+            if _re.search(r"(_us\b|usec|timestamp)", code) and _re.search(r"\b(1e6|1e-6|1_000_000|1000000)\b", code):
+                inline.append(f"{path.relative_to(REPO)}:{n}: {line.strip()}")
+    assert defs == ["monitor/resample.py"]
+    assert not inline, inline

@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from monitor.errors import ConfigError, ModelError
+from monitor.resample import US_PER_S
 from monitor.vehicle import VehicleConfig
 from offline.sim.battery import Battery
 from offline.sim.controller import Controller, ControllerConfig, clip_in_place
@@ -263,7 +264,7 @@ def simulate(
         roll, pitch = roll + att_noise[..., 0], pitch + att_noise[..., 1]
         yaw = (yaw + att_noise[..., 2] + math.pi) % (2 * math.pi) - math.pi
     time_s = np.arange(1, T + 1) / sim.log_rate_hz
-    timestamp_us = BOOT_OFFSET_US + np.round(np.arange(1, T + 1) * (1e6 / sim.log_rate_hz)).astype(np.int64)
+    timestamp_us = BOOT_OFFSET_US + np.round(np.arange(1, T + 1) * (US_PER_S / sim.log_rate_hz)).astype(np.int64)
     return FlightLog(
         time_s=time_s,
         timestamp_us=timestamp_us,
