@@ -97,10 +97,6 @@ class VehicleConfig:
 
     # Derived arrays (cheap; the simulator caches what it needs).
     @property
-    def inertia_kg_m2(self) -> np.ndarray:
-        return np.diag(self.inertia_diag_kg_m2)
-
-    @property
     def rotor_positions_array_m(self) -> np.ndarray:
         return np.array(self.rotor_positions_frd_m, dtype=np.float64)
 

@@ -27,6 +27,7 @@ def test_shipped_model_meets_the_contract():
     assert (MODEL.with_suffix(".manifest.json")).is_file()
 
 
+@pytest.mark.realdata
 @pytest.mark.skipif(not SEVERE_CUT.is_file(), reason=f"CrazyPAD data not found at {DEFAULT_ROOT}")
 def test_diagnose_names_the_cut_propeller_with_bitcraze_numbers(capsys):
     from monitor.diagnose.cli import main
@@ -45,6 +46,7 @@ def test_diagnose_names_the_cut_propeller_with_bitcraze_numbers(capsys):
     assert out["verdict"]["fault_probability"][names.index("M3")] > 0.9
 
 
+@pytest.mark.realdata
 @pytest.mark.skipif(not CONTROLLER_LOG.is_file(), reason=f"CrazyPAD data not found at {DEFAULT_ROOT}")
 def test_controller_logs_get_no_verdict_and_say_why(capsys):
     """Controller-config flights carry no motor commands: the monitor must refuse, not guess."""
