@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import subprocess
 import sys
 import sysconfig
@@ -32,8 +33,13 @@ def _run(cmd, **kw):
 @pytest.mark.realdata
 @pytest.mark.skipif(not LOG171.is_file(), reason=f"real ArduPilot log not found at {LOG171} (../shared/data)")
 def test_installed_wheel_diagnoses_a_shared_log_from_root(tmp_path):
+    # Build from a clean copy: setuptools' build/ in the checkout may hold stale files from earlier builds.
+    src = tmp_path / "src"
+    shutil.copytree(
+        REPO, src, ignore=shutil.ignore_patterns(".git", ".venv", "build", "*.egg-info", "out", "__pycache__", ".*_cache")
+    )
     wheels = tmp_path / "wheels"
-    r = _run([sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation", "-q", "-w", str(wheels), str(REPO)])
+    r = _run([sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation", "-q", "-w", str(wheels), str(src)])
     assert r.returncode == 0, r.stderr
     (wheel,) = wheels.glob("propwatch-*.whl")
 
