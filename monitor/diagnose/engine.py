@@ -18,6 +18,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from monitor.diagnose.physics import PhysicsEvidence, physics_evidence
 from monitor.errors import ModelError
 from monitor.esc import EscCurve
 from monitor.features import compute_features, signals_needed, sliding_windows, valid_windows
@@ -53,6 +54,7 @@ class Diagnosis:
     timeline: dict = field(default_factory=dict)
     hop_steps: int = 1
     envelope: dict = field(default_factory=dict)  # the figures behind the envelope checks
+    physics: PhysicsEvidence | None = None  # rotor effectiveness and the sets the moment balance allows
 
     def to_json(self) -> dict:
         """The ``--json`` object (every key documented in docs/diagnose-json.md).
@@ -73,6 +75,9 @@ class Diagnosis:
             "timeline": self.timeline,
             "hop_steps": self.hop_steps,
             "envelope": self.envelope,
+            "hypotheses": self.physics.hypotheses if self.physics else None,
+            "rotor_effectiveness": self.physics.rotor_effectiveness if self.physics else None,
+            "rotor_effectiveness_std": self.physics.rotor_effectiveness_std if self.physics else None,
         }
 
 
@@ -201,11 +206,17 @@ def rpm_envelope(table: FlightTable, clf: Classifier, figures: dict) -> tuple[st
 
 
 def diagnose_table(
-    table: FlightTable, clf: Classifier, hop: int = 1, batch: int = 4096, esc: EscCurve | None = None
+    table: FlightTable,
+    clf: Classifier,
+    hop: int = 1,
+    batch: int = 4096,
+    esc: EscCurve | None = None,
+    vehicle=None,
 ) -> Diagnosis:
     """Classify every usable window of ``table`` (one every ``hop`` steps) and aggregate.
 
     ``esc``: the curve the table's RPM came from, to refuse a log of another vehicle class.
+    ``vehicle``: its geometry, inertia and kF/kτ give the moment-balance evidence (``physics``).
     """
     if hop < 1:
         raise ValueError("hop must be >= 1")
@@ -241,6 +252,10 @@ def diagnose_table(
     label = int(np.argmax(mean_labels)) + 1
     p = faults.mean(axis=0)
     d.windows = len(ends)
+    if vehicle is not None:
+        d.physics, why_not = physics_evidence(table, vehicle, window=info.window)
+        if why_not:
+            d.warnings.append(why_not)
     d.verdict = {
         "label": label,
         "faulty_propellers": list(LABEL_TABLE[label]),
