@@ -60,7 +60,9 @@ def test_every_option_has_help_text():
     assert _options_without_help("  --seed SEED\n  --out OUT   where\n") == ["--seed SEED"]  # the check itself
 
 
-@pytest.mark.parametrize("name", ["train", "export", "evaluate", "calibrate", "train-propellers", "dataset", "crazypad"])
+@pytest.mark.parametrize(
+    "name", ["train", "export", "evaluate", "calibrate", "train-propellers", "dataset", "crazypad", "evalsim"]
+)
 def test_help_does_not_import_torch(name):
     code = f"import sys; sys.modules['torch'] = None; from monitor.cli import main; sys.exit(main([{name!r}, '--help']))"
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=REPO, timeout=60)

@@ -8,7 +8,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from offline.evalsim.sets import DEFAULT_DURATION_S, SET_NAMES, build_set, write_set
+from offline.evalsim.names import DEFAULT_DURATION_S, SET_NAMES
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -22,6 +22,8 @@ def main(argv: list[str] | None = None) -> int:
     )
     a = p.parse_args(argv)
     from tqdm import tqdm
+
+    from offline.evalsim.sets import build_set, write_set  # the simulator (rotorpy, torch): only for work
 
     n = len(build_set(a.set, a.flights, a.seed, a.duration_s))
     with tqdm(total=n, unit="flight", desc=f"evalsim {a.set}") as bar:
