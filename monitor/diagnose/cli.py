@@ -91,7 +91,12 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     # inference time without adding information to a post-flight verdict.
     p.add_argument("--hop", type=int, default=20, help="classify one window every HOP grid steps (default 20 = 1 s)")
     p.add_argument("--json", action="store_true", help="print JSON to stdout")
-    p.add_argument("--report", metavar="DIR", default=None, help="write PNG + HTML reports into DIR")
+    p.add_argument(
+        "--report",
+        metavar="DIR",
+        default=None,
+        help="write a PNG + HTML report per log into DIR (their paths are printed on stderr)",
+    )
     return p.parse_args(argv)
 
 
