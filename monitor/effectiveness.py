@@ -53,6 +53,11 @@ N_STATE = 2 * N_ROTORS + 3  # thrust losses (4), torque losses (4), disturbance 
 RPM_TO_RAD_S = 2.0 * np.pi / 60.0
 SUB_BLOCKS = 4  # a window's noise is read from the spread of its sub-blocks' balances
 HYPOTHESES: tuple[tuple[int, ...], ...] = tuple(tuple(LABEL_TABLE[k]) for k in range(1, 17))
+# Prior over the 16 sets: a healthy vehicle is as likely as all damage patterns together (a monitor
+# watches mostly healthy flights; what the balance cannot see, e.g. all four rotors alike, stays
+# "healthy" unless evidence says otherwise), the 15 damage patterns alike.
+HEALTHY_PRIOR = 0.5
+SET_PRIOR = np.array([HEALTHY_PRIOR] + [(1.0 - HEALTHY_PRIOR) / 15.0] * 15)
 
 
 @dataclass(frozen=True)
@@ -113,8 +118,9 @@ class Priors:
 
     @classmethod
     def unmeasured_airframe(cls) -> Priors:
-        """An airframe nobody balanced or measured: motors spread 4 % (std), CG offset 2 mm (std)."""
-        return cls(healthy_spread_std=0.04, cg_offset_std_m=0.002)
+        """An airframe nobody balanced or measured, at the register's ranges: motor speed spread
+        uniform in ±4-8 % (thrust ±8-16 %: std 0.07) and CG uniform in ±1 cm (std 5.8 mm)."""
+        return cls(healthy_spread_std=0.07, cg_offset_std_m=0.0058)
 
     def disturbance_std(self, geometry: RotorGeometry) -> np.ndarray:
         rp = 4.0 * self.cg_offset_std_m / geometry.arm_m
@@ -338,7 +344,7 @@ class HypothesisBank:
 
     def posterior(self, evidence: Evidence, set_prior: np.ndarray | None = None) -> Verdict:
         """Each set's marginal likelihood of the accumulated balances, and its posterior effectiveness."""
-        prior_p = np.full(16, 1.0 / 16) if set_prior is None else np.asarray(set_prior, dtype=np.float64)
+        prior_p = SET_PRIOR if set_prior is None else np.asarray(set_prior, dtype=np.float64)
         lam = self.prec + evidence.info  # (16, 11, 11) posterior precision
         rhs = self.prec_mean + evidence.vec
         cov = np.linalg.inv(lam)
