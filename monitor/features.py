@@ -171,9 +171,6 @@ class Normalizer:
         std = np.where(std > 1e-9, std, 1.0)
         return cls(tuple(map(float, flat.mean(axis=0))), tuple(map(float, std)))
 
-    def apply(self, x: np.ndarray) -> np.ndarray:
-        return ((x - np.asarray(self.mean, np.float32)) / np.asarray(self.std, np.float32)).astype(np.float32)
-
     def to_dict(self) -> dict:
         return {"mean": list(self.mean), "std": list(self.std)}
 

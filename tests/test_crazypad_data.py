@@ -15,9 +15,13 @@ from monitor.vehicle import REPO_ROOT, load_vehicle
 from offline.crazypad.data import DEFAULT_ROOT, cut_total_mm, load_manifest, select
 from offline.crazypad.vehicle import hover_cmd
 
-pytestmark = pytest.mark.skipif(
-    not (DEFAULT_ROOT / "manifest.csv").is_file(), reason=f"CrazyPAD data not found at {DEFAULT_ROOT} (../shared/data/crazypad)"
-)
+pytestmark = [
+    pytest.mark.realdata,
+    pytest.mark.skipif(
+        not (DEFAULT_ROOT / "manifest.csv").is_file(),
+        reason=f"CrazyPAD data not found at {DEFAULT_ROOT} (../shared/data/crazypad)",
+    ),
+]
 
 
 @pytest.fixture(scope="module")

@@ -39,7 +39,9 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument("--vehicle", help="vehicle YAML whose ESC curve overrides the model's")
     p.add_argument("--report", help="write counters and latency percentiles as JSON at exit")
     p.add_argument("--tlog-speed", type=float, help="for a .tlog: 1 = recorded pace, 0 = as fast as possible")
-    p.add_argument("--log-level", default="INFO", choices=["DEBUG", "INFO", "WARNING", "ERROR"])
+    p.add_argument(
+        "--log-level", default="INFO", choices=["DEBUG", "INFO", "WARNING", "ERROR"], help="logging threshold (default INFO)"
+    )
     return p.parse_args(argv)
 
 

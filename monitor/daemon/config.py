@@ -11,7 +11,7 @@ from pathlib import Path
 
 from monitor.config import from_mapping, load_dataclass
 from monitor.errors import ConfigError
-from monitor.vehicle import REPO_ROOT
+from monitor.resources import shipped
 
 MOTOR_SOURCES = ("servo", "actuator", "esc")
 LANDED_STATE_MODES = ("auto", "required", "ignore")
@@ -110,7 +110,7 @@ class AlertConfig:
 
 @dataclass(frozen=True)
 class MonitorConfig:
-    model_path: str = str(REPO_ROOT / "models" / "classifier.onnx")
+    model_path: str = str(shipped("classifier.onnx"))
     vehicle_path: str = ""  # optional vehicle YAML whose ESC curve overrides the model's
     events_path: str = ""  # JSON lines, one per alert ('' = none; --events overrides)
     link: LinkConfig = field(default_factory=LinkConfig)

@@ -24,6 +24,7 @@ os.environ.setdefault("MAVLINK_DIALECT", "common")  # mavutil's default 'all' co
 from pymavlink import mavutil  # noqa: E402
 
 from monitor.errors import ConfigError  # noqa: E402
+from monitor.resample import US_PER_S  # noqa: E402
 
 log = logging.getLogger("propwatch.monitor.link")
 
@@ -203,7 +204,7 @@ class Link:
         )
 
     def request_message_interval(self, target_system: int, target_component: int, message_id: int, rate_hz: float) -> None:
-        interval_us = int(round(1e6 / rate_hz))
+        interval_us = int(round(US_PER_S / rate_hz))
         self._send(
             lambda mav: mav.command_long_encode(
                 target_system,

@@ -1,21 +1,29 @@
 """``propwatch diagnose LOG [LOG...] [--json] [--report DIR]``.
 
-Output with ``--json`` (stdout), for one LOG::
+Numbering, one for every output (text, HTML, PNG, JSON): propellers are in PX4
+quad-X order (1 front-right CCW, 2 rear-left CCW, 3 front-left CW, 4 rear-right
+CW); ``label`` is 1..16 over PX4 rotor sets (1 none, 2-5 rotor 1..4 alone, 6-11
+pairs, 12-15 triples, 16 all; monitor/labels.py). Each rotor is shown by the
+vehicle's own name with its PX4 number beside it, e.g. CrazyPAD's
+``M3 (PX4 rotor 2)``.
+
+Output with ``--json`` (stdout), for one LOG (every key: docs/diagnose-json.md)::
 
     {"log": PATH,
-     "verdict": {"label": N, "faulty_propellers": [...], "fault_probability": [p1, p2, p3, p4]} | null,
+     "verdict": {"label": N, "faulty_propellers": [PX4 numbers], "faulty_names": [...],
+                 "fault_probability": [p1, p2, p3, p4]} | null,
      "windows": n, "warnings": [...], "reason": null | "why there is no verdict",
-     "propellers": [{"propeller": 1, "name": "M1", "fault_probability": p, "faulty": bool}, ...],
+     "propellers": [{"propeller": 1, "px4_rotor": 1, "name": "M1", "fault_probability": p, "faulty": bool}, ...],
      "label_probability": [16 values] | null,
      "airborne_segments": [{"start_boot_s", "stop_boot_s", "steps"}, ...],
      "timeline": {"t_boot_s": [...], "fault_probability": [[p1..p4], ...], "label": [...]},
      "hop_steps": k,
-     "envelope": {"airborne_mean_rpm", "trained_mean_rpm", "rpm_ratio", "large_attitude_fraction"}}
+     "envelope": {"airborne_mean_rpm", "trained_mean_rpm", "rpm_ratio", "rpm_z", "large_attitude_fraction"}}
 
 For several LOGs: ``{"results": [one object as above per LOG, in order]}``;
 a log that cannot be read appears as ``{"log": PATH, "error": "..."}``.
-Propellers are in PX4 order; ``name`` is the vehicle's own numbering. Times are
-seconds on the autopilot's boot clock; a timeline point is the end of its window.
+Times are seconds on the autopilot's boot clock; a timeline point is the end of
+its window. Floats are rounded to 6 decimals.
 
 Exit code: 0 every log got a verdict; 1 some log got no verdict (the reason
 says why: outside the model's envelope, no airborne flight, ...); 2 some log
@@ -29,14 +37,17 @@ import json
 import sys
 from pathlib import Path
 
-from monitor.diagnose.engine import Diagnosis, diagnose_table
+from monitor.diagnose.engine import Diagnosis, describe_label, diagnose_table, rotor_name, round_floats
 from monitor.errors import PropwatchError
 from monitor.esc import EscCurve
 from monitor.logs import read_log
 from monitor.model import Classifier, choose_esc
-from monitor.vehicle import DEFAULT_VEHICLE, REPO_ROOT, load_vehicle
+from monitor.progress import bar
+from monitor.resources import shipped
+from monitor.vehicle import DEFAULT_VEHICLE, load_vehicle
 
-DEFAULT_MODEL = REPO_ROOT / "models" / "classifier.onnx"
+DEFAULT_MODEL = shipped("classifier.onnx")
+BIG_LOG_BYTES = 1_000_000  # a single log this large takes seconds to read: show a bar
 
 
 def default_model(vehicle_yaml: str | None) -> Path:
@@ -47,7 +58,7 @@ def default_model(vehicle_yaml: str | None) -> Path:
     envelope checks then say whether the log fits it.
     """
     if vehicle_yaml:
-        own = REPO_ROOT / "models" / f"{Path(vehicle_yaml).stem}-classifier.onnx"
+        own = shipped(f"{Path(vehicle_yaml).stem}-classifier.onnx")
         if own.is_file():
             return own
     return DEFAULT_MODEL
@@ -80,7 +91,12 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     # inference time without adding information to a post-flight verdict.
     p.add_argument("--hop", type=int, default=20, help="classify one window every HOP grid steps (default 20 = 1 s)")
     p.add_argument("--json", action="store_true", help="print JSON to stdout")
-    p.add_argument("--report", metavar="DIR", default=None, help="write PNG + HTML reports into DIR")
+    p.add_argument(
+        "--report",
+        metavar="DIR",
+        default=None,
+        help="write a PNG + HTML report per log into DIR (their paths are printed on stderr)",
+    )
     return p.parse_args(argv)
 
 
@@ -91,32 +107,28 @@ def diagnose_file(path: str, clf: Classifier, esc: EscCurve, fmt: str | None, ho
 
 def format_text(d: Diagnosis) -> str:
     lines = [f"== {d.source}"]
+    names = [p["name"] for p in d.propellers]
     if d.verdict is None:
         lines.append(f"no verdict: {d.reason}")
     else:
-        faulty = d.verdict["faulty_propellers"]
-        lines.append(
-            f"verdict: label {d.verdict['label']} ("
-            + (
-                "no faulty propeller"
-                if not faulty
-                else "faulty propeller(s) " + ", ".join(d.propellers[i - 1]["name"] for i in faulty)
-            )
-            + f"), from {d.windows} windows"
-        )
+        lines.append(f"verdict: {describe_label(d.verdict['label'], names)}, from {d.windows} windows")
         for p in d.propellers:
             lines.append(
-                f"  propeller {p['propeller']} ({p['name']}): P(faulty) = {p['fault_probability']:.3f}"
+                f"  {rotor_name(p['name'], p['propeller'])}: P(faulty) = {p['fault_probability']:.3f}"
                 + ("  <- FAULTY" if p["faulty"] else "")
             )
     if d.physics is not None:
-        names = [p["name"] for p in d.propellers]
         eff = ", ".join(
-            f"{n} {m:.2f}±{s:.2f}" for n, m, s in zip(names, d.physics.rotor_effectiveness, d.physics.rotor_effectiveness_std)
+            f"{rotor_name(n, i + 1)} {m:.2f}±{s:.2f}"
+            for i, (n, m, s) in enumerate(zip(names, d.physics.rotor_effectiveness, d.physics.rotor_effectiveness_std))
         )
         lines.append(f"  rotor effectiveness (fraction of nominal thrust, moment balance over {d.physics.windows} x 5 s): {eff}")
         sets = " or ".join(
-            ("{" + ",".join(names[i - 1] for i in h["faulty_propellers"]) + "}" if h["faulty_propellers"] else "healthy")
+            (
+                "{" + ", ".join(rotor_name(names[i - 1], i) for i in h["faulty_propellers"]) + "}"
+                if h["faulty_propellers"]
+                else "healthy"
+            )
             + f" p={h['probability']:.2f}"
             for h in d.physics.hypotheses
         )
@@ -137,26 +149,38 @@ def main(argv: list[str] | None = None) -> int:
     esc = choose_esc(clf, args.vehicle or "")
     vehicle = load_vehicle(args.vehicle or DEFAULT_VEHICLE)  # geometry for the moment-balance evidence
     results, code = [], 0
-    for path in args.logs:
+    # Several or long logs: a bar in bytes read (rate and ETA), on a terminal only; reading dominates the time.
+    sizes = [Path(p).stat().st_size if Path(p).is_file() else 0 for p in args.logs]
+    progress = bar(sum(sizes), "B", "diagnose", unit_scale=True) if len(args.logs) > 1 or sum(sizes) > BIG_LOG_BYTES else None
+    for path, size in zip(args.logs, sizes):
+        if progress is not None:
+            progress.set_postfix_str(Path(path).name)
         try:
             table, d = diagnose_file(path, clf, esc, args.fmt, args.hop, vehicle)
         except PropwatchError as exc:
             results.append({"log": path, "error": str(exc)})
             print(f"propwatch diagnose: error: {exc}", file=sys.stderr)
             code = 2
+            if progress is not None:
+                progress.update(size)
             continue
         if d.verdict is None:
             code = max(code, 1)
         if args.report:
             from monitor.diagnose.report import write_report
 
-            write_report(d, table, Path(args.report))
+            page = write_report(d, table, Path(args.report))
+            print(f"report: {page} and {page.with_suffix('.png')}", file=sys.stderr)
         results.append(d.to_json())
+        if progress is not None:
+            progress.update(size)
         if not args.json:
             print(format_text(d))
+    if progress is not None:
+        progress.close()
     if args.json:
         out = results[0] if len(results) == 1 else {"results": results}
-        json.dump(out, sys.stdout, allow_nan=False)
+        json.dump(round_floats(out), sys.stdout, allow_nan=False)
         sys.stdout.write("\n")
     return code
 

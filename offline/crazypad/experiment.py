@@ -278,11 +278,11 @@ def run(
     epochs: int = 8,
     log=print,
 ) -> dict:
-    from monitor.vehicle import REPO_ROOT
+    from monitor.resources import shipped
     from offline.classifier.export import export_onnx
     from offline.classifier.train import TrainConfig, train
 
-    vehicle_path = vehicle_path or REPO_ROOT / "models" / "crazyflie.yaml"
+    vehicle_path = vehicle_path or shipped("crazyflie.yaml")
     loaded = load_vehicle_with_sources(vehicle_path)
     nominal = loaded.config
     out.mkdir(parents=True, exist_ok=True)

@@ -40,9 +40,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--fault", default="bent", help=f"comma-separated, each one of {', '.join(FAULTS)}")
     p.add_argument("--waypoints", default="A", help="custom set: comma-separated routes A, B, random (cycled over flights)")
     p.add_argument("--payload", type=_range, default=(0.0, 0.0), help="custom set: extra kg, LOW,HIGH uniform per flight")
-    p.add_argument("--flights-per-label", type=int, default=2)
+    p.add_argument("--flights-per-label", type=int, default=2, help="simulated flights for each of the 16 labels (default 2)")
     p.add_argument("--duration", type=float, default=80.0, help="seconds per flight (paper: 80)")
-    p.add_argument("--propellers", choices=("lstm", "quadratic"), default="lstm")
+    p.add_argument(
+        "--propellers", choices=("lstm", "quadratic"), default="lstm", help="propeller model (offline.propellers; default lstm)"
+    )
     p.add_argument("--wind", type=float, default=0.0, help="max steady wind, m/s (random per vehicle variant)")
     p.add_argument("--motor-efficiency-spread", type=float, default=0.0, help="+- fraction per rotor per variant")
     p.add_argument("--cg-offset", type=float, default=0.0, help="max horizontal CG offset, m, per variant")
@@ -55,8 +57,8 @@ def build_parser() -> argparse.ArgumentParser:
         "(needs --propellers quadratic; replaces --wind/--motor-efficiency-spread/--cg-offset/--variants)",
     )
     p.add_argument("--sensor-noise", type=float, default=1.0, help="scale of the simulator's gyro/attitude noise (0 = off)")
-    p.add_argument("--vehicle", type=Path, default=DEFAULT_VEHICLE)
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--vehicle", type=Path, default=DEFAULT_VEHICLE, help="vehicle YAML (default models/vehicle.yaml)")
+    p.add_argument("--seed", type=int, default=0, help="seed of routes, variants, noise and faults (default 0)")
     return p
 
 

@@ -29,6 +29,7 @@ from monitor.config import to_mapping
 from monitor.errors import ConfigError
 from monitor.features import SAMPLE_RATE_HZ
 from monitor.labels import LABEL_MASKS
+from monitor.progress import bar, interactive
 from monitor.vehicle import VehicleConfig
 from offline.dataset.records import FaultDataset, concat
 from offline.manifest import make_manifest
@@ -214,6 +215,7 @@ def generate(spec: DatasetSpec, vehicle: VehicleConfig, log=print, *, register=N
         variants=[to_mapping(v) for v in variants] if _randomised(spec) else None,
     )
     parts, order = [], []
+    progress = bar(n, "flight", f"dataset {spec.name}") if interactive() else None
     for v, veh in enumerate(variants):
         idx = np.flatnonzero(variant_of == v)
         for c0 in range(0, len(idx), spec.chunk_flights):
@@ -224,7 +226,12 @@ def generate(spec: DatasetSpec, vehicle: VehicleConfig, log=print, *, register=N
                 from_log(flight_log, spec.name, vehicle, cond[chunk], payload[chunk], tuple(names[i] for i in chunk), manifest)
             )
             order.append(chunk)
-            log(f"{spec.name}: simulated {sum(len(o) for o in order)}/{n} flights")
+            if progress is not None:
+                progress.update(len(chunk))
+            else:
+                log(f"{spec.name}: simulated {sum(len(o) for o in order)}/{n} flights")
+    if progress is not None:
+        progress.close()
     ds = parts[0] if len(parts) == 1 else concat(parts, spec.name)
     back = np.argsort(np.concatenate(order))  # restore label order
     ds = ds.subset(back)

@@ -15,6 +15,7 @@ import numpy as np
 
 from monitor.esc import PAPER_ESC, RAD_S_PER_RPM
 from monitor.labels import label_for
+from monitor.resample import US_PER_S
 from offline.evalsim import frames
 from offline.evalsim.airframe import Airframe, Damage, thrust_torque_factors
 from offline.evalsim.controller import CascadeController, qmul
@@ -381,7 +382,7 @@ def simulate_flights(specs: list[FlightSpec]) -> list[FlightLog]:
         out.append(
             FlightLog(
                 time_s=t_s,
-                timestamp_us=BOOT_OFFSET_US + np.rint(t_s * 1e6).astype(np.int64),
+                timestamp_us=BOOT_OFFSET_US + np.rint(t_s * US_PER_S).astype(np.int64),
                 pos_ned_m=r["pos"],
                 vel_ned_m_s=r["vel"],
                 q_world_body=r["q"],

@@ -27,10 +27,11 @@ from pathlib import Path
 import numpy as np
 
 from monitor.errors import ConfigError
+from monitor.resources import shipped
 from monitor.vehicle import VehicleConfig
 from offline.propellers.faults import CONDITIONS, SIGNATURES, FaultSignature, signature_table
 
-MODELS_DIR = Path(__file__).resolve().parents[2] / "models" / "propellers"
+MODELS_DIR = shipped("propellers")
 KINDS = ("quadratic", "lstm")
 
 __all__ = ["CONDITIONS", "KINDS", "MODELS_DIR", "SIGNATURES", "FaultSignature", "build_propellers", "check_conditions"]

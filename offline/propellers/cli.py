@@ -240,7 +240,7 @@ def rescore_shipped(models_dir: Path, vehicle_path: Path) -> dict:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="propwatch train-propellers", description=__doc__.split("\n")[0])
     ap.add_argument("--out", type=Path, default=MODELS_DIR, help="output folder (default models/propellers)")
-    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--seed", type=int, default=0, help="seed of the load-cell noise, split and initialisation (default 0)")
     ap.add_argument("--epochs", type=int, default=None, help="maximum epochs per condition (default: the TrainConfig's)")
     ap.add_argument("--vehicle", type=Path, default=DEFAULT_VEHICLE, help="vehicle YAML the load cell is built around")
     ap.add_argument("--fit-stand", nargs="+", metavar="CSV", help="only fit real thrust-stand exports and print the fits")

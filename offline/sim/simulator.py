@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from monitor.errors import ConfigError, ModelError
+from monitor.resample import US_PER_S
 from monitor.vehicle import VehicleConfig
 from offline.sim.battery import Battery
 from offline.sim.controller import Controller, ControllerConfig, clip_in_place
@@ -204,7 +205,10 @@ def simulate(
     if progress:
         from tqdm import tqdm
 
-        bar = tqdm(total=T, unit="log", desc=f"simulate {n} flight(s)", leave=False)
+        # The n flights advance together, one log step at a time: the bar counts flights done (fractions
+        # of each), so its rate and ETA are in flights.
+        bar = tqdm(total=n, unit="flight", unit_scale=True, desc="simulate", leave=False)
+        per_step = n / T
 
     # The ESC turns PWM into speed through its fit; the command is the speed the controller
     # asks for, inside the ESC's range. PWM itself (its inverse) is only needed for the log.
@@ -260,7 +264,7 @@ def simulate(
             if pf is not None:  # battery sag on the speed an open-loop ESC reaches
                 dyn.voltage_scale[:, 0] = (battery_v[:, j] / battery.full_v) ** pf.esc_voltage_exponent
             if bar is not None:
-                bar.update(1)
+                bar.update(per_step)
     if bar is not None:
         bar.close()
     # In place and by blocks of samples, so peak memory stays that of the logs themselves.
@@ -296,7 +300,7 @@ def simulate(
         roll, pitch = roll + att_noise[..., 0], pitch + att_noise[..., 1]
         yaw = (yaw + att_noise[..., 2] + math.pi) % (2 * math.pi) - math.pi
     time_s = np.arange(1, T + 1) / sim.log_rate_hz
-    timestamp_us = BOOT_OFFSET_US + np.round(np.arange(1, T + 1) * (1e6 / sim.log_rate_hz)).astype(np.int64)
+    timestamp_us = BOOT_OFFSET_US + np.round(np.arange(1, T + 1) * (US_PER_S / sim.log_rate_hz)).astype(np.int64)
     return FlightLog(
         time_s=time_s,
         timestamp_us=timestamp_us,
