@@ -9,6 +9,8 @@ NEVER used for training or model selection (see the package docstring).
 | onset | a fault (single propeller or pair, 5-20 % thrust loss) starting mid-flight at a recorded time |
 | hidden | per airframe one hidden effect (CG, weak motor, motor lag, linear drag, ESC curve): 2 healthy + 4 single faults |
 | effectiveness | one rotor losing exactly 5, 10 or 20 % thrust, torque per thrust unchanged or falling |
+| paper_torque_rising | CONTROL: ``paper`` flight for flight (same seeds, routes, losses) but torque per thrust RISING
+  by the same magnitude, as training assumes; the difference from ``paper`` is that sign alone |
 
 ``flights`` is the number of flights; labels / nuisances / patterns cycle, so
 ``flights=32`` on ``paper`` gives every label twice. Flight i of a set depends
@@ -34,7 +36,7 @@ from offline.evalsim.flight import FlightSpec, simulate_flights, truth
 from offline.manifest import make_manifest, write_manifest
 from offline.sim.io_tlog import write_tlog
 
-SET_NAMES = ("paper", "shift", "healthy", "onset", "hidden", "effectiveness")
+SET_NAMES = ("paper", "shift", "healthy", "onset", "hidden", "effectiveness", "paper_torque_rising")
 _SET_CODES = {n: i + 101 for i, n in enumerate(SET_NAMES)}
 DEFAULT_DURATION_S = 80.0
 BATCH = 32  # flights integrated together (memory ~ BATCH * duration)
@@ -140,6 +142,14 @@ def _paper(v, seed, i, duration_s) -> FlightSpec:
     kind = "bent" if (i // 16) % 2 == 0 else "cracked"
     af = _base(v, rng).with_(damage=_damage(rng, LABEL_TABLE[label], kind))
     return _spec("paper", seed, i, af, rng, duration_s, nuisance=kind)
+
+
+def _paper_torque_rising(v, seed, i, duration_s) -> FlightSpec:
+    """``paper``'s flight i with the torque-per-thrust change mirrored to rising (training's sign)."""
+    spec = _paper(v, seed, i, duration_s)
+    d = spec.airframe.damage
+    rising = replace(d, torque_per_thrust_change=tuple(abs(x) for x in d.torque_per_thrust_change))
+    return replace(spec, name=f"paper_torque_rising_{i:04d}", airframe=spec.airframe.with_(damage=rising))
 
 
 def _shift(v, seed, i, duration_s) -> FlightSpec:
@@ -256,6 +266,7 @@ _BUILDERS: dict[str, tuple[Callable, int]] = {
     "onset": (_onset, len(ONSET_PATTERNS)),
     "hidden": (_hidden, 6 * len(HIDDEN_EFFECTS)),
     "effectiveness": (_effectiveness, 12),
+    "paper_torque_rising": (_paper_torque_rising, 16),
 }
 
 
