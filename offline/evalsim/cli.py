@@ -8,7 +8,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from offline.evalsim.sets import DEFAULT_DURATION_S, SET_NAMES, build_set, write_set
+from offline.evalsim.names import DEFAULT_DURATION_S, SET_NAMES
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -20,6 +20,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--duration-s", type=float, default=DEFAULT_DURATION_S)
     a = p.parse_args(argv)
     from tqdm import tqdm
+
+    from offline.evalsim.sets import build_set, write_set
 
     n = len(build_set(a.set, a.flights, a.seed, a.duration_s))
     with tqdm(total=n, unit="flight", desc=f"evalsim {a.set}") as bar:

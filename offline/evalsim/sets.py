@@ -34,12 +34,11 @@ from monitor.vehicle import DEFAULT_VEHICLE, load_vehicle
 from offline.evalsim.airframe import Airframe, Damage
 from offline.evalsim.environment import Sensors, Telemetry, Wind
 from offline.evalsim.flight import FlightSpec, simulate_flights, truth
+from offline.evalsim.names import DEFAULT_DURATION_S, SET_NAMES
 from offline.manifest import make_manifest, write_manifest
 from offline.sim.io_tlog import write_tlog
 
-SET_NAMES = ("paper", "shift", "healthy", "onset", "hidden", "effectiveness", "paper_torque_rising")
 _SET_CODES = {n: i + 101 for i, n in enumerate(SET_NAMES)}
-DEFAULT_DURATION_S = 80.0
 BATCH = 32  # flights integrated together (memory ~ BATCH * duration)
 
 # Route box (NED, m): new routes, not offline/sim's box (±15 m, 4..16 m up).
