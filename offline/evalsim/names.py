@@ -1,4 +1,4 @@
-"""The evaluation sets' names and default flight length, apart so ``propwatch evalsim --help`` imports no simulator (torch)."""
+"""Set names and defaults, importable without RotorPy (which imports torch): keeps ``--help`` fast."""
 
-SET_NAMES = ("paper", "shift", "healthy", "onset", "hidden", "effectiveness")
+SET_NAMES = ("paper", "shift", "healthy", "onset", "hidden", "effectiveness", "paper_torque_rising")
 DEFAULT_DURATION_S = 80.0
