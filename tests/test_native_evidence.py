@@ -74,13 +74,13 @@ def test_crazyflie_mixer_by_hand():
 
 @pytest.mark.realdata
 @needs_crazypad
-@pytest.mark.parametrize("condition", ["normal_flight", "cut_propeller_M3_3mm", "tape_on_propeller_M3"])
+@pytest.mark.parametrize("condition", ["normal_flight", "cut_propeller_M3_3mm"])
 def test_rebuilt_commands_match_motor_logs_of_the_same_condition(condition):
     # Controller and motor logs are separate flights of the same script: the rebuilt per-motor
     # shares (airborne means) must agree with the logged ones within the flight-to-flight spread.
     def shares(log_type, fmt, airframe):
         out = []
-        for path in sorted((CRAZYPAD / log_type / condition).glob(f"{airframe}_log*.csv.gz")):
+        for path in sorted((CRAZYPAD / log_type / condition).glob(f"{airframe}_log*.csv.gz"))[:3]:
             try:
                 t = read_log(path, fmt=fmt)
             except Exception:
@@ -95,3 +95,26 @@ def test_rebuilt_commands_match_motor_logs_of_the_same_condition(condition):
         np.testing.assert_allclose(rebuilt, logged, atol=0.025, err_msg=f"{condition} {airframe}")
         # The pattern, not just the level: M3 (PX4 rotor 2) is each airframe's strongest-loaded motor.
         assert np.argmax(rebuilt) == np.argmax(logged) == 1
+
+
+def test_best_threshold_counts_the_misplaced_flights():
+    from offline.crazypad.evidence import _best_threshold_errors
+
+    assert _best_threshold_errors(np.array([0.0, 1.0, 2.0]), np.array([3.0, 4.0])) == 0
+    assert _best_threshold_errors(np.array([3.0, 4.0]), np.array([0.0, 1.0, 2.0])) == 0  # either direction
+    assert _best_threshold_errors(np.array([0.0, 3.5, 2.0]), np.array([3.0, 4.0])) == 1
+
+
+@pytest.mark.realdata
+@needs_crazypad
+def test_flight_evidence_of_a_real_flight():
+    from offline.crazypad.data import load_manifest
+    from offline.crazypad.evidence import flight_evidence
+
+    flights = {f.file: f for f in load_manifest(CRAZYPAD)}
+    healthy = flight_evidence(flights["motor/normal_flight/E9_log00.csv.gz"], CRAZYPAD)
+    heavy = flight_evidence(flights["motor/add_weight_W3_near_M3/E9_log00.csv.gz"], CRAZYPAD)
+    assert healthy.shares.sum() == pytest.approx(4.0)
+    assert np.all(np.isfinite(healthy.activity)) and healthy.vibration > 0
+    # A 3-g mass near M3 loads M3 (README: share 1.204 vs 1.080 healthy).
+    assert heavy.shares[2] > healthy.shares[2] + 0.1
