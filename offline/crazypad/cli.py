@@ -56,7 +56,7 @@ def _root(args) -> Path:
 
 
 def analyse(root: Path, vehicle_path: str) -> dict:
-    from offline.crazypad.calibration import calibrate_steady, equivalent_speed_ratios
+    from offline.calibrate.fit import calibrate_steady, equivalent_speed_ratios
     from offline.crazypad.real import summarise
     from offline.crazypad.vehicle import bitcraze_order
 
