@@ -15,8 +15,9 @@
 Signals: CrazyPAD motor logs have the four motor commands, roll and yaw; no
 pitch and no body rates. The classifier uses the commands only, as each
 motor's share of the mean (``rpm_rel_1..4``): roll and yaw carry estimator
-offsets the simulator does not have, and controller logs (gyro rates, no
-commands) cannot be diagnosed at all.
+offsets the simulator does not have. Controller logs (gyro rates, no logged
+commands) get commands rebuilt by the firmware mixer (``monitor.logs.mixers``);
+this experiment still scores the motor logs only, as before.
 """
 
 from __future__ import annotations
