@@ -23,6 +23,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "evaluate": ("offline.classifier.evaluate_cli", "evaluate a classifier on data sets"),
     "calibrate": ("offline.calibrate.cli", "fit model extensions to measured flights"),
     "crazypad": ("offline.crazypad.cli", "sim-to-real experiment on CrazyPAD"),
+    "adapt": ("offline.adapt.cli", "calibrate, simulate, train and baseline a new airframe from its healthy logs"),
     "diagnose": ("monitor.diagnose.cli", "diagnose recorded flight logs"),
     "monitor": ("monitor.daemon.cli", "run the onboard monitor daemon"),
     "replay": ("monitor.replay", "replay a .tlog as if it were PX4"),

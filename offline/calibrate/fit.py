@@ -427,7 +427,7 @@ class SteadyCalibration:
     calibrated_holdout_rms_cmd: float
     fit_files: list[str]
     holdout_files: list[str]
-    calibrated_fit_rms_cmd: float = float("nan")  # what the chosen terms leave in the fit flights' means
+    calibrated_bias_rms_cmd: float = float("nan")  # RMS over motors of (mean measured - model) on the fit flights
     spread_rms_cmd: float = float("nan")  # flight-to-flight std of the per-motor means (RMS over motors)
 
     @property
@@ -441,7 +441,7 @@ class SteadyCalibration:
         """
         n = max(len(self.fit_files), 1)
         se = self.spread_rms_cmd / math.sqrt(n) if self.spread_rms_cmd > 0 else float("nan")
-        return {"rms_cmd": self.calibrated_fit_rms_cmd, "in_standard_errors": self.calibrated_fit_rms_cmd / se}
+        return {"rms_cmd": self.calibrated_bias_rms_cmd, "in_standard_errors": self.calibrated_bias_rms_cmd / se}
 
     def to_dict(self) -> dict:
         return {
@@ -517,7 +517,7 @@ def calibrate_steady(
         _steady_rms(calibrated, holdout_cmd),
         fit_files,
         holdout_files,
-        _steady_rms(calibrated, fit_cmd),
+        float(np.sqrt(np.mean((np.mean(fit_cmd, axis=0) - predicted_commands(calibrated)) ** 2))),
         float(np.sqrt(np.mean(np.std(fit_cmd, axis=0, ddof=1) ** 2))) if len(fit_cmd) > 1 else float("nan"),
     )
 
