@@ -83,7 +83,18 @@ class HealthyBaseline:
             "shares": [round(float(s), 4) for s in shares],
             "deviation_spreads": [round(float(d), 2) for d in dev],
             "rotors_beyond_3_spreads": out,
+            "verdict": self.verdict(dev),
         }
+
+    def verdict(self, dev: np.ndarray) -> str:
+        """What the shares alone can say. A rotor that works harder than this airframe's healthy
+        flights is an *imbalance* near it: a damaged propeller and a CG offset toward that rotor
+        (a mass near it) move the shares alike, and on the real CrazyPAD flights no share, activity
+        or vibration evidence told them apart (offline/crazypad/README.md), so both are named."""
+        k = int(np.argmax(dev))
+        if dev[k] <= OUTLIER_SPREADS:
+            return f"no rotor beyond {OUTLIER_SPREADS:g} spreads of this airframe's healthy flights"
+        return f"imbalance near {self.motor_names[k]}: CG offset or damage"
 
     def to_dict(self) -> dict:
         return asdict(self)

@@ -92,6 +92,9 @@ def test_adapt_end_to_end_tiny(tmp_path):
     cut_table = read_log(cut.rsplit("=", 1)[0], fmt="crazypad", esc=load_vehicle(CRAZYFLIE).esc)
     seen = base.compare(cut_table)
     assert seen["basis"] == "omega2" and seen["deviation_spreads"][1] > 3.0 and 2 in seen["rotors_beyond_3_spreads"]
+    assert seen["verdict"] == "imbalance near M3: CG offset or damage"
+    healthy = base.compare(read_log(HEALTHY_E9[0], fmt="crazypad", esc=load_vehicle(CRAZYFLIE).esc))
+    assert healthy["verdict"].startswith("no rotor beyond 3 spreads")
     from offline.adapt.card import card_markdown
 
     assert (tmp_path / "card.md").read_text() == card_markdown(manifest)

@@ -11,7 +11,7 @@ Output with ``--json`` (stdout), for one LOG::
      "timeline": {"t_boot_s": [...], "fault_probability": [[p1..p4], ...], "label": [...]},
      "hop_steps": k,
      "envelope": {"airborne_mean_rpm", "trained_mean_rpm", "rpm_ratio", "large_attitude_fraction"},
-     "baseline": {"basis", "shares", "deviation_spreads", "rotors_beyond_3_spreads"}}  (--vehicle DIR only)
+     "baseline": {"basis", "shares", "deviation_spreads", "rotors_beyond_3_spreads", "verdict"}}  (--vehicle DIR only)
 
 For several LOGs: ``{"results": [one object as above per LOG, in order]}``;
 a log that cannot be read appears as ``{"log": PATH, "error": "..."}``.
