@@ -44,7 +44,7 @@ def card_markdown(m: dict) -> str:
         "**Gain over the nominal model** (same recipe and network, trained around the nominal vehicle), on the held-out",
         "healthy logs and the `--labelled` logs:",
         "",
-        "| model | exact label | healthy false alarms |",
+        "| model | exact label | called faulty, of the flights whose truth is healthy (held-out healthy + labelled healthy) |",
         "|---|---|---|",
         _row("nominal", m["scores"]["nominal"]["summary"]),
         _row("adapted", m["scores"]["adapted"]["summary"]),
