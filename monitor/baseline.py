@@ -31,22 +31,33 @@ SPREAD_FLOOR = 0.02
 OUTLIER_SPREADS = 3.0  # a share this many spreads from the airframe's healthy mean is not healthy
 
 
+def _rows_and_basis(table: FlightTable) -> tuple[np.ndarray, np.ndarray, str]:
+    """Airborne rows with all four values known, their per-rotor values, and the basis.
+
+    omega^2 (kRPM^2) where RPM is known (the ESC fit or ESC telemetry), as ``monitor.share_baseline``;
+    the raw command where no RPM is known for any airborne row.
+    """
+    rpm = np.asarray(table.motor_rpm, dtype=np.float64)
+    rows = table.airborne & np.all(np.isfinite(rpm), axis=1)
+    if rows.any():
+        return rows, (rpm[rows] / 1000.0) ** 2, "omega2"
+    cmd = np.asarray(table.motor_cmd, dtype=np.float64)
+    rows = table.airborne & np.all(np.isfinite(cmd), axis=1)
+    if not rows.any():
+        raise ConfigError(f"{table.source}: no airborne step with all four motor values: no shares")
+    return rows, cmd[rows], "command"
+
+
 def flight_shares(table: FlightTable) -> tuple[np.ndarray, str]:
     """(4,) each rotor's airborne mean omega^2 (or command) over the mean of the four, and the basis."""
-    m = table.airborne
-    rpm = table.motor_rpm[m]
-    if len(rpm) and np.isfinite(rpm).all():
-        x, basis = (rpm / 1000.0) ** 2, "omega2"
-    else:
-        x, basis = table.motor_cmd[m], "command"
-    mean = np.nanmean(x, axis=0)
+    _, x, basis = _rows_and_basis(table)
+    mean = np.mean(x, axis=0)
     return mean / np.mean(mean), basis
 
 
-def share_noise(table: FlightTable, basis: str) -> np.ndarray:
+def share_noise(table: FlightTable) -> np.ndarray:
     """(4,) within-flight std of each rotor's per-sample share (grid rate), airborne samples."""
-    m = table.airborne
-    x = (table.motor_rpm[m] / 1000.0) ** 2 if basis == "omega2" else table.motor_cmd[m]
+    _, x, _ = _rows_and_basis(table)
     with np.errstate(invalid="ignore", divide="ignore"):
         s = x / np.mean(x, axis=1, keepdims=True)
     return np.nanstd(s, axis=0)
@@ -142,7 +153,7 @@ def baseline_from_tables(tables: list[FlightTable], files: list[str], activity: 
     basis = bases.pop()
     sh = np.array([s for s, _ in per])
     std = sh.std(axis=0, ddof=1) if len(sh) > 1 else np.zeros(4)
-    noise = np.mean([share_noise(t, basis) for t in tables], axis=0)
+    noise = np.mean([share_noise(t) for t in tables], axis=0)
     return HealthyBaseline(
         basis=basis,
         shares_mean=tuple(map(float, sh.mean(axis=0))),
