@@ -24,6 +24,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "evalsim": ("offline.evalsim.cli", "write an evaluation-only set from the second simulator (never for training)"),
     "calibrate": ("offline.calibrate.cli", "fit model extensions to measured flights"),
     "crazypad": ("offline.crazypad.cli", "sim-to-real experiment on CrazyPAD"),
+    "adapt": ("offline.adapt.cli", "calibrate, simulate, train and baseline a new airframe from its healthy logs"),
     "diagnose": ("monitor.diagnose.cli", "diagnose recorded flight logs"),
     "inspect": ("monitor.inspect_cli", "what propwatch read from a log: messages, rates, gaps, motors, CSV"),
     "monitor": ("monitor.daemon.cli", "run the onboard monitor daemon"),

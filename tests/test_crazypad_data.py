@@ -84,7 +84,7 @@ def test_hover_command_lies_in_the_real_airborne_range(flights, vehicle):
 
 
 def test_calibration_names_a_cause_and_helps_held_out_flights(flights, vehicle):
-    from offline.crazypad.calibration import calibrate_steady
+    from offline.calibrate.fit import calibrate_steady
     from offline.crazypad.real import summarise
 
     for af in ("E8", "E9"):
@@ -102,7 +102,7 @@ def test_calibration_names_a_cause_and_helps_held_out_flights(flights, vehicle):
 
 def test_calibrated_vehicle_file_round_trips(flights, vehicle, tmp_path):
     from monitor.vehicle import load_vehicle_with_sources
-    from offline.crazypad.calibration import calibrate_steady
+    from offline.calibrate.fit import calibrate_steady
     from offline.crazypad.experiment import write_vehicle
     from offline.crazypad.real import summarise
 

@@ -48,13 +48,14 @@ def test_diagnose_names_the_cut_propeller_with_bitcraze_numbers(capsys):
 
 @pytest.mark.realdata
 @pytest.mark.skipif(not CONTROLLER_LOG.is_file(), reason=f"CrazyPAD data not found at {DEFAULT_ROOT}")
-def test_controller_logs_get_no_verdict_and_say_why(capsys):
-    """Controller-config flights carry no motor commands: the monitor must refuse, not guess."""
+def test_controller_logs_are_diagnosed_from_rebuilt_commands_and_say_so(capsys):
+    """Controller-config flights log no motor commands: the reader rebuilds them with the firmware
+    mixer (monitor.logs.mixers), the output says so, and this healthy flight is called healthy."""
     from monitor.diagnose.cli import main
 
     code = main(
         [str(CONTROLLER_LOG), "--format", "crazypad-controller", "--vehicle", str(VEHICLE), "--model", str(MODEL), "--json"]
     )
     out = json.loads(capsys.readouterr().out)
-    assert code == 1 and out["verdict"] is None
-    assert any("motor commands are not logged" in w for w in out["warnings"])
+    assert code == 0 and out["verdict"]["faulty_propellers"] == []
+    assert any("rebuilt from controller.cmd_thrust" in w for w in out["warnings"])

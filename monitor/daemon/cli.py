@@ -14,6 +14,7 @@ import logging
 import signal
 import sys
 import time
+from pathlib import Path
 
 from monitor.daemon.alerts import EventWriter
 from monitor.daemon.config import load_monitor_config
@@ -36,7 +37,9 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument("--config", help="monitor YAML (see deploy/monitor.yaml); defaults for every key")
     p.add_argument("--events", help="append one JSON line per alert here (overrides events_path)")
     p.add_argument("--model", help="classifier ONNX (overrides model_path)")
-    p.add_argument("--vehicle", help="vehicle YAML whose ESC curve overrides the model's")
+    p.add_argument(
+        "--vehicle", help="vehicle YAML whose ESC curve overrides the model's, or a `propwatch adapt` folder (its model too)"
+    )
     p.add_argument("--report", help="write counters and latency percentiles as JSON at exit")
     p.add_argument("--tlog-speed", type=float, help="for a .tlog: 1 = recorded pace, 0 = as fast as possible")
     p.add_argument(
@@ -51,8 +54,12 @@ def main(argv: list[str] | None = None) -> int:
     logging.basicConfig(level=args.log_level, stream=sys.stderr, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     cfg = load_monitor_config(args.config)
     model_path = args.model or cfg.model_path
+    vehicle = args.vehicle or cfg.vehicle_path
+    if vehicle and Path(vehicle).is_dir():  # a `propwatch adapt` folder: its model and calibrated vehicle
+        model_path = args.model or str(Path(vehicle) / "classifier.onnx")
+        vehicle = str(Path(vehicle) / "vehicle.yaml")
     classifier = Classifier(model_path, threads=cfg.inference.threads)
-    esc = choose_esc(classifier, args.vehicle or cfg.vehicle_path)
+    esc = choose_esc(classifier, vehicle)
     pipeline = Pipeline(classifier, cfg, esc)
     tlog_speed = cfg.link.tlog_speed if args.tlog_speed is None else args.tlog_speed
     link = Link(args.connect, cfg.link.component_id, tlog_speed, cfg.link.system_id or None)

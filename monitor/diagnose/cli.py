@@ -18,7 +18,8 @@ Output with ``--json`` (stdout), for one LOG (every key: docs/diagnose-json.md):
      "airborne_segments": [{"start_boot_s", "stop_boot_s", "steps"}, ...],
      "timeline": {"t_boot_s": [...], "fault_probability": [[p1..p4], ...], "label": [...]},
      "hop_steps": k,
-     "envelope": {"airborne_mean_rpm", "trained_mean_rpm", "rpm_ratio", "rpm_z", "large_attitude_fraction"}}
+     "envelope": {"airborne_mean_rpm", "trained_mean_rpm", "rpm_ratio", "rpm_z", "large_attitude_fraction"},
+     "baseline": {"basis", "shares", "deviation_spreads", "rotors_beyond_3_spreads", "verdict"}}  (--vehicle DIR only)
 
 For several LOGs: ``{"results": [one object as above per LOG, in order]}``;
 a log that cannot be read appears as ``{"log": PATH, "error": "..."}``.
@@ -85,7 +86,8 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         "--vehicle",
         default=None,
         help="vehicle YAML whose ESC curve converts motor commands to RPM "
-        "(default: the model's metadata vehicle.esc, else the paper's fit = models/vehicle.yaml)",
+        "(default: the model's metadata vehicle.esc, else the paper's fit = models/vehicle.yaml), or a "
+        "`propwatch adapt` output folder: its vehicle.yaml, classifier.onnx and healthy baseline",
     )
     # Windows are 5 s long; at a 1 s hop consecutive ones share 4 s: a finer hop costs
     # inference time without adding information to a post-flight verdict.
@@ -144,6 +146,15 @@ def main(argv: list[str] | None = None) -> int:
     if args.hop < 1:
         print("propwatch diagnose: --hop must be >= 1", file=sys.stderr)
         return 2
+    baseline = None
+    if args.vehicle and Path(args.vehicle).is_dir():
+        # A `propwatch adapt` folder: its calibrated vehicle, its model, its airframe's healthy baseline.
+        from monitor.baseline import BASELINE_FILE, HealthyBaseline
+
+        folder = Path(args.vehicle)
+        args.vehicle = str(folder / "vehicle.yaml")
+        args.model = args.model or str(folder / "classifier.onnx")
+        baseline = HealthyBaseline.load(folder / BASELINE_FILE)
     clf = Classifier(args.model or default_model(args.vehicle))
     # The daemon's rule, so both convert commands identically: --vehicle, else the model's own ESC curve.
     esc = choose_esc(clf, args.vehicle or "")
@@ -171,11 +182,17 @@ def main(argv: list[str] | None = None) -> int:
 
             page = write_report(d, table, Path(args.report))
             print(f"report: {page} and {page.with_suffix('.png')}", file=sys.stderr)
-        results.append(d.to_json())
+        res = d.to_json()
+        if baseline is not None:
+            res["baseline"] = baseline.compare(table)
+        results.append(res)
         if progress is not None:
             progress.update(size)
         if not args.json:
             print(format_text(d))
+            if baseline is not None and "deviation_spreads" in res["baseline"]:
+                b = res["baseline"]
+                print("  vs this airframe's healthy baseline (spreads): " + ", ".join(f"{x:+.1f}" for x in b["deviation_spreads"]))
     if progress is not None:
         progress.close()
     if args.json:

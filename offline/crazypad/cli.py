@@ -59,7 +59,7 @@ def _root(args) -> Path:
 
 
 def analyse(root: Path, vehicle_path: str) -> dict:
-    from offline.crazypad.calibration import calibrate_steady, equivalent_speed_ratios
+    from offline.calibrate.fit import calibrate_steady, equivalent_speed_ratios
     from offline.crazypad.real import summarise
     from offline.crazypad.vehicle import bitcraze_order
 
@@ -151,6 +151,9 @@ def ship(model: Path, report_json: Path) -> Path:
         "features": rep["features"],
         "window_steps": rep["window_steps"],
     }
-    path = SHIPPED_MODEL.with_suffix(".manifest.json")
-    path.write_text(json.dumps(manifest, indent=2, sort_keys=True, default=str) + "\n", encoding="utf-8")
+    from offline.crazypad.card import write_card
+    from offline.manifest import write_manifest
+
+    path = write_manifest(SHIPPED_MODEL.with_suffix(".manifest.json"), manifest)
+    write_card(path)  # the card comes from the manifest, never by hand
     return path
