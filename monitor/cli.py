@@ -26,6 +26,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "diagnose": ("monitor.diagnose.cli", "diagnose recorded flight logs"),
     "monitor": ("monitor.daemon.cli", "run the onboard monitor daemon"),
     "replay": ("monitor.replay", "replay a .tlog as if it were PX4"),
+    "fleet": ("fleet.cli", "fleet: ingest many logs into a health database (Ray), web report"),
 }
 
 
