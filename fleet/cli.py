@@ -38,7 +38,9 @@ def build_parser() -> argparse.ArgumentParser:
         help="auto: start Ray on this machine (default); HOST:PORT: join that cluster; off: no Ray, one process",
     )
     i.add_argument("--workers", type=_positive, default=None, help="local Ray: worker processes (default: every core)")
-    i.add_argument("--format", dest="fmt", default=None, help="CSV mapping for .csv/.csv.gz logs (monitor/formats.yaml, e.g. crazypad)")
+    i.add_argument(
+        "--format", dest="fmt", default=None, help="CSV mapping for .csv/.csv.gz logs (monitor/formats.yaml, e.g. crazypad)"
+    )
     i.add_argument("--vehicle", default=None, help="vehicle YAML for every log (its ESC curve and shipped model, as diagnose)")
     i.add_argument(
         "--model",
@@ -49,8 +51,11 @@ def build_parser() -> argparse.ArgumentParser:
     )
     i.add_argument("--hop", type=_positive, default=20, help="classify one window every HOP steps (default 20 = 1 s)")
     i.add_argument(
-        "--vehicle-from-dir", type=_positive, default=None, metavar="N", help="vehicle id = name of the log's N-th parent folder "
-        "(1 = the folder holding it) when the log carries no id"
+        "--vehicle-from-dir",
+        type=_positive,
+        default=None,
+        metavar="N",
+        help="vehicle id = name of the log's N-th parent folder (1 = the folder holding it) when the log carries no id",
     )
     i.add_argument("--batch", type=_positive, default=32, help="rows per database transaction (default 32)")
     i.add_argument("--retry-errors", action="store_true", help="re-run logs whose earlier attempt is an error row")

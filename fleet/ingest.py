@@ -72,7 +72,7 @@ def _progress(total: int, enabled: bool):
 def ingest(
     paths: list[str],
     db: str | Path,
-    settings: IngestSettings = IngestSettings(),
+    settings: IngestSettings | None = None,
     ray_address: str | None = "auto",
     workers: int | None = None,
     batch_rows: int = 32,
@@ -82,6 +82,7 @@ def ingest(
 ) -> IngestSummary:
     """Ingest every new log under ``paths`` into ``db``. ``ray_address`` None or "off": in this process."""
     t0 = time.perf_counter()
+    settings = settings or IngestSettings()
     summary = IngestSummary(db=str(db))
     logs = find_logs(paths)
     summary.found = len(logs)

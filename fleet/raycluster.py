@@ -50,7 +50,9 @@ def check_reachable(address: str, deadline_s: float = CONNECT_DEADLINE_S) -> Non
 def ray_session(address: str = "auto", workers: int | None = None):
     """Yield the ``ray`` module connected as asked; shut down only what this call started."""
     ray = need("ray")
-    if ray.is_initialized():
+    if address != "auto":
+        check_reachable(address)
+    if ray.is_initialized():  # the embedding program (or a test session) already connected
         yield ray
         return
     kwargs = dict(include_dashboard=False, log_to_driver=False, logging_level=logging.WARNING)
@@ -59,7 +61,6 @@ def ray_session(address: str = "auto", workers: int | None = None):
             kwargs["num_cpus"] = int(workers)
         ray.init(**kwargs)
     else:
-        check_reachable(address)
         try:
             ray.init(address=address, **kwargs)
         except Exception as exc:  # noqa: BLE001 - Ray raises ConnectionError, RuntimeError, ... by version
