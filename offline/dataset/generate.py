@@ -165,7 +165,10 @@ def from_log(
     )
 
 
-def generate(spec: DatasetSpec, vehicle: VehicleConfig, log=print) -> FaultDataset:
+def generate(spec: DatasetSpec, vehicle: VehicleConfig, log=print, run_chunks=None) -> FaultDataset:
+    """The data set of ``spec``. ``run_chunks`` maps the list of ``simulate_flights`` keyword sets
+    (one per chunk) to their flight logs, in order; default: one after another in this process
+    (``offline.dataset.ray_shard`` runs them as Ray tasks: same chunks, same seeds, same arrays)."""
     rng = np.random.default_rng([spec.seed, 0])
     cond = flight_conditions(spec.fault, spec.flights_per_label, rng)
     n = len(cond)
@@ -184,22 +187,31 @@ def generate(spec: DatasetSpec, vehicle: VehicleConfig, log=print) -> FaultDatas
         vehicle={"name": vehicle.name, "esc": to_mapping(vehicle.esc)},
         variants=[to_mapping(v) for v in variants] if _randomised(spec) else None,
     )
-    parts, order = [], []
+    jobs, order = [], []
     for v, veh in enumerate(variants):
         idx = np.flatnonzero(variant_of == v)
         for c0 in range(0, len(idx), spec.chunk_flights):
             chunk = idx[c0 : c0 + spec.chunk_flights]
             seed = int(np.random.default_rng([spec.seed, 1, v, c0]).integers(2**31))
-            flight_log = simulate_flights(veh, wps[chunk], cond[chunk], payload[chunk], spec, seed)
-            parts.append(
-                from_log(flight_log, spec.name, vehicle, cond[chunk], payload[chunk], tuple(names[i] for i in chunk), manifest)
+            jobs.append(
+                dict(vehicle=veh, waypoints=wps[chunk], conditions=cond[chunk], payload_kg=payload[chunk], spec=spec, seed=seed)
             )
             order.append(chunk)
-            log(f"{spec.name}: simulated {sum(len(o) for o in order)}/{n} flights")
+    parts = []
+    for chunk, flight_log in zip(order, (run_chunks or _one_after_another)(jobs)):
+        parts.append(
+            from_log(flight_log, spec.name, vehicle, cond[chunk], payload[chunk], tuple(names[i] for i in chunk), manifest)
+        )
+        log(f"{spec.name}: simulated {sum(len(o) for o in order[: len(parts)])}/{n} flights")
     ds = parts[0] if len(parts) == 1 else concat(parts, spec.name)
     back = np.argsort(np.concatenate(order))  # restore label order
     ds = ds.subset(back)
     return dataclasses.replace(ds, manifest=manifest)
+
+
+def _one_after_another(jobs: list[dict]):
+    for job in jobs:
+        yield simulate_flights(**job)
 
 
 def _randomised(spec: DatasetSpec) -> bool:
