@@ -37,6 +37,7 @@ class FleetSpec:
     fault: str = "bent"
     propellers: str = "lstm"
     seed: int = 0
+    first_vehicle: int = 0  # numbering (folder and uid) starts here, to write several batches into one fleet
 
 
 def vehicle_uid(v: int) -> int:
@@ -72,13 +73,13 @@ def write_fleet(out: str | Path, spec: FleetSpec | None = None) -> list[Path]:
     log = simulate(vehicle, random_waypoints(n, 5, seed=spec.seed), props, sim, seed=spec.seed)
     paths = []
     for v in range(spec.vehicles):
-        folder = out / f"vehicle_{v + 1}"
+        folder = out / f"vehicle_{spec.first_vehicle + v + 1}"
         folder.mkdir(parents=True, exist_ok=True)
         for k in range(spec.flights):
             i = v * spec.flights + k
             path = folder / f"flight_{k + 1:02d}.tlog"
             wall = DEFAULT_WALL_BOOT_US + k * DAY_US + v * 3_600_000_000
             write_tlog(path, log, i, wall_boot_us=wall, battery_full_v=vehicle.battery_full_v)
-            append_autopilot_version(path, vehicle_uid(v))
+            append_autopilot_version(path, vehicle_uid(spec.first_vehicle + v))
             paths.append(path)
     return paths
