@@ -11,7 +11,8 @@ Figures: logs/s and MB/s over the processing time (first task submitted to last
 row committed), Ray start-up apart; the re-ingest of the same 200 against the
 first run; Ray's per-task overhead (1000 empty tasks on the 2-worker instance)
 and the per-log overhead of a Ray worker against the serial loop. The 1-minute
-load average before each run says how busy the shared machine was.
+load average before each run says how busy the shared machine was: on a busy
+2-core machine the 2-worker figure is a lower bound of Ray's scaling.
 """
 
 from __future__ import annotations
@@ -28,6 +29,10 @@ from pathlib import Path
 
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
+# One BLAS/OpenMP thread per process, as Ray gives each 1-CPU worker: the serial loop is then one
+# core's worth of work too, and idle BLAS threads do not spin against the workers on a busy machine.
+for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
 
 from fleet.ingest import ingest  # noqa: E402
 from fleet.worker import IngestSettings  # noqa: E402
@@ -74,10 +79,22 @@ def make_logs(root: Path, data: Path) -> list[Path]:
     return logs
 
 
+def cpu_cost(db: Path) -> dict:
+    """Worker CPU seconds per log and per minute of logged flight (load-independent, unlike wall time)."""
+    import duckdb
+
+    con = duckdb.connect(str(db), read_only=True)
+    try:
+        n, cpu, minutes = con.execute("SELECT count(*), sum(process_cpu_s), sum(duration_s) / 60 FROM flights").fetchone()
+    finally:
+        con.close()
+    return dict(cpu_s_per_log=round(cpu / n, 4), cpu_s_per_flight_min=round(cpu / minutes, 4), flight_minutes=round(minutes, 1))
+
+
 def ray_task_overhead_s(n: int = 1000) -> float:
     import ray
 
-    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False, logging_level=logging.WARNING)
+    ray.init(address="local", num_cpus=2, include_dashboard=False, log_to_driver=False, logging_level=logging.WARNING)
     try:
 
         @ray.remote
@@ -112,6 +129,7 @@ def main(argv: list[str] | None = None) -> int:
         s = ingest([str(f) for f in logs], db, settings, ray_address=address, workers=workers, progress=False)
         again = ingest([str(f) for f in logs], db, settings, ray_address=address, workers=workers, progress=False)
         assert again.new == 0 and again.already_known == len(logs)
+        cpu = cpu_cost(db)
         results[run] = dict(
             load_1min_before=round(load, 2),
             logs=s.new,
@@ -125,13 +143,15 @@ def main(argv: list[str] | None = None) -> int:
             mb_per_s=round(mb / s.process_s, 3),
             reingest_s=round(again.total_s, 3),
             reingest_fraction=round(again.total_s / s.total_s, 4),
+            **cpu,
         )
         r = results[run]
         print(
             f"{run:>6}: {r['logs_per_s']:.2f} logs/s, {r['mb_per_s']:.2f} MB/s (processing {r['process_s']:.1f} s, "
             f"Ray start {r['ray_start_s']:.1f} s, total {r['total_s']:.1f} s; {r['ok']} verdicts, {r['no_verdict']} no verdict, "
             f"{r['error']} errors); re-ingest {r['reingest_s']:.2f} s = {100 * r['reingest_fraction']:.1f} % of the first run; "
-            f"load {r['load_1min_before']} before"
+            f"load {r['load_1min_before']} before; worker CPU {r['cpu_s_per_log']:.3f} s/log, "
+            f"{r['cpu_s_per_flight_min']:.3f} s per flight-minute"
         )
     if "serial" in results:
         for run in ("ray1", "ray2"):

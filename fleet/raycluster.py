@@ -1,8 +1,8 @@
 """Ray for the fleet tools: a local instance by default, or an existing cluster by address.
 
-``auto`` starts Ray inside this process (no setup; ``RAY_ADDRESS`` in the
-environment still wins, as in Ray itself) or reuses one the calling program
-already started. An address is checked before Ray is asked to join it: Ray's
+``auto`` starts a new Ray instance on this machine (no setup; ``address="local"``,
+so a cluster someone else started here with ``ray start`` is never joined by
+accident) or reuses one the calling program already started. An address is checked before Ray is asked to join it: Ray's
 own client retries an unreachable GCS for minutes, so a TCP connect and a gRPC
 (HTTP/2) handshake with a deadline come first and fail naming the address.
 """
@@ -59,7 +59,7 @@ def ray_session(address: str = "auto", workers: int | None = None):
     if address == "auto":
         if workers:
             kwargs["num_cpus"] = int(workers)
-        ray.init(**kwargs)
+        ray.init(address="local", **kwargs)
     else:
         try:
             ray.init(address=address, **kwargs)

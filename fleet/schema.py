@@ -46,7 +46,8 @@ COLUMNS: tuple[tuple[str, str], ...] = (
     ("propwatch_version", "VARCHAR"),
     ("diagnosis", "VARCHAR"),  # the whole `propwatch diagnose --json` object
     ("ingested_at", "TIMESTAMP"),
-    ("process_s", "DOUBLE"),  # worker seconds spent on this log
+    ("process_s", "DOUBLE"),  # worker wall-clock seconds spent on this log
+    ("process_cpu_s", "DOUBLE"),  # worker CPU seconds (user + system) spent on this log
 )
 COLUMN_NAMES = tuple(c for c, _ in COLUMNS)
 
