@@ -59,6 +59,11 @@ def build_parser() -> argparse.ArgumentParser:
     )
     i.add_argument("--batch", type=_positive, default=32, help="rows per database transaction (default 32)")
     i.add_argument("--retry-errors", action="store_true", help="re-run logs whose earlier attempt is an error row")
+    i.add_argument(
+        "--rehash",
+        action="store_true",
+        help="hash every file again (default: a path with the size and mtime of its row is known)",
+    )
     i.add_argument("--export", default=None, metavar="PARQUET", help="also write the whole table to this Parquet file")
     i.add_argument("--json", action="store_true", help="print the summary as JSON")
     i.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -101,6 +106,7 @@ def _ingest(a: argparse.Namespace) -> int:
         progress=not a.no_progress,
         export=a.export,
         retry_errors=a.retry_errors,
+        rehash=a.rehash,
     )
     if a.json:
         json.dump(s.to_json(), sys.stdout)

@@ -17,7 +17,7 @@ from pathlib import Path
 
 from fleet.discover import content_hash, find_logs
 from fleet.raycluster import cluster_cpus, ray_session
-from fleet.schema import export_parquet, forget_errors, insert_rows, known_hashes, open_db
+from fleet.schema import export_parquet, forget_errors, insert_rows, known_files, known_hashes, open_db, update_mtimes
 from fleet.worker import IngestSettings, empty_row, process_log, utc_naive
 
 TASK_MAX_RETRIES = 3  # a worker killed mid-log (OOM killer, preempted node) costs a re-run, not a row
@@ -28,6 +28,7 @@ IN_FLIGHT_PER_CPU = 4  # tasks queued per cluster CPU: keeps workers busy withou
 class IngestSummary:
     db: str
     found: int = 0
+    hashed: int = 0  # files read to hash them (the others kept path, size and mtime since ingest)
     already_known: int = 0
     duplicate_content: int = 0  # same bytes under two paths in this run: one row
     new: int = 0
@@ -79,35 +80,54 @@ def ingest(
     progress: bool = True,
     export: str | Path | None = None,
     retry_errors: bool = False,
+    rehash: bool = False,
 ) -> IngestSummary:
-    """Ingest every new log under ``paths`` into ``db``. ``ray_address`` None or "off": in this process."""
+    """Ingest every new log under ``paths`` into ``db``. ``ray_address`` None or "off": in this process.
+
+    ``rehash``: read every file to hash it, even one whose path, size and mtime match its row.
+    """
     t0 = time.perf_counter()
     settings = settings or IngestSettings()
     summary = IngestSummary(db=str(db))
+    mtime_of: dict[str, int] = {}
     logs = find_logs(paths)
     summary.found = len(logs)
     con = open_db(db)
     try:
-        hashed = [(p, content_hash(p), p.stat().st_size) for p in logs]
+        seen_files = {} if rehash else known_files(con)
+        hashed = []
+        for p in logs:
+            st = p.stat()
+            stored = seen_files.get(str(p))
+            if stored and stored[:2] == (st.st_size, st.st_mtime_ns):
+                h = stored[2]  # same path, size and modification time as when ingested: not re-read
+            else:
+                h = content_hash(p)
+                summary.hashed += 1
+            mtime_of[str(p)] = st.st_mtime_ns
+            hashed.append((p, h, st.st_size))
         if retry_errors:
             forget_errors(con, {h for _, h, _ in hashed})
         known = known_hashes(con)
-        todo, seen = [], set()
+        todo, seen, touched = [], set(), []
         for p, h, size in hashed:
             if h in known:
                 summary.already_known += 1
+                if str(p) in seen_files and seen_files[str(p)][2] == h and seen_files[str(p)][1] != mtime_of[str(p)]:
+                    touched.append((mtime_of[str(p)], h))  # same bytes, new mtime: remember it, skip re-reading next time
             elif h in seen:
                 summary.duplicate_content += 1
             else:
                 seen.add(h)
                 todo.append((str(p), h, size))
+        update_mtimes(con, touched)
         summary.new = len(todo)
         summary.bytes_new = sum(s for _, _, s in todo)
         if todo:
             if ray_address in (None, "off"):
-                _run_serial(con, todo, settings, summary, batch_rows, progress)
+                _run_serial(con, todo, settings, summary, batch_rows, progress, mtime_of)
             else:
-                _run_ray(con, todo, settings, summary, batch_rows, progress, ray_address, workers)
+                _run_ray(con, todo, settings, summary, batch_rows, progress, mtime_of, ray_address, workers)
         if export:
             summary.export = str(export_parquet(con, export))
     finally:
@@ -119,12 +139,14 @@ def ingest(
 class _Writer:
     """Buffers rows and commits them per batch; counts statuses."""
 
-    def __init__(self, con, summary: IngestSummary, batch_rows: int, bar):
+    def __init__(self, con, summary: IngestSummary, batch_rows: int, bar, mtime_of: dict[str, int]):
         self.con, self.summary, self.batch_rows, self.bar = con, summary, max(1, batch_rows), bar
+        self.mtime_of = mtime_of
         self.rows: list[dict] = []
         self.pids: set[int] = set()
 
     def add(self, row: dict) -> None:
+        row["mtime_ns"] = self.mtime_of.get(row["path"])  # as the driver saw it when hashing
         self.rows.append(row)
         setattr(self.summary, row["status"], getattr(self.summary, row["status"]) + 1)
         if row.get("worker_pid"):
@@ -143,8 +165,8 @@ class _Writer:
         self.summary.worker_pids = sorted(self.pids)
 
 
-def _run_serial(con, todo, settings, summary, batch_rows, progress) -> None:
-    w = _Writer(con, summary, batch_rows, _progress(len(todo), progress))
+def _run_serial(con, todo, settings, summary, batch_rows, progress, mtime_of) -> None:
+    w = _Writer(con, summary, batch_rows, _progress(len(todo), progress), mtime_of)
     t = time.perf_counter()
     try:
         for path, h, size in todo:
@@ -154,7 +176,7 @@ def _run_serial(con, todo, settings, summary, batch_rows, progress) -> None:
     summary.process_s = time.perf_counter() - t
 
 
-def _run_ray(con, todo, settings, summary, batch_rows, progress, address, workers) -> None:
+def _run_ray(con, todo, settings, summary, batch_rows, progress, mtime_of, address, workers) -> None:
     t = time.perf_counter()
     with ray_session(address, workers) as ray:
         summary.ray_start_s = time.perf_counter() - t
@@ -163,7 +185,7 @@ def _run_ray(con, todo, settings, summary, batch_rows, progress, address, worker
         task = ray.remote(max_retries=TASK_MAX_RETRIES, num_cpus=1)(process_log)
         settings_ref = ray.put(settings)
         window = (workers or cluster_cpus(ray)) * IN_FLIGHT_PER_CPU
-        w = _Writer(con, summary, batch_rows, _progress(len(todo), progress))
+        w = _Writer(con, summary, batch_rows, _progress(len(todo), progress), mtime_of)
         t = time.perf_counter()
         pending: dict = {}
         queue = iter(todo)

@@ -23,6 +23,7 @@ COLUMNS: tuple[tuple[str, str], ...] = (
     ("log_hash", "VARCHAR PRIMARY KEY"),  # sha256 of the file's bytes
     ("path", "VARCHAR NOT NULL"),
     ("size_bytes", "BIGINT"),
+    ("mtime_ns", "BIGINT"),  # file modification time at ingest: an unchanged (path, size, mtime) is not re-hashed
     ("format", "VARCHAR"),
     ("vehicle_id", "VARCHAR"),
     ("vehicle_id_source", "VARCHAR"),  # ulog:sys_uuid, mavlink:AUTOPILOT_VERSION.uid, dataflash:..., dir:N
@@ -111,6 +112,20 @@ def check_version(con, path) -> int:
 
 def known_hashes(con) -> set[str]:
     return {r[0] for r in con.execute("SELECT log_hash FROM flights").fetchall()}
+
+
+def known_files(con) -> dict[str, tuple[int, int, str]]:
+    """path -> (size_bytes, mtime_ns, log_hash) of the rows' files as they were at ingest."""
+    rows = con.execute("SELECT path, size_bytes, mtime_ns, log_hash FROM flights WHERE mtime_ns IS NOT NULL").fetchall()
+    return {p: (size, mtime, h) for p, size, mtime, h in rows}
+
+
+def update_mtimes(con, mtime_hash: list[tuple[int, str]]) -> None:
+    """Record new modification times of files whose bytes are unchanged (one transaction)."""
+    if mtime_hash:
+        con.execute("BEGIN TRANSACTION")
+        con.executemany("UPDATE flights SET mtime_ns = ? WHERE log_hash = ?", [list(x) for x in mtime_hash])
+        con.execute("COMMIT")
 
 
 def forget_errors(con, hashes: set[str]) -> int:

@@ -91,8 +91,14 @@ def test_bad_logs_are_error_rows_with_the_reason(serial_db):
 def test_reingest_skips_known_content_and_takes_only_new_logs(serial_db, fleet_dir, tmp_path):
     before = rows(serial_db)
     again = ingest([str(fleet_dir)], serial_db, ray_address="off", progress=False)
-    assert (again.found, again.already_known, again.new) == (9, 9, 0)
+    assert (again.found, again.already_known, again.new, again.hashed) == (9, 9, 0, 0)  # nothing re-read
     assert rows(serial_db) == before
+    touched = fleet_dir / "sim" / "vehicle_1" / "flight_02.tlog"
+    os.utime(touched, ns=(time.time_ns(), time.time_ns()))  # new mtime, same bytes: re-read, still known
+    again = ingest([str(fleet_dir)], serial_db, ray_address="off", progress=False)
+    assert (again.already_known, again.new, again.hashed) == (9, 0, 1)
+    assert ingest([str(fleet_dir)], serial_db, ray_address="off", progress=False).hashed == 0  # new mtime recorded
+    assert ingest([str(fleet_dir)], serial_db, ray_address="off", progress=False, rehash=True).hashed == 9
     # A copy under another name is the same flight; a new file is ingested alone.
     extra = tmp_path / "more"
     extra.mkdir()
