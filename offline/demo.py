@@ -7,6 +7,9 @@
 3. Diagnose real logs from ``--data``: the ArduPilot DataFlash log and, when
    the Crazyflie model is shipped, one healthy and one cut-propeller CrazyPAD
    flight.
+4. Fleet: a small simulated fleet (3 vehicles, one bending a propeller), the
+   logs above and the real logs into ``propwatch fleet ingest`` (Ray), then
+   ``propwatch fleet report``; prints the site's path.
 
 Each step runs the real command in a subprocess and prints what it said.
 """
