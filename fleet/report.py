@@ -316,6 +316,11 @@ def flight_page(f: dict, v: Vehicle) -> str:
     else:
         what = "No verdict" if f["status"] == "no_verdict" else "Unreadable log"
         body += f"<h2>{what}</h2><p class='flag'>{e(f['error'] or '')}</p>"
+    fmt_arg = f" --format {f['format']}" if f["format"] not in (None, "tlog", "ulog", "dataflash") else ""
+    body += (
+        "<p class='muted'>Motor, attitude and rate signals of this flight: "
+        f"<code>propwatch diagnose {e(f['path'])}{e(fmt_arg)} --report DIR</code> (the log itself is not kept here).</p>"
+    )
     warns = f["warnings"] or []
     body += "<h2>Warnings</h2><ul>" + ("".join(f"<li>{e(w)}</li>" for w in warns) or "<li>none</li>") + "</ul>"
     segs = d.get("airborne_segments") or []
