@@ -3,6 +3,8 @@
 Examples:
   propwatch dataset --sets A,B,C --fault bent --out out/data            # A-bent.npz, B-bent.npz, C-bent.npz
   propwatch dataset --name R --waypoints random --payload 0,0.6 --wind 3 --fault mixed --out out/data
+  propwatch dataset --name RR --waypoints random --payload 0,0.6 --fault varied --physics randomised \
+      --propellers quadratic --out out/data  # every flight's physics drawn from offline/sim/assumptions.py
 """
 
 from __future__ import annotations
@@ -46,6 +48,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--motor-efficiency-spread", type=float, default=0.0, help="+- fraction per rotor per variant")
     p.add_argument("--cg-offset", type=float, default=0.0, help="max horizontal CG offset, m, per variant")
     p.add_argument("--variants", type=int, default=1, help="vehicle variants carrying the randomised terms")
+    p.add_argument(
+        "--physics",
+        choices=("fixed", "randomised"),
+        default="fixed",
+        help="randomised: draw every flight's physics and fault signatures from the assumption register "
+        "(needs --propellers quadratic; replaces --wind/--motor-efficiency-spread/--cg-offset/--variants)",
+    )
     p.add_argument("--sensor-noise", type=float, default=1.0, help="scale of the simulator's gyro/attitude noise (0 = off)")
     p.add_argument("--vehicle", type=Path, default=DEFAULT_VEHICLE)
     p.add_argument("--seed", type=int, default=0)
@@ -76,6 +85,7 @@ def specs_from_args(a: argparse.Namespace) -> list[DatasetSpec]:
         vehicle_variants=a.variants,
         sensor_noise_scale=a.sensor_noise,
         chunk_flights=a.chunk_flights,
+        physics=a.physics,
     )
     specs = []
     sets = [s.strip() for s in a.sets.split(",") if s.strip()]

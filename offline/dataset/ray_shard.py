@@ -19,8 +19,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from offline.dataset.generate import simulate_flights
-
 TASK_MAX_RETRIES = 3
 IN_FLIGHT_PER_WORKER = 2
 
@@ -36,20 +34,29 @@ class ChunkSignals:
         return self.arrays
 
 
-def simulate_chunk(job: dict) -> ChunkSignals:
-    log = simulate_flights(**job)
-    return ChunkSignals({k: np.asarray(v, dtype=np.float32) for k, v in log.signals().items()}, float(log.log_rate_hz))
+def simulate_chunk(job: tuple):
+    """Run one chunk job ``(function, keyword arguments)``; a flight log comes back as its float32 signals."""
+    fn, kw = job
+    out = fn(**kw)
+    if hasattr(out, "signals"):
+        return ChunkSignals({k: np.asarray(v, dtype=np.float32) for k, v in out.signals().items()}, float(out.log_rate_hz))
+    return out  # already the signals (randomised physics)
+
+
+def _flights(job: tuple) -> int:
+    kw = job[1]
+    return len(kw["conditions"] if "conditions" in kw else kw["cond"])
 
 
 def ray_chunks(address: str = "auto", workers: int | None = None, progress: bool = True):
     """A ``run_chunks`` for ``generate``: chunks as Ray tasks, yielded in order, with a progress bar."""
     from fleet.raycluster import cluster_cpus, ray_session
 
-    def run(jobs: list[dict]):
+    def run(jobs: list[tuple]):
         with ray_session(address, workers) as ray:
             task = ray.remote(num_cpus=1, max_retries=TASK_MAX_RETRIES)(simulate_chunk)
             window = (workers or cluster_cpus(ray)) * IN_FLIGHT_PER_WORKER
-            bar = _bar(sum(len(j["conditions"]) for j in jobs), progress)
+            bar = _bar(sum(_flights(j) for j in jobs), progress)
             refs: list = []
             finished: set = set()
             try:
@@ -61,7 +68,7 @@ def ray_chunks(address: str = "auto", workers: int | None = None, progress: bool
                         ready, _ = ray.wait(running, num_returns=1)
                         for r in ready:
                             finished.add(r)
-                            bar.update(len(jobs[refs.index(r)]["conditions"]))
+                            bar.update(_flights(jobs[refs.index(r)]))
                     out = ray.get(refs[i])
                     refs[i] = None  # let the object store drop it
                     yield out
