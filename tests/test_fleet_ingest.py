@@ -71,7 +71,9 @@ def test_one_row_per_log_with_vehicle_date_and_verdict(serial_db):
             assert r["start_time_source"] == "tlog:receive_time" and r["start_time_utc"].day == 1 + k
             assert len(r["p_faulty"]) == 4 and r["model_version"] and r["propwatch_version"]
             assert r["duration_s"] == pytest.approx(SPEC.duration_s, abs=0.2) and 0 < r["airborne_s"] <= r["duration_s"]
-            assert r["hypotheses"] is None and r["rotor_effectiveness"] is None  # this diagnose gives neither
+            d = json.loads(r["diagnosis"])  # the new keys are stored as diagnose gives them, NULL when it does not
+            assert r["rotor_effectiveness"] == d.get("rotor_effectiveness")
+            assert (json.loads(r["hypotheses"]) if r["hypotheses"] is not None else None) == d.get("hypotheses")
     # Vehicle 2 bent propeller 3 from its second flight on: the verdicts say so, its first flight and vehicle 1 do not.
     assert by_name["vehicle_2/flight_02.tlog"]["faulty_propellers"] == [3]
     assert by_name["vehicle_2/flight_03.tlog"]["faulty_propellers"] == [3]
