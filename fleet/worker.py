@@ -53,13 +53,24 @@ def _model(path: Path, vehicle_yaml: str | None):
     key = (str(path), vehicle_yaml)
     if key not in _MODELS:
         from monitor.model import Classifier, choose_esc
+        from monitor.vehicle import load_vehicle
 
         clf = Classifier(path)
         esc = choose_esc(clf, vehicle_yaml or "")
         version = hashlib.sha256(path.read_bytes()).hexdigest()[:12]
         name = (clf.info.metadata.get("vehicle") or {}).get("name", "")
-        _MODELS[key] = (clf, esc, f"{path.name}" + (f" ({name})" if name else ""), version)
+        vehicle = load_vehicle(vehicle_yaml or vehicle_for_model(path))  # geometry for diagnose's physics evidence
+        _MODELS[key] = (clf, esc, f"{path.name}" + (f" ({name})" if name else ""), version, vehicle)
     return _MODELS[key]
+
+
+def vehicle_for_model(path: Path) -> Path:
+    """The vehicle YAML shipped beside a model (``NAME-classifier.onnx`` -> ``models/NAME.yaml``), else the paper quad's."""
+    from monitor.vehicle import DEFAULT_VEHICLE
+
+    stem = path.name.removesuffix(".onnx").removesuffix("classifier").rstrip("-")
+    own = REPO_ROOT / "models" / f"{stem}.yaml"
+    return own if stem and own.is_file() else DEFAULT_VEHICLE
 
 
 def choose_model(settings: IngestSettings, cmd_unit: str):
@@ -135,7 +146,7 @@ def _diagnose_into(row: dict, path: Path, settings: IngestSettings) -> None:
     fmt = log_format(path, settings.csv_format)
     row["format"] = fmt
     raw = read_raw(path, fmt, extras=False)
-    clf, esc, model_id, model_version = choose_model(settings, raw.cmd_unit)
+    clf, esc, model_id, model_version, vehicle = choose_model(settings, raw.cmd_unit)
     row.update(model_id=model_id, model_version=model_version)
     table = to_flight_table(raw, esc=esc, rate_hz=clf.info.sample_rate_hz)
     try:
@@ -148,7 +159,7 @@ def _diagnose_into(row: dict, path: Path, settings: IngestSettings) -> None:
             start_us = int(table.timestamp_us[0]) + ident.utc_minus_boot_us
             row["start_time_utc"] = utc_naive(start_us)
             row["start_time_source"] = ident.time_source
-    d = diagnose_table(table, clf, hop=settings.hop, esc=esc)
+    d = diagnose_table(table, clf, hop=settings.hop, esc=esc, vehicle=vehicle)
     out = d.to_json()
     row.update(
         duration_s=len(table) / table.rate_hz,
@@ -166,9 +177,11 @@ def _diagnose_into(row: dict, path: Path, settings: IngestSettings) -> None:
             faulty_propellers=[int(i) for i in d.verdict["faulty_propellers"]],
             p_faulty=[float(x) for x in d.verdict["fault_probability"]],
         )
-    # Keys other diagnose versions add; NULL when this one does not give them.
-    hyp = out.get("hypotheses")
+    # Physics evidence (rotor effectiveness, hypotheses) in PX4 rotor order, as p_faulty: from the Diagnosis
+    # itself (the JSON may be renumbered to the vehicle's own numbers); NULL when diagnose gives none.
+    ev = getattr(d, "physics", None)
+    hyp = getattr(ev, "hypotheses", None) if ev is not None else out.get("hypotheses")
     row["hypotheses"] = json.dumps(hyp) if hyp is not None else None
     for key in ("rotor_effectiveness", "rotor_effectiveness_std"):
-        v = out.get(key)
+        v = getattr(ev, key, None) if ev is not None else out.get(key)
         row[key] = [float(x) for x in v] if v is not None else None

@@ -213,24 +213,15 @@ def test_export_parquet_holds_the_table(serial_db, fleet_dir, tmp_path, capsys):
     assert {"log_hash", "vehicle_id", "p_faulty", "rotor_effectiveness", "hypotheses"} <= set(t.column_names)
 
 
-def test_new_diagnose_keys_are_stored_when_present(fleet_dir, monkeypatch):
-    from monitor.diagnose import engine
-
-    orig = engine.Diagnosis.to_json
-
-    def with_keys(self):
-        out = orig(self)
-        out["hypotheses"] = [{"faulty_propellers": [3], "probability": 0.9}, {"faulty_propellers": [], "probability": 0.1}]
-        out["rotor_effectiveness"] = [1.0, 0.99, 0.8, 1.01]
-        out["rotor_effectiveness_std"] = [0.01, 0.01, 0.02, 0.01]
-        return out
-
-    monkeypatch.setattr(engine.Diagnosis, "to_json", with_keys)
-    p = fleet_dir / "sim" / "vehicle_2" / "flight_03.tlog"
-    row = process_log(str(p), "h", p.stat().st_size, IngestSettings())
-    assert row["status"] == "ok"
-    assert row["rotor_effectiveness"] == [1.0, 0.99, 0.8, 1.01] and row["rotor_effectiveness_std"][2] == 0.02
-    assert '"probability": 0.9' in row["hypotheses"]
+def test_rotor_effectiveness_and_hypotheses_are_stored_in_px4_order(serial_db):
+    by_name = {Path(r["path"]).parent.name + "/" + Path(r["path"]).name: r for r in rows(serial_db)}
+    bent = by_name["vehicle_2/flight_03.tlog"]  # propeller 3 bent: its rotor gives less thrust than commanded
+    eff = bent["rotor_effectiveness"]
+    assert eff is not None and len(eff) == 4 and len(bent["rotor_effectiveness_std"]) == 4
+    assert min(range(4), key=lambda i: eff[i]) == 2 and eff[2] < 0.97
+    assert 3 in json.loads(bent["hypotheses"])[0]["faulty_propellers"]
+    healthy = by_name["vehicle_1/flight_01.tlog"]["rotor_effectiveness"]
+    assert all(abs(e - 1.0) < 0.05 for e in healthy)
 
 
 @pytest.mark.realdata
