@@ -13,7 +13,7 @@ $(STAMP): pyproject.toml
 	$(BIN)/pip install -q --upgrade pip
 	# torch first, exactly pinned: here it takes the local CPU wheel (a looser pin pulls GBs of CUDA).
 	$(BIN)/pip install -q torch==2.13.0
-	$(BIN)/pip install -q -e '.[offline,dev]'
+	$(BIN)/pip install -q -e '.[offline,fleet,dev]'
 	touch $(STAMP)
 
 setup: $(STAMP)
@@ -27,8 +27,8 @@ test: $(STAMP)
 	$(BIN)/python -m pytest -q
 
 lint: $(STAMP)
-	$(BIN)/ruff check monitor offline tests bench
-	$(BIN)/ruff format --check monitor offline tests bench
+	$(BIN)/ruff check monitor offline fleet tests bench
+	$(BIN)/ruff format --check monitor offline fleet tests bench
 
 bench: $(STAMP)
 	for b in bench/bench_*.py; do echo "== $$b"; $(BIN)/python $$b || exit 1; done

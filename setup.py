@@ -9,6 +9,6 @@ package ``monitor.shipped``, which ``monitor.resources`` reads through
 from setuptools import find_packages, setup
 
 setup(
-    packages=find_packages(include=["monitor*", "offline*"]) + ["monitor.shipped", "monitor.shipped.propellers"],
+    packages=find_packages(include=["monitor*", "offline*", "fleet*"]) + ["monitor.shipped", "monitor.shipped.propellers"],
     package_dir={"monitor.shipped": "models"},
 )

@@ -29,6 +29,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "inspect": ("monitor.inspect_cli", "what propwatch read from a log: messages, rates, gaps, motors, CSV"),
     "monitor": ("monitor.daemon.cli", "run the onboard monitor daemon"),
     "replay": ("monitor.replay", "replay a .tlog as if it were PX4"),
+    "fleet": ("fleet.cli", "fleet: ingest many logs into a health database (Ray), web report"),
 }
 
 

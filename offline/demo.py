@@ -7,6 +7,9 @@
 3. Diagnose real logs from ``--data``: the ArduPilot DataFlash log and, when
    the Crazyflie model is shipped, one healthy and one cut-propeller CrazyPAD
    flight.
+4. Fleet: a small simulated fleet (3 vehicles, one bending a propeller), the
+   logs above and the real logs into ``propwatch fleet ingest`` (Ray), then
+   ``propwatch fleet report``; prints the site's path.
 
 Each step runs the real command in a subprocess and prints what it said, every
 warning included; every diagnosis also writes its ``--report`` (an HTML page and
@@ -113,8 +116,32 @@ def run(out: Path, data: Path, duration_s: float = 40.0) -> int:
                 _diagnose(files[0], out / "reports" / sub, "--format", "crazypad", "--vehicle", str(shipped("crazyflie.yaml")))
     else:
         print("  (CrazyPAD skipped: model or data not found)")
+    fleet_step(out, data)
     print(f"\nsimulated logs and sidecars are in {out}; reports (open the .html) in {out / 'reports'}")
     return 0 if failures == 0 else 1
+
+
+def fleet_step(out: Path, data: Path) -> None:
+    """4. The fleet view: a small simulated fleet, the demo's logs and the real logs into one database and site."""
+    from offline.fleet_sim import FleetSpec, write_fleet
+
+    print("\n== 4. fleet: ingest (Ray) into a DuckDB health database, then the static web report")
+    write_fleet(
+        out / "fleet-sim", FleetSpec(vehicles=3, flights=4, duration_s=20.0, faulty_vehicle=2, fault_from_flight=2, seed=7)
+    )
+    real = [data / "px4_ulog", data / "ardupilot_log171", data / "crazypad" / "motor" / "normal_flight"]
+    real += [data / "crazypad" / "motor" / "cut_propeller_M3_4mm_3.5mm_39.5mm"]
+    own = [out / "fleet-sim"] + [out / name for name in ("healthy", "prop3-bent", "prop1-cracked")]
+    paths = [str(p) for p in own + real if p.is_dir()]
+    db = out / "fleet.duckdb"
+    r = _propwatch("fleet", "ingest", *paths, "--db", str(db), "--format", "crazypad", "--vehicle-from-dir", "1", "--no-progress")
+    print("  " + (r.stdout.strip() or r.stderr.strip()[-400:]).replace("\n", "\n  "))
+    if r.returncode == 2:
+        return
+    r = _propwatch("fleet", "report", "--db", str(db), "--out", str(out / "fleet-site"))
+    print("  " + (r.stdout.strip() or r.stderr.strip()[-400:]))
+    if r.returncode == 0:
+        print(f"  fleet site: {out / 'fleet-site' / 'index.html'}")
 
 
 def main(argv: list[str] | None = None) -> int:

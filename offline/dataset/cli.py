@@ -10,6 +10,7 @@ Examples:
 from __future__ import annotations
 
 import argparse
+import contextlib
 from pathlib import Path
 
 from monitor.errors import ConfigError
@@ -59,6 +60,18 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--sensor-noise", type=float, default=1.0, help="scale of the simulator's gyro/attitude noise (0 = off)")
     p.add_argument("--vehicle", type=Path, default=DEFAULT_VEHICLE, help="vehicle YAML (default models/vehicle.yaml)")
     p.add_argument("--seed", type=int, default=0, help="seed of routes, variants, noise and faults (default 0)")
+    p.add_argument(
+        "--chunk-flights", type=int, default=64, help="flights per simulator call and per Ray task (part of the data set)"
+    )
+    p.add_argument(
+        "--ray",
+        nargs="?",
+        const="auto",
+        default=None,
+        metavar="ADDRESS",
+        help="simulate chunks as Ray tasks: local Ray without ADDRESS, else join the cluster at HOST:PORT (same arrays as without)",
+    )
+    p.add_argument("--workers", type=int, default=None, help="with --ray: worker processes (local) or tasks in flight")
     return p
 
 
@@ -73,6 +86,7 @@ def specs_from_args(a: argparse.Namespace) -> list[DatasetSpec]:
         cg_offset_max_m=a.cg_offset,
         vehicle_variants=a.variants,
         sensor_noise_scale=a.sensor_noise,
+        chunk_flights=a.chunk_flights,
         physics=a.physics,
     )
     specs = []
@@ -103,11 +117,21 @@ def specs_from_args(a: argparse.Namespace) -> list[DatasetSpec]:
 def main(argv: list[str] | None = None) -> int:
     a = build_parser().parse_args(argv)
     vehicle = load_vehicle(a.vehicle)
-    for spec in specs_from_args(a):
-        ds = generate(spec, vehicle)
-        path = save_dataset(a.out / f"{spec.name}.npz", ds)
-        write_manifest(a.out / f"{spec.name}.manifest.json", ds.manifest)
-        print(f"wrote {path}: {ds.n_flights} flights x {ds.n_steps} steps ({ds.n_steps / ds.sample_rate_hz:.0f} s)")
+    if a.chunk_flights < 1:
+        raise ConfigError(f"--chunk-flights: must be >= 1, got {a.chunk_flights}")
+    specs = specs_from_args(a)
+    run_chunks, session = None, contextlib.nullcontext()
+    if a.ray:
+        from fleet.raycluster import ray_session
+        from offline.dataset.ray_shard import ray_chunks
+
+        run_chunks, session = ray_chunks(a.ray, a.workers), ray_session(a.ray, a.workers)  # one Ray for every set
+    with session:
+        for spec in specs:
+            ds = generate(spec, vehicle, run_chunks=run_chunks)
+            path = save_dataset(a.out / f"{spec.name}.npz", ds)
+            write_manifest(a.out / f"{spec.name}.manifest.json", ds.manifest)
+            print(f"wrote {path}: {ds.n_flights} flights x {ds.n_steps} steps ({ds.n_steps / ds.sample_rate_hz:.0f} s)")
     return 0
 
 

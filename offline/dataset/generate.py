@@ -192,10 +192,14 @@ def from_log(
     )
 
 
-def generate(spec: DatasetSpec, vehicle: VehicleConfig, log=print, *, register=None) -> FaultDataset:
-    """The data set of ``spec``; ``register`` (randomised physics only) defaults to ``assumptions.REGISTER``."""
+def generate(spec: DatasetSpec, vehicle: VehicleConfig, log=print, run_chunks=None, *, register=None) -> FaultDataset:
+    """The data set of ``spec``; ``register`` (randomised physics only) defaults to ``assumptions.REGISTER``.
+
+    ``run_chunks`` maps the list of chunk jobs ``(function, keyword arguments)`` to their results, in
+    order; default: one after another in this process (``offline.dataset.ray_shard`` runs them as Ray
+    tasks: same chunks, same seeds, same arrays)."""
     if spec.physics == "randomised":
-        return _generate_randomised(spec, vehicle, log, register)
+        return _generate_randomised(spec, vehicle, log, register, run_chunks)
     rng = np.random.default_rng([spec.seed, 0])
     cond = flight_conditions(spec.fault, spec.flights_per_label, rng)
     n = len(cond)
@@ -214,28 +218,36 @@ def generate(spec: DatasetSpec, vehicle: VehicleConfig, log=print, *, register=N
         vehicle={"name": vehicle.name, "esc": to_mapping(vehicle.esc)},
         variants=[to_mapping(v) for v in variants] if _randomised(spec) else None,
     )
-    parts, order = [], []
+    jobs, order = [], []
     progress = bar(n, "flight", f"dataset {spec.name}") if interactive() else None
     for v, veh in enumerate(variants):
         idx = np.flatnonzero(variant_of == v)
         for c0 in range(0, len(idx), spec.chunk_flights):
             chunk = idx[c0 : c0 + spec.chunk_flights]
             seed = int(np.random.default_rng([spec.seed, 1, v, c0]).integers(2**31))
-            flight_log = simulate_flights(veh, wps[chunk], cond[chunk], payload[chunk], spec, seed)
-            parts.append(
-                from_log(flight_log, spec.name, vehicle, cond[chunk], payload[chunk], tuple(names[i] for i in chunk), manifest)
-            )
+            kw = dict(vehicle=veh, waypoints=wps[chunk], conditions=cond[chunk], payload_kg=payload[chunk], spec=spec, seed=seed)
+            jobs.append((simulate_flights, kw))
             order.append(chunk)
-            if progress is not None:
-                progress.update(len(chunk))
-            else:
-                log(f"{spec.name}: simulated {sum(len(o) for o in order)}/{n} flights")
+    parts = []
+    for chunk, flight_log in zip(order, (run_chunks or _one_after_another)(jobs)):
+        parts.append(
+            from_log(flight_log, spec.name, vehicle, cond[chunk], payload[chunk], tuple(names[i] for i in chunk), manifest)
+        )
+        if progress is not None:
+            progress.update(len(chunk))
+        else:
+            log(f"{spec.name}: simulated {sum(len(o) for o in order[: len(parts)])}/{n} flights")
     if progress is not None:
         progress.close()
     ds = parts[0] if len(parts) == 1 else concat(parts, spec.name)
     back = np.argsort(np.concatenate(order))  # restore label order
     ds = ds.subset(back)
     return dataclasses.replace(ds, manifest=manifest)
+
+
+def _one_after_another(jobs: list[tuple]):
+    for fn, kw in jobs:
+        yield fn(**kw)
 
 
 def _randomised(spec: DatasetSpec) -> bool:
@@ -302,7 +314,7 @@ class _Signals:
         return self._signals
 
 
-def _generate_randomised(spec: DatasetSpec, vehicle: VehicleConfig, log, register) -> FaultDataset:
+def _generate_randomised(spec: DatasetSpec, vehicle: VehicleConfig, log, register, run_chunks=None) -> FaultDataset:
     from offline.sim.assumptions import REGISTER
 
     register = REGISTER if register is None else register
@@ -325,10 +337,16 @@ def _generate_randomised(spec: DatasetSpec, vehicle: VehicleConfig, log, registe
             "flights": n,
         },
     )
+    chunks = [np.arange(c0, min(n, c0 + spec.chunk_flights)) for c0 in range(0, n, spec.chunk_flights)]
+    jobs = [
+        (
+            simulate_randomised,
+            dict(spec=spec, vehicle=vehicle, idx=idx, cond=cond[idx], payload=payload[idx], wps=wps[idx], register=register),
+        )
+        for idx in chunks
+    ]
     parts = []
-    for c0 in range(0, n, spec.chunk_flights):
-        idx = np.arange(c0, min(n, c0 + spec.chunk_flights))
-        sig = simulate_randomised(spec, vehicle, idx, cond[idx], payload[idx], wps[idx], register)
+    for idx, sig in zip(chunks, (run_chunks or _one_after_another)(jobs)):
         parts.append(
             from_log(
                 _Signals(sig, SAMPLE_RATE_HZ), spec.name, vehicle, cond[idx], payload[idx], tuple(names[i] for i in idx), manifest
