@@ -230,7 +230,9 @@ class Link:
                 1 for m in msgs if m.get_type() == "BAD_DATA" and "signature" in str(getattr(m, "reason", ""))
             )
         if self.guard.allow_sources:
-            kept = [m for m in msgs if m.get_type() == "BAD_DATA" or self.guard.source_ok(m.get_srcSystem(), m.get_srcComponent())]
+            kept = [
+                m for m in msgs if m.get_type() == "BAD_DATA" or self.guard.source_ok(m.get_srcSystem(), m.get_srcComponent())
+            ]
             self.rejected["source not allowed"] += len(msgs) - len(kept)
             msgs = kept
         return [(m, received) for m in msgs]

@@ -112,6 +112,10 @@ class Pipeline:
             "implausible_samples": 0,
         }
         self._max_gap_us = fast
+        self._period_us = period_us(r.rate_hz)
+        # Boot times of implausible samples: the grid step whose period holds one is invalid even when
+        # the sample falls between two instants (a 50 Hz stream on the 20 Hz grid), so no window spans it.
+        self._bad_times: deque[int] = deque(maxlen=256)
         # Ring of features, stored twice so any window is one contiguous slice.
         self._ring = np.zeros((2 * self.window, len(self.features)), dtype=np.float32)
         self._head = 0
@@ -132,7 +136,9 @@ class Pipeline:
             back_us = s.previous_us - s.timestamp_us
             if back_us > REBOOT_BACK_US or s.timestamp_us < REBOOT_BOOT_US:
                 self.stats["clock_resets"] += 1
-                self.clock_events.append(f"autopilot rebooted (boot clock {s.previous_us / 1e6:.1f} -> {s.timestamp_us / 1e6:.1f} s)")
+                self.clock_events.append(
+                    f"autopilot rebooted (boot clock {s.previous_us / 1e6:.1f} -> {s.timestamp_us / 1e6:.1f} s)"
+                )
             else:
                 self.stats["clock_steps_back"] += 1
                 self.clock_events.append(f"autopilot clock stepped back {back_us / 1e6:.1f} s")
@@ -144,6 +150,7 @@ class Pipeline:
             vals = (s.roll_rad, s.pitch_rad, s.yaw_rad, s.roll_rate_rad_s, s.pitch_rate_rad_s, s.yaw_rate_rad_s)
             if self.plausible.attitude(s.timestamp_us, vals) is not None:
                 self.stats["implausible_samples"] += 1
+                self._bad_times.append(s.timestamp_us)
                 vals = NAN6  # never evidence: the instants it would hold become a gap
             return self._push("attitude", s.timestamp_us, vals, received_s)
         if isinstance(s, md.ActuatorOutputs) and s.source == self._source:
@@ -166,6 +173,7 @@ class Pipeline:
     def _push_motor(self, t_us: int, values: np.ndarray, is_cmd: bool, received_s: float) -> list[StepResult]:
         if self.plausible.motor(t_us, values) is not None:
             self.stats["implausible_samples"] += 1
+            self._bad_times.append(t_us)
             return self._push("motor", t_us, np.full(4, np.nan), received_s)
         return self._push("motor", t_us, self.esc.cmd_to_rpm(values) if is_cmd else values, received_s)
 
@@ -173,6 +181,7 @@ class Pipeline:
         """Drop everything held (grid and ring); decoding state (autopilot, clock) is kept."""
         self.hold.reset()
         self.plausible.reset()
+        self._bad_times.clear()
         self._clear()
 
     def flush(self) -> list[StepResult]:
@@ -205,10 +214,10 @@ class Pipeline:
     def _why(self, v: dict[str, np.ndarray], airborne: bool, t_us: int) -> str:
         if not airborne:
             return "not armed" if v["armed"][0] != 1.0 else "not in the air"
-        bad = [k for k in ("attitude", "motor") if not np.isfinite(v[k]).all()]
+        bad = [k for k in ("attitude", "motor") if not np.isfinite(v[k]).all()] or list(self.plausible.last)
         for k in bad:  # a sample dropped as implausible is the reason, not a mere gap
             last = self.plausible.last.get(k)
-            if last is not None and 0 <= t_us - last[0] <= self._max_gap_us:
+            if last is not None and last[0] >= t_us - self._max_gap_us:  # dropped at or after this instant's data
                 return f"{k} implausible: {last[1]}"
         return f"{' and '.join(bad) or 'features'} missing, stale or NaN"
 
@@ -230,11 +239,15 @@ class Pipeline:
             "yaw_rate_rad_s": att[5:6],
         }
         feats = compute_features(signals, self.features)[0]
-        valid = airborne and bool(np.isfinite(feats).all())
+        bad = self._bad_times
+        while bad and bad[0] <= g.timestamp_us - self._period_us:
+            bad.popleft()
+        tainted = bool(bad) and bad[0] <= g.timestamp_us
+        valid = airborne and not tainted and bool(np.isfinite(feats).all())
         battery_v = float(v["battery"][0])
         if not valid:
             self._clear()
-            data_ok = bool(np.isfinite(att).all() and np.isfinite(v["motor"]).all())
+            data_ok = not tainted and bool(np.isfinite(att).all() and np.isfinite(v["motor"]).all())
             return StepResult(
                 g.timestamp_us, airborne, False, 0, battery_v, reason=self._why(v, airborne, g.timestamp_us), data_ok=data_ok
             )

@@ -75,7 +75,8 @@ class Daemon:
         self._next_watchdog = 0.0
         self._next_bad_log = 0.0
         self._bad_since_log = 0
-        self._classifying_state = False
+        self._classifying_state: bool | None = None  # None: no step yet, the first one sets STATUS
+        self._last_reason = ""
         self._state_log_limit = RateLimiter(2.0)
         self._error_log_limit = RateLimiter(10.0)
         self._slow: set[str] = set(self.fast_streams())
@@ -170,14 +171,17 @@ class Daemon:
             self._on_step(step)
 
     def _on_step(self, step) -> None:
-        if step.valid != self._classifying_state:
+        if step.valid != self._classifying_state or (not step.valid and step.reason != self._last_reason):
             self._classifying_state = step.valid
             if step.valid:
+                self._last_reason = ""
                 log.info("t=%d ms: buffering (classification after %d valid steps)", step.time_boot_ms, self.pipeline.window)
                 self._set_status("airborne: classifying")
-            elif self._state_log_limit.allow():  # NaN flapping must not flood the journal
-                log.info("t=%d ms: not classifying: %s", step.time_boot_ms, step.reason)
-                self._set_status(f"not classifying: {step.reason}")
+            else:
+                self._last_reason = step.reason
+                self._set_status(f"not classifying: {step.reason}")  # a datagram, only on change
+                if self._state_log_limit.allow():  # NaN flapping must not flood the journal
+                    log.info("t=%d ms: not classifying: %s", step.time_boot_ms, step.reason)
         if step.data_ok:
             self._transition(self.blind.recover())
         elif step.airborne:

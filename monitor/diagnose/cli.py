@@ -98,9 +98,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     return p.parse_args(argv)
 
 
-def diagnose_file(
-    path: str, clf: Classifier, esc: EscCurve, fmt: str | None, hop: int, max_seconds: float = DEFAULT_MAX_SECONDS
-):
+def diagnose_file(path: str, clf: Classifier, esc: EscCurve, fmt: str | None, hop: int, max_seconds: float = DEFAULT_MAX_SECONDS):
     check_size(path, max_seconds)
     raw = read_raw(path, fmt, extras=False)
     streams = {k: getattr(raw, k) for k in ("motor_cmd", "attitude_rad", "rates_rad_s")}
