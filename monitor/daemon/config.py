@@ -110,6 +110,7 @@ class InputConfig:
         _check(self.motor_source in MOTOR_SOURCES, "input.motor_source", f"must be one of {MOTOR_SOURCES}")
         _check(all(1 <= c <= 32 for c in self.motor_outputs), "input.motor_outputs", "channels are 1..32")
         _check(len(set(self.motor_outputs)) == 4, "input.motor_outputs", "must name four different outputs")
+        _check(0 <= self.battery_id <= 255, "input.battery_id", "must be 0..255 (BATTERY_STATUS.id)")
         _check(self.landed_state in LANDED_STATE_MODES, "input.landed_state", f"must be one of {LANDED_STATE_MODES}")
 
 
@@ -159,7 +160,6 @@ class AlertConfig:
         _check(0 < self.threshold <= 1, "alerts.threshold", "must be in (0, 1]")
         _check(self.threshold <= self.critical_threshold <= 1, "alerts.critical_threshold", "must be in [threshold, 1]")
         _check(self.consecutive >= 1, "alerts.consecutive", "must be >= 1")
-        _check(self.refractory_s >= 0 and self.statustext_min_interval_s >= 0, "alerts", "intervals must be >= 0")
         _within(self.consecutive, 1, 100_000, "alerts.consecutive")
         _within(self.refractory_s, 0.0, 86_400.0, "alerts.refractory_s")
         _within(self.statustext_min_interval_s, 0.0, 3600.0, "alerts.statustext_min_interval_s")

@@ -125,6 +125,7 @@ class Link:
         self.rejected: Counter = Counter()  # why frames/datagrams were dropped
         self._batch_addr: tuple[str, int] | None = None
         self._autopilot_addr: tuple[str, int] | None = None
+        self._signing: Any = None
         if self.is_log:
             self.open()
         else:
@@ -155,6 +156,7 @@ class Link:
                 self.conn.setup_signing(
                     self.guard.signing_key, sign_outgoing=True, allow_unsigned_callback=None, link_id=self.guard.signing_link_id
                 )
+                self._signing = self.conn.mav.signing  # its counters outlive a reopen's connection
             if self.is_udpin:
                 self.conn.clients = set()  # replies go to the autopilot's address only, once it is known
                 if self._autopilot_addr is not None:
@@ -272,8 +274,8 @@ class Link:
 
     def stats(self) -> dict:
         out: dict[str, Any] = {"rejected": dict(self.rejected), "peers_remembered": len(self.peers)}
-        signing = getattr(getattr(self.conn, "mav", None), "signing", None)
-        if self.guard.signing_key is not None and signing is not None:
+        signing = self._signing
+        if signing is not None:
             out["signing"] = {
                 "good": signing.goodsig_count,
                 "bad": signing.badsig_count,
