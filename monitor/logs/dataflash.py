@@ -68,7 +68,7 @@ def read_dataflash(path: str | Path) -> RawFlight:
     path = Path(path)
     if not path.is_file():
         raise LogFormatError(f"{path}: no such file")
-    check_marker_gaps(path.read_bytes(), (b"\xa3\x95",), path, "DataFlash")
+    check_marker_gaps(path, (b"\xa3\x95",), "DataFlash")
     err = io.StringIO()
     rows: dict[str, list] = {k: [] for k in ("cmd", "att", "rate", "imu", "bat", "armed", "alt", "ekf")}
     try:

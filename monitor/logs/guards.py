@@ -26,6 +26,7 @@ MAX_BYTES_PER_S = 1_000_000  # PX4 high-rate ULog profiles stay well below 1 MB/
 MAX_GARBAGE_BYTES = 8 * 1024 * 1024
 MAX_SAMPLES_PER_S = 2000.0  # the fastest logged stream (IMU at 1 kHz class) with margin
 MIN_SAMPLES_FOR_RATE = 1000
+CHUNK_BYTES = 4 * 1024 * 1024
 
 
 def check_size(path: str | Path, max_seconds: float = DEFAULT_MAX_SECONDS) -> None:
@@ -42,25 +43,46 @@ def check_size(path: str | Path, max_seconds: float = DEFAULT_MAX_SECONDS) -> No
         )
 
 
-def check_marker_gaps(buf: bytes, markers: tuple[bytes, ...], path: str | Path, what: str) -> None:
-    """Refuse a buffer with more than ``MAX_GARBAGE_BYTES`` in a row holding none of ``markers``."""
-    if len(buf) <= MAX_GARBAGE_BYTES:
-        return
-    a = np.frombuffer(buf, dtype=np.uint8)
-    hit = np.zeros(len(a), dtype=bool)
-    for m in markers:
-        if len(m) == 1:
-            hit |= a == m[0]
-        else:
-            hit[:-1] |= (a[:-1] == m[0]) & (a[1:] == m[1])
-    pos = np.concatenate(([-1], np.flatnonzero(hit), [len(a)]))
-    gaps = np.diff(pos) - 1
-    i = int(np.argmax(gaps))
-    if gaps[i] > MAX_GARBAGE_BYTES:
-        raise LogFormatError(
-            f"{path}: {gaps[i] / 1e6:.1f} MB without any {what} message from byte {pos[i] + 1}: "
-            "not a log, or damaged beyond reading"
-        )
+def check_marker_gaps(path: str | Path, markers: tuple[bytes, ...], what: str) -> None:
+    """Refuse a file with more than ``MAX_GARBAGE_BYTES`` in a row holding none of ``markers`` (1 or 2 bytes).
+
+    Read in ``CHUNK_BYTES`` pieces, so the check itself costs little memory on a huge file.
+    """
+    path = Path(path)
+    last = -1  # offset of the latest marker seen
+    offset = 0
+    prev_tail = b""
+    with open(path, "rb") as fh:
+        while True:
+            chunk = fh.read(CHUNK_BYTES)
+            if not chunk:
+                break
+            buf = prev_tail + chunk  # one byte of overlap finds a 2-byte marker split across chunks
+            base = offset - len(prev_tail)
+            a = np.frombuffer(buf, dtype=np.uint8)
+            hit = np.zeros(len(a), dtype=bool)
+            for m in markers:
+                if len(m) == 1:
+                    hit |= a == m[0]
+                else:
+                    hit[:-1] |= (a[:-1] == m[0]) & (a[1:] == m[1])
+            pos = np.flatnonzero(hit) + base
+            if len(pos):
+                gaps = np.diff(np.concatenate(([last], pos))) - 1
+                k = int(np.argmax(gaps))
+                if gaps[k] > MAX_GARBAGE_BYTES:
+                    _refuse(path, int(gaps[k]), (last if k == 0 else int(pos[k - 1])) + 1, what)
+                last = int(pos[-1])
+            offset += len(chunk)
+            prev_tail = chunk[-1:]
+            if offset - 1 - last > MAX_GARBAGE_BYTES:
+                _refuse(path, offset - 1 - last, last + 1, what)
+
+
+def _refuse(path: Path, gap: int, start: int, what: str) -> None:
+    raise LogFormatError(
+        f"{path}: {gap / 1e6:.1f} MB without any {what} message from byte {start}: not a log, or damaged beyond reading"
+    )
 
 
 def check_time_advances(streams: dict[str, object], path: str | Path, max_seconds: float = DEFAULT_MAX_SECONDS) -> None:

@@ -166,8 +166,8 @@ def read_tlog(path: str | Path, system_id: int | None = None, extras: bool = Tru
     path = Path(path)
     if not path.is_file():
         raise LogFormatError(f"{path}: no such file")
+    check_marker_gaps(path, (bytes([V1_MAGIC]), bytes([V2_MAGIC])), "MAVLink")
     buf = path.read_bytes()
-    check_marker_gaps(buf, (bytes([V1_MAGIC]), bytes([V2_MAGIC])), path, "MAVLink")
     mav, mavlink_map = _mavlink()
     dec = md.MavlinkDecoder(system_id=system_id)
     col = _Collector()
