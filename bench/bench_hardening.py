@@ -136,8 +136,7 @@ def zeros(args, work: Path, model: Path) -> dict:
 
     heads = {
         "tlog": write_tlog(work / "h.tlog", synth_flight(1.0)).read_bytes()[:3000],
-        "dataflash": b"\xa3\x95\x80"
-        + struct.pack("<BB4s16s64s", 128, 89, b"FMT", b"BBnNZ", b"Type,Length,Name,Format,Columns"),
+        "dataflash": b"\xa3\x95\x80" + struct.pack("<BB4s16s64s", 128, 89, b"FMT", b"BBnNZ", b"Type,Length,Name,Format,Columns"),
     }
     out = {}
     for name, head in heads.items():

@@ -171,3 +171,35 @@ def test_signing_key_file_and_allow_list_syntax_are_checked(tmp_path):
         monitor_config_from_mapping({"link": {"allow_sources": ["1-1"]}})
     with pytest.raises(ConfigError, match="allow_addresses"):
         monitor_config_from_mapping({"link": {"allow_addresses": ["127.0.0.1:99999"]}})
+
+
+def test_forged_signed_frames_from_many_streams_keep_pymavlink_signing_state_bounded(tmp_path):
+    from monitor.daemon.link import MAX_SIGNING_STREAMS, LinkGuard
+
+    rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    rx.bind(("127.0.0.1", 0))
+    port = rx.getsockname()[1]
+    rx.close()
+    link = Link(f"udpin:127.0.0.1:{port}", 191, guard=LinkGuard(signing_key=KEY))
+    tx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    hb = mavlink.MAVLink_heartbeat_message(2, 12, 129, 0, 4, 3)
+    n = 0
+    try:
+        for link_id in range(3):
+            for sys_id in range(1, 255):
+                mav = mavlink.MAVLink(None, srcSystem=sys_id, srcComponent=1)
+                mav.signing.secret_key, mav.signing.sign_outgoing, mav.signing.link_id = WRONG_KEY, True, link_id
+                mav.signing.timestamp = int((time.time() - 1420070400) * 100_000)
+                tx.sendto(bytes(hb.pack(mav)), ("127.0.0.1", port))
+                n += 1
+                if n % 50 == 0:
+                    while link.read(0.01):
+                        pass
+        while link.read(0.05):
+            pass
+        assert len(link._signing.stream_timestamps) <= MAX_SIGNING_STREAMS
+        assert link.rejected["invalid or missing signature"] > 0.9 * n
+        assert link.rejected["signing streams forgotten"] > 0
+    finally:
+        tx.close()
+        link.close()

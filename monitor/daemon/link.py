@@ -227,10 +227,12 @@ class Link:
         except Exception as exc:  # noqa: BLE001 - pymavlink raises MAVError and struct errors on garbage
             log.debug("parse error: %s", exc)
             return [(_BadData(str(exc)), received)]
-        if self.guard.signing_key is not None:
+        if self._signing is not None:
             self.rejected["invalid or missing signature"] += sum(
                 1 for m in msgs if m.get_type() == "BAD_DATA" and "signature" in str(getattr(m, "reason", ""))
             )
+            if len(self._signing.stream_timestamps) > MAX_SIGNING_STREAMS:
+                self._prune_signing_streams()
         if self.guard.allow_sources:
             kept = [
                 m for m in msgs if m.get_type() == "BAD_DATA" or self.guard.source_ok(m.get_srcSystem(), m.get_srcComponent())
@@ -267,10 +269,14 @@ class Link:
             self._autopilot_addr = self._batch_addr
             self.conn.clients = {self._batch_addr}
             self.conn.clients_last_alive = {}
-        signing = getattr(self.conn.mav, "signing", None)
-        if signing is not None and len(signing.stream_timestamps) > MAX_SIGNING_STREAMS:
-            sys_id = self._system_id
-            signing.stream_timestamps = {k: v for k, v in signing.stream_timestamps.items() if k[1] == sys_id}
+
+    def _prune_signing_streams(self) -> None:
+        """pymavlink records a timestamp for every (link, sys, comp) that sent a signed-looking frame,
+        valid or not: keep the autopilot's (replay protection) and forget the rest."""
+        keep = self._system_id
+        ts = self._signing.stream_timestamps
+        self._signing.stream_timestamps = {k: v for k, v in ts.items() if k[1] == keep}
+        self.rejected["signing streams forgotten"] += len(ts) - len(self._signing.stream_timestamps)
 
     def stats(self) -> dict:
         out: dict[str, Any] = {"rejected": dict(self.rejected), "peers_remembered": len(self.peers)}
