@@ -144,8 +144,9 @@ def test_forged_stream_with_signing_on_gives_no_classification_and_no_alert(tmp_
     daemon, got, _ = run_daemon(tmp_path, toy, frames, cfg)
     rep = daemon.report()
     assert rep["pipeline"]["classified"] == 0 and rep["alerts"] == 0, rep
-    assert rep["pipeline"]["steps"] == 0 and rep["bad_data"] >= len(frames) * 0.9
-    assert rep["link"]["rejected"]["invalid or missing signature"] >= len(frames) * 0.9
+    # Every frame that arrived was refused (loopback UDP may drop some on a busy machine).
+    assert rep["pipeline"]["steps"] == 0 and rep["messages"] == rep["bad_data"] > len(frames) * 0.5
+    assert rep["link"]["rejected"]["invalid or missing signature"] > len(frames) * 0.5
     assert got == []  # nothing is ever sent to a forger
     assert not (tmp_path / "events.jsonl").read_text()
 

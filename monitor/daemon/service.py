@@ -79,7 +79,8 @@ class Daemon:
         self._last_reason = ""
         self._state_log_limit = RateLimiter(2.0)
         self._error_log_limit = RateLimiter(10.0)
-        self._slow: set[str] = set(self.fast_streams())
+        self._fast = self.fast_streams()
+        self._slow: set[str] = set(self._fast)
         self.blind = BlindTracker(config.blind)
         self._armed = False
         self._last_fast_rx: dict[str, float] = {}
@@ -147,7 +148,7 @@ class Daemon:
         if self._system_id is not None and msg.get_srcSystem() == self._system_id and msg.get_srcComponent() == dec.component_id:
             self._rates[kind] += 1
             now = time.monotonic()
-            if kind in self.fast_streams():
+            if kind in self._fast:
                 self._last_fast_rx[kind] = now
             if dec.clock_us != self._clock_seen:
                 self._clock_seen, self._clock_moved_at = dec.clock_us, now
