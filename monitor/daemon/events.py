@@ -63,7 +63,7 @@ class EventWriter:
             return True
         if len(self._pending) == self._pending.maxlen:
             self.dropped += 1
-        self._pending.append(json.dumps(record, allow_nan=False, default=str))
+        self._pending.append(json.dumps(record, default=str))
         return self.flush(force=True)
 
     def retry(self) -> bool:

@@ -114,7 +114,12 @@ class Daemon:
                 continue
             for msg, received in batch:
                 self.handle(msg, received)
-            self.tick(time.monotonic())
+            try:
+                self.tick(time.monotonic())
+            except Exception:  # noqa: BLE001 - housekeeping must not stop the monitor in flight either
+                self.counters.internal_errors += 1
+                if self._error_log_limit.allow():
+                    log.exception("error in the loop's periodic work (%d so far); continuing", self.counters.internal_errors)
             if self.link.is_log and self.link.eof:
                 for step in self.pipeline.flush():
                     self._on_step(step)
