@@ -29,6 +29,11 @@ HALF_PI = math.pi / 2
 PITCH_SLACK_RAD = 1e-3  # float32 rounding of +-pi/2
 
 
+def _beyond(v: float, limit: float) -> bool:
+    """|v| > limit, inf included; NaN is 'unknown' (the hold makes it a gap), not implausible."""
+    return v == v and not abs(v) <= limit
+
+
 class Plausibility:
     def __init__(self, config: PlausibleConfig, esc: EscCurve, motor_source: str):
         self.cfg = config
@@ -53,9 +58,9 @@ class Plausibility:
         roll, pitch, yaw, *rates = vals
         lim = self.cfg.attitude_max_rad
         bad = None
-        if not (abs(roll) <= lim and abs(yaw) <= lim and abs(pitch) <= HALF_PI + PITCH_SLACK_RAD):
+        if _beyond(roll, lim) or _beyond(yaw, lim) or _beyond(pitch, HALF_PI + PITCH_SLACK_RAD):
             bad = "attitude outside +-pi"
-        elif not all(abs(r) <= self.cfg.rate_max_rad_s for r in rates):
+        elif any(_beyond(r, self.cfg.rate_max_rad_s) for r in rates):
             bad = f"rate beyond the gyro range {self.cfg.rate_max_rad_s:g} rad/s"
         if bad is None and all(map(math.isfinite, vals)):
             bad = self._frozen("attitude", t_us, tuple(vals), rest=False)
@@ -66,12 +71,12 @@ class Plausibility:
         finite = [v for v in vals if math.isfinite(v)]  # NaN = unknown: the hold already makes it a gap
         bad = None
         if self.motor_is_rpm:
-            if not all(0.0 <= v <= self.cfg.rpm_max for v in finite):
+            if not all(0.0 <= v <= self.cfg.rpm_max for v in vals if v == v):
                 bad = f"ESC rpm outside [0, {self.cfg.rpm_max:g}]"
             rest = all(v == 0.0 for v in vals)
         else:
             lo, hi = self.cmd_range
-            if not all(lo <= v <= hi or v in self.cmd_rest for v in finite):
+            if not all(lo <= v <= hi or v in self.cmd_rest for v in vals if v == v):
                 bad = f"motor command outside [{lo:g}, {hi:g}] and not disarmed"
             rest = all(v in self.cmd_rest for v in vals)
         if bad is None and len(finite) == len(vals):
@@ -91,7 +96,7 @@ class Plausibility:
             self._same[stream] = (vals, t_us)
             return None
         if t_us - prev[1] >= self.frozen_us:
-            return f"{stream} frozen (identical for {(t_us - prev[1]) / 1e6:.1f} s)"
+            return f"{stream} frozen (identical for >= {self.cfg.frozen_s:g} s)"
         return None
 
     def _count(self, stream: str, t_us: int, bad: str | None, vals) -> str | None:

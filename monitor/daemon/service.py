@@ -88,6 +88,7 @@ class Daemon:
         self._clock_moved_at = time.monotonic()
         self._next_sink_report = 0.0
         self._link_up_at = 0.0
+        self._tick_reason: str | None = None  # the loop's own blindness (link, clock, streams), else None
         self._status_base = ""
         self._status_sent = ""
 
@@ -177,7 +178,9 @@ class Daemon:
             self._on_step(step)
 
     def _on_step(self, step) -> None:
-        if step.valid != self._classifying_state or (not step.valid and step.reason != self._last_reason):
+        stopped = self._classifying_state is True and not step.valid  # classification was running and stops
+        flipped = step.valid != self._classifying_state
+        if flipped or (not step.valid and step.reason != self._last_reason):
             self._classifying_state = step.valid
             if step.valid:
                 self._last_reason = ""
@@ -186,10 +189,12 @@ class Daemon:
             else:
                 self._last_reason = step.reason
                 self._set_status(f"not classifying: {step.reason}")  # a datagram, only on change
-                if self._state_log_limit.allow():  # NaN flapping must not flood the journal
+                # The journal hears of each stop (NaN flapping rate-limited); a new reason while stopped is STATUS only.
+                if stopped and self._state_log_limit.allow():
                     log.info("t=%d ms: not classifying: %s", step.time_boot_ms, step.reason)
         if step.data_ok:
-            self._transition(self.blind.recover())
+            if self._tick_reason is None:  # a lost link or frozen clock ends at the next tick that clears it
+                self._transition(self.blind.recover())
         elif step.airborne:
             self._transition(self.blind.data(False, *_blind_reason(step.reason)))
         if not step.valid:
@@ -259,23 +264,26 @@ class Daemon:
 
     def _check_blind(self, now: float) -> None:
         """Blindness seen from the loop: a lost link, a frozen autopilot clock, a fast stream gone."""
+        found = self._loop_blindness(now)
+        self._tick_reason = None if found is None else found[0]
+        if found is not None:
+            self._transition(self.blind.enter(*found))
+
+    def _loop_blindness(self, now: float) -> tuple[str, str] | None:
         b = self.cfg.blind
         if self._system_id is None:
-            return
+            return None
         if not self._link_up and self._last_autopilot_hb is not None:
-            self._transition(self.blind.enter("link lost", "link lost: no autopilot heartbeat"))
-            return
+            return "link lost", "link lost: no autopilot heartbeat"
         fresh = [k for k, t in self._last_fast_rx.items() if now - t < b.frozen_clock_s]
         if fresh and now - self._clock_moved_at >= b.frozen_clock_s:
-            frozen_s = now - self._clock_moved_at
-            self._transition(self.blind.enter("autopilot clock frozen", f"autopilot clock frozen for {frozen_s:.1f} s"))
-            return
+            return "autopilot clock frozen", f"autopilot clock frozen for {now - self._clock_moved_at:.1f} s"
         if self._armed and self._link_up:
-            for name, what in zip(self.fast_streams(), ("attitude", "motor")):
+            for name, what in zip(self._fast, ("attitude", "motor")):
                 t = self._last_fast_rx.get(name, self._link_up_at)
                 if now - t >= max(b.after_s, self.cfg.resample.max_gap_s):
-                    self._transition(self.blind.enter(f"no {what} data", f"no {name} from the autopilot"))
-                    return
+                    return f"no {what} data", f"no {name} from the autopilot"
+        return None
 
     def _check_sink(self, now: float) -> None:
         self.events.retry()
