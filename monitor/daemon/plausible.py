@@ -29,11 +29,6 @@ HALF_PI = math.pi / 2
 PITCH_SLACK_RAD = 1e-3  # float32 rounding of +-pi/2
 
 
-def _beyond(v: float, limit: float) -> bool:
-    """|v| > limit, inf included; NaN is 'unknown' (the hold makes it a gap), not implausible."""
-    return v == v and not abs(v) <= limit
-
-
 class Plausibility:
     def __init__(self, config: PlausibleConfig, esc: EscCurve, motor_source: str):
         self.cfg = config
@@ -55,31 +50,32 @@ class Plausibility:
 
     # -- one sample --------------------------------------------------------------------
     def attitude(self, t_us: int, vals: tuple[float, ...]) -> str | None:
-        roll, pitch, yaw, *rates = vals
-        lim = self.cfg.attitude_max_rad
+        roll, pitch, yaw, p, q, r = vals
+        lim, rlim = self.cfg.attitude_max_rad, self.cfg.rate_max_rad_s
         bad = None
-        if _beyond(roll, lim) or _beyond(yaw, lim) or _beyond(pitch, HALF_PI + PITCH_SLACK_RAD):
+        # abs(x) > limit is True for inf and False for NaN (NaN is 'unknown': the hold makes it a gap).
+        if abs(roll) > lim or abs(yaw) > lim or abs(pitch) > HALF_PI + PITCH_SLACK_RAD:
             bad = "attitude outside +-pi"
-        elif any(_beyond(r, self.cfg.rate_max_rad_s) for r in rates):
+        elif abs(p) > rlim or abs(q) > rlim or abs(r) > rlim:
             bad = f"rate beyond the gyro range {self.cfg.rate_max_rad_s:g} rad/s"
-        if bad is None and all(map(math.isfinite, vals)):
+        if bad is None:  # NaN never equals itself, so a NaN sample never counts as frozen
             bad = self._frozen("attitude", t_us, tuple(vals), rest=False)
         return self._count("attitude", t_us, bad, vals)
 
     def motor(self, t_us: int, vals) -> str | None:
-        vals = tuple(float(v) for v in vals)
-        finite = [v for v in vals if math.isfinite(v)]  # NaN = unknown: the hold already makes it a gap
+        vals = tuple(vals.tolist()) if hasattr(vals, "tolist") else tuple(map(float, vals))
         bad = None
+        # Comparisons with NaN are False: NaN (unknown) is neither outside the range nor frozen.
         if self.motor_is_rpm:
-            if not all(0.0 <= v <= self.cfg.rpm_max for v in vals if v == v):
+            if any(v < 0.0 or v > self.cfg.rpm_max for v in vals):
                 bad = f"ESC rpm outside [0, {self.cfg.rpm_max:g}]"
             rest = all(v == 0.0 for v in vals)
         else:
             lo, hi = self.cmd_range
-            if not all(lo <= v <= hi or v in self.cmd_rest for v in vals if v == v):
+            if any((v < lo or v > hi) and v not in self.cmd_rest for v in vals):
                 bad = f"motor command outside [{lo:g}, {hi:g}] and not disarmed"
             rest = all(v in self.cmd_rest for v in vals)
-        if bad is None and len(finite) == len(vals):
+        if bad is None:
             bad = self._frozen("motor", t_us, vals, rest)
         return self._count("motor", t_us, bad, vals)
 
