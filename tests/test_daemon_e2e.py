@@ -97,4 +97,5 @@ def test_full_healthy_flight_raises_no_alert(tmp_path, flights):
     d, _, events, _, received, report = fly_over_udp(tmp_path, CLASSIFIER, raw, speed=4)
     assert report["pipeline"]["classified"] > 1000, d.text[-2000:]  # it did watch the flight
     assert events == [], events
-    assert not [m for m in received if m["mavpackettype"] == "STATUSTEXT"]
+    # No alert text (a NOTICE, severity 5, may say the monitor went blind when the replay stopped).
+    assert not [m for m in received if m["mavpackettype"] == "STATUSTEXT" and m["severity"] < 5]

@@ -8,17 +8,15 @@ re-arms or silences it). STATUSTEXT is rate-limited on the same clock.
 
 from __future__ import annotations
 
-import json
 import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
 from monitor.daemon.config import AlertConfig
-from monitor.errors import ConfigError
+from monitor.daemon.events import EventWriter  # noqa: F401  (moved; kept importable from here)
 from monitor.labels import N_PROPS
 
 STATUSTEXT_MAX_CHARS = 50
@@ -134,27 +132,3 @@ class RateLimiter:
             return False
         self._last = now
         return True
-
-
-class EventWriter:
-    """One JSON line per alert, flushed at once so a crash loses nothing already decided."""
-
-    def __init__(self, path: str | Path | None):
-        self.path = Path(path) if path else None
-        self._fh = None
-        if self.path is not None:
-            try:
-                self.path.parent.mkdir(parents=True, exist_ok=True)
-                self._fh = self.path.open("a", encoding="utf-8")
-            except OSError as exc:
-                raise ConfigError(f"{self.path}: cannot open the events file: {exc.strerror or exc}") from exc
-
-    def write(self, alert: Alert) -> None:
-        if self._fh is not None:
-            self._fh.write(json.dumps(alert.event()) + "\n")
-            self._fh.flush()
-
-    def close(self) -> None:
-        if self._fh is not None:
-            self._fh.close()
-            self._fh = None

@@ -10,15 +10,16 @@ a bad config, model or connection (via ``monitor.cli``).
 from __future__ import annotations
 
 import argparse
+import gc
 import logging
 import signal
 import sys
 import time
 from pathlib import Path
 
-from monitor.daemon.alerts import EventWriter
-from monitor.daemon.config import load_monitor_config
-from monitor.daemon.link import Link
+from monitor.daemon.config import MonitorConfig, load_monitor_config, parse_address, parse_source
+from monitor.daemon.events import EventWriter
+from monitor.daemon.link import Link, LinkGuard, read_signing_key
 from monitor.daemon.pipeline import Pipeline
 from monitor.daemon.sdnotify import Notifier
 from monitor.daemon.service import Daemon
@@ -48,6 +49,17 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     return p.parse_args(argv)
 
 
+def guard(cfg: MonitorConfig) -> LinkGuard:
+    c = cfg.link
+    return LinkGuard(
+        signing_key=read_signing_key(c.signing_key_path) if c.signing_key_path else None,
+        signing_link_id=c.signing_link_id,
+        allow_addresses=tuple(parse_address(a) for a in c.allow_addresses),
+        allow_sources=tuple(parse_source(s) for s in c.allow_sources),
+        max_peers=c.max_peers,
+    )
+
+
 def main(argv: list[str] | None = None) -> int:
     started = time.monotonic()
     args = parse_args(argv)
@@ -62,8 +74,8 @@ def main(argv: list[str] | None = None) -> int:
     esc = choose_esc(classifier, vehicle)
     pipeline = Pipeline(classifier, cfg, esc)
     tlog_speed = cfg.link.tlog_speed if args.tlog_speed is None else args.tlog_speed
-    link = Link(args.connect, cfg.link.component_id, tlog_speed, cfg.link.system_id or None)
-    events = EventWriter(args.events or cfg.events_path or None)
+    link = Link(args.connect, cfg.link.component_id, tlog_speed, cfg.link.system_id or None, guard(cfg))
+    events = EventWriter(args.events or cfg.events_path or None, cfg.blind.events_retry_s, cfg.blind.events_backlog)
     daemon = Daemon(cfg, link, pipeline, events, Notifier())
 
     def on_signal(signum, _frame):
@@ -73,6 +85,9 @@ def main(argv: list[str] | None = None) -> int:
     signal.signal(signal.SIGTERM, on_signal)
     signal.signal(signal.SIGINT, on_signal)
     log.info("start-up took %.3f s", time.monotonic() - started)
+    # Everything loaded so far (model, dialect tables) lives until exit: keep it out of the collector's
+    # full passes, which would otherwise walk it in the middle of a step.
+    gc.freeze()
     try:
         return daemon.run()
     finally:

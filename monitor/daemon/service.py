@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import json
 import logging
-import math
 import threading
 import time
 from collections import Counter
@@ -19,8 +18,11 @@ from pathlib import Path
 import numpy as np
 
 from monitor import mavlink_decode as md
-from monitor.daemon.alerts import AlertRule, EventWriter, RateLimiter, StatusTextQueue
+from monitor.daemon.alerts import AlertRule, RateLimiter, StatusTextQueue
+from monitor.daemon.blind import BlindTracker, Transition
 from monitor.daemon.config import MonitorConfig
+from monitor.daemon.events import EventWriter
+from monitor.daemon.latency import LatencyHistogram
 from monitor.daemon.link import MAV_CMD_SET_MESSAGE_INTERVAL, Link
 from monitor.daemon.pipeline import Pipeline
 from monitor.daemon.sdnotify import Notifier
@@ -31,6 +33,9 @@ READ_TIMEOUT_S = 0.1  # select() returns at once when data comes; this only pace
 BAD_DATA_LOG_PERIOD_S = 5.0
 MOTOR_STREAM = {"servo": "SERVO_OUTPUT_RAW", "actuator": "ACTUATOR_OUTPUT_STATUS", "esc": "ESC_STATUS"}
 LANDED_RATE_HZ = 2.0  # EXTENDED_SYS_STATE: a state, not a signal
+SINK_REPORT_PERIOD_S = 60.0  # a failing events file is told to the ground station once a minute
+MAV_SEVERITY_WARNING = 4
+REPORT_TOP_N = 20  # the report lists at most this many ignored sources / undecodable kinds
 
 
 @dataclass
@@ -41,8 +46,10 @@ class Counters:
     statustexts: int = 0
     stream_requests: int = 0
     internal_errors: int = 0
+    notices: int = 0
+    sink_reports: int = 0
     acks: Counter = field(default_factory=Counter)
-    latencies_s: list = field(default_factory=list)
+    latency: LatencyHistogram = field(default_factory=LatencyHistogram)
 
 
 class Daemon:
@@ -68,10 +75,22 @@ class Daemon:
         self._next_watchdog = 0.0
         self._next_bad_log = 0.0
         self._bad_since_log = 0
-        self._classifying_state = False
+        self._classifying_state: bool | None = None  # None: no step yet, the first one sets STATUS
+        self._last_reason = ""
         self._state_log_limit = RateLimiter(2.0)
         self._error_log_limit = RateLimiter(10.0)
-        self._slow: set[str] = set(self.fast_streams())
+        self._fast = self.fast_streams()
+        self._slow: set[str] = set(self._fast)
+        self.blind = BlindTracker(config.blind)
+        self._armed = False
+        self._last_fast_rx: dict[str, float] = {}
+        self._clock_seen: int | None = None
+        self._clock_moved_at = time.monotonic()
+        self._next_sink_report = 0.0
+        self._link_up_at = 0.0
+        self._tick_reason: str | None = None  # the loop's own blindness (link, clock, streams), else None
+        self._status_base = ""
+        self._status_sent = ""
 
     def fast_streams(self) -> tuple[str, ...]:
         return ("ATTITUDE", MOTOR_STREAM[self.cfg.input.motor_source])
@@ -96,7 +115,12 @@ class Daemon:
                 continue
             for msg, received in batch:
                 self.handle(msg, received)
-            self.tick(time.monotonic())
+            try:
+                self.tick(time.monotonic())
+            except Exception:  # noqa: BLE001 - housekeeping must not stop the monitor in flight either
+                self.counters.internal_errors += 1
+                if self._error_log_limit.allow():
+                    log.exception("error in the loop's periodic work (%d so far); continuing", self.counters.internal_errors)
             if self.link.is_log and self.link.eof:
                 for step in self.pipeline.flush():
                     self._on_step(step)
@@ -129,35 +153,57 @@ class Daemon:
             log.info("autopilot: system %d component %d", dec.system_id, dec.component_id)
         if self._system_id is not None and msg.get_srcSystem() == self._system_id and msg.get_srcComponent() == dec.component_id:
             self._rates[kind] += 1
+            now = time.monotonic()
+            if kind in self._fast:
+                self._last_fast_rx[kind] = now
+            if dec.clock_us != self._clock_seen:
+                self._clock_seen, self._clock_moved_at = dec.clock_us, now
             if kind == "HEARTBEAT":
-                self._last_autopilot_hb = time.monotonic()
+                self._armed = bool(getattr(msg, "base_mode", 0) & md.MAV_MODE_FLAG_SAFETY_ARMED)
+                self._last_autopilot_hb = now
+                self.link.autopilot_seen()
                 if not self._link_up:
                     self._link_up = True
+                    self._link_up_at = now
                     log.info("link up: autopilot heartbeat received")
-                    self.notifier.status(f"link up: autopilot {self._system_id}")
+                    self._set_status(f"link up: autopilot {self._system_id}")
             elif kind == "COMMAND_ACK" and msg.command == MAV_CMD_SET_MESSAGE_INTERVAL:
                 self.counters.acks[int(msg.result)] += 1
                 if msg.result != 0:
                     log.warning("stream-rate request refused by the autopilot (MAV_RESULT %d)", msg.result)
+        while self.pipeline.clock_events:  # reboot or clock step: blind until good data flows again
+            what = self.pipeline.clock_events.popleft()
+            self._transition(self.blind.enter("autopilot rebooted" if "reboot" in what else "clock stepped back", what))
         for step in steps:
             self._on_step(step)
 
     def _on_step(self, step) -> None:
-        if step.valid != self._classifying_state:
+        stopped = self._classifying_state is True and not step.valid  # classification was running and stops
+        flipped = step.valid != self._classifying_state
+        if flipped or (not step.valid and step.reason != self._last_reason):
             self._classifying_state = step.valid
             if step.valid:
+                self._last_reason = ""
                 log.info("t=%d ms: buffering (classification after %d valid steps)", step.time_boot_ms, self.pipeline.window)
-                self.notifier.status("airborne: classifying")
-            elif self._state_log_limit.allow():  # NaN flapping must not flood the journal
-                log.info("t=%d ms: not classifying: %s", step.time_boot_ms, step.reason)
-                self.notifier.status(f"not classifying: {step.reason}")
+                self._set_status("airborne: classifying")
+            else:
+                self._last_reason = step.reason
+                self._set_status(f"not classifying: {step.reason}")  # a datagram, only on change
+                # The journal hears of each stop (NaN flapping rate-limited); a new reason while stopped is STATUS only.
+                if stopped and self._state_log_limit.allow():
+                    log.info("t=%d ms: not classifying: %s", step.time_boot_ms, step.reason)
+        if step.data_ok:
+            if self._tick_reason is None:  # a lost link or frozen clock ends at the next tick that clears it
+                self._transition(self.blind.recover())
+        elif step.airborne:
+            self._transition(self.blind.data(False, *_blind_reason(step.reason)))
         if not step.valid:
             self.rule.reset()
             return
         if step.fault_probability is None:
             return
         if step.latency_s is not None:
-            self.counters.latencies_s.append(step.latency_s)
+            self.counters.latency.add(step.latency_s)
         p = step.fault_probability
         if self.cfg.alerts.named_value_float:
             for i, v in enumerate(p):
@@ -174,16 +220,78 @@ class Daemon:
             alert.label,
             np.array2string(np.asarray(alert.fault_probability), precision=3),
         )
-        self.notifier.status(f"last alert: {text} at t={alert.time_boot_ms} ms")
-        self.events.write(alert)
+        # The ground station first: a failing disk must never delay or lose the alert itself.
         self.statustexts.add(alert)
         self._send_statustext()
+        self._set_status(f"last alert: {text} at t={alert.time_boot_ms} ms")
+        self.events.write(alert)
 
     def _send_statustext(self) -> None:
         due = self.statustexts.due()
         if due is not None:
             self.counters.statustexts += 1
             self.link.send_statustext(*due)
+
+    # -- blind spells, sink failures, systemd STATUS ---------------------------------------
+    def _transition(self, t: Transition | None) -> None:
+        if t is None:
+            return
+        if t.blind:
+            log.warning("BLIND: %s", t.detail)
+        else:
+            log.info("recovered: %s (blind %.1f s)", t.detail, t.duration_s)
+        self._publish_status()
+        self.events.write_record(t.record(self._clock_seen // 1000 if self._clock_seen is not None else None))
+        self._send_notice()
+
+    def _send_notice(self) -> None:
+        due = self.blind.due()
+        if due is not None:
+            self.counters.notices += 1
+            self.link.send_statustext(*due)
+
+    def _set_status(self, text: str) -> None:
+        self._status_base = text
+        self._publish_status()
+
+    def _publish_status(self) -> None:
+        text = f"BLIND: {self.blind.detail}" if self.blind.blind else self._status_base
+        if self.events.failing:
+            text += f"; events file failing ({self.events.last_error}, {self.events.pending} waiting)"
+        if text and text != self._status_sent:
+            self._status_sent = text
+            self.notifier.status(text)
+
+    def _check_blind(self, now: float) -> None:
+        """Blindness seen from the loop: a lost link, a frozen autopilot clock, a fast stream gone."""
+        found = self._loop_blindness(now)
+        self._tick_reason = None if found is None else found[0]
+        if found is not None:
+            self._transition(self.blind.enter(*found))
+
+    def _loop_blindness(self, now: float) -> tuple[str, str] | None:
+        b = self.cfg.blind
+        if self._system_id is None:
+            return None
+        if not self._link_up and self._last_autopilot_hb is not None:
+            return "link lost", "link lost: no autopilot heartbeat"
+        fresh = [k for k, t in self._last_fast_rx.items() if now - t < b.frozen_clock_s]
+        if fresh and now - self._clock_moved_at >= b.frozen_clock_s:
+            return "autopilot clock frozen", f"autopilot clock frozen for {now - self._clock_moved_at:.1f} s"
+        if self._armed and self._link_up:
+            for name, what in zip(self._fast, ("attitude", "motor")):
+                t = self._last_fast_rx.get(name, self._link_up_at)
+                if now - t >= max(b.after_s, self.cfg.resample.max_gap_s):
+                    return f"no {what} data", f"no {name} from the autopilot"
+        return None
+
+    def _check_sink(self, now: float) -> None:
+        self.events.retry()
+        if self.events.failing and now >= self._next_sink_report:
+            self._next_sink_report = now + SINK_REPORT_PERIOD_S
+            self.counters.sink_reports += 1
+            self.link.send_statustext("PROPWATCH: events file write failing", MAV_SEVERITY_WARNING)
+        self._publish_status()
 
     # -- periodic work -------------------------------------------------------------------
     def tick(self, now: float) -> None:
@@ -201,13 +309,17 @@ class Daemon:
         if self._link_up and self._last_autopilot_hb is not None and now - self._last_autopilot_hb > link.link_timeout_s:
             self._link_up = False
             log.warning("link lost: no autopilot heartbeat for %.1f s", now - self._last_autopilot_hb)
-            self.notifier.status("link lost")
+            self._set_status("link lost")
         if now - self._rate_window_start >= link.rate_check_period_s:
             self._check_rates(now)
         if self.notifier.watchdog_s and now >= self._next_watchdog:
             self.notifier.watchdog()
             self._next_watchdog = now + self.notifier.watchdog_s / 2
         self._send_statustext()  # alerts held back by the rate limit
+        if not self.link.is_log:  # a log replayed fast has no wall-clock meaning for blindness
+            self._check_blind(now)
+        self._send_notice()
+        self._check_sink(now)
         if self._bad_since_log and now >= self._next_bad_log:
             log.warning("%d unparseable packets/bytes dropped (%d in total)", self._bad_since_log, self.counters.bad_data)
             self._bad_since_log = 0
@@ -247,9 +359,9 @@ class Daemon:
 
     # -- reporting -----------------------------------------------------------------------
     def report(self) -> dict:
-        lat = np.asarray(self.counters.latencies_s, dtype=np.float64) * 1e3
-        pct = (lambda q: float(np.percentile(lat, q))) if len(lat) else (lambda q: math.nan)
         c = self.counters
+        lat = c.latency
+        ev = self.events
         return {
             "messages": c.messages,
             "bad_data": c.bad_data,
@@ -257,12 +369,30 @@ class Daemon:
             "statustexts": c.statustexts,
             "stream_requests": c.stream_requests,
             "internal_errors": c.internal_errors,
+            "notices": c.notices,
+            "blind_spells": self.blind.spells,
+            "blind_now": self.blind.reason,
+            "events_file": {
+                "written": ev.written,
+                "failures": ev.failures,
+                "pending": ev.pending,
+                "dropped": ev.dropped,
+                "reported_to_gcs": c.sink_reports,
+            },
+            "implausible": dict(self.pipeline.plausible.dropped),
+            "link": self.link.stats(),
             "acks": {str(k): v for k, v in c.acks.items()},
             "pipeline": dict(self.pipeline.stats),
             "late_samples": self.pipeline.hold.late,
-            "ignored": {f"{s}/{k}": n for (s, k), n in self.pipeline.decoder.ignored.items()},
-            "undecodable": dict(self.pipeline.decoder.undecodable),
-            "latency_ms": {"n": int(len(lat)), "p50": pct(50), "p99": pct(99), "max": float(lat.max()) if len(lat) else math.nan},
+            "hold_overflow": self.pipeline.hold.overflow,
+            "ignored": {f"{s}/{k}": n for (s, k), n in self.pipeline.decoder.ignored.most_common(REPORT_TOP_N)},
+            "undecodable": dict(self.pipeline.decoder.undecodable.most_common(REPORT_TOP_N)),
+            "latency_ms": {
+                "n": lat.n,
+                "p50": lat.percentile_s(50) * 1e3,
+                "p99": lat.percentile_s(99) * 1e3,
+                "max": lat.max_s * 1e3,
+            },
         }
 
     def summary(self) -> None:
@@ -281,3 +411,12 @@ class Daemon:
 
     def write_report(self, path: str | Path) -> None:
         Path(path).write_text(json.dumps(self.report(), indent=2, default=float) + "\n", encoding="utf-8")
+
+
+def _blind_reason(step_reason: str) -> tuple[str, str]:
+    """(short reason, detail) of an airborne step without usable data."""
+    if "implausible" in step_reason:
+        return ("implausible attitude" if step_reason.startswith("attitude") else "implausible motor data"), step_reason
+    if step_reason.startswith("attitude") and "motor" not in step_reason:
+        return "no attitude data", step_reason
+    return "no motor data", step_reason

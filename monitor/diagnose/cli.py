@@ -28,12 +28,18 @@ its window. Floats are rounded to 6 decimals.
 
 Exit code: 0 every log got a verdict; 1 some log got no verdict (the reason
 says why: outside the model's envelope, no airborne flight, ...); 2 some log
-could not be read (unknown format, missing messages) or bad arguments.
+could not be read (unknown format, missing messages, damaged beyond reading,
+larger or longer than ``--max-seconds`` allows, messages that stop advancing
+time) or bad arguments. Whatever a reader raises ends in one of these codes.
+With ``--json`` stdout holds only the JSON: anything a library prints while
+reading goes to stderr (at most a few lines, then a count).
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
+import io
 import json
 import sys
 from pathlib import Path
@@ -41,7 +47,8 @@ from pathlib import Path
 from monitor.diagnose.engine import Diagnosis, describe_label, diagnose_table, rotor_name, round_floats
 from monitor.errors import PropwatchError
 from monitor.esc import EscCurve
-from monitor.logs import read_log
+from monitor.logs import read_raw, to_flight_table
+from monitor.logs.guards import DEFAULT_MAX_SECONDS, check_size, check_time_advances
 from monitor.model import Classifier, choose_esc
 from monitor.progress import bar
 from monitor.resources import shipped
@@ -92,6 +99,13 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     # Windows are 5 s long; at a 1 s hop consecutive ones share 4 s: a finer hop costs
     # inference time without adding information to a post-flight verdict.
     p.add_argument("--hop", type=int, default=20, help="classify one window every HOP grid steps (default 20 = 1 s)")
+    p.add_argument(
+        "--max-seconds",
+        type=float,
+        default=DEFAULT_MAX_SECONDS,
+        help=f"longest log accepted, in seconds of its own clock (default {DEFAULT_MAX_SECONDS:g} = 3 h); "
+        "also bounds the file size read (1 MB per second)",
+    )
     p.add_argument("--json", action="store_true", help="print JSON to stdout")
     p.add_argument(
         "--report",
@@ -102,9 +116,40 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     return p.parse_args(argv)
 
 
-def diagnose_file(path: str, clf: Classifier, esc: EscCurve, fmt: str | None, hop: int, vehicle=None):
-    table = read_log(path, fmt=fmt, esc=esc, rate_hz=clf.info.sample_rate_hz, extras=False)
+def diagnose_file(
+    path: str, clf: Classifier, esc: EscCurve, fmt: str | None, hop: int, vehicle=None, max_seconds: float = DEFAULT_MAX_SECONDS
+):
+    check_size(path, max_seconds)
+    raw = read_raw(path, fmt, extras=False)
+    streams = {k: getattr(raw, k) for k in ("motor_cmd", "attitude_rad", "rates_rad_s")}
+    check_time_advances(streams, path, max_seconds)
+    table = to_flight_table(raw, esc=esc, rate_hz=clf.info.sample_rate_hz)
     return table, diagnose_table(table, clf, hop=hop, esc=esc, vehicle=vehicle)
+
+
+class _PrintTrap(io.TextIOBase):
+    """Stands in for stdout while logs are read: libraries' prints go to stderr, a few lines then a count."""
+
+    KEEP = 5
+
+    def __init__(self) -> None:
+        self.lines = 0
+
+    def writable(self) -> bool:
+        return True
+
+    def write(self, text: str) -> int:
+        for line in text.splitlines():
+            if line.strip():
+                self.lines += 1
+                if self.lines <= self.KEEP:
+                    print(f"propwatch diagnose: (reader) {line}", file=sys.stderr)
+        return len(text)
+
+    def report(self) -> None:
+        if self.lines > self.KEEP:
+            print(f"propwatch diagnose: (reader) ... {self.lines - self.KEEP} more line(s) not shown", file=sys.stderr)
+        self.lines = 0
 
 
 def format_text(d: Diagnosis) -> str:
@@ -146,6 +191,9 @@ def main(argv: list[str] | None = None) -> int:
     if args.hop < 1:
         print("propwatch diagnose: --hop must be >= 1", file=sys.stderr)
         return 2
+    if not 0 < args.max_seconds <= 7 * 86400:
+        print("propwatch diagnose: --max-seconds must be in (0, 604800]", file=sys.stderr)
+        return 2
     baseline = None
     if args.vehicle and Path(args.vehicle).is_dir():
         # A `propwatch adapt` folder: its calibrated vehicle, its model, its airframe's healthy baseline.
@@ -163,11 +211,13 @@ def main(argv: list[str] | None = None) -> int:
     # Several or long logs: a bar in bytes read (rate and ETA), on a terminal only; reading dominates the time.
     sizes = [Path(p).stat().st_size if Path(p).is_file() else 0 for p in args.logs]
     progress = bar(sum(sizes), "B", "diagnose", unit_scale=True) if len(args.logs) > 1 or sum(sizes) > BIG_LOG_BYTES else None
+    trap = _PrintTrap()
     for path, size in zip(args.logs, sizes):
         if progress is not None:
             progress.set_postfix_str(Path(path).name)
         try:
-            table, d = diagnose_file(path, clf, esc, args.fmt, args.hop, vehicle)
+            with contextlib.redirect_stdout(trap):
+                table, d = diagnose_file(path, clf, esc, args.fmt, args.hop, vehicle, args.max_seconds)
         except PropwatchError as exc:
             results.append({"log": path, "error": str(exc)})
             print(f"propwatch diagnose: error: {exc}", file=sys.stderr)
@@ -175,6 +225,15 @@ def main(argv: list[str] | None = None) -> int:
             if progress is not None:
                 progress.update(size)
             continue
+        except Exception as exc:  # noqa: BLE001 - a reader's own failure (struct.error, pymavlink's bare
+            # exceptions, MemoryError...) on input it did not expect: still "could not be read", never a traceback.
+            msg = f"{path}: cannot read: {type(exc).__name__}: {exc}"
+            results.append({"log": path, "error": msg})
+            print(f"propwatch diagnose: error: {msg}", file=sys.stderr)
+            code = 2
+            continue
+        finally:
+            trap.report()
         if d.verdict is None:
             code = max(code, 1)
         if args.report:

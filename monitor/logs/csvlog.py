@@ -187,8 +187,17 @@ def _parse(text: str, delimiter: str, path: Path) -> tuple[list[str], np.ndarray
         header = [h.strip() for h in next(reader)]
     except StopIteration:
         raise LogFormatError(f"{path}: empty CSV file") from None
+    except csv.Error as exc:  # binary junk: NUL bytes, a bare CR inside a field
+        raise LogFormatError(f"{path}: not a CSV file: {exc}") from None
     rows, bad = [], 0
-    for row in reader:
+    while True:
+        try:
+            row = next(reader)
+        except StopIteration:
+            break
+        except csv.Error:  # one damaged line: skipped like a malformed row
+            bad += 1
+            continue
         if len(row) != len(header):
             bad += 1
             continue
