@@ -53,7 +53,7 @@ def test_extra_tables_render_in_order_and_replace_by_key(tmp_path):
     tables = load_tables(tmp_path / TABLES_FILE)
     assert before[0] == "ablation" and [t.key for t in tables] == before + ["model_x_simulator"]
     card = write_card_from(tmp_path, manifest, results, None).read_text(encoding="utf-8")
-    assert "| today | 99.0 | 63.0 |" in card and "62.5" not in card
+    assert "| today | 99.0 | 63.0 |" in card and "| today | 99.0 | 62.5 |" not in card
     assert card.index("## Ablation") < card.index("## Model x simulator") < card.index("## Limits")
     assert "Produced by: `make evaluate-sims`." in card
 
