@@ -137,11 +137,11 @@ class Pipeline:
             if back_us > REBOOT_BACK_US or s.timestamp_us < REBOOT_BOOT_US:
                 self.stats["clock_resets"] += 1
                 self.clock_events.append(
-                    f"autopilot rebooted (boot clock {s.previous_us / 1e6:.1f} -> {s.timestamp_us / 1e6:.1f} s)"
+                    f"autopilot rebooted (boot clock {s.previous_us / US_PER_S:.1f} -> {s.timestamp_us / US_PER_S:.1f} s)"
                 )
             else:
                 self.stats["clock_steps_back"] += 1
-                self.clock_events.append(f"autopilot clock stepped back {back_us / 1e6:.1f} s")
+                self.clock_events.append(f"autopilot clock stepped back {back_us / US_PER_S:.1f} s")
             self.reset()
             return []
         if s.timestamp_us is None:

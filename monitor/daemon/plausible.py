@@ -24,6 +24,7 @@ from collections import Counter
 
 from monitor.daemon.config import PlausibleConfig
 from monitor.esc import EscCurve
+from monitor.resample import US_PER_S
 
 HALF_PI = math.pi / 2
 PITCH_SLACK_RAD = 1e-3  # float32 rounding of +-pi/2
@@ -39,7 +40,7 @@ class Plausibility:
         else:  # e.g. Crazyflie cf16: the curve's own domain is the envelope
             self.cmd_range = (esc.cmd_min, esc.cmd_max)
             self.cmd_rest = (0.0,)
-        self.frozen_us = int(round(config.frozen_s * 1e6))
+        self.frozen_us = int(round(config.frozen_s * US_PER_S))
         self.dropped: Counter = Counter()  # "stream: reason" -> samples dropped
         self.last: dict[str, tuple[int, str]] = {}  # stream -> (boot time µs, reason) of its latest drop
         self._same: dict[str, tuple[tuple, int]] = {}  # stream -> (values, first boot time µs with them)

@@ -251,7 +251,9 @@ def main(argv: list[str] | None = None) -> int:
             print(format_text(d))
             if baseline is not None and "deviation_spreads" in res["baseline"]:
                 b = res["baseline"]
-                print("  vs this airframe's healthy baseline (spreads): " + ", ".join(f"{x:+.1f}" for x in b["deviation_spreads"]))
+                print(
+                    "  vs this airframe's healthy baseline (spreads): " + ", ".join(f"{x:+.1f}" for x in b["deviation_spreads"])
+                )
     if progress is not None:
         progress.close()
     if args.json:

@@ -27,9 +27,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--format", dest="fmt", default=None, help="log format or CSV mapping name (monitor/formats.yaml)")
     p.add_argument("--labelled", nargs="*", default=[], metavar="LOG[=ROTORS]", help="flights to score the gain on")
     p.add_argument("--mission", choices=("random", "crazypad"), default=None, help="simulated routes (default: by format)")
-    p.add_argument("--flights-per-label", type=int, default=4)
-    p.add_argument("--epochs", type=int, default=4)
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--flights-per-label", type=int, default=4, help="simulated training flights per label (default 4)")
+    p.add_argument("--epochs", type=int, default=4, help="training epochs (default 4)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the simulated training set and the training (default 0)")
     p.add_argument("--json", action="store_true", help="print the summary as JSON on stdout")
     return p
 
