@@ -127,16 +127,3 @@ def predict_table(table: FlightTable, vehicle, priors: Priors | None = None, bas
         "rotor_effectiveness": ev.rotor_effectiveness,
         "rotor_effectiveness_std": ev.rotor_effectiveness_std,
     }
-
-
-def physics_verdict(ev: PhysicsEvidence) -> dict:
-    """The verdict dict of the most probable set (``source`` says where it came from)."""
-    from monitor.labels import label_for
-
-    faulty = list(ev.hypotheses[0]["faulty_propellers"])
-    return {
-        "label": label_for(faulty),
-        "faulty_propellers": faulty,
-        "fault_probability": list(ev.fault_probability),
-        "source": "moment balance",
-    }
