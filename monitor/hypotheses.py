@@ -1,7 +1,8 @@
 """The verdict as a small set of propeller-set hypotheses with a stated coverage (issue 12, point 4).
 
 A flight's score over the 16 propeller sets is the classifier's mean label probability over its windows,
-optionally times the moment balance's likelihood of each set (``monitor.effectiveness``), renormalised.
+that times the moment balance's likelihood of each set (``monitor.effectiveness``), or that likelihood
+alone, renormalised: the calibration picks one of the three on our own data.
 Split conformal prediction turns that score into a set: on flights of our own simulator with randomised
 physics that the classifier never saw, the threshold is the score the truth reached in all but
 ``1 - coverage`` of them (``offline.classifier.conformal`` fits it and writes ``<model>.sets.json`` beside
@@ -23,7 +24,7 @@ import numpy as np
 from monitor.errors import ModelError
 from monitor.labels import LABEL_TABLE, N_LABELS
 
-SCORES = ("classifier", "classifier x moment balance")
+SCORES = ("classifier", "classifier x moment balance", "moment balance")
 MAX_TEXT_CHARS = 50  # MAVLink STATUSTEXT text field
 
 
@@ -77,9 +78,11 @@ def flight_score(label_probability: np.ndarray, physics_log_likelihood: np.ndarr
     p = np.asarray(label_probability, dtype=np.float64)
     if p.shape != (N_LABELS,) or not np.all(np.isfinite(p)):
         raise ValueError(f"label_probability must be {N_LABELS} finite values")
-    if score == "classifier x moment balance" and physics_log_likelihood is not None:
+    if score != "classifier" and physics_log_likelihood is not None:
         ll = np.asarray(physics_log_likelihood, dtype=np.float64)
-        logp = np.log(np.maximum(p, 1e-12)) + (ll - ll.max())
+        logp = ll - ll.max()
+        if score == "classifier x moment balance":
+            logp = logp + np.log(np.maximum(p, 1e-12))
         p = np.exp(logp - logp.max())
     return p / p.sum()
 

@@ -54,6 +54,9 @@ def test_moment_balance_likelihood_moves_the_score():
     fused = flight_score(p, ll, "classifier x moment balance")
     assert np.argmax(fused) == 3 and fused.sum() == pytest.approx(1.0)
     assert np.allclose(flight_score(p, ll, "classifier"), p)  # the classifier alone ignores it
+    p2 = np.full(16, 0.5 / 15)
+    p2[0] = 0.5
+    assert np.argmax(flight_score(p2, ll, "moment balance")) == 3  # the balance alone ignores the classifier
     assert np.allclose(flight_score(p, None, "classifier x moment balance"), p)  # no balance: classifier alone
     with pytest.raises(ValueError):
         flight_score(np.full(16, np.nan), None, "classifier")

@@ -39,6 +39,7 @@ class PhysicsEvidence:
     rotor_effectiveness_std: list[float]
     windows: int
     fault_probability: list[float]  # P(rotor i in the faulty set), PX4 order
+    log_likelihood: tuple[float, ...] = ()  # marginal log-likelihood of each of the 16 sets (label order)
 
     @property
     def ambiguous(self) -> bool:
@@ -109,6 +110,7 @@ def physics_evidence(
         rotor_effectiveness_std=[round(float(x), 4) for x in v.thrust_fraction_std[best]],
         windows=int(ev.windows),
         fault_probability=[round(float(x), 4) for x in v.fault_probability()],
+        log_likelihood=tuple(float(x) for x in v.log_likelihood),
     ), None
 
 
