@@ -9,7 +9,8 @@ loss of 5, 10 and 20 % within +-2 points from 5 s of 20 Hz data on both simulato
   its .tlog files as the monitor reads any log.
 Every non-overlapping 5 s window after the first 5 s is one estimate: the damaged rotor's effectiveness
 under the one-rotor hypothesis of that rotor, with the airframe known (nominal priors, as after
-``propwatch adapt``). Printed per loss: windows, median and p95 of |error| in points, share within 2 points,
+``propwatch adapt``), read as diagnose reports it (``Priors.for_measurement``: the loss left to the data);
+"best set right" is the window's most probable set under the register's priors. Printed per loss: windows, median and p95 of |error| in points, share within 2 points,
 and how often the window's most probable set is the truth. Cost: window_balance + posterior per window.
 
 Run: ``python bench/bench_effectiveness.py [--out out/effectiveness] [--flights 24]`` (a few minutes).
@@ -36,13 +37,16 @@ SKIP = 100  # the first 5 s (take-off transients)
 def window_estimates(rpm, rates, rotor: int, bank: HypothesisBank, geometry, priors, rate_hz, starts):
     """Per window: (effectiveness of ``rotor`` under its own hypothesis, most probable set, seconds)."""
     k = HYPOTHESES.index((rotor,))
+    measuring = HypothesisBank(priors.for_measurement(), geometry)
     out = []
     for a in starts:
         t0 = time.perf_counter()
         ev = Evidence()
         ev.add(*window_balance(rpm[a : a + WINDOW], rates[a : a + WINDOW], geometry, rate_hz), priors)
         v = bank.posterior(ev)
-        out.append((float(v.thrust_fraction[k][rotor - 1]), HYPOTHESES[v.best], time.perf_counter() - t0))
+        dt = time.perf_counter() - t0
+        eta = float(measuring.posterior(ev).thrust_fraction[k][rotor - 1])
+        out.append((eta, HYPOTHESES[v.best], dt))
     return out
 
 
