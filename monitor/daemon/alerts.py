@@ -1,6 +1,11 @@
-"""The alert rule (per propeller), the STATUSTEXT wording, and the events file.
+"""The alert sinks (STATUSTEXT queue, events file) and the older consecutive-window rule.
 
-Rule, per propeller: P(faulty) >= threshold in ``consecutive`` classified
+The daemon decides with ``monitor.decision.Decision`` (shared with
+``propwatch diagnose``; ``alerts.rule: sequential``, the default). The rule
+below is kept as ``alerts.rule: consecutive`` and as the comparison row of
+``make evaluate-alerts``.
+
+Consecutive rule, per propeller: P(faulty) >= threshold in ``consecutive`` classified
 windows in a row raises an alert, then that propeller stays quiet for
 ``refractory_s`` seconds of ``time.monotonic()`` (a wall-clock step never
 re-arms or silences it). STATUSTEXT is rate-limited on the same clock.
@@ -70,14 +75,23 @@ class StatusTextQueue:
         self.critical_threshold = critical_threshold
         self._pending: dict[int, float] = {}
 
+        self._texts: dict[str, int] = {}  # decision announcements: text -> severity
+
     def add(self, alert: Alert) -> None:
         for p in alert.faulty_propellers:
             self._pending[p] = max(self._pending.get(p, 0.0), alert.fault_probability[p - 1])
 
+    def add_text(self, text: str, severity: int) -> None:
+        """A worded announcement; what waits for the rate limit is sent later, most severe first."""
+        self._texts[text] = min(severity, self._texts.get(text, severity))
+
     def due(self) -> tuple[str, int] | None:
         """(text, severity) to send now, or None (nothing pending, or too soon)."""
-        if not self._pending or not self.limit.allow():
+        if not (self._pending or self._texts) or not self.limit.allow():
             return None
+        if self._texts:
+            text = min(self._texts, key=lambda t: self._texts[t])  # MAV_SEVERITY: lower is more severe
+            return text, self._texts.pop(text)
         worst = max(self._pending.values())
         text = statustext(self._pending)
         self._pending = {}
@@ -150,8 +164,11 @@ class EventWriter:
                 raise ConfigError(f"{self.path}: cannot open the events file: {exc.strerror or exc}") from exc
 
     def write(self, alert: Alert) -> None:
+        self.write_event(alert.event())
+
+    def write_event(self, event: dict) -> None:
         if self._fh is not None:
-            self._fh.write(json.dumps(alert.event()) + "\n")
+            self._fh.write(json.dumps(event) + "\n")
             self._fh.flush()
 
     def close(self) -> None:

@@ -24,6 +24,7 @@ from monitor.daemon.config import MonitorConfig
 from monitor.daemon.link import MAV_CMD_SET_MESSAGE_INTERVAL, Link
 from monitor.daemon.pipeline import Pipeline
 from monitor.daemon.sdnotify import Notifier
+from monitor.decision import Announcement, Decision, EscTelemetry, StepInputs, WindowEvidence, file_sha256
 
 log = logging.getLogger("propwatch.monitor")
 
@@ -31,6 +32,7 @@ READ_TIMEOUT_S = 0.1  # select() returns at once when data comes; this only pace
 BAD_DATA_LOG_PERIOD_S = 5.0
 MOTOR_STREAM = {"servo": "SERVO_OUTPUT_RAW", "actuator": "ACTUATOR_OUTPUT_STATUS", "esc": "ESC_STATUS"}
 LANDED_RATE_HZ = 2.0  # EXTENDED_SYS_STATE: a state, not a signal
+EVIDENCE_FRESH_S = 2.0  # a VIBRATION / ESC_STATUS stream silent for longer is not live evidence
 
 
 @dataclass
@@ -55,6 +57,18 @@ class Daemon:
         self.events = events
         self.notifier = notifier or Notifier({})
         self.rule = AlertRule(config.alerts)
+        self.sequential = config.alerts.rule == "sequential"
+        self.decision = Decision(
+            config.alerts.decision(),
+            config.resample.rate_hz,
+            pipeline.window,
+            model_sha256=file_sha256(pipeline.classifier.path),
+        )
+        self.esc_telemetry = EscTelemetry()
+        self._evidence_t: dict[str, float] = {}  # evidence -> boot time (s) it was last usable
+        self._paused = ""
+        self._airborne = False
+        self._status_text = ""
         self.statustexts = StatusTextQueue(config.alerts.statustext_min_interval_s, config.alerts.critical_threshold)
         self.stop = threading.Event()
         self.counters = Counters()
@@ -141,8 +155,89 @@ class Daemon:
                     log.warning("stream-rate request refused by the autopilot (MAV_RESULT %d)", msg.result)
         for step in steps:
             self._on_step(step)
+        if self.pipeline.vibration or self.pipeline.esc:
+            self._side_evidence()
+
+    # -- evidence and the decision ---------------------------------------------------------
+    def _side_evidence(self) -> None:
+        """VIBRATION and ESC_STATUS since the last message: validated (bad ones counted), then used."""
+        vib, esc = self.pipeline.vibration, self.pipeline.esc
+        self.pipeline.vibration, self.pipeline.esc = [], []
+        for v in vib:
+            t = v.timestamp_us / 1e6
+            before = sum(self.decision.vibration.rejected.values())
+            for a in self.decision.vibration_sample(t, v.vibration, self._airborne):
+                self._announce(a, int(v.timestamp_us // 1000))
+            if sum(self.decision.vibration.rejected.values()) == before:
+                self._evidence_t["vibration"] = t
+        for e in esc:
+            if self.esc_telemetry.observe(e.rpm) == "":
+                self._evidence_t["esc_rpm"] = e.timestamp_us / 1e6
+
+    def live_evidence(self, t_s: float) -> list[str]:
+        """Which evidence is flowing now: classifier (motor stream + attitude), vibration, esc_rpm."""
+        return [k for k, last in sorted(self._evidence_t.items()) if t_s - last <= EVIDENCE_FRESH_S]
+
+    def _set_status(self, text: str) -> None:
+        if text != self._status_text:
+            self._status_text = text
+            self.notifier.status(text)
+
+    def _decide(self, step) -> None:
+        """The shared decision rule on one grid step (pause when a stream stopped, never freeze it)."""
+        t = step.timestamp_us / 1e6
+        self._airborne = step.airborne
+        self.decision.step(t, step.inputs or StepInputs(step.airborne))
+        if step.valid:
+            self._evidence_t["classifier"] = t
+        live = self.live_evidence(t)
+        if step.airborne and not step.valid:
+            if self._paused != step.reason:
+                self._paused = step.reason
+                self.decision.pause(step.reason)
+                motor = MOTOR_STREAM[self.cfg.input.motor_source]
+                log.warning("t=%d ms: decision paused: %s", step.time_boot_ms, step.reason)
+                self.events.write_event(
+                    {
+                        "kind": "paused",
+                        "time_boot_ms": step.time_boot_ms,
+                        "reason": step.reason,
+                        "evidence_live": live,
+                        "classifier_input": motor,
+                    }
+                )
+            self._set_status(f"classifier paused: {step.reason}; evidence live: {', '.join(live) or 'none'}")
+        elif step.valid and self._paused:
+            self.events.write_event({"kind": "resumed", "time_boot_ms": step.time_boot_ms, "evidence_live": live})
+            log.info("t=%d ms: decision resumed", step.time_boot_ms)
+            self._paused = ""
+            self.decision.resume()
+        if step.valid:
+            self._set_status(f"airborne: deciding; evidence live: {', '.join(live)}")
+        if not step.valid or step.fault_probability is None:
+            return
+        if step.latency_s is not None:
+            self.counters.latencies_s.append(step.latency_s)
+        ev = WindowEvidence(step.fault_probability, step.label_probability)
+        for a in self.decision.window_evidence(t, ev):
+            self._announce(a, step.time_boot_ms, step)
+
+    def _announce(self, a: Announcement, time_boot_ms: int, step=None) -> None:
+        self.counters.alerts += 1
+        event = {**a.event(), "time_boot_ms": time_boot_ms}
+        if step is not None and step.fault_probability is not None:
+            event["probabilities"] = [round(float(p), 4) for p in step.fault_probability]
+            event["battery_v"] = None if math.isnan(step.battery_v) else round(step.battery_v, 2)
+        log.warning("%s t=%d ms: %s (%s evidence)", a.level.upper(), time_boot_ms, a.text, a.evidence)
+        self.statustexts.add_text(a.text, a.severity)
+        self._send_statustext()  # STATUSTEXT first: the pilot before the disk
+        self.events.write_event(event)
+        self._set_status(f"last alert: {a.text} at t={time_boot_ms} ms")
 
     def _on_step(self, step) -> None:
+        if self.sequential:
+            self._decide(step)
+            return
         if step.valid != self._classifying_state:
             self._classifying_state = step.valid
             if step.valid:
@@ -263,6 +358,8 @@ class Daemon:
             "ignored": {f"{s}/{k}": n for (s, k), n in self.pipeline.decoder.ignored.items()},
             "undecodable": dict(self.pipeline.decoder.undecodable),
             "latency_ms": {"n": int(len(lat)), "p50": pct(50), "p99": pct(99), "max": float(lat.max()) if len(lat) else math.nan},
+            "decision": self.decision.verdict() if self.sequential else None,
+            "esc_rejected": dict(self.esc_telemetry.rejected),
         }
 
     def summary(self) -> None:

@@ -10,6 +10,16 @@ envelope (its mean RPM against the RPM the model was trained on).
 Verdict: the label with the highest mean probability over the windows used;
 ``faulty_propellers`` are that label's propellers; ``fault_probability[i]``
 is the mean over windows of the model's P(propeller i faulty).
+
+Confidence, in words (``verdict.confidence``): ``confident`` when that label's
+mean probability reaches ``DecisionConfig.faulty_probability`` (0.9); else
+``suspect`` when at least half the windows agree on it, else ``uncertain``.
+Only a confident verdict marks propellers FAULTY (``propellers[].faulty``); a
+suspect one marks them ``suspect``. ``label_probability_of_verdict`` and
+``agreeing_windows`` (the share of windows whose most likely label is the
+verdict's) say how sure it is. The in-flight decision is the daemon's own rule
+(``monitor.decision``), replayed over the log step by step: ``decision`` holds
+its suspect / fault announcements and final state.
 """
 
 from __future__ import annotations
@@ -19,6 +29,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from monitor.decision import Decision, DecisionConfig, StepInputs, WindowEvidence, file_sha256
 from monitor.errors import ModelError
 from monitor.esc import EscCurve
 from monitor.features import compute_features, signals_needed, sliding_windows, valid_windows
@@ -53,6 +64,7 @@ class Diagnosis:
     timeline: dict = field(default_factory=dict)
     hop_steps: int = 1
     envelope: dict = field(default_factory=dict)  # the figures behind the envelope checks
+    decision: dict | None = None  # the shared in-flight rule replayed: {"alerts": [...], "final": {...}}
 
     def to_json(self) -> dict:
         """The ``--json`` object. Propeller numbers are the vehicle's own (``FlightTable.motor_names``,
@@ -69,6 +81,7 @@ class Diagnosis:
             "timeline": self.timeline,
             "hop_steps": self.hop_steps,
             "envelope": self.envelope,
+            "decision": self.decision,
         }
         own = vehicle_numbers([p["name"] for p in self.propellers]) if self.propellers else None
         return renumber(out, own) if own else out
@@ -99,6 +112,7 @@ def renumber(out: dict, own: list[int]) -> dict:
     v = out["verdict"]
     if v is not None:
         out["verdict"] = {
+            **v,
             "label": relabel(v["label"]),
             "faulty_propellers": sorted(own[i - 1] for i in v["faulty_propellers"]),
             "fault_probability": reorder(v["fault_probability"]),
@@ -117,6 +131,10 @@ def renumber(out: dict, own: list[int]) -> dict:
         t["fault_probability"] = [reorder(row) for row in t["fault_probability"]]
         t["label"] = [relabel(k) for k in t["label"]]
         out["timeline"] = t
+    if out.get("decision"):
+        dec = dict(out["decision"])
+        dec["alerts"] = [{**a, "propellers": sorted(own[i - 1] for i in a["propellers"])} for a in dec["alerts"]]
+        out["decision"] = dec
     out["propeller_numbering"] = {
         "names": [p["name"] for p in out["propellers"]],
         "px4_rotor": [p["px4_rotor"] for p in out["propellers"]],
@@ -252,23 +270,66 @@ def diagnose_table(
     label = int(np.argmax(mean_labels)) + 1
     p = faults.mean(axis=0)
     d.windows = len(ends)
-    d.verdict = {"label": label, "faulty_propellers": list(LABEL_TABLE[label]), "fault_probability": [float(x) for x in p]}
+    cfg = DecisionConfig()
+    confidence, agree = verdict_confidence(labels, label, cfg)
+    d.verdict = {
+        "label": label,
+        "faulty_propellers": list(LABEL_TABLE[label]),
+        "fault_probability": [float(x) for x in p],
+        "confidence": confidence,
+        "label_probability_of_verdict": round(float(mean_labels[label - 1]), 4),
+        "agreeing_windows": round(agree, 4),
+        "faulty_probability_required": cfg.faulty_probability,
+    }
     d.label_probability = [float(x) for x in mean_labels]
     d.propellers = [
         {
             "propeller": i + 1,
             "name": table.motor_names[i],
             "fault_probability": float(p[i]),
-            "faulty": (i + 1) in LABEL_TABLE[label],
+            "faulty": (i + 1) in LABEL_TABLE[label] and confidence == "confident",
+            "suspect": (i + 1) in LABEL_TABLE[label] and confidence == "suspect",
         }
         for i in range(4)
     ]
+    d.decision = replay_decision(table, clf, cfg, ends, labels, faults)
     d.timeline = {
         "t_boot_s": [float(x) for x in _t_s(table, ends)],
         "fault_probability": np.round(faults, 5).tolist(),
         "label": (np.argmax(labels, axis=1) + 1).tolist(),
     }
     return d
+
+
+def verdict_confidence(labels: np.ndarray, label: int, cfg: DecisionConfig) -> tuple[str, float]:
+    """('confident' | 'suspect' | 'uncertain', share of windows whose most likely label is ``label``)."""
+    agree = float(np.mean(np.argmax(labels, axis=1) + 1 == label))
+    if labels[:, label - 1].mean() >= cfg.faulty_probability:
+        return "confident", agree
+    return ("suspect" if agree >= 0.5 else "uncertain"), agree
+
+
+def replay_decision(
+    table: FlightTable, clf: Classifier, cfg: DecisionConfig, ends: np.ndarray, labels: np.ndarray, faults: np.ndarray
+) -> dict:
+    """The daemon's decision rule over the log, step by step, with the windows classified at ``ends``."""
+    dec = Decision(cfg, table.rate_hz, clf.info.window, model_sha256=file_sha256(clf.path))
+    t_s = _t_s(table, np.arange(len(table.timestamp_us)))
+    rpm = np.asarray(table.motor_rpm, dtype=np.float64)
+    mean_rpm = rpm.mean(axis=1)
+    tilt = np.maximum(np.abs(table.roll_rad), np.abs(table.pitch_rad))
+    rates = np.abs(np.stack([table.roll_rate_rad_s, table.pitch_rate_rad_s, table.yaw_rate_rad_s], axis=1)).max(axis=1)
+    battery = np.asarray(table.battery_v, dtype=np.float64)
+    at = {int(e): k for k, e in enumerate(ends)}
+    alerts = []
+    for j in range(len(t_s)):
+        air = bool(table.airborne[j])
+        dec.step(float(t_s[j]), StepInputs(air, mean_rpm[j], tilt[j], rates[j], battery[j], rpm[j]))
+        k = at.get(j)
+        if k is not None:
+            for a in dec.window_evidence(float(t_s[j]), WindowEvidence(faults[k], labels[k])):
+                alerts.append({"t_boot_s": round(a.t_s, 2), "level": a.level, "propellers": list(a.propellers), "text": a.text})
+    return {"alerts": alerts, "final": dec.verdict()}
 
 
 def predict_at(clf: Classifier, feats: np.ndarray, ends: np.ndarray, window: int, batch: int):

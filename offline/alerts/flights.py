@@ -1,0 +1,135 @@
+"""Flights for judging alert rules: healthy ones with randomised physics, and ones with an in-flight onset.
+
+Drawn from our simulator with the data set's shift options (random routes,
+payload, steady wind, per-motor efficiency spread, CG offset: one vehicle
+variant per chunk of flights) and classified at every step (hop 1, as the
+daemon does at 20 Hz). What a rule needs per flight is kept: the window
+outputs, the per-step flight state for the regime tracker, the accelerometer
+(for PX4's imbalance metric), the truth and the onset time.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+import numpy as np
+
+from monitor.labels import LABEL_MASKS
+from monitor.model import Classifier
+from monitor.vehicle import VehicleConfig
+from offline.dataset.generate import DatasetSpec, routes, simulate_flights, vehicle_variant
+from offline.dataset.onset import SwitchedPropellers
+
+
+@dataclass(frozen=True)
+class FlightSet:
+    """How a set of flights is drawn."""
+
+    kind: str  # "healthy" | "single" | "pair" | "any"
+    n_flights: int = 16
+    duration_s: float = 80.0
+    payload_kg: tuple[float, float] = (0.0, 0.6)
+    wind_max_m_s: float = 6.0
+    motor_efficiency_spread: float = 0.06
+    cg_offset_max_m: float = 0.01
+    onset_s: tuple[float, float] = (25.0, 50.0)
+    chunk_flights: int = 8  # one vehicle variant (wind, motor spread, CG) per chunk
+    propellers: str = "quadratic"
+    seed: int = 0
+
+
+@dataclass
+class AlertFlight:
+    name: str
+    rate_hz: float
+    window: int
+    fault_probability: np.ndarray  # (N, 4): window k ends at step k + window - 1
+    motor_rpm: np.ndarray  # (T, 4) commanded RPM (ESC fit of PWM), PX4 order
+    mean_rpm: np.ndarray  # (T,)
+    tilt_rad: np.ndarray
+    rate_rad_s: np.ndarray
+    battery_v: np.ndarray
+    accel_frd_m_s2: np.ndarray  # (T, 3)
+    truth: tuple[int, ...]  # faulty propellers after onset (1..4)
+    onset_s: float  # inf for healthy; time of the first faulty sample (step index / rate)
+
+    @property
+    def hours(self) -> float:
+        return len(self.fault_probability) / self.rate_hz / 3600.0
+
+
+def _conditions(kind: str, n: int, rng: np.random.Generator) -> np.ndarray:
+    if kind == "healthy":
+        return np.zeros((n, 4), np.int8)
+    n_faulty = LABEL_MASKS.sum(axis=1)
+    pool = {"single": np.flatnonzero(n_faulty == 1), "pair": np.flatnonzero(n_faulty == 2), "any": np.arange(1, 16)}[kind]
+    masks = LABEL_MASKS[rng.choice(pool, n)] > 0
+    return (masks * rng.integers(1, 3, (n, 4))).astype(np.int8)  # each faulty propeller bent or cracked
+
+
+def simulate_set(vehicle: VehicleConfig, fs: FlightSet, clf: Classifier, log=print) -> list[AlertFlight]:
+    rng = np.random.default_rng([fs.seed, 13])
+    out: list[AlertFlight] = []
+    spec = DatasetSpec(
+        "alerts",
+        waypoints=("random",),
+        duration_s=fs.duration_s,
+        propellers=fs.propellers,
+        wind_max_m_s=fs.wind_max_m_s,
+        motor_efficiency_spread=fs.motor_efficiency_spread,
+        cg_offset_max_m=fs.cg_offset_max_m,
+        seed=fs.seed,
+    )
+    from offline.propellers import build_propellers
+
+    for c0 in range(0, fs.n_flights, fs.chunk_flights):
+        n = min(fs.chunk_flights, fs.n_flights - c0)
+        cond = _conditions(fs.kind, n, rng)
+        payload = rng.uniform(*fs.payload_kg, n)
+        onset = np.full(n, np.inf) if fs.kind == "healthy" else rng.uniform(*fs.onset_s, n)
+        veh = vehicle_variant(vehicle, spec, rng)
+        seed = int(rng.integers(2**31))
+        wps, _ = routes(spec, n, seed=seed)
+        props = None
+        if fs.kind != "healthy":
+            before = build_propellers(veh, np.zeros_like(cond), kind=fs.propellers, rng_seed=seed)
+            after = build_propellers(veh, cond, kind=fs.propellers, rng_seed=seed + 1)
+            props = SwitchedPropellers(before, after, onset)
+        flog = simulate_flights(veh, wps, cond, payload, dataclasses.replace(spec, seed=seed), seed, propellers=props)
+        out += _classify(flog, clf, cond, onset, f"{fs.kind}-s{fs.seed}-{c0}")
+        log(f"alerts: {fs.kind} seed {fs.seed}: {len(out)}/{fs.n_flights} flights")
+    return out
+
+
+def _classify(flog, clf: Classifier, cond: np.ndarray, onset: np.ndarray, prefix: str) -> list[AlertFlight]:
+    from monitor.features import compute_features
+
+    info = clf.info
+    w = info.window
+    sig = flog.signals()
+    flights = []
+    for b in range(len(cond)):
+        feats = compute_features({k: v[b] for k, v in sig.items()}, info.features).astype(np.float32)
+        idx = np.arange(len(feats) - w + 1)[:, None] + np.arange(w)[None, :]
+        probs = np.concatenate([clf.predict(feats[idx[i : i + 2048]])[1] for i in range(0, len(idx), 2048)])
+        rates = flog.rates_frd_rad_s[b]
+        # The onset switches at the first physics step at or after onset_s; its first logged sample is the next one.
+        onset_s = float(np.ceil(onset[b] * flog.log_rate_hz) / flog.log_rate_hz) if np.isfinite(onset[b]) else np.inf
+        flights.append(
+            AlertFlight(
+                f"{prefix}-{b}",
+                float(flog.log_rate_hz),
+                w,
+                probs.astype(np.float64),
+                flog.motor_rpm[b].astype(np.float64),
+                flog.motor_rpm[b].mean(axis=1),
+                np.maximum(np.abs(flog.roll_rad[b]), np.abs(flog.pitch_rad[b])),
+                np.abs(rates).max(axis=1),
+                flog.battery_v[b].astype(np.float64),
+                flog.accel_frd_m_s2[b].astype(np.float64),
+                tuple(int(i) + 1 for i in np.flatnonzero(cond[b])),
+                onset_s,
+            )
+        )
+    return flights
