@@ -71,6 +71,8 @@ from __future__ import annotations
 import hashlib
 import json
 import math
+import statistics
+from collections import deque
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -204,12 +206,18 @@ def thresholds(
     return Thresholds(th["suspect"], th["fault"], "analytic (Wald bound, one sample per window)")
 
 
-def window_llr(fault_probability: np.ndarray) -> np.ndarray:
+def window_llr(fault_probability) -> np.ndarray:
     """Clipped per-propeller log-likelihood ratio of one window (NaN -> 0: no evidence)."""
-    p = np.asarray(fault_probability, dtype=np.float64)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        llr = np.log(p) - np.log1p(-p)
-    return np.where(np.isnan(llr), 0.0, np.clip(llr, -LLR_CLIP, LLR_CLIP))
+    out = np.zeros(N_PROPS)
+    for i, p in enumerate(fault_probability):
+        p = float(p)
+        if p != p:  # NaN
+            continue
+        if p <= 0.0 or p >= 1.0:
+            out[i] = LLR_CLIP if p >= 1.0 else -LLR_CLIP
+            continue
+        out[i] = min(max(math.log(p / (1.0 - p)), -LLR_CLIP), LLR_CLIP)
+    return out
 
 
 # -- inputs -----------------------------------------------------------------------------------
@@ -269,17 +277,20 @@ class RegimeTracker:
         self.cfg = cfg
         self.window = window
         self.rate_hz = rate_hz
-        self._rpm = np.full(2 * window, np.nan)  # the last two windows' mean RPM (for the collective step)
-        self._volts = np.full(window, np.nan)
+        self._rpm: deque[float] = deque(maxlen=2 * window)  # the last two windows' mean RPM (collective step)
+        self._volts: deque[float] = deque(maxlen=window)
         self._n = 0
         self.hold_until_step = 0
         self.step = 0
         self.counts = {"aggressive": 0, "collective_step": 0, "battery_sag": 0, "landed": 0}
         self.last_reason = ""
+        self._tilt_max = math.radians(cfg.aggressive_tilt_deg)
+        self._rate_max = math.radians(cfg.aggressive_rate_deg_s)
+        self._check_every = max(window // 5, 1)
 
     def reset(self) -> None:
-        self._rpm[:] = np.nan
-        self._volts[:] = np.nan
+        self._rpm.clear()
+        self._volts.clear()
         self._n = 0
         self.hold_until_step = self.step + self.window  # a window must lie wholly after take-off
 
@@ -292,30 +303,26 @@ class RegimeTracker:
                 self.counts["landed"] += 1
             self.reset()
             return "landed" if was_flying else ""
-        self._rpm = np.roll(self._rpm, -1)
-        self._rpm[-1] = s.mean_rpm
-        self._volts = np.roll(self._volts, -1)
-        self._volts[-1] = s.battery_v
         self._n += 1
+        if math.isfinite(s.mean_rpm):
+            self._rpm.append(s.mean_rpm)
+        if math.isfinite(s.battery_v):
+            self._volts.append(s.battery_v)
         event = ""
         c = self.cfg
-        if s.tilt_rad > math.radians(c.aggressive_tilt_deg) or s.rate_rad_s > math.radians(c.aggressive_rate_deg_s):
+        if s.tilt_rad > self._tilt_max or s.rate_rad_s > self._rate_max:
             event = "aggressive"
-        elif (
-            self._n >= 2 * self.window
-            and self._n % (self.window // 5 or 1) == 0
-            and np.isfinite(self._rpm[: self.window]).any()
-            and np.isfinite(self._rpm[self.window :]).any()
-        ):
-            old, new = np.nanmedian(self._rpm[: self.window]), np.nanmedian(self._rpm[self.window :])
-            if math.isfinite(old) and old > 0 and abs(new - old) / old > c.collective_step_fraction:
+        elif len(self._rpm) == 2 * self.window and self._n % self._check_every == 0:
+            rpm = list(self._rpm)
+            old, new = statistics.median(rpm[: self.window]), statistics.median(rpm[self.window :])
+            if old > 0 and abs(new - old) / old > c.collective_step_fraction:
                 event = "collective_step"
-                self._rpm[: self.window] = np.nan  # measure the next step from the new level
-        if not event and self._n >= self.window:
+                self._rpm.clear()  # measure the next step from the new level
+        if not event and len(self._volts) == self.window:
             v0, v1 = self._volts[0], self._volts[-1]
-            if math.isfinite(v0) and math.isfinite(v1) and v0 > 0 and (v0 - v1) / v0 > c.battery_sag_fraction:
+            if v0 > 0 and (v0 - v1) / v0 > c.battery_sag_fraction:
                 event = "battery_sag"
-                self._volts[:-1] = np.nan
+                self._volts.clear()
         if event:
             self.counts[event] += 1
             self.last_reason = event

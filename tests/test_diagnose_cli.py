@@ -39,7 +39,8 @@ def run(capsys, *argv) -> tuple[int, dict]:
 @pytest.mark.parametrize("faulty", [0, 1, 2, 3, 4])
 def test_verdict_names_the_faulty_propeller(capsys, model, logs, faulty):
     code, res = run(capsys, logs[faulty], "--model", model, "--json")
-    assert code == 0
+    # 3 = a verdict that is not confident (the fixture model is not always sure); the label is still named
+    assert code == (0 if res["verdict"]["confidence"] == "confident" else 3), res["verdict"]
     v = res["verdict"]
     assert v["label"] == faulty + 1  # label 1 = no fault, 2..5 = propeller 1..4 alone
     assert v["faulty_propellers"] == ([faulty] if faulty else [])
@@ -107,7 +108,7 @@ def test_outside_envelope_is_refused_not_classified(capsys, logs, tmp_path):
     # Moderately off (x1.2, about 1.2 training std): classified, with a warning.
     near = build_model(tmp_path / "near.onnx", trained_rpm=float(PAPER_ESC.cmd_to_rpm(HOVER_PWM_US)) / 1.2)
     code, res = run(capsys, logs[0], "--model", near, "--json")
-    assert code == 0 and res["verdict"]["label"] == 1
+    assert code in (0, 3) and res["verdict"]["label"] == 1
     assert any("outside the model's envelope" in w for w in res["warnings"])
 
 
@@ -126,7 +127,7 @@ def test_errors_exit_non_zero_through_propwatch(capsys, model, tmp_path):
 @pytest.mark.skipif(not LOG171.is_file(), reason=f"real ArduPilot log not found at {LOG171}")
 def test_log171_gets_a_verdict_or_a_reason(capsys, model):
     code, res = run(capsys, LOG171, "--model", model, "--json")
-    assert code in (0, 1)
+    assert code in (0, 1, 3)
     assert (res["verdict"] is not None) != (res["reason"] is not None)
     assert any("9.9 Hz" in w for w in res["warnings"])  # ATT/RATE at 10 Hz, below the 20 Hz grid
     assert any("beyond 45 deg" in w for w in res["warnings"])  # the flip at the end

@@ -104,7 +104,7 @@ class Pipeline:
         self._since_inference = 0
         # VIBRATION and ESC_STATUS samples since the caller last took them (the decision validates them).
         self.vibration: list[md.Vibration] = []
-        self.esc: list[md.EscRpm] = []
+        self.esc_samples: list[md.EscRpm] = []
 
     # -- input -----------------------------------------------------------------------
     def feed(self, msg: Any, received_s: float | None = None) -> list[StepResult]:
@@ -132,7 +132,7 @@ class Pipeline:
             self.vibration.append(s)
             return []
         if isinstance(s, md.EscRpm) and self.config.input.motor_source != "esc":
-            self.esc.append(s)  # telemetry beside the commanded RPM: evidence, not the motor stream
+            self.esc_samples.append(s)  # telemetry beside the commanded RPM: evidence, not the motor stream
             return []
         if isinstance(s, md.EscRpm) and self.config.input.motor_source == "esc":
             rpm = self._map(s.first_index + 1, s.rpm)

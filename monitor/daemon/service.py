@@ -155,14 +155,14 @@ class Daemon:
                     log.warning("stream-rate request refused by the autopilot (MAV_RESULT %d)", msg.result)
         for step in steps:
             self._on_step(step)
-        if self.pipeline.vibration or self.pipeline.esc:
+        if self.pipeline.vibration or self.pipeline.esc_samples:
             self._side_evidence()
 
     # -- evidence and the decision ---------------------------------------------------------
     def _side_evidence(self) -> None:
         """VIBRATION and ESC_STATUS since the last message: validated (bad ones counted), then used."""
-        vib, esc = self.pipeline.vibration, self.pipeline.esc
-        self.pipeline.vibration, self.pipeline.esc = [], []
+        vib, esc = self.pipeline.vibration, self.pipeline.esc_samples
+        self.pipeline.vibration, self.pipeline.esc_samples = [], []
         for v in vib:
             t = v.timestamp_us / 1e6
             before = sum(self.decision.vibration.rejected.values())
