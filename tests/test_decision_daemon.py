@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -18,6 +20,7 @@ from monitor.daemon.service import Daemon
 from monitor.model import Classifier, choose_esc
 
 BOOT0_S = 100.0  # synth_flight's boot time at flight time 0
+REPO = Path(__file__).resolve().parent.parent
 
 
 class StatusLog:
@@ -106,3 +109,65 @@ def test_a_stream_that_stops_pauses_the_decision_and_it_resumes(tmp_path, model)
     assert "paused" in kinds and "resumed" in kinds[kinds.index("paused") :], events
     assert any(s.startswith("classifier paused:") for s in status)
     assert np.isfinite(d.report()["latency_ms"]["p99"])
+
+
+# -- the shipped classifier on simulated flights replayed from .tlog ------------------------------------
+SHIPPED = REPO / "models" / "classifier.onnx"
+
+
+def simulated_tlog(tmp_path, faulty: dict[int, int], onset_s: float, duration_s: float, wind_m_s: float, seed: int):
+    """One flight of our simulator on a random route with steady wind; ``faulty`` = {rotor: 1 bent / 2 cracked}
+    switched on at ``onset_s``; written as the .tlog PX4 would stream."""
+    pytest.importorskip("torch")
+    from monitor.vehicle import load_vehicle
+    from offline.dataset.generate import DatasetSpec, routes, simulate_flights
+    from offline.dataset.onset import SwitchedPropellers
+    from offline.propellers import build_propellers
+    from offline.sim.io_tlog import write_tlog as write_sim_tlog
+
+    vehicle = load_vehicle(REPO / "models" / "vehicle.yaml")
+    vehicle = dataclasses.replace(vehicle, wind_ned_m_s=(wind_m_s, 0.3 * wind_m_s, 0.0))
+    cond = np.zeros((1, 4), np.int8)
+    for rotor, kind in faulty.items():
+        cond[0, rotor - 1] = kind
+    spec = DatasetSpec("e2e", waypoints=("random",), duration_s=duration_s, propellers="quadratic", seed=seed)
+    wps, _ = routes(spec, 1, seed=seed)
+    before = build_propellers(vehicle, np.zeros_like(cond), kind="quadratic", rng_seed=seed)
+    after = build_propellers(vehicle, cond, kind="quadratic", rng_seed=seed + 1)
+    props = SwitchedPropellers(before, after, np.array([onset_s]))
+    log = simulate_flights(vehicle, wps, cond, np.zeros(1), spec, seed, propellers=props)
+    return write_sim_tlog(tmp_path / "flight.tlog", log, 0)
+
+
+def replay_shipped(tmp_path, tlog):
+    cfg = monitor_config_from_mapping({"link": {"tlog_speed": 0.0}})
+    clf = Classifier(SHIPPED)
+    pipeline = Pipeline(clf, cfg, choose_esc(clf, ""))
+    events_path = tmp_path / "events.jsonl"
+    d = Daemon(cfg, Link(str(tlog), 191, 0.0), pipeline, EventWriter(events_path), StatusLog())
+    d.run()
+    events = [json.loads(x) for x in events_path.read_text().splitlines()] if events_path.exists() else []
+    return d, [e for e in events if e["kind"] == "decision"]
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not SHIPPED.is_file(), reason="models/classifier.onnx not built")
+def test_replayed_healthy_windy_flight_raises_nothing(tmp_path):
+    tlog = simulated_tlog(tmp_path, {}, math.inf, 80.0, wind_m_s=5.0, seed=31)
+    d, alerts = replay_shipped(tmp_path, tlog)
+    assert d.report()["pipeline"]["classified"] > 1000  # it did watch the flight
+    assert alerts == [], alerts
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not SHIPPED.is_file(), reason="models/classifier.onnx not built")
+def test_replayed_onset_flight_raises_suspect_then_fault_on_the_right_propeller(tmp_path):
+    onset_s = 30.0
+    tlog = simulated_tlog(tmp_path, {2: 2}, onset_s, 75.0, wind_m_s=3.0, seed=32)
+    d, alerts = replay_shipped(tmp_path, tlog)
+    levels = [a["level"] for a in alerts]
+    assert "suspect" in levels and "fault" in levels and levels.index("suspect") < levels.index("fault"), alerts
+    assert all(a["faulty_propellers"] == [2] for a in alerts if a["level"] == "fault"), alerts
+    t0 = d.pipeline.decoder.clock_us  # boot time at the end; the flight started duration earlier
+    first_fault = next(a for a in alerts if a["level"] == "fault")
+    assert first_fault["t_s"] - (t0 / 1e6 - 75.0) > onset_s  # never before the onset
