@@ -21,6 +21,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "train": ("offline.classifier.train_cli", "train the CNN fault classifier"),
     "export": ("offline.classifier.export_cli", "export a trained classifier to ONNX"),
     "evaluate": ("offline.classifier.evaluate_cli", "evaluate a classifier on data sets"),
+    "evalsim": ("offline.evalsim.cli", "write an evaluation-only set from the second simulator (never for training)"),
     "calibrate": ("offline.calibrate.cli", "fit model extensions to measured flights"),
     "crazypad": ("offline.crazypad.cli", "sim-to-real experiment on CrazyPAD"),
     "diagnose": ("monitor.diagnose.cli", "diagnose recorded flight logs"),

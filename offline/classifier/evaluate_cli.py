@@ -41,12 +41,23 @@ class LoadedModel:
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="propwatch evaluate", description=__doc__)
     p.add_argument("model", type=Path, help=".onnx or .pt")
-    p.add_argument("datasets", nargs="+", type=Path, help="data set .npz files")
+    p.add_argument("datasets", nargs="*", type=Path, help="data set .npz files")
     p.add_argument("--out", type=Path, default=Path("out/evaluate"), help="folder for PNGs and results.json")
     p.add_argument("--hop", type=int, default=1, help="window hop (1 = every window, as the paper)")
     p.add_argument("--test-flights", default="", help="comma-separated flight indices to score (e.g. the held-out flights of A)")
     p.add_argument("--json", action="store_true", help="print results as JSON instead of the table")
+    p.add_argument(
+        "--evalsim",
+        action="append",
+        default=[],
+        type=Path,
+        help="an evaluation-only set folder from 'propwatch evalsim' (repeatable; .onnx models; the ω²-share baseline is a row)",
+    )
     a = p.parse_args(argv)
+    if not a.datasets and not a.evalsim:
+        p.error("give data set .npz files and/or --evalsim folders")
+    if a.evalsim and a.model.suffix != ".onnx":
+        p.error("--evalsim scores the model as shipped: give an .onnx model")
     model = LoadedModel(a.model)
     results = []
     for path in a.datasets:
@@ -64,13 +75,25 @@ def main(argv: list[str] | None = None) -> int:
         r = evaluate_dataset(model.predict, ds, model.features, model.window, a.hop, flights, name)
         plot_confusion(r, a.out / f"confusion_{ds.name}.png")
         results.append(r)
+    evalsim = []
+    if a.evalsim:
+        from offline.evalsim.score import score_folder
+
+        evalsim = [dict(zip(("set", "rows"), score_folder(d, a.model), strict=True), folder=str(d)) for d in a.evalsim]
     a.out.mkdir(parents=True, exist_ok=True)
-    payload = {"model": str(a.model), "hop": a.hop, "results": [r.to_dict() for r in results]}
+    payload = {"model": str(a.model), "hop": a.hop, "results": [r.to_dict() for r in results], "evalsim": evalsim}
     (a.out / "results.json").write_text(json.dumps(payload, indent=2) + "\n", encoding="utf-8")
     if a.json:
         print(json.dumps(payload))
     else:
-        print(format_table(results))
+        if results:
+            print(format_table(results))
+        if evalsim:
+            from offline.evalsim.score import format_rows
+
+            print("\nevaluation-only simulator (offline/evalsim; never used for training):")
+            for e in evalsim:
+                print(format_rows(e["rows"], e["set"]))
         print(f"confusion matrices and results.json in {a.out}")
     return 0
 

@@ -1,0 +1,340 @@
+"""Named, seeded, deterministic evaluation sets: lists of ``FlightSpec``, and a writer to a folder.
+
+NEVER used for training or model selection (see the package docstring).
+
+| set | what varies |
+| paper | 1.5 kg paper quad, new routes, all 16 labels, evalsim's own bent/cracked-like damage |
+| shift | as paper + 30 % payload, motor efficiency spread ±4-8 %, CG offset, inertia error, gusty wind |
+| healthy | healthy flights, each with ONE nuisance (``NUISANCES``) |
+| onset | a fault (single propeller or pair, 5-20 % thrust loss) starting mid-flight at a recorded time |
+| hidden | per airframe one hidden effect (CG, weak motor, motor lag, linear drag, ESC curve): 2 healthy + 4 single faults |
+| effectiveness | one rotor losing exactly 5, 10 or 20 % thrust, torque per thrust unchanged or falling |
+
+``flights`` is the number of flights; labels / nuisances / patterns cycle, so
+``flights=32`` on ``paper`` gives every label twice. Flight i of a set depends
+only on (set, seed, i): asking for more flights extends a set.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from collections.abc import Callable
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+from monitor.esc import EscCurve
+from monitor.labels import LABEL_TABLE
+from monitor.vehicle import DEFAULT_VEHICLE, load_vehicle
+from offline.evalsim.airframe import Airframe, Damage
+from offline.evalsim.environment import Sensors, Telemetry, Wind
+from offline.evalsim.flight import FlightSpec, simulate_flights, truth
+from offline.manifest import make_manifest, write_manifest
+from offline.sim.io_tlog import write_tlog
+
+SET_NAMES = ("paper", "shift", "healthy", "onset", "hidden", "effectiveness")
+_SET_CODES = {n: i + 101 for i, n in enumerate(SET_NAMES)}
+DEFAULT_DURATION_S = 80.0
+BATCH = 32  # flights integrated together (memory ~ BATCH * duration)
+
+# Route box (NED, m): new routes, not offline/sim's box (±15 m, 4..16 m up).
+ROUTE_BOX_NED_M = ((-20.0, 20.0), (-20.0, 20.0), (-14.0, -6.0))
+N_WAYPOINTS = 5
+
+NUISANCES = (
+    "route",
+    "payload",
+    "wind_gusts",
+    "body_drag",
+    "cg_offset",
+    "slow_motor",
+    "weak_motor",
+    "battery_sag",
+    "imu_noise",
+    "inertia",
+    "payload_pickup",
+)
+HIDDEN_EFFECTS = ("cg_offset", "weak_motor", "motor_lag", "linear_drag", "esc_curve")
+ONSET_PATTERNS = ((1,), (2,), (3,), (4,), (1, 2), (1, 3), (1, 4), (2, 3), (2, 4), (3, 4))
+EFFECTIVENESS_LOSSES = (0.05, 0.10, 0.20)
+
+# The damage ranges (each damaged rotor draws its own values). Torque per unit thrust FALLS
+# (training assumed +2..+10 %); thrust loss constant or falling with speed.
+DAMAGE_RANGES = {
+    "bent": {
+        "thrust_loss_at_hover": (0.08, 0.13),
+        "loss_speed_exponent": (0.0, 0.5),
+        "torque_per_thrust_change": (-0.08, -0.02),
+        "flutter_thrust_std": (0.005, 0.01),
+        "vibration_1p_m_s2": (0.4, 1.0),
+    },
+    "cracked": {
+        "thrust_loss_at_hover": (0.12, 0.20),
+        "loss_speed_exponent": (0.0, 0.3),
+        "torque_per_thrust_change": (-0.12, -0.04),
+        "flutter_thrust_std": (0.01, 0.03),
+        "vibration_1p_m_s2": (0.2, 0.6),
+    },
+}
+
+
+def flight_seed(set_name: str, seed: int, i: int) -> int:
+    return int(np.random.SeedSequence([seed, _SET_CODES[set_name], i]).generate_state(1)[0])
+
+
+def _rng(set_name: str, seed: int, i: int) -> np.random.Generator:
+    return np.random.default_rng([seed, _SET_CODES[set_name], i, 7])
+
+
+def _route(rng: np.random.Generator) -> tuple[tuple[float, float, float], ...]:
+    box = np.asarray(ROUTE_BOX_NED_M)
+    wps = box[:, 0] + rng.random((N_WAYPOINTS, 3)) * (box[:, 1] - box[:, 0])
+    return tuple(tuple(float(x) for x in w) for w in wps)
+
+
+def _damage(rng: np.random.Generator, faulty: tuple[int, ...], kind: str, onset_s: float = 0.0) -> Damage:
+    ranges = DAMAGE_RANGES[kind]
+    vals = {k: [0.0] * 4 for k in ranges}
+    for p in faulty:
+        for k, (lo, hi) in ranges.items():
+            vals[k][p - 1] = float(rng.uniform(lo, hi))
+    return Damage(**{k: tuple(v) for k, v in vals.items()}, onset_time_s=onset_s)
+
+
+def _base(v, rng: np.random.Generator, spread: float = 0.01) -> Airframe:
+    """The paper quad with a small healthy motor spread (±``spread`` thrust efficiency)."""
+    eff = tuple(float(x) for x in 1.0 + rng.uniform(-spread, spread, 4))
+    return Airframe.from_vehicle(v, motor_thrust_efficiency=eff)
+
+
+def _light_wind(rng: np.random.Generator) -> Wind:
+    heading = rng.uniform(0, 2 * np.pi)
+    speed = rng.uniform(0.0, 1.5)
+    return Wind(mean_ned_m_s=(speed * np.cos(heading), speed * np.sin(heading), 0.0), gust_std_m_s=(0.2, 0.2, 0.1))
+
+
+def _gusty_wind(rng: np.random.Generator) -> Wind:
+    heading = rng.uniform(0, 2 * np.pi)
+    speed = rng.uniform(2.0, 5.0)
+    g = rng.uniform(0.8, 1.5)
+    return Wind(mean_ned_m_s=(speed * np.cos(heading), speed * np.sin(heading), 0.0), gust_std_m_s=(g, g, 0.5 * g))
+
+
+def _spec(set_name, seed, i, af, rng, duration_s, wind=None, **kw) -> FlightSpec:
+    return FlightSpec(
+        name=f"{set_name}_{i:04d}",
+        airframe=af,
+        waypoints_ned_m=_route(rng),
+        duration_s=duration_s,
+        seed=flight_seed(set_name, seed, i),
+        wind=wind if wind is not None else _light_wind(rng),
+        **kw,
+    )
+
+
+def _paper(v, seed, i, duration_s) -> FlightSpec:
+    rng = _rng("paper", seed, i)
+    label = i % 16 + 1
+    kind = "bent" if (i // 16) % 2 == 0 else "cracked"
+    af = _base(v, rng).with_(damage=_damage(rng, LABEL_TABLE[label], kind))
+    return _spec("paper", seed, i, af, rng, duration_s, nuisance=kind)
+
+
+def _shift(v, seed, i, duration_s) -> FlightSpec:
+    rng = _rng("shift", seed, i)
+    label = i % 16 + 1
+    kind = "bent" if (i // 16) % 2 == 0 else "cracked"
+    spread = rng.uniform(0.04, 0.08)
+    af = _base(v, rng, spread).with_(
+        payload_kg=0.3 * v.mass_kg,
+        cg_offset_frd_m=(float(rng.uniform(-0.01, 0.01)), float(rng.uniform(-0.01, 0.01)), 0.0),
+        inertia_diag_kg_m2=tuple(float(x) for x in np.asarray(v.inertia_diag_kg_m2) * (1 + rng.uniform(-0.1, 0.1, 3))),
+        damage=_damage(rng, LABEL_TABLE[label], kind),
+    )
+    return _spec("shift", seed, i, af, rng, duration_s, wind=_gusty_wind(rng), nuisance=kind)
+
+
+def _with_nuisance(af: Airframe, v, rng: np.random.Generator, name: str, duration_s: float):
+    """(airframe, wind or None, sensors or None) with the one nuisance ``name`` applied."""
+    wind = sensors = None
+    if name == "payload":
+        af = af.with_(payload_kg=0.3 * v.mass_kg)
+    elif name == "wind_gusts":
+        wind = _gusty_wind(rng)
+    elif name == "body_drag":
+        af = af.with_(drag_quadratic_n_per_m2_s2=(0.12, 0.12, 0.2), rotor_drag_kg_per_rad=8e-5)
+    elif name == "cg_offset":
+        r, a = rng.uniform(0.015, 0.025), rng.uniform(0, 2 * np.pi)
+        af = af.with_(cg_offset_frd_m=(float(r * np.cos(a)), float(r * np.sin(a)), 0.0))
+    elif name in ("slow_motor", "motor_lag"):
+        tau = list(af.motor_time_constant_s)
+        tau[int(rng.integers(4))] = float(rng.uniform(0.045, 0.075))
+        af = af.with_(motor_time_constant_s=tuple(tau))
+    elif name == "weak_motor":
+        eff = list(af.motor_thrust_efficiency)
+        eff[int(rng.integers(4))] *= 0.94
+        af = af.with_(motor_thrust_efficiency=tuple(eff))
+    elif name == "battery_sag":
+        af = af.with_(battery_start_soc=0.35, battery_internal_resistance_ohm=0.06, esc_rpm_per_volt=0.03)
+    elif name == "imu_noise":
+        s = Sensors()
+        sensors = replace(
+            s,
+            gyro_noise_std_rad_s=4 * s.gyro_noise_std_rad_s,
+            gyro_bias_std_rad_s=3 * s.gyro_bias_std_rad_s,
+            accel_noise_std_m_s2=4 * s.accel_noise_std_m_s2,
+            attitude_noise_std_rad=3 * s.attitude_noise_std_rad,
+        )
+    elif name == "inertia":
+        af = af.with_(inertia_diag_kg_m2=tuple(float(x) * 1.25 for x in af.inertia_diag_kg_m2))
+    elif name == "payload_pickup":
+        af = af.with_(payload_kg=0.3 * v.mass_kg, payload_pickup_time_s=float(rng.uniform(0.3, 0.5) * duration_s))
+    elif name == "linear_drag":
+        af = af.with_(rotor_drag_kg_per_rad=float(rng.uniform(1.0e-4, 2.0e-4)))
+    elif name == "esc_curve":
+        e = af.esc
+        gain = rng.uniform(0.96, 0.98) if rng.random() < 0.5 else rng.uniform(1.02, 1.04)
+        af = af.with_(
+            esc=EscCurve(e.a_rpm_per_cmd2 * gain, e.b_rpm_per_cmd * gain, e.c_rpm * gain, e.cmd_min, e.cmd_max, e.cmd_unit)
+        )
+    elif name != "route":
+        raise ValueError(f"unknown nuisance {name!r}")
+    return af, wind, sensors
+
+
+def _healthy(v, seed, i, duration_s) -> FlightSpec:
+    rng = _rng("healthy", seed, i)
+    name = NUISANCES[i % len(NUISANCES)]
+    af, wind, sensors = _with_nuisance(_base(v, rng), v, rng, name, duration_s)
+    kw = {"sensors": sensors} if sensors is not None else {}
+    return _spec("healthy", seed, i, af, rng, duration_s, wind=wind, nuisance=name, **kw)
+
+
+def _onset(v, seed, i, duration_s) -> FlightSpec:
+    rng = _rng("onset", seed, i)
+    faulty = ONSET_PATTERNS[i % len(ONSET_PATTERNS)]
+    dmg = _damage(rng, faulty, "bent" if rng.random() < 0.5 else "cracked", float(rng.uniform(0.3, 0.6) * duration_s))
+    loss = tuple(float(rng.uniform(0.05, 0.20)) if p + 1 in faulty else 0.0 for p in range(4))
+    af = _base(v, rng).with_(damage=replace(dmg, thrust_loss_at_hover=loss))
+    return _spec("onset", seed, i, af, rng, duration_s, nuisance="onset")
+
+
+def _hidden(v, seed, i, duration_s) -> FlightSpec:
+    """Airframe a = i // 6 has one hidden effect; its flights: 2 healthy, then propellers 1..4 faulty."""
+    a, k = divmod(i, 6)
+    effect = HIDDEN_EFFECTS[a % len(HIDDEN_EFFECTS)]
+    arng = _rng("hidden", seed, 100_000 + a)  # the airframe: shared by its flights
+    af, _, _ = _with_nuisance(_base(v, arng), v, arng, effect, duration_s)
+    rng = _rng("hidden", seed, i)
+    if k >= 2:
+        af = af.with_(damage=_damage(rng, (k - 1,), "bent" if rng.random() < 0.5 else "cracked"))
+    return _spec("hidden", seed, i, af, rng, duration_s, nuisance=effect, airframe_id=f"hidden-{a:03d}-{effect}")
+
+
+def _effectiveness(v, seed, i, duration_s) -> FlightSpec:
+    rng = _rng("effectiveness", seed, i)
+    rotor = i % 4 + 1
+    loss_v = EFFECTIVENESS_LOSSES[(i // 4) % 3]
+    dq = 0.0 if (i // 12) % 2 == 0 else -0.05
+    loss = tuple(loss_v if p + 1 == rotor else 0.0 for p in range(4))
+    dmg = Damage(
+        thrust_loss_at_hover=loss,
+        torque_per_thrust_change=tuple(dq if p + 1 == rotor else 0.0 for p in range(4)),
+        vibration_1p_m_s2=tuple(0.5 if p + 1 == rotor else 0.0 for p in range(4)),
+    )
+    af = _base(v, rng, spread=0.0).with_(damage=dmg)
+    return _spec("effectiveness", seed, i, af, rng, duration_s, nuisance=f"loss {loss_v:.2f}, torque/thrust {dq:+.2f}")
+
+
+_BUILDERS: dict[str, tuple[Callable, int]] = {
+    # name -> (builder, default flight count: one cycle)
+    "paper": (_paper, 16),
+    "shift": (_shift, 16),
+    "healthy": (_healthy, len(NUISANCES)),
+    "onset": (_onset, len(ONSET_PATTERNS)),
+    "hidden": (_hidden, 6 * len(HIDDEN_EFFECTS)),
+    "effectiveness": (_effectiveness, 12),
+}
+
+
+def build_set(
+    name: str, flights: int | None = None, seed: int = 0, duration_s: float = DEFAULT_DURATION_S, vehicle_path=DEFAULT_VEHICLE
+) -> list[FlightSpec]:
+    """The flight specs of set ``name`` (``flights`` defaults to one cycle of its labels / effects)."""
+    if name not in _BUILDERS:
+        raise ValueError(f"unknown evalsim set {name!r}; choose from {', '.join(SET_NAMES)}")
+    if duration_s < 5.0:
+        raise ValueError(f"duration_s: at least 5 s, got {duration_s}")
+    builder, default_n = _BUILDERS[name]
+    n = default_n if flights is None else int(flights)
+    if n < 1:
+        raise ValueError(f"flights: at least 1, got {flights}")
+    v = load_vehicle(vehicle_path)
+    return [builder(v, seed, i, float(duration_s)) for i in range(n)]
+
+
+def write_set(
+    name: str,
+    out_dir: str | Path,
+    flights: int | None = None,
+    seed: int = 0,
+    duration_s: float = DEFAULT_DURATION_S,
+    progress: Callable[[int], None] | None = None,
+) -> Path:
+    """Simulate set ``name`` into ``out_dir``: one .tlog + one truth .json per flight + manifest.json.
+
+    Files are written to temporary names and renamed, the manifest last, so a
+    folder with a manifest is complete.
+    """
+    from offline.evalsim.assumptions import ASSUMPTIONS
+
+    specs = build_set(name, flights, seed, duration_s)
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    entries = []
+    for b in range(0, len(specs), BATCH):
+        chunk = specs[b : b + BATCH]
+        logs = simulate_flights(chunk)
+        for spec, log in zip(chunk, logs, strict=True):
+            tlog = f"{spec.name}.tlog"
+            write_tlog(out / tlog, log, 0)
+            t = truth(spec, file=tlog)
+            _write_json(out / f"{spec.name}.json", t)
+            entries.append(
+                {
+                    "file": tlog,
+                    "truth": f"{spec.name}.json",
+                    "label": t["label"],
+                    "faulty_propellers": t["faulty_propellers"],
+                    "nuisance": spec.nuisance,
+                    "airframe_id": spec.airframe_id,
+                    "seed": spec.seed,
+                }
+            )
+        if progress is not None:
+            progress(len(chunk))
+    manifest = make_manifest(
+        "propwatch-evalsim-set",
+        {"set": name, "flights": len(specs), "duration_s": duration_s, "vehicle_path": str(DEFAULT_VEHICLE)},
+        seed,
+        flights=entries,
+        assumptions=ASSUMPTIONS,
+        evaluation_only=True,
+    )
+    write_manifest(out / "manifest.json", manifest)
+    return out
+
+
+def _write_json(path: Path, obj: dict) -> None:
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(json.dumps(obj, indent=1, sort_keys=True) + "\n", encoding="utf-8")
+    os.replace(tmp, path)
+
+
+def load_truth(path: str | Path) -> dict:
+    return json.loads(Path(path).read_text(encoding="utf-8"))
+
+
+__all__ = ["SET_NAMES", "Telemetry", "build_set", "flight_seed", "load_truth", "write_set"]
