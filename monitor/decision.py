@@ -334,18 +334,28 @@ class RegimeTracker:
         return self.step < self.hold_until_step
 
 
+# Projection that removes the collective (1,1,1,1)/2 and yaw (1,1,-1,-1)/2 directions (PX4 order: 1, 2 CCW; 3, 4 CW).
+_C, _Y = np.full(4, 0.5), np.array([0.5, 0.5, -0.5, -0.5])
+_YAW_FREE = np.eye(4) - np.outer(_C, _C) - np.outer(_Y, _Y)
+
+
 # -- physics: each rotor's share of omega^2 ---------------------------------------------------------
 class RotorShare:
     """Window-mean share of omega^2 per rotor against the flight's own baseline: thrust-loss evidence.
 
     A rotor that lost a fraction f of its thrust must spin faster for the
-    controller to hold attitude: its omega^2 rises by ~f, its share of the
-    four (omega_i^2 / mean omega^2) by ~3f/4. The share needs no fault model
-    and no training; against the airframe's own first ``BASELINE_S`` it is
-    blind to CG offsets and motor spread (issue 12's baseline names 24 of
-    24 that way). Per window: the Gaussian mean-shift log-likelihood ratio
-    ``delta (x - b - delta/2) / sigma^2`` with ``delta = 3 f_min / 4`` and
-    sigma the share's own window-to-window spread in the baseline (floored).
+    controller to hold roll and pitch: its omega^2 rises by ~f. The yaw
+    balance moves the shares too, along (+1, +1, -1, -1) (CCW against CW
+    rotors), by an amount that depends on how the damaged blade's torque per
+    thrust changed, which nobody has measured (issue 12): that direction and
+    the collective one are projected out (``_YAW_FREE``). What is left of a
+    thrust loss on rotor i is +f/2 on i and -f/2 on its same-spin diagonal
+    partner, whatever the torque change. The share needs no fault model and
+    no training; against the airframe's own first ``BASELINE_S`` it is blind
+    to CG offsets and motor spread (issue 12's baseline names 24 of 24 that
+    way). Per window: the Gaussian mean-shift log-likelihood ratio
+    ``delta (x - b - delta/2) / sigma^2`` with ``delta = f_min / 2`` and
+    sigma the residual's own window-to-window spread in the baseline (floored).
     """
 
     SIGMA_FLOOR = 0.004
@@ -353,7 +363,7 @@ class RotorShare:
     def __init__(self, window: int, rate_hz: float, min_thrust_loss: float):
         self.window = window
         self.rate_hz = rate_hz
-        self.delta = 0.75 * min_thrust_loss
+        self.delta = 0.5 * min_thrust_loss
         self._ring = np.full((window, N_PROPS), np.nan)
         self._i = 0
         self._n = 0
@@ -382,7 +392,7 @@ class RotorShare:
         """Per-rotor evidence of the current window, or None (no full window, or baseline still being learnt)."""
         if self._n < self.window:
             return None
-        x = self._ring.mean(axis=0)
+        x = _YAW_FREE @ self._ring.mean(axis=0)
         if self.baseline is None:
             self._base.append(x)
             if (self._n - self.window) / self.rate_hz >= BASELINE_S and len(self._base) >= 3:

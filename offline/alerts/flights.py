@@ -11,6 +11,7 @@ outputs, the per-step flight state for the regime tracker, the accelerometer
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -133,3 +134,69 @@ def _classify(flog, clf: Classifier, cond: np.ndarray, onset: np.ndarray, prefix
             )
         )
     return flights
+
+
+# -- the evaluation-only simulator (offline/evalsim): never used to calibrate, only to score ---------------
+def evalsim_set(kind: str, n_flights: int, seed: int, clf: Classifier, duration_s: float = 80.0, log=print) -> list[AlertFlight]:
+    """``kind``: evalsim's ``healthy`` (one nuisance each: gusts, CG, weak motor, sag, payload pick-up, ...) or
+    ``onset`` (5-20 % thrust loss on singles and pairs). Each flight goes through its .tlog and the log reader,
+    as diagnose and the daemon would see it (telemetry jitter and drops included)."""
+    import tempfile
+    from pathlib import Path
+
+    from monitor.logs import read_log
+    from monitor.model import choose_esc
+    from offline.evalsim.flight import simulate_flights as evalsim_flights
+    from offline.evalsim.flight import truth
+    from offline.evalsim.sets import build_set
+    from offline.sim.io_tlog import write_tlog
+    from offline.sim.log import BOOT_OFFSET_US
+
+    specs = build_set(kind, flights=n_flights, seed=seed, duration_s=duration_s)
+    esc = choose_esc(clf, "")
+    out = []
+    with tempfile.TemporaryDirectory(prefix="propwatch-alerts-") as tmp:
+        for c0 in range(0, len(specs), 8):
+            chunk = specs[c0 : c0 + 8]
+            for spec, flog in zip(chunk, evalsim_flights(chunk)):
+                path = write_tlog(Path(tmp) / f"{spec.name}.tlog", flog, 0)
+                table = read_log(path, esc=esc, rate_hz=clf.info.sample_rate_hz, extras=True)
+                tr = truth(spec)
+                onset = tr["fault_onset_s"] if tr["faulty_propellers"] else math.inf
+                out.append(_from_table(table, clf, tuple(tr["faulty_propellers"]), onset, BOOT_OFFSET_US, f"evalsim-{spec.name}"))
+            log(f"alerts: evalsim {kind} seed {seed}: {len(out)}/{len(specs)} flights")
+    return out
+
+
+def _from_table(table, clf: Classifier, truth_props, onset_log_s: float, boot_offset_us: int, name: str) -> AlertFlight:
+    from monitor.features import compute_features, valid_windows
+
+    info = clf.info
+    w = info.window
+    feats = compute_features(table.signals(), info.features).astype(np.float32)
+    idx = np.arange(len(feats) - w + 1)[:, None] + np.arange(w)[None, :]
+    probs = np.full((len(idx), 4), np.nan)
+    ok = valid_windows(feats[idx]) & np.array([table.airborne[i].all() for i in idx])
+    good = np.flatnonzero(ok)
+    for i in range(0, len(good), 2048):
+        probs[good[i : i + 2048]] = clf.predict(feats[idx[good[i : i + 2048]]])[1]
+    ts = np.asarray(table.timestamp_us, dtype=np.int64)
+    rate = float(table.rate_hz)
+    # Step j is at (j + 1) / rate s of this flight; the onset is on the log's clock (boot offset + onset).
+    onset_s = (boot_offset_us + onset_log_s * 1e6 - ts[0]) / 1e6 + 1.0 / rate if math.isfinite(onset_log_s) else math.inf
+    rates = np.abs(np.stack([table.roll_rate_rad_s, table.pitch_rate_rad_s, table.yaw_rate_rad_s], axis=1))
+    acc = table.accel_frd_m_s2 if table.accel_frd_m_s2 is not None else np.full((len(ts), 3), np.nan)
+    return AlertFlight(
+        name,
+        rate,
+        w,
+        probs,
+        np.asarray(table.motor_rpm, dtype=np.float64),
+        np.asarray(table.motor_rpm, dtype=np.float64).mean(axis=1),
+        np.maximum(np.abs(table.roll_rad), np.abs(table.pitch_rad)),
+        np.nanmax(np.where(np.isfinite(rates), rates, -np.inf), axis=1),
+        np.asarray(table.battery_v, dtype=np.float64),
+        np.asarray(acc, dtype=np.float64),
+        truth_props,
+        float(onset_s),
+    )
