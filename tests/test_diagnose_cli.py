@@ -67,7 +67,7 @@ def test_every_named_feature_is_fed_from_the_log(capsys, logs, tmp_path):
 
 def test_text_output_and_hop(capsys, model, logs):
     code, out = run(capsys, logs[2], "--model", model)
-    assert code == 0 and "label 3" in out and "FAULTY" in out and "airborne" in out
+    assert code == 0 and "label 3" in out and "<- FAULTY" in out and "airborne" in out
     _, every = run(capsys, logs[2], "--model", model, "--json", "--hop", "1")
     _, sparse = run(capsys, logs[2], "--model", model, "--json", "--hop", "7")
     t_every, t_sparse = every["timeline"]["t_boot_s"], sparse["timeline"]["t_boot_s"]
@@ -169,3 +169,21 @@ def test_reports_of_same_named_logs_do_not_overwrite(capsys, model, tmp_path):
     pages = sorted(p.name for p in out.glob("*.html"))
     assert pages == ["E8_log00.tlog-2.html", "E8_log00.tlog.html"]
     assert str(a) in (out / "E8_log00.tlog.html").read_text() and str(b) in (out / "E8_log00.tlog-2.html").read_text()
+
+
+def test_a_verdict_below_the_stated_probability_is_not_faulty_and_exits_3(capsys, model, logs, monkeypatch):
+    import monitor.diagnose.engine as engine
+    from monitor.decision import DecisionConfig
+
+    code, res = run(capsys, logs[2], "--model", model, "--json")
+    assert code == 0 and res["verdict"]["confidence"] == "confident"
+    sure = res["verdict"]["label_probability_of_verdict"]
+    # The same log, with FAULTY required above what this verdict reaches: no confident verdict.
+    monkeypatch.setattr(engine, "DecisionConfig", lambda: DecisionConfig(faulty_probability=min(0.99999, sure + 1e-4)))
+    code, res = run(capsys, logs[2], "--model", model, "--json")
+    v = res["verdict"]
+    assert code == 3 and v["confidence"] in ("suspect", "uncertain") and v["faulty_propellers"] == [2]
+    assert v["label_probability_of_verdict"] == sure and 0.0 <= v["agreeing_windows"] <= 1.0
+    assert not any(p["faulty"] for p in res["propellers"])
+    code, out = run(capsys, logs[2], "--model", model)
+    assert code == 3 and "<- FAULTY" not in out and f"{v['confidence']} (label probability" in out

@@ -32,6 +32,7 @@ READ_TIMEOUT_S = 0.1  # select() returns at once when data comes; this only pace
 BAD_DATA_LOG_PERIOD_S = 5.0
 MOTOR_STREAM = {"servo": "SERVO_OUTPUT_RAW", "actuator": "ACTUATOR_OUTPUT_STATUS", "esc": "ESC_STATUS"}
 LANDED_RATE_HZ = 2.0  # EXTENDED_SYS_STATE: a state, not a signal
+VIBRATION_RATE_HZ = 10.0  # imbalance evidence beside the classifier (PX4's default stream rate is lower)
 EVIDENCE_FRESH_S = 2.0  # a VIBRATION / ESC_STATUS stream silent for longer is not live evidence
 
 
@@ -315,6 +316,9 @@ class Daemon:
             self.counters.stream_requests += 1
         if self.cfg.input.landed_state != "ignore" and "ATTITUDE" in names:
             self.link.request_message_interval(sysid, comp, md.STREAM_IDS["EXTENDED_SYS_STATE"], LANDED_RATE_HZ)
+            self.counters.stream_requests += 1
+        if self.sequential and "ATTITUDE" in names:
+            self.link.request_message_interval(sysid, comp, md.STREAM_IDS["VIBRATION"], VIBRATION_RATE_HZ)
             self.counters.stream_requests += 1
         log.info("requested %s at %.0f Hz (MAV_CMD_SET_MESSAGE_INTERVAL)", ", ".join(names), self.cfg.link.stream_rate_hz)
 

@@ -119,7 +119,7 @@ def format_text(d: Diagnosis) -> str:
             )
             + f"), from {d.windows} windows: {conf} (label probability "
             + f"{d.verdict.get('label_probability_of_verdict', float('nan')):.2f}, "
-            + f"{100 * d.verdict.get('agreeing_windows', float('nan')):.0f} % of windows agree; FAULTY needs >= "
+            + f"{100 * d.verdict.get('agreeing_windows', float('nan')):.0f} % of windows agree; marked FAULTY from "
             + f"{d.verdict.get('faulty_probability_required', float('nan')):.2f})"
         )
         for p in d.propellers:
