@@ -215,6 +215,8 @@ class Daemon:
             self.decision.resume()
         if step.valid:
             self._set_status(f"airborne: deciding; evidence live: {', '.join(live)}")
+        elif not step.airborne and not self._paused:
+            self._set_status(f"not deciding: {step.reason}")
         if not step.valid or step.fault_probability is None:
             return
         if step.latency_s is not None:
