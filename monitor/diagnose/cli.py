@@ -48,7 +48,7 @@ from monitor.errors import PropwatchError
 from monitor.esc import EscCurve
 from monitor.logs import read_log
 from monitor.model import Classifier, choose_esc
-from monitor.vehicle import REPO_ROOT
+from monitor.vehicle import DEFAULT_VEHICLE, REPO_ROOT, load_vehicle
 
 DEFAULT_MODEL = REPO_ROOT / "models" / "classifier.onnx"
 
@@ -98,9 +98,9 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     return p.parse_args(argv)
 
 
-def diagnose_file(path: str, clf: Classifier, esc: EscCurve, fmt: str | None, hop: int):
+def diagnose_file(path: str, clf: Classifier, esc: EscCurve, fmt: str | None, hop: int, vehicle=None):
     table = read_log(path, fmt=fmt, esc=esc, rate_hz=clf.info.sample_rate_hz, extras=False)
-    return table, diagnose_table(table, clf, hop=hop, esc=esc)
+    return table, diagnose_table(table, clf, hop=hop, esc=esc, vehicle=vehicle)
 
 
 def format_text(d: Diagnosis) -> str:
@@ -132,6 +132,18 @@ def format_text(d: Diagnosis) -> str:
         lines.append(
             "  in-flight rule: " + ("; ".join(f"{a['text']} at {a['t_boot_s']:.1f} s" for a in alerts) if alerts else "no alert")
         )
+    if d.physics is not None:
+        names = [p["name"] for p in d.propellers]
+        eff = ", ".join(
+            f"{n} {m:.2f}±{s:.2f}" for n, m, s in zip(names, d.physics.rotor_effectiveness, d.physics.rotor_effectiveness_std)
+        )
+        lines.append(f"  rotor effectiveness (fraction of nominal thrust, moment balance over {d.physics.windows} x 5 s): {eff}")
+        sets = " or ".join(
+            ("{" + ",".join(names[i - 1] for i in h["faulty_propellers"]) + "}" if h["faulty_propellers"] else "healthy")
+            + f" p={h['probability']:.2f}"
+            for h in d.physics.hypotheses
+        )
+        lines.append(("  physics cannot tell apart: " if d.physics.ambiguous else "  physics: ") + sets)
     for s in d.segments:
         lines.append(f"  airborne {s['start_boot_s']:.1f}-{s['stop_boot_s']:.1f} s boot time ({s['steps']} steps)")
     lines += [f"  warning: {w}" for w in d.warnings]
@@ -155,10 +167,11 @@ def main(argv: list[str] | None = None) -> int:
     clf = Classifier(args.model or default_model(args.vehicle))
     # The daemon's rule, so both convert commands identically: --vehicle, else the model's own ESC curve.
     esc = choose_esc(clf, args.vehicle or "")
+    vehicle = load_vehicle(args.vehicle or DEFAULT_VEHICLE)  # geometry for the moment-balance evidence
     results, code = [], 0
     for path in args.logs:
         try:
-            table, d = diagnose_file(path, clf, esc, args.fmt, args.hop)
+            table, d = diagnose_file(path, clf, esc, args.fmt, args.hop, vehicle)
         except PropwatchError as exc:
             results.append({"log": path, "error": str(exc)})
             print(f"propwatch diagnose: error: {exc}", file=sys.stderr)

@@ -30,6 +30,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from monitor.decision import Decision, DecisionConfig, StepInputs, WindowEvidence, file_sha256
+from monitor.diagnose.physics import PhysicsEvidence, physics_evidence
 from monitor.errors import ModelError
 from monitor.esc import EscCurve
 from monitor.features import compute_features, signals_needed, sliding_windows, valid_windows
@@ -65,6 +66,7 @@ class Diagnosis:
     hop_steps: int = 1
     envelope: dict = field(default_factory=dict)  # the figures behind the envelope checks
     decision: dict | None = None  # the shared in-flight rule replayed: {"alerts": [...], "final": {...}}
+    physics: PhysicsEvidence | None = None  # rotor effectiveness and the sets the moment balance allows
 
     def to_json(self) -> dict:
         """The ``--json`` object. Propeller numbers are the vehicle's own (``FlightTable.motor_names``,
@@ -82,6 +84,9 @@ class Diagnosis:
             "hop_steps": self.hop_steps,
             "envelope": self.envelope,
             "decision": self.decision,
+            "hypotheses": self.physics.hypotheses if self.physics else None,
+            "rotor_effectiveness": self.physics.rotor_effectiveness if self.physics else None,
+            "rotor_effectiveness_std": self.physics.rotor_effectiveness_std if self.physics else None,
         }
         own = vehicle_numbers([p["name"] for p in self.propellers]) if self.propellers else None
         return renumber(out, own) if own else out
@@ -117,6 +122,13 @@ def renumber(out: dict, own: list[int]) -> dict:
             "faulty_propellers": sorted(own[i - 1] for i in v["faulty_propellers"]),
             "fault_probability": reorder(v["fault_probability"]),
         }
+    if out.get("hypotheses"):
+        out["hypotheses"] = [
+            {**h, "faulty_propellers": sorted(own[i - 1] for i in h["faulty_propellers"])} for h in out["hypotheses"]
+        ]
+    for key in ("rotor_effectiveness", "rotor_effectiveness_std"):
+        if out.get(key) is not None:
+            out[key] = reorder(out[key])
     out["propellers"] = sorted(
         ({**p, "propeller": own[p["propeller"] - 1], "px4_rotor": p["propeller"]} for p in out["propellers"]),
         key=lambda p: p["propeller"],
@@ -230,11 +242,17 @@ def rpm_envelope(table: FlightTable, clf: Classifier, figures: dict) -> tuple[st
 
 
 def diagnose_table(
-    table: FlightTable, clf: Classifier, hop: int = 1, batch: int = 4096, esc: EscCurve | None = None
+    table: FlightTable,
+    clf: Classifier,
+    hop: int = 1,
+    batch: int = 4096,
+    esc: EscCurve | None = None,
+    vehicle=None,
 ) -> Diagnosis:
     """Classify every usable window of ``table`` (one every ``hop`` steps) and aggregate.
 
     ``esc``: the curve the table's RPM came from, to refuse a log of another vehicle class.
+    ``vehicle``: its geometry, inertia and kF/kτ give the moment-balance evidence (``physics``).
     """
     if hop < 1:
         raise ValueError("hop must be >= 1")
@@ -272,6 +290,10 @@ def diagnose_table(
     d.windows = len(ends)
     cfg = DecisionConfig()
     confidence, agree = verdict_confidence(labels, label, cfg)
+    if vehicle is not None:
+        d.physics, why_not = physics_evidence(table, vehicle, window=info.window)
+        if why_not:
+            d.warnings.append(why_not)
     d.verdict = {
         "label": label,
         "faulty_propellers": list(LABEL_TABLE[label]),

@@ -1,0 +1,119 @@
+"""Localisation on our own simulator's paper sets: physics (moment balance) beside the CNN and the ω²-share baseline.
+
+For each of the paper's sets A, B, C (Table 4.2) and each fault kind, one 80 s flight per label is
+simulated (offline.dataset, LSTM propellers as the shipped classifier was trained on) and every flight
+gets three verdicts:
+- ``physics``: the most probable propeller set of the moment-balance hypothesis bank
+  (monitor.effectiveness, nominal priors, no airframe baseline), its 95 % credible set and size;
+- ``cnn``: the shipped classifier, the label with the highest mean probability over its windows;
+- ``share``: the ω²-share baseline (the rotor with the largest flight-mean share of ω²; always one rotor).
+Run: ``python bench/bench_localise.py [--flights-per-label 1] [--duration-s 80] [--json out.json]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+
+import numpy as np
+
+from monitor.effectiveness import HYPOTHESES, Evidence, HypothesisBank, Priors, RotorGeometry, credible_set, window_balance
+from monitor.features import compute_features, sliding_windows
+from monitor.labels import LABEL_TABLE
+from monitor.model import Classifier
+from monitor.vehicle import DEFAULT_VEHICLE, REPO_ROOT, load_vehicle
+from offline.dataset.generate import PRESETS, DatasetSpec, generate
+
+WARMUP_STEPS = 100  # first 5 s: the simulator starts from a hover without the controller's integrators settled
+
+
+def physics_verdicts(ds, bank: HypothesisBank, geometry: RotorGeometry, priors: Priors):
+    sig = ds.signals
+    rates = np.stack([sig["roll_rate_rad_s"], sig["pitch_rate_rad_s"], sig["yaw_rate_rad_s"]], axis=-1)
+    out = []
+    for f in range(ds.n_flights):
+        t = sig["motor_rpm"].shape[1]
+        starts = np.arange(WARMUP_STEPS, t - 99, 100)
+        idx = starts[:, None] + np.arange(100)[None, :]
+        ev = Evidence()
+        ev.add(*window_balance(sig["motor_rpm"][f][idx], rates[f][idx], geometry, ds.sample_rate_hz), priors)
+        v = bank.posterior(ev)
+        out.append((HYPOTHESES[v.best], [HYPOTHESES[k] for k in credible_set(v, 0.95)], v.fault_probability()))
+    return out
+
+
+def share_verdicts(ds):
+    u = np.square(ds.signals["motor_rpm"][:, WARMUP_STEPS:, :].astype(np.float64))
+    share = u.mean(axis=1) / u.mean(axis=(1, 2))[:, None]
+    return [(int(np.argmax(s)) + 1,) for s in share]
+
+
+def cnn_verdicts(ds, clf: Classifier, hop: int = 10):
+    feats = compute_features(ds.signals, clf.info.features)
+    out = []
+    for f in range(ds.n_flights):
+        w = sliding_windows(feats[f, WARMUP_STEPS:], clf.info.window, hop)
+        labels, _ = clf.predict(np.ascontiguousarray(w))
+        out.append(tuple(LABEL_TABLE[int(np.argmax(labels.mean(axis=0))) + 1]))
+    return out
+
+
+def score(truth, pred):
+    truth = [tuple(t) for t in truth]
+    single = [i for i, t in enumerate(truth) if len(t) == 1]
+    acc = np.mean([p == t for p, t in zip(pred, truth)])
+    acc1 = np.mean([pred[i] == truth[i] for i in single]) if single else float("nan")
+    return float(acc), float(acc1)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--flights-per-label", type=int, default=1, help="flights per label and set (default 1)")
+    ap.add_argument("--duration-s", type=float, default=80.0, help="flight length (paper: 80 s)")
+    ap.add_argument("--json", help="write the table as JSON here")
+    ap.add_argument("--seed", type=int, default=101, help="data set seed (not the training seeds)")
+    args = ap.parse_args(argv)
+    vehicle = load_vehicle(DEFAULT_VEHICLE)
+    geometry, priors = RotorGeometry.from_vehicle(vehicle), Priors()
+    bank = HypothesisBank(priors, geometry)
+    clf = Classifier(REPO_ROOT / "models" / "classifier.onnx")
+    rows = []
+    for name in ("A", "B", "C"):
+        for fault in ("bent", "cracked"):
+            t0 = time.perf_counter()
+            spec = DatasetSpec(
+                name=f"{name}-{fault}",
+                fault=fault,
+                flights_per_label=args.flights_per_label,
+                duration_s=args.duration_s,
+                seed=args.seed,
+                **PRESETS[name],
+            )
+            ds = generate(spec, vehicle, log=lambda *_: None)
+            truth = [tuple(i + 1 for i in range(4) if c[i]) for c in ds.conditions]
+            phys = physics_verdicts(ds, bank, geometry, priors)
+            row = {"set": spec.name, "flights": ds.n_flights}
+            for key, pred in (("physics", [p[0] for p in phys]), ("cnn", cnn_verdicts(ds, clf)), ("share", share_verdicts(ds))):
+                row[key] = score(truth, pred)
+            row["physics_set_coverage"] = float(np.mean([t in p[1] for t, p in zip(truth, phys)]))
+            row["physics_set_size"] = float(np.mean([len(p[1]) for p in phys]))
+            healthy = [p[2] for t, p in zip(truth, phys) if not t]
+            row["physics_healthy_p_faulty_max"] = float(np.max(np.mean(healthy, axis=0))) if healthy else float("nan")
+            row["seconds"] = round(time.perf_counter() - t0, 1)
+            rows.append(row)
+            print(
+                f"{spec.name:10s} n={row['flights']:3d}  exact all/single  physics {100 * row['physics'][0]:5.1f}/{100 * row['physics'][1]:5.1f}"
+                f"  cnn {100 * row['cnn'][0]:5.1f}/{100 * row['cnn'][1]:5.1f}  share -/{100 * row['share'][1]:5.1f}"
+                f"  | physics set cover {100 * row['physics_set_coverage']:5.1f} % size {row['physics_set_size']:.2f}"
+                f"  healthy max mean P(faulty) {row['physics_healthy_p_faulty_max']:.2f}  ({row['seconds']} s)",
+                flush=True,
+            )
+    if args.json:
+        with open(args.json, "w") as f:
+            json.dump(rows, f, indent=1)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

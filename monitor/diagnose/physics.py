@@ -1,0 +1,129 @@
+"""The physics evidence of one flight: rotor effectiveness and the sets of propellers it allows.
+
+Non-overlapping 5 s windows lying wholly in the air with every signal measured give their
+moment balances (``monitor.effectiveness``); the balances add up over the flight and the 16
+propeller sets are weighed against them. What comes out is what a flight-test engineer can
+check by hand: "rotor 3 delivers 0.90 ± 0.02 of nominal thrust", and, where the balance
+cannot tell sets apart (a same-spin diagonal pair against a healthy vehicle, all four against
+payload), a credible set with more than one member instead of a guess.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from monitor.effectiveness import (
+    HYPOTHESES,
+    Baseline,
+    Evidence,
+    HypothesisBank,
+    Priors,
+    RotorGeometry,
+    credible_set,
+    window_balance,
+)
+from monitor.flight import FlightTable
+
+CREDIBLE_MASS = 0.95
+# A rotor outside this range of nominal thrust is not a damaged propeller but a balance that does not
+# close for this vehicle (another airframe, wrong ESC curve or inertia): the evidence is withheld.
+PLAUSIBLE_EFFECTIVENESS = (0.5, 1.15)
+
+
+@dataclass(frozen=True)
+class PhysicsEvidence:
+    hypotheses: list[dict]  # credible set, most probable first: {"faulty_propellers": [...], "probability": p}
+    rotor_effectiveness: list[float]  # η per rotor under the most probable set, PX4 order
+    rotor_effectiveness_std: list[float]
+    windows: int
+    fault_probability: list[float]  # P(rotor i in the faulty set), PX4 order
+
+    @property
+    def ambiguous(self) -> bool:
+        return len(self.hypotheses) > 1
+
+
+def usable_window_starts(table: FlightTable, window: int) -> np.ndarray:
+    """Starts of non-overlapping windows wholly airborne with rates and RPM measured."""
+    sig = table.signals()
+    ok = table.airborne.copy()
+    ok &= np.isfinite(sig["motor_rpm"]).all(axis=1)
+    for k in ("roll_rate_rad_s", "pitch_rate_rad_s", "yaw_rate_rad_s"):
+        ok &= np.isfinite(sig[k])
+    starts = []
+    a, n = 0, len(ok)
+    while a + window <= n:
+        if ok[a : a + window].all():
+            starts.append(a)
+            a += window
+        else:
+            a += int(np.argmin(ok[a : a + window])) + 1  # restart after the first unusable step
+    return np.asarray(starts, dtype=np.int64)
+
+
+def table_evidence(table: FlightTable, geometry: RotorGeometry, priors: Priors, window: int) -> Evidence:
+    ev = Evidence()
+    starts = usable_window_starts(table, window)
+    if len(starts) == 0:
+        return ev
+    sig = table.signals()
+    rates = np.stack([sig["roll_rate_rad_s"], sig["pitch_rate_rad_s"], sig["yaw_rate_rad_s"]], axis=-1)
+    idx = starts[:, None] + np.arange(window)[None, :]
+    z, h, std = window_balance(sig["motor_rpm"][idx], rates[idx], geometry, table.rate_hz)
+    ev.add(z, h, std, priors)
+    return ev
+
+
+def physics_evidence(
+    table: FlightTable,
+    vehicle,
+    priors: Priors | None = None,
+    baseline: Baseline | None = None,
+    window: int = 100,
+) -> tuple[PhysicsEvidence | None, str | None]:
+    """(evidence, None), or (None, why not) when there is no usable window or the balance does not close."""
+    priors = priors or Priors()
+    geometry = RotorGeometry.from_vehicle(vehicle)
+    ev = table_evidence(table, geometry, priors, window)
+    if ev.windows == 0:
+        return None, f"no rotor-effectiveness evidence: no {window}-step airborne window with rates and RPM measured"
+    v = HypothesisBank(priors, geometry, baseline).posterior(ev)
+    best = v.best
+    eta = v.thrust_fraction[best]
+    lo, hi = PLAUSIBLE_EFFECTIVENESS
+    if not np.all((eta >= lo) & (eta <= hi)):
+        return None, (
+            f"rotor-effectiveness evidence withheld: the moment balance of vehicle '{getattr(vehicle, 'name', '?')}' "
+            f"does not close on this log (effectiveness {np.round(eta, 2).tolist()} outside {lo}-{hi}); "
+            "another airframe or a wrong ESC curve: calibrate it with `propwatch adapt`"
+        )
+    hyps = [
+        {"faulty_propellers": list(HYPOTHESES[k]), "probability": round(float(v.probability[k]), 4)}
+        for k in credible_set(v, CREDIBLE_MASS)
+    ]
+    return PhysicsEvidence(
+        hypotheses=hyps,
+        rotor_effectiveness=[round(float(x), 4) for x in v.thrust_fraction[best]],
+        rotor_effectiveness_std=[round(float(x), 4) for x in v.thrust_fraction_std[best]],
+        windows=int(ev.windows),
+        fault_probability=[round(float(x), 4) for x in v.fault_probability()],
+    ), None
+
+
+def predict_table(table: FlightTable, vehicle, priors: Priors | None = None, baseline: Baseline | None = None) -> dict:
+    """A scoring predictor: the most probable set, the credible set and P(faulty) per rotor (PX4 order).
+
+    A flight without usable evidence gets ``faulty_propellers: None`` and the reason.
+    """
+    ev, why_not = physics_evidence(table, vehicle, priors, baseline)
+    if ev is None:
+        return {"faulty_propellers": None, "hypotheses": [], "fault_probability": None, "reason": why_not}
+    return {
+        "faulty_propellers": ev.hypotheses[0]["faulty_propellers"],
+        "hypotheses": ev.hypotheses,
+        "fault_probability": ev.fault_probability,
+        "rotor_effectiveness": ev.rotor_effectiveness,
+        "rotor_effectiveness_std": ev.rotor_effectiveness_std,
+    }

@@ -1,0 +1,411 @@
+"""Rotor effectiveness from moment balance: evidence a flight-test engineer can check by hand.
+
+Physics (PX4 FRD body, quad-X order; ``VehicleConfig`` gives rotor positions, spin signs, inertia,
+kF and kτ). Euler's equation averaged over a window of W samples at ``rate_hz``::
+
+    I (ω[W-1] - ω[0]) / ((W-1)·dt) + mean(ω × Iω) = Σ_i r_i × F_i  + disturbance
+
+Rotor i's thrust is ``η_i · kF · u_i`` and its drag torque ``κ_i · kτ · u_i`` with ``u_i`` the
+commanded ω² (the paper's target RPM, squared, in rad²/s²); ``η_i`` and ``κ_i`` are its thrust
+and torque effectiveness, 1 for a nominal rotor. Normalising roll/pitch by ``kF·L·ū`` and yaw by
+``kτ·ū`` (``L`` the mean horizontal arm, ``ū`` the mean command over the four rotors) gives three
+dimensionless equations per window. What the nominal model says is missing is
+
+    z = H·1 - b = H·Δ + d + noise,   Δ = (1-η_1..4, 1-κ_1..4)
+
+``H`` (3 x 8) holds each rotor's lever (roll ``-y_i/L``, pitch ``x_i/L``) or spin sign (yaw)
+times its share of the command ``ū_i/ū``; ``b`` is the moment the measured rates required; ``d``
+is the disturbance (CG offset, yaw trim) in the same units. A 1 cm CG offset on a 0.16 m-arm
+quad-X is worth about a 35 % loss of one rotor in roll/pitch (``4·offset/L``): the airframe's
+healthy baseline (``propwatch adapt``) pins ``d``; without one its prior is wide.
+
+Only the steady balance is used. The transient response (angular acceleration per command
+change) would pin the overall scale too, but from 20 Hz snapshots of a 200 Hz command it is
+attenuated by errors-in-variables (measured: a healthy rotor reads 0.6-0.9 of nominal, ±15 % per
+5 s window on our simulator), so it is not evidence of an absolute loss.
+
+What the balance can and cannot tell (this is the ambiguity the verdict reports):
+- roll and pitch give each **diagonal pair's ratio**, η_1/η_2 and η_3/η_4, independently of mass,
+  payload and inertia: one weak rotor of a pair shows exactly;
+- which diagonal pair is weak, and a same-spin pair (1+2 or 3+4) against a healthy vehicle, show
+  only in yaw, i.e. through κ, whose change per unit thrust loss nobody has measured (prior
+  ``torque_per_thrust_std``);
+- all four rotors equally weak looks like payload: not identifiable from these signals.
+
+Hypotheses: each of the 16 propeller sets S (monitor.labels) is a Gaussian prior on
+(Δ, d): damaged rotors lose ``loss_mean ± loss_std`` of thrust and their torque changes by
+``torque_per_thrust_std`` per thrust; healthy ones spread by ``healthy_spread_std``. The model is
+linear-Gaussian, so each hypothesis' marginal likelihood and the posterior of η are closed form
+from sufficient statistics that accumulate over windows (``Evidence``), which is what the daemon
+keeps between windows and diagnose sums over a flight.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from monitor.labels import LABEL_TABLE
+
+N_ROTORS = 4
+N_STATE = 2 * N_ROTORS + 3  # thrust losses (4), torque losses (4), disturbance (roll, pitch, yaw)
+RPM_TO_RAD_S = 2.0 * np.pi / 60.0
+SUB_BLOCKS = 4  # a window's noise is read from the spread of its sub-blocks' balances
+HYPOTHESES: tuple[tuple[int, ...], ...] = tuple(tuple(LABEL_TABLE[k]) for k in range(1, 17))
+
+
+@dataclass(frozen=True)
+class RotorGeometry:
+    """What the balance needs of a vehicle (``from_vehicle``); FRD, PX4 rotor order."""
+
+    lever_roll: tuple[float, ...]  # -y_i / L
+    lever_pitch: tuple[float, ...]  # x_i / L
+    spin_sign: tuple[float, ...]  # +1: drag torque yaws the body nose-right (CCW rotor)
+    inertia_diag_kg_m2: tuple[float, float, float]
+    kf_n_per_rad_s2: float
+    ktau_nm_per_rad_s2: float
+    arm_m: float
+
+    @classmethod
+    def from_vehicle(cls, vehicle) -> RotorGeometry:
+        pos = np.asarray(vehicle.rotor_positions_frd_m, dtype=np.float64)
+        arm = float(np.mean(np.hypot(pos[:, 0], pos[:, 1])) / np.sqrt(2.0))  # quad-X: |x| = |y| = L
+        return cls(
+            lever_roll=tuple(map(float, -pos[:, 1] / arm)),
+            lever_pitch=tuple(map(float, pos[:, 0] / arm)),
+            spin_sign=tuple(map(float, vehicle.spin_sign)),
+            inertia_diag_kg_m2=tuple(map(float, vehicle.inertia_diag_kg_m2)),
+            kf_n_per_rad_s2=float(vehicle.kf_n_per_rad_s2),
+            ktau_nm_per_rad_s2=float(vehicle.ktau_nm_per_rad_s2),
+            arm_m=arm,
+        )
+
+
+@dataclass(frozen=True)
+class Priors:
+    """Prior ranges, as standard deviations of the linear-Gaussian model (fractions of nominal).
+
+    Damaged blades follow the assumption register (offline/sim/assumptions.py): thrust loss 5-20 %
+    (uniform: mean 0.125, std 0.045) and a torque-per-thrust change of either sign (std 0.10: the
+    register's -10..+10 % and the +15..+25 % that offline/propellers/faults.py's fixed signatures
+    imply both lie within 2 std).
+
+    The airframe is taken as nominal as its vehicle file says: rotors matched to 1 % and the CG
+    within 0.5 mm (``4·0.0005/L`` in roll/pitch units). That is what makes a single flight
+    decisive, and it is an assumption about the vehicle, not a measurement: real airframes spread
+    their motors by 4-8 % (CrazyPAD) and carry CG offsets of millimetres, each worth a 10-20 %
+    loss of one rotor. ``propwatch adapt`` measures them from the airframe's healthy flights and
+    passes a ``Baseline``; with ``Priors.unmeasured_airframe()`` the verdict hedges instead.
+    Yaw trim from motor tilt: std 0.02 of one rotor's drag torque. The noise floor (0.01) is the
+    balance scatter of healthy 5 s windows on our simulator at 20 Hz.
+    """
+
+    loss_mean: float = 0.125
+    loss_std: float = 0.045
+    torque_per_thrust_std: float = 0.10
+    healthy_spread_std: float = 0.01
+    healthy_torque_spread_std: float = 0.02  # torque coefficient spread beyond the speed spread
+    cg_offset_std_m: float = 0.0005
+    yaw_trim_std: float = 0.02
+    noise_floor: float = 0.01  # per-window balance noise never below this (snapshot sampling, lag)
+    noise_inflation: float = 1.0  # calibrated on randomised flights (windows are not independent)
+
+    @classmethod
+    def unmeasured_airframe(cls) -> Priors:
+        """An airframe nobody balanced or measured: motors spread 4 % (std), CG offset 2 mm (std)."""
+        return cls(healthy_spread_std=0.04, cg_offset_std_m=0.002)
+
+    def disturbance_std(self, geometry: RotorGeometry) -> np.ndarray:
+        rp = 4.0 * self.cg_offset_std_m / geometry.arm_m
+        return np.array([rp, rp, self.yaw_trim_std])
+
+
+@dataclass(frozen=True)
+class Baseline:
+    """A healthy airframe's own balance (from ``propwatch adapt``): disturbance mean and spread,
+    and the per-rotor effectiveness spread left once it is known."""
+
+    disturbance_mean: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    disturbance_std: tuple[float, float, float] | None = None
+    healthy_spread_std: float | None = None
+    flights: int = 0
+
+    def to_dict(self) -> dict:
+        return {
+            "disturbance_mean": list(self.disturbance_mean),
+            "disturbance_std": None if self.disturbance_std is None else list(self.disturbance_std),
+            "healthy_spread_std": self.healthy_spread_std,
+            "flights": self.flights,
+        }
+
+    @classmethod
+    def from_dict(cls, d: dict, origin: str = "baseline") -> Baseline:
+        from monitor.errors import ConfigError
+
+        try:
+            mean = tuple(float(x) for x in d["disturbance_mean"])
+            std = None if d.get("disturbance_std") is None else tuple(float(x) for x in d["disturbance_std"])
+            spread = None if d.get("healthy_spread_std") is None else float(d["healthy_spread_std"])
+            flights = int(d.get("flights", 0))
+        except (KeyError, TypeError, ValueError) as exc:
+            raise ConfigError(f"{origin}: not a rotor-balance baseline ({exc!r})") from None
+        vals = list(mean) + list(std or []) + ([spread] if spread is not None else [])
+        if len(mean) != 3 or (std is not None and len(std) != 3) or not np.all(np.isfinite(vals)):
+            raise ConfigError(f"{origin}: disturbance_mean/std must be 3 finite numbers each")
+        if (std is not None and min(std) <= 0) or (spread is not None and spread <= 0):
+            raise ConfigError(f"{origin}: disturbance_std and healthy_spread_std must be > 0")
+        return cls(mean, std, spread, flights)
+
+
+# What a healthy baseline can still not pin down: the residual balance scatter between flights and
+# the rotor-to-rotor spread of a measured airframe (efficiency drift with battery and temperature).
+BASELINE_DISTURBANCE_FLOOR = 0.01
+BASELINE_SPREAD_STD = 0.01
+
+
+def baseline_from_flights(flight_z: list[np.ndarray]) -> Baseline:
+    """The airframe's balance from its healthy flights: ``flight_z`` holds each flight's window
+    balances z (n_windows, 3). Mean over flights; spread = flight-to-flight std, never below the floor."""
+    means = np.array([np.nanmean(np.asarray(z, dtype=np.float64).reshape(-1, 3), axis=0) for z in flight_z])
+    means = means[np.isfinite(means).all(axis=1)]
+    if len(means) == 0:
+        raise ValueError("baseline_from_flights: no flight with a usable window")
+    std = means.std(axis=0, ddof=1) if len(means) > 1 else np.zeros(3)
+    std = np.maximum(std, BASELINE_DISTURBANCE_FLOOR)
+    return Baseline(tuple(map(float, means.mean(axis=0))), tuple(map(float, std)), BASELINE_SPREAD_STD, len(means))
+
+
+def window_balance(
+    motor_rpm: np.ndarray, rates_rad_s: np.ndarray, geometry: RotorGeometry, rate_hz: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per window: (z (..., 3), H (..., 3, 8), noise std (..., 3)).
+
+    ``motor_rpm`` (..., W, 4) commanded RPM; ``rates_rad_s`` (..., W, 3) body rates FRD.
+    """
+    rpm = np.asarray(motor_rpm, dtype=np.float64)
+    w = np.asarray(rates_rad_s, dtype=np.float64)
+    z, h = _balance(rpm, w, geometry, rate_hz)
+    n = rpm.shape[-2]
+    k = SUB_BLOCKS if n >= 4 * SUB_BLOCKS else 1
+    if k > 1:
+        m = n // k  # k equal sub-blocks (a remainder at the end is left out of the noise estimate)
+        rb = rpm[..., : m * k, :].reshape(rpm.shape[:-2] + (k, m, 4))
+        wb = w[..., : m * k, :].reshape(w.shape[:-2] + (k, m, 3))
+        zb = _balance(rb, wb, geometry, rate_hz)[0]  # (..., k, 3)
+        std = zb.std(axis=-2, ddof=1) / np.sqrt(k)
+    else:
+        std = np.zeros_like(z)
+    return z, h, std
+
+
+def _balance(rpm: np.ndarray, w: np.ndarray, g: RotorGeometry, rate_hz: float) -> tuple[np.ndarray, np.ndarray]:
+    dt = 1.0 / rate_hz
+    u = np.square(rpm * RPM_TO_RAD_S)
+    u_bar = u[..., :-1, :].mean(axis=-2)  # paired with the rate differences
+    u_ref = u_bar.mean(axis=-1, keepdims=True)
+    share = u_bar / np.where(u_ref > 0, u_ref, np.nan)
+    inertia = np.asarray(g.inertia_diag_kg_m2)
+    span_s = (w.shape[-2] - 1) * dt
+    w_mid = 0.5 * (w[..., 1:, :] + w[..., :-1, :])
+    gyro = np.cross(w_mid, w_mid * inertia).mean(axis=-2)  # ω × Iω
+    required = inertia * (w[..., -1, :] - w[..., 0, :]) / span_s + gyro
+    scale_rp = g.kf_n_per_rad_s2 * g.arm_m * u_ref[..., 0]
+    scale_y = g.ktau_nm_per_rad_s2 * u_ref[..., 0]
+    b = np.stack([required[..., 0] / scale_rp, required[..., 1] / scale_rp, required[..., 2] / scale_y], axis=-1)
+    h = np.zeros(share.shape[:-1] + (3, 2 * N_ROTORS))
+    h[..., 0, :N_ROTORS] = share * np.asarray(g.lever_roll)
+    h[..., 1, :N_ROTORS] = share * np.asarray(g.lever_pitch)
+    h[..., 2, N_ROTORS:] = share * np.asarray(g.spin_sign)
+    z = h.sum(axis=-1) - b
+    return z, h
+
+
+def hypothesis_prior(
+    faulty: tuple[int, ...], priors: Priors, geometry: RotorGeometry, baseline: Baseline | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """Prior mean (11,) and covariance (11, 11) of (thrust losses, torque losses, disturbance) under a set."""
+    base = baseline or Baseline()
+    spread = priors.healthy_spread_std if base.healthy_spread_std is None else base.healthy_spread_std
+    d_std = priors.disturbance_std(geometry) if base.disturbance_std is None else np.asarray(base.disturbance_std)
+    mean = np.zeros(N_STATE)
+    cov = np.zeros((N_STATE, N_STATE))
+    for i in range(N_ROTORS):
+        t, q = i, N_ROTORS + i
+        if i + 1 in faulty:
+            # torque loss = thrust loss - torque-per-thrust change (either sign)
+            mean[t] = mean[q] = priors.loss_mean
+            var = priors.loss_std**2
+            cov[t, t] = var
+            cov[q, q] = var + priors.torque_per_thrust_std**2
+            cov[t, q] = cov[q, t] = var
+        else:
+            var = spread**2
+            cov[t, t] = var
+            cov[q, q] = var + priors.healthy_torque_spread_std**2
+            cov[t, q] = cov[q, t] = var
+    mean[2 * N_ROTORS :] = base.disturbance_mean
+    cov[2 * N_ROTORS :, 2 * N_ROTORS :] = np.diag(np.square(d_std))
+    return mean, cov
+
+
+@dataclass
+class Evidence:
+    """Sufficient statistics of windows' balances (information form); they add and decay.
+
+    ``add`` takes one or more windows' (z, H, std); ``discount`` multiplies the evidence by a
+    factor in [0, 1] (regime change: take-off, payload drop). Windows should not overlap: their
+    balances would then share samples and the likelihood would count them twice.
+    """
+
+    info: np.ndarray = field(default_factory=lambda: np.zeros((N_STATE, N_STATE)))
+    vec: np.ndarray = field(default_factory=lambda: np.zeros(N_STATE))
+    quad: float = 0.0
+    logdet_noise: float = 0.0
+    rows: float = 0.0
+    windows: float = 0.0
+
+    def add(self, z: np.ndarray, h: np.ndarray, std: np.ndarray, priors: Priors) -> None:
+        z = np.asarray(z, dtype=np.float64).reshape(-1, 3)
+        h = np.asarray(h, dtype=np.float64).reshape(-1, 3, 2 * N_ROTORS)
+        s = np.asarray(std, dtype=np.float64).reshape(-1, 3)
+        keep = np.isfinite(z).all(axis=1) & np.isfinite(h).all(axis=(1, 2)) & np.isfinite(s).all(axis=1)
+        z, h, s = z[keep], h[keep], s[keep]
+        if len(z) == 0:
+            return
+        var = np.square(np.maximum(s, priors.noise_floor) * priors.noise_inflation)
+        g = np.concatenate([h, np.broadcast_to(np.eye(3), (len(z), 3, 3))], axis=2)  # z = G x + n
+        gw = g / var[:, :, None]
+        self.info += np.einsum("nri,nrj->ij", gw, g)
+        self.vec += np.einsum("nri,nr->i", gw, z)
+        self.quad += float(np.sum(z * z / var))
+        self.logdet_noise += float(np.sum(np.log(var)))
+        self.rows += 3.0 * len(z)
+        self.windows += float(len(z))
+
+    def discount(self, factor: float) -> None:
+        f = float(np.clip(factor, 0.0, 1.0))
+        self.info *= f
+        self.vec *= f
+        self.quad *= f
+        self.logdet_noise *= f
+        self.rows *= f
+        self.windows *= f
+
+    def copy(self) -> Evidence:
+        return Evidence(self.info.copy(), self.vec.copy(), self.quad, self.logdet_noise, self.rows, self.windows)
+
+
+@dataclass(frozen=True)
+class Verdict:
+    """Posterior over the 16 propeller sets and each set's rotor effectiveness."""
+
+    log_likelihood: np.ndarray  # (16,) label order
+    probability: np.ndarray  # (16,) with the given set prior
+    thrust_fraction: np.ndarray  # (16, 4) posterior mean η under each set
+    thrust_fraction_std: np.ndarray  # (16, 4)
+    torque_fraction: np.ndarray  # (16, 4) posterior mean κ under each set
+    windows: float
+
+    @property
+    def best(self) -> int:
+        return int(np.argmax(self.probability))
+
+    def fault_probability(self) -> np.ndarray:
+        """(4,) P(rotor i is in the faulty set)."""
+        mask = np.array([[i + 1 in s for i in range(N_ROTORS)] for s in HYPOTHESES], dtype=np.float64)
+        return self.probability @ mask
+
+    def effectiveness(self) -> tuple[np.ndarray, np.ndarray]:
+        """(mean, std) of η per rotor, mixed over the sets by their probability."""
+        p = self.probability[:, None]
+        mean = np.sum(p * self.thrust_fraction, axis=0)
+        var = np.sum(p * (np.square(self.thrust_fraction_std) + np.square(self.thrust_fraction - mean)), axis=0)
+        return mean, np.sqrt(var)
+
+
+class HypothesisBank:
+    """The 16 sets' priors, inverted once (they depend only on priors, geometry and baseline)."""
+
+    def __init__(self, priors: Priors, geometry: RotorGeometry, baseline: Baseline | None = None):
+        self.priors, self.geometry, self.baseline = priors, geometry, baseline
+        means, covs = zip(*(hypothesis_prior(s, priors, geometry, baseline) for s in HYPOTHESES))
+        self.mean = np.stack(means)  # (16, 11)
+        self.prec = np.linalg.inv(np.stack(covs))  # (16, 11, 11)
+        self.prec_mean = np.einsum("kij,kj->ki", self.prec, self.mean)
+        self.mean_prec_mean = np.einsum("ki,ki->k", self.mean, self.prec_mean)
+        self.logdet_prior = np.linalg.slogdet(np.stack(covs))[1]
+
+    def posterior(self, evidence: Evidence, set_prior: np.ndarray | None = None) -> Verdict:
+        """Each set's marginal likelihood of the accumulated balances, and its posterior effectiveness."""
+        prior_p = np.full(16, 1.0 / 16) if set_prior is None else np.asarray(set_prior, dtype=np.float64)
+        lam = self.prec + evidence.info  # (16, 11, 11) posterior precision
+        rhs = self.prec_mean + evidence.vec
+        cov = np.linalg.inv(lam)
+        mu = np.einsum("kij,kj->ki", cov, rhs)
+        logdet_lam = np.linalg.slogdet(lam)[1]
+        ll = -0.5 * (
+            evidence.quad
+            + self.mean_prec_mean
+            - np.einsum("ki,ki->k", mu, rhs)
+            + self.logdet_prior
+            + logdet_lam
+            + evidence.logdet_noise
+            + evidence.rows * np.log(2 * np.pi)
+        )
+        logp = ll + np.log(np.maximum(prior_p, 1e-300))
+        prob = np.exp(logp - logp.max())
+        prob /= prob.sum()
+        std = np.sqrt(np.diagonal(cov, axis1=1, axis2=2))
+        return Verdict(
+            log_likelihood=ll,
+            probability=prob,
+            thrust_fraction=1.0 - mu[:, :N_ROTORS],
+            thrust_fraction_std=std[:, :N_ROTORS],
+            torque_fraction=1.0 - mu[:, N_ROTORS : 2 * N_ROTORS],
+            windows=evidence.windows,
+        )
+
+
+def posterior(
+    evidence: Evidence,
+    priors: Priors,
+    geometry: RotorGeometry,
+    baseline: Baseline | None = None,
+    set_prior: np.ndarray | None = None,
+) -> Verdict:
+    """One-off ``HypothesisBank(priors, geometry, baseline).posterior(evidence, set_prior)``."""
+    return HypothesisBank(priors, geometry, baseline).posterior(evidence, set_prior)
+
+
+def credible_set(verdict: Verdict, mass: float = 0.95) -> list[int]:
+    """Indices (label - 1) of the most probable sets whose probabilities add up to ``mass``."""
+    order = np.argsort(-verdict.probability, kind="stable")
+    cum = np.cumsum(verdict.probability[order])
+    n = int(np.searchsorted(cum, mass - 1e-12) + 1)
+    return [int(k) for k in order[:n]]
+
+
+def flight_evidence(
+    motor_rpm: np.ndarray,
+    rates_rad_s: np.ndarray,
+    usable: np.ndarray,
+    geometry: RotorGeometry,
+    rate_hz: float,
+    priors: Priors,
+    window: int = 100,
+) -> Evidence:
+    """Evidence from the non-overlapping windows of one flight that are wholly ``usable``."""
+    ev = Evidence()
+    t = len(motor_rpm)
+    starts = np.arange(0, t - window + 1, window)
+    if len(starts) == 0:
+        return ev
+    ok = np.array([bool(np.all(usable[a : a + window])) for a in starts])
+    starts = starts[ok]
+    if len(starts) == 0:
+        return ev
+    idx = starts[:, None] + np.arange(window)[None, :]
+    z, h, std = window_balance(motor_rpm[idx], rates_rad_s[idx], geometry, rate_hz)
+    ev.add(z, h, std, priors)
+    return ev
