@@ -14,6 +14,14 @@ Two processes, as deployed: ``propwatch replay`` plays the flight as PX4 would
 - peak RSS of the daemon from /proc (target <= 150 MB);
 - start-up, from spawning the daemon to its "ready" line (target <= 2 s).
 
+``--inprocess`` instead times the daemon's normal path alone, without
+sockets or a second process: every message of the flight through
+``Daemon.handle`` (decode, plausibility, hold, features, inference, alert
+rule) with the loop's ``tick`` every 10 messages, as process CPU time per
+message and per classified step, best of ``--repeat`` runs. On a shared,
+busy machine this is the figure to compare before and after a change (run
+this script with PYTHONPATH pointing at either tree).
+
 The flight is the synthetic PX4 stream of ``tests/test_daemon_helpers.py``
 (HEARTBEAT, EXTENDED_SYS_STATE, ATTITUDE 50 Hz, SERVO_OUTPUT_RAW and
 ESC_STATUS 25 Hz, battery, a GCS on system 255), or ``--tlog`` any recorded
@@ -155,6 +163,57 @@ def run(args) -> dict:
     }
 
 
+class _NullLink:
+    url = "null:"
+    is_log = False
+    is_udpout = False
+    eof = False
+
+    def __getattr__(self, name):  # every send_* / set_system_id / autopilot_seen: do nothing
+        return lambda *a, **k: {} if name == "stats" else None
+
+
+def run_inprocess(args) -> dict:
+    from pymavlink.dialects.v20 import common as mavlink
+
+    from monitor.daemon.alerts import EventWriter
+    from monitor.daemon.config import MonitorConfig
+    from monitor.daemon.pipeline import Pipeline
+    from monitor.daemon.sdnotify import Notifier
+    from monitor.daemon.service import Daemon
+    from monitor.model import Classifier, choose_esc
+
+    with tempfile.TemporaryDirectory() as tmp:
+        model, tlog = build_inputs(args, Path(tmp))
+        clf = Classifier(str(model))
+        from monitor.replay import read_tlog
+
+        frames = [f for _, f, _ in read_tlog(tlog)]
+    parser = mavlink.MAVLink(None)
+    msgs = [m for f in frames for m in (parser.parse_buffer(f) or [])]
+    best = None
+    for _ in range(args.repeat):
+        cfg = MonitorConfig()
+        daemon = Daemon(cfg, _NullLink(), Pipeline(clf, cfg, choose_esc(clf, "")), EventWriter(None), Notifier({}))
+        c0 = time.process_time()
+        for i, m in enumerate(msgs):
+            daemon.handle(m, time.perf_counter())
+            if i % 10 == 0:
+                daemon.tick(time.monotonic())
+        cpu = time.process_time() - c0
+        best = cpu if best is None else min(best, cpu)
+        classified = daemon.pipeline.stats["classified"]
+    return {
+        "messages": len(msgs),
+        "classified_steps": classified,
+        "cpu_s": round(best, 3),
+        "cpu_us_per_message": round(1e6 * best / len(msgs), 2),
+        "cpu_ms_per_classified_step": round(1e3 * best / max(classified, 1), 4),
+        "cpu_percent_at_real_pace": round(100.0 * best / (args.minutes * 60.0), 3),
+        "load_average": os.getloadavg(),
+    }
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--minutes", type=float, default=10.0, help="flight length (synthetic flight)")
@@ -163,7 +222,12 @@ def main(argv=None) -> int:
     p.add_argument("--model", help="ONNX model (default models/classifier.onnx, else the tests' toy model)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--json", action="store_true")
+    p.add_argument("--inprocess", action="store_true", help="time the normal path in process (CPU per message)")
+    p.add_argument("--repeat", type=int, default=3, help="--inprocess: best of this many runs")
     args = p.parse_args(argv)
+    if args.inprocess:
+        print(json.dumps(run_inprocess(args), indent=2))
+        return 0
     res = run(args)
     if args.json:
         print(json.dumps(res, indent=2))

@@ -18,26 +18,20 @@ import time
 
 import numpy as np
 
-from monitor.effectiveness import HYPOTHESES, Evidence, HypothesisBank, Priors, RotorGeometry, credible_set, window_balance
+from monitor.effectiveness import HYPOTHESES, Evidence, HypothesisBank, Priors, RotorGeometry, credible_set
 from monitor.features import compute_features, sliding_windows
 from monitor.labels import LABEL_TABLE
 from monitor.model import Classifier
 from monitor.vehicle import DEFAULT_VEHICLE, REPO_ROOT, load_vehicle
 from offline.dataset.generate import PRESETS, DatasetSpec, generate
-
-WARMUP_STEPS = 100  # first 5 s: the simulator starts from a hover without the controller's integrators settled
+from offline.physics_calibration import WARMUP_STEPS, flight_balances
 
 
 def physics_verdicts(ds, bank: HypothesisBank, geometry: RotorGeometry, priors: Priors):
-    sig = ds.signals
-    rates = np.stack([sig["roll_rate_rad_s"], sig["pitch_rate_rad_s"], sig["yaw_rate_rad_s"]], axis=-1)
     out = []
-    for f in range(ds.n_flights):
-        t = sig["motor_rpm"].shape[1]
-        starts = np.arange(WARMUP_STEPS, t - 99, 100)
-        idx = starts[:, None] + np.arange(100)[None, :]
+    for z, h, std in flight_balances(ds, geometry):  # non-overlapping 5 s windows after the first 5 s
         ev = Evidence()
-        ev.add(*window_balance(sig["motor_rpm"][f][idx], rates[f][idx], geometry, ds.sample_rate_hz), priors)
+        ev.add(z, h, std, priors)
         v = bank.posterior(ev)
         out.append((HYPOTHESES[v.best], [HYPOTHESES[k] for k in credible_set(v, 0.95)], v.fault_probability()))
     return out

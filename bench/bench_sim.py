@@ -29,12 +29,19 @@ from offline.sim.propeller import QuadraticPropeller  # noqa: E402
 from offline.sim.simulator import SimConfig, simulate  # noqa: E402
 
 
-def time_sim(vehicle, n: int, duration_s: float) -> dict:
+def time_sim(vehicle, n: int, duration_s: float, randomised: bool = False) -> dict:
+    """``randomised``: every flight with its own physics drawn from the assumption register (per-flight path)."""
     sim = dataclasses.replace(SimConfig(), duration_s=duration_s)
     wps = random_waypoints(n, 5, seed=1)
     prop = QuadraticPropeller.for_vehicle(vehicle)
+    per_flight = None
+    if randomised:
+        from offline.sim.assumptions import REGISTER, draw_flights
+        from offline.sim.perflight import PerFlightTerms
+
+        per_flight = PerFlightTerms.from_flights(draw_flights(REGISTER, 0, range(n)), vehicle)
     w0, c0 = time.perf_counter(), time.process_time()
-    simulate(vehicle, wps, prop, sim, seed=0)
+    simulate(vehicle, wps, prop, sim, seed=0, per_flight=per_flight)
     wall, cpu = time.perf_counter() - w0, time.process_time() - c0
     flown = n * duration_s
     return {
@@ -124,6 +131,7 @@ def main(argv=None) -> int:
         },
         "batch_1": time_sim(vehicle, 1, dur),
         f"batch_{big}": time_sim(vehicle, big, dur),
+        f"batch_{big}_randomised": time_sim(vehicle, big, dur, randomised=True),
     }
     mem_dur = 2.0 if args.quick else 10.0
     sizes = (8, 32) if args.quick else (32, 128, 512)
@@ -135,7 +143,7 @@ def main(argv=None) -> int:
     out["numpy_call_us"] = round(numpy_call_us(), 3)
     if "error" not in out["rotorpy"]:
         # Same machine, same moment: the ratio survives a loaded machine better than either figure.
-        for key in ("batch_1", f"batch_{big}"):
+        for key in ("batch_1", f"batch_{big}", f"batch_{big}_randomised"):
             out[key]["x_rotorpy_cpu"] = round(out[key]["rtf_cpu"] / out["rotorpy"]["rtf_cpu"], 1)
     if args.json:
         print(json.dumps(out, indent=2))
@@ -147,12 +155,13 @@ def main(argv=None) -> int:
         f"propwatch simulator, physics {sim.physics_rate_hz} Hz / control {sim.control_rate_hz} Hz / "
         f"position {sim.position_rate_hz} Hz / log {sim.log_rate_hz} Hz, one thread"
     )
-    for key in ("batch_1", f"batch_{big}"):
+    for key in ("batch_1", f"batch_{big}", f"batch_{big}_randomised"):
         r = out[key]
         print(
             f"  {r['flights']:4d} x {r['duration_s']:.0f} s flights: wall {r['wall_s']:7.2f} s  cpu {r['cpu_s']:7.2f} s  "
             f"real-time factor {r['rtf_wall']:8.1f} (wall)  {r['rtf_cpu']:8.1f} (cpu)"
             + (f"  = {r['x_rotorpy_cpu']:.0f} x RotorPy" if "x_rotorpy_cpu" in r else "")
+            + ("  (per-flight drawn physics)" if key.endswith("randomised") else "")
         )
     print(f"  peak traced memory over {mem_dur:.0f} s flights:")
     for n, b in zip(sizes, per):

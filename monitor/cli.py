@@ -24,9 +24,12 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "evalsim": ("offline.evalsim.cli", "write an evaluation-only set from the second simulator (never for training)"),
     "calibrate": ("offline.calibrate.cli", "fit model extensions to measured flights"),
     "crazypad": ("offline.crazypad.cli", "sim-to-real experiment on CrazyPAD"),
+    "adapt": ("offline.adapt.cli", "calibrate, simulate, train and baseline a new airframe from its healthy logs"),
     "diagnose": ("monitor.diagnose.cli", "diagnose recorded flight logs"),
+    "inspect": ("monitor.inspect_cli", "what propwatch read from a log: messages, rates, gaps, motors, CSV"),
     "monitor": ("monitor.daemon.cli", "run the onboard monitor daemon"),
     "replay": ("monitor.replay", "replay a .tlog as if it were PX4"),
+    "fleet": ("fleet.cli", "fleet: ingest many logs into a health database (Ray), web report"),
 }
 
 
@@ -34,7 +37,7 @@ def usage() -> str:
     width = max(map(len, COMMANDS))
     lines = ["usage: propwatch COMMAND [ARGS...]", "", "commands:"]
     lines += [f"  {name:<{width}}  {help_}" for name, (_, help_) in COMMANDS.items()]
-    lines += ["", "'propwatch COMMAND --help' for a command's options."]
+    lines += ["", "'propwatch COMMAND --help' for a command's options; 'propwatch --version' (also after a COMMAND)."]
     return "\n".join(lines)
 
 
@@ -43,6 +46,11 @@ def main(argv: list[str] | None = None) -> int:
     if not argv or argv[0] in ("-h", "--help"):
         print(usage())
         return 0 if argv else 2
+    if argv[0] == "--version" or "--version" in argv[1:2]:
+        from monitor import version
+
+        print(f"propwatch {version()}")
+        return 0
     name, rest = argv[0], argv[1:]
     if name not in COMMANDS:
         print(f"propwatch: unknown command {name!r}\n\n{usage()}", file=sys.stderr)

@@ -15,6 +15,7 @@ raises ``ConfigError`` naming the key.
 from __future__ import annotations
 
 import dataclasses
+import math
 import types
 import typing
 from collections.abc import Mapping
@@ -35,10 +36,15 @@ def read_yaml(path: str | Path) -> dict[str, Any]:
         text = path.read_text(encoding="utf-8")
     except OSError as exc:
         raise ConfigError(f"{path}: cannot read config: {exc.strerror or exc}") from exc
+    except UnicodeDecodeError as exc:
+        raise ConfigError(f"{path}: not a UTF-8 text file (byte {exc.start})") from None
     try:
         data = yaml.safe_load(text)
     except yaml.YAMLError as exc:
-        raise ConfigError(f"{path}: invalid YAML: {exc}") from exc
+        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise ConfigError(f"{path}: invalid YAML: {first}") from None
+    except (ValueError, TypeError, RecursionError) as exc:  # e.g. a YAML integer too large to hold
+        raise ConfigError(f"{path}: invalid YAML: {type(exc).__name__}") from None
     if data is None:
         data = {}
     if not isinstance(data, dict):
@@ -82,9 +88,12 @@ def _convert_plain(tp: Any, value: Any, where: str) -> Any:
     if tp is float:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise ConfigError(f"{where}: expected a number, got {value!r}")
-        value = float(value)
-        if value != value:
-            raise ConfigError(f"{where}: NaN is not allowed")
+        try:
+            value = float(value)
+        except OverflowError:
+            raise ConfigError(f"{where}: {value!r} is out of range") from None
+        if not math.isfinite(value):  # .inf / .nan: every numeric setting has finite bounds
+            raise ConfigError(f"{where}: must be a finite number, got {value!r}")
         return value
     if tp is int:
         if isinstance(value, bool) or not isinstance(value, int):

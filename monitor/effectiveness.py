@@ -53,6 +53,11 @@ N_STATE = 2 * N_ROTORS + 3  # thrust losses (4), torque losses (4), disturbance 
 RPM_TO_RAD_S = 2.0 * np.pi / 60.0
 SUB_BLOCKS = 4  # a window's noise is read from the spread of its sub-blocks' balances
 HYPOTHESES: tuple[tuple[int, ...], ...] = tuple(tuple(LABEL_TABLE[k]) for k in range(1, 17))
+# Prior over the 16 sets: a healthy vehicle is as likely as all damage patterns together (a monitor
+# watches mostly healthy flights; what the balance cannot see, e.g. all four rotors alike, stays
+# "healthy" unless evidence says otherwise), the 15 damage patterns alike.
+HEALTHY_PRIOR = 0.5
+SET_PRIOR = np.array([HEALTHY_PRIOR] + [(1.0 - HEALTHY_PRIOR) / 15.0] * 15)
 
 
 @dataclass(frozen=True)
@@ -86,8 +91,10 @@ class RotorGeometry:
 class Priors:
     """Prior ranges, as standard deviations of the linear-Gaussian model (fractions of nominal).
 
-    Damaged blades follow the assumption register (offline/sim/assumptions.py): thrust loss 5-20 %
-    (uniform: mean 0.125, std 0.045) and a torque-per-thrust change of either sign (std 0.10: the
+    Damaged blades follow the assumption register (offline/sim/assumptions.py): thrust loss at hover
+    speed (the register's low- and high-speed ranges of bent and cracked blades, read at the paper
+    quad's hover, s² = 0.26: mean 0.07, std 0.025, 90 % within 3-11 %; the std is widened to 0.035
+    for heavier vehicles hovering faster) and a torque-per-thrust change of either sign (std 0.10: the
     register's -10..+10 % and the +15..+25 % that offline/propellers/faults.py's fixed signatures
     imply both lie within 2 std).
 
@@ -101,8 +108,8 @@ class Priors:
     balance scatter of healthy 5 s windows on our simulator at 20 Hz.
     """
 
-    loss_mean: float = 0.125
-    loss_std: float = 0.045
+    loss_mean: float = 0.07
+    loss_std: float = 0.035
     torque_per_thrust_std: float = 0.10
     healthy_spread_std: float = 0.01
     healthy_torque_spread_std: float = 0.02  # torque coefficient spread beyond the speed spread
@@ -113,8 +120,9 @@ class Priors:
 
     @classmethod
     def unmeasured_airframe(cls) -> Priors:
-        """An airframe nobody balanced or measured: motors spread 4 % (std), CG offset 2 mm (std)."""
-        return cls(healthy_spread_std=0.04, cg_offset_std_m=0.002)
+        """An airframe nobody balanced or measured, at the register's ranges: motor speed spread
+        uniform in ±4-8 % (thrust ±8-16 %: std 0.07) and CG uniform in ±1 cm (std 5.8 mm)."""
+        return cls(healthy_spread_std=0.07, cg_offset_std_m=0.0058)
 
     def disturbance_std(self, geometry: RotorGeometry) -> np.ndarray:
         rp = 4.0 * self.cg_offset_std_m / geometry.arm_m
@@ -129,51 +137,6 @@ class Baseline:
     disturbance_mean: tuple[float, float, float] = (0.0, 0.0, 0.0)
     disturbance_std: tuple[float, float, float] | None = None
     healthy_spread_std: float | None = None
-    flights: int = 0
-
-    def to_dict(self) -> dict:
-        return {
-            "disturbance_mean": list(self.disturbance_mean),
-            "disturbance_std": None if self.disturbance_std is None else list(self.disturbance_std),
-            "healthy_spread_std": self.healthy_spread_std,
-            "flights": self.flights,
-        }
-
-    @classmethod
-    def from_dict(cls, d: dict, origin: str = "baseline") -> Baseline:
-        from monitor.errors import ConfigError
-
-        try:
-            mean = tuple(float(x) for x in d["disturbance_mean"])
-            std = None if d.get("disturbance_std") is None else tuple(float(x) for x in d["disturbance_std"])
-            spread = None if d.get("healthy_spread_std") is None else float(d["healthy_spread_std"])
-            flights = int(d.get("flights", 0))
-        except (KeyError, TypeError, ValueError) as exc:
-            raise ConfigError(f"{origin}: not a rotor-balance baseline ({exc!r})") from None
-        vals = list(mean) + list(std or []) + ([spread] if spread is not None else [])
-        if len(mean) != 3 or (std is not None and len(std) != 3) or not np.all(np.isfinite(vals)):
-            raise ConfigError(f"{origin}: disturbance_mean/std must be 3 finite numbers each")
-        if (std is not None and min(std) <= 0) or (spread is not None and spread <= 0):
-            raise ConfigError(f"{origin}: disturbance_std and healthy_spread_std must be > 0")
-        return cls(mean, std, spread, flights)
-
-
-# What a healthy baseline can still not pin down: the residual balance scatter between flights and
-# the rotor-to-rotor spread of a measured airframe (efficiency drift with battery and temperature).
-BASELINE_DISTURBANCE_FLOOR = 0.01
-BASELINE_SPREAD_STD = 0.01
-
-
-def baseline_from_flights(flight_z: list[np.ndarray]) -> Baseline:
-    """The airframe's balance from its healthy flights: ``flight_z`` holds each flight's window
-    balances z (n_windows, 3). Mean over flights; spread = flight-to-flight std, never below the floor."""
-    means = np.array([np.nanmean(np.asarray(z, dtype=np.float64).reshape(-1, 3), axis=0) for z in flight_z])
-    means = means[np.isfinite(means).all(axis=1)]
-    if len(means) == 0:
-        raise ValueError("baseline_from_flights: no flight with a usable window")
-    std = means.std(axis=0, ddof=1) if len(means) > 1 else np.zeros(3)
-    std = np.maximum(std, BASELINE_DISTURBANCE_FLOOR)
-    return Baseline(tuple(map(float, means.mean(axis=0))), tuple(map(float, std)), BASELINE_SPREAD_STD, len(means))
 
 
 def window_balance(
@@ -251,10 +214,9 @@ def hypothesis_prior(
 
 @dataclass
 class Evidence:
-    """Sufficient statistics of windows' balances (information form); they add and decay.
+    """Sufficient statistics of windows' balances (information form); they add over windows.
 
-    ``add`` takes one or more windows' (z, H, std); ``discount`` multiplies the evidence by a
-    factor in [0, 1] (regime change: take-off, payload drop). Windows should not overlap: their
+    ``add`` takes one or more windows' (z, H, std). Windows should not overlap: their
     balances would then share samples and the likelihood would count them twice.
     """
 
@@ -283,18 +245,6 @@ class Evidence:
         self.rows += 3.0 * len(z)
         self.windows += float(len(z))
 
-    def discount(self, factor: float) -> None:
-        f = float(np.clip(factor, 0.0, 1.0))
-        self.info *= f
-        self.vec *= f
-        self.quad *= f
-        self.logdet_noise *= f
-        self.rows *= f
-        self.windows *= f
-
-    def copy(self) -> Evidence:
-        return Evidence(self.info.copy(), self.vec.copy(), self.quad, self.logdet_noise, self.rows, self.windows)
-
 
 @dataclass(frozen=True)
 class Verdict:
@@ -316,13 +266,6 @@ class Verdict:
         mask = np.array([[i + 1 in s for i in range(N_ROTORS)] for s in HYPOTHESES], dtype=np.float64)
         return self.probability @ mask
 
-    def effectiveness(self) -> tuple[np.ndarray, np.ndarray]:
-        """(mean, std) of η per rotor, mixed over the sets by their probability."""
-        p = self.probability[:, None]
-        mean = np.sum(p * self.thrust_fraction, axis=0)
-        var = np.sum(p * (np.square(self.thrust_fraction_std) + np.square(self.thrust_fraction - mean)), axis=0)
-        return mean, np.sqrt(var)
-
 
 class HypothesisBank:
     """The 16 sets' priors, inverted once (they depend only on priors, geometry and baseline)."""
@@ -338,7 +281,7 @@ class HypothesisBank:
 
     def posterior(self, evidence: Evidence, set_prior: np.ndarray | None = None) -> Verdict:
         """Each set's marginal likelihood of the accumulated balances, and its posterior effectiveness."""
-        prior_p = np.full(16, 1.0 / 16) if set_prior is None else np.asarray(set_prior, dtype=np.float64)
+        prior_p = SET_PRIOR if set_prior is None else np.asarray(set_prior, dtype=np.float64)
         lam = self.prec + evidence.info  # (16, 11, 11) posterior precision
         rhs = self.prec_mean + evidence.vec
         cov = np.linalg.inv(lam)
@@ -367,45 +310,9 @@ class HypothesisBank:
         )
 
 
-def posterior(
-    evidence: Evidence,
-    priors: Priors,
-    geometry: RotorGeometry,
-    baseline: Baseline | None = None,
-    set_prior: np.ndarray | None = None,
-) -> Verdict:
-    """One-off ``HypothesisBank(priors, geometry, baseline).posterior(evidence, set_prior)``."""
-    return HypothesisBank(priors, geometry, baseline).posterior(evidence, set_prior)
-
-
 def credible_set(verdict: Verdict, mass: float = 0.95) -> list[int]:
     """Indices (label - 1) of the most probable sets whose probabilities add up to ``mass``."""
     order = np.argsort(-verdict.probability, kind="stable")
     cum = np.cumsum(verdict.probability[order])
     n = int(np.searchsorted(cum, mass - 1e-12) + 1)
     return [int(k) for k in order[:n]]
-
-
-def flight_evidence(
-    motor_rpm: np.ndarray,
-    rates_rad_s: np.ndarray,
-    usable: np.ndarray,
-    geometry: RotorGeometry,
-    rate_hz: float,
-    priors: Priors,
-    window: int = 100,
-) -> Evidence:
-    """Evidence from the non-overlapping windows of one flight that are wholly ``usable``."""
-    ev = Evidence()
-    t = len(motor_rpm)
-    starts = np.arange(0, t - window + 1, window)
-    if len(starts) == 0:
-        return ev
-    ok = np.array([bool(np.all(usable[a : a + window])) for a in starts])
-    starts = starts[ok]
-    if len(starts) == 0:
-        return ev
-    idx = starts[:, None] + np.arange(window)[None, :]
-    z, h, std = window_balance(motor_rpm[idx], rates_rad_s[idx], geometry, rate_hz)
-    ev.add(z, h, std, priors)
-    return ev

@@ -171,12 +171,69 @@ class Normalizer:
         std = np.where(std > 1e-9, std, 1.0)
         return cls(tuple(map(float, flat.mean(axis=0))), tuple(map(float, std)))
 
-    def apply(self, x: np.ndarray) -> np.ndarray:
-        return ((x - np.asarray(self.mean, np.float32)) / np.asarray(self.std, np.float32)).astype(np.float32)
-
     def to_dict(self) -> dict:
         return {"mean": list(self.mean), "std": list(self.std)}
 
     @classmethod
     def from_dict(cls, d: Mapping) -> Normalizer:
         return cls(tuple(map(float, d["mean"])), tuple(map(float, d["std"])))
+
+
+# ---------------------------------------------------------------------------
+# Native-rate evidence (issue 14): computed at the log's own rate (CrazyPAD 100 Hz), not on the
+# 20 Hz model grid, because what a damaged blade adds to a motor command or to the airframe's
+# acceleration lives above 10 Hz and is gone after resampling. One function each, numpy only,
+# so the daemon can call them when its streams are fast enough (``NATIVE_MIN_RATE_HZ``).
+
+NATIVE_MIN_RATE_HZ = 50.0  # below this the high band (VIBRATION_BAND_HZ) is not observable
+VIBRATION_BAND_HZ = 15.0  # lower edge of the "vibration" band; the flight script's manoeuvres sit below 2 Hz
+
+
+def _check_native_rate(rate_hz: float, what: str) -> None:
+    if not np.isfinite(rate_hz) or rate_hz < NATIVE_MIN_RATE_HZ:
+        raise ModelError(f"{what}: needs a stream at >= {NATIVE_MIN_RATE_HZ:g} Hz, got {rate_hz!r} Hz")
+
+
+def motor_command_activity(motor_cmd: np.ndarray, rate_hz: float, mask: np.ndarray | None = None) -> np.ndarray:
+    """(..., T, 4) motor commands at their native rate -> (..., 4) activity per motor.
+
+    Activity = std of the sample-to-sample change over the mean command, both over the
+    samples ``mask`` keeps (airborne; a difference counts when both of its samples are kept).
+    Dimensionless, so independent of the command unit and of the vehicle's weight. A motor
+    whose controller keeps correcting (a damaged or unbalanced propeller) is more active.
+    """
+    _check_native_rate(rate_hz, "motor_command_activity")
+    cmd = np.asarray(motor_cmd, dtype=np.float64)
+    d = np.diff(cmd, axis=-2)
+    if mask is not None:
+        m = np.asarray(mask, dtype=bool)
+        keep = m[1:] & m[:-1]
+        d = np.where(keep[:, None], d, np.nan)
+        cmd = np.where(m[:, None], cmd, np.nan)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        mean = np.nanmean(cmd, axis=-2)
+        return np.nanstd(d, axis=-2) / np.where(np.abs(mean) > 0, np.abs(mean), np.nan)
+
+
+def vibration_energy(accel: np.ndarray, rate_hz: float, band_hz: float = VIBRATION_BAND_HZ) -> np.ndarray:
+    """(..., T, 3) accelerations (any unit u, any frame) -> (...,) mean-square above ``band_hz`` in u².
+
+    Parseval on the real FFT of each axis (mean removed), summed over the axes: the power
+    of everything faster than the flight's manoeuvres. Rows with NaN must be cut by the
+    caller (a FFT cannot skip them): a NaN anywhere gives NaN.
+    """
+    _check_native_rate(rate_hz, "vibration_energy")
+    if not 0.0 < band_hz < rate_hz / 2.0:
+        raise ModelError(f"vibration_energy: band_hz must be in (0, {rate_hz / 2:g}) Hz, got {band_hz}")
+    a = np.asarray(accel, dtype=np.float64)
+    n = a.shape[-2]
+    if n < 4:
+        return np.full(a.shape[:-2], np.nan)
+    a = a - np.mean(a, axis=-2, keepdims=True)
+    spec = np.fft.rfft(a, axis=-2)
+    freq = np.fft.rfftfreq(n, d=1.0 / rate_hz)
+    w = np.where(freq >= band_hz, 2.0, 0.0)  # one-sided spectrum: both halves of each bin
+    if n % 2 == 0:
+        w[-1] = np.where(freq[-1] >= band_hz, 1.0, 0.0)  # the Nyquist bin has no mirror
+    power = np.sum(w[:, None] * np.abs(spec) ** 2, axis=-2) / (n * n)
+    return np.sum(power, axis=-1)

@@ -167,7 +167,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--linger", type=float, default=1.0, help="seconds to keep answering after the last message")
     p.add_argument("--requests", help="append one JSON line per command received (and how it was answered)")
     p.add_argument("--received", help="append one JSON line per message received from the other side")
-    p.add_argument("--log-level", default="INFO", choices=["DEBUG", "INFO", "WARNING", "ERROR"])
+    p.add_argument(
+        "--log-level", default="INFO", choices=["DEBUG", "INFO", "WARNING", "ERROR"], help="logging threshold (default INFO)"
+    )
     args = p.parse_args(argv)
     logging.basicConfig(level=args.log_level, stream=sys.stderr, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     frames = read_tlog(args.log)

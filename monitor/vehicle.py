@@ -27,6 +27,7 @@ import numpy as np
 
 from monitor.errors import ConfigError
 from monitor.esc import EscCurve
+from monitor.resources import shipped
 
 GRAVITY_M_S2 = 9.80665  # standard gravity (ISO 80000-3), PX4 CONSTANTS_ONE_G; the one definition
 
@@ -96,10 +97,6 @@ class VehicleConfig:
 
     # Derived arrays (cheap; the simulator caches what it needs).
     @property
-    def inertia_kg_m2(self) -> np.ndarray:
-        return np.diag(self.inertia_diag_kg_m2)
-
-    @property
     def rotor_positions_array_m(self) -> np.ndarray:
         return np.array(self.rotor_positions_frd_m, dtype=np.float64)
 
@@ -146,5 +143,6 @@ def quad_x_positions(arm_length_m: float) -> tuple[Vec3, Vec3, Vec3, Vec3]:
     return ((d, d, 0.0), (-d, -d, 0.0), (d, -d, 0.0), (-d, d, 0.0))
 
 
+# The repository root (a checkout's models/ lives there); shipped files are found through monitor.resources.
 REPO_ROOT = Path(__file__).resolve().parent.parent
-DEFAULT_VEHICLE = REPO_ROOT / "models" / "vehicle.yaml"
+DEFAULT_VEHICLE = shipped("vehicle.yaml")

@@ -7,17 +7,27 @@
 3. Diagnose real logs from ``--data``: the ArduPilot DataFlash log and, when
    the Crazyflie model is shipped, one healthy and one cut-propeller CrazyPAD
    flight.
+4. Fleet: a small simulated fleet (3 vehicles, one bending a propeller), the
+   logs above and the real logs into ``propwatch fleet ingest`` (Ray), then
+   ``propwatch fleet report``; prints the site's path.
 
-Each step runs the real command in a subprocess and prints what it said.
+Each step runs the real command in a subprocess and prints what it said, every
+warning included; every diagnosis also writes its ``--report`` (an HTML page and
+a PNG of the probability timeline and signals) under ``OUT/reports``, and the
+demo prints where.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import re
 import subprocess
 import sys
 from pathlib import Path
+
+from monitor.diagnose.engine import rotor_name
+from monitor.resources import shipped
 
 REPO = Path(__file__).resolve().parent.parent
 
@@ -34,12 +44,13 @@ def _verdict_line(res: dict) -> str:
     v = res.get("verdict")
     if not v:
         return f"no verdict: {res.get('reason')}"
-    probs = " ".join(f"{p:.2f}" for p in v["fault_probability"])
-    return f"label {v['label']}, faulty {v['faulty_propellers'] or 'none'}, P(fault) per propeller [{probs}], {res['windows']} windows"
+    probs = " ".join(f"{p['name']}={p['fault_probability']:.2f}" for p in res["propellers"])
+    faulty = ", ".join(rotor_name(n, i) for n, i in zip(v["faulty_names"], v["faulty_propellers"])) or "none"
+    return f"label {v['label']}, faulty {faulty}, P(faulty) {probs}, {res['windows']} windows"
 
 
-def _diagnose(log: Path, *extra: str) -> dict:
-    r = _propwatch("diagnose", str(log), "--json", *extra)
+def _diagnose(log: Path, reports: Path, *extra: str) -> dict:
+    r = _propwatch("diagnose", str(log), "--json", "--report", str(reports), *extra)
     try:
         res = json.loads(r.stdout)
     except json.JSONDecodeError:
@@ -47,8 +58,11 @@ def _diagnose(log: Path, *extra: str) -> dict:
             "error": (r.stderr or r.stdout).strip().splitlines()[-1] if (r.stderr or r.stdout).strip() else f"exit {r.returncode}"
         }
     print("  -> " + _verdict_line(res))
-    for w in res.get("warnings", [])[:3]:
+    for w in res.get("warnings", []):
         print(f"     warning: {w}")
+    for line in r.stderr.splitlines():
+        if m := re.match(r"report: (.+) and (.+)$", line):
+            print(f"     picture: {m.group(2)}\n     page:    {m.group(1)}")
     return res
 
 
@@ -79,7 +93,7 @@ def run(out: Path, data: Path, duration_s: float = 40.0) -> int:
     print("\n== 2. diagnose the simulated flights with models/classifier.onnx")
     for name, label, _ in cases:
         logs = sorted((out / name).glob("*.tlog"))
-        res = _diagnose(logs[0])
+        res = _diagnose(logs[0], out / "reports" / name)
         got = (res.get("verdict") or {}).get("label")
         ok = got == int(label)
         failures += 0 if ok else 1
@@ -89,28 +103,52 @@ def run(out: Path, data: Path, duration_s: float = 40.0) -> int:
     ardu = data / "ardupilot_log171" / "log171.bin"
     if ardu.is_file():
         print("  (an ArduCopter of unknown build: the paper quad's model, uncalibrated for it; read the warnings)")
-        _diagnose(ardu)
+        _diagnose(ardu, out / "reports")
     else:
         print(f"  (skipped: {ardu} not found)")
-    cf_model = REPO / "models" / "crazyflie-classifier.onnx"
+    cf_model = shipped("crazyflie-classifier.onnx")
     cp = data / "crazypad" / "motor"
     if cf_model.is_file() and cp.is_dir():
         for sub in ("normal_flight", "cut_propeller_M3_4mm_3.5mm_39.5mm"):
             files = sorted((cp / sub).glob("*.csv.gz"))
             if files:
                 # The vehicle YAML selects its own shipped model (models/crazyflie-classifier.onnx).
-                _diagnose(files[0], "--format", "crazypad", "--vehicle", str(REPO / "models" / "crazyflie.yaml"))
+                _diagnose(files[0], out / "reports" / sub, "--format", "crazypad", "--vehicle", str(shipped("crazyflie.yaml")))
     else:
         print("  (CrazyPAD skipped: model or data not found)")
-    print(f"\nsimulated logs and sidecars are in {out}")
+    fleet_step(out, data)
+    print(f"\nsimulated logs and sidecars are in {out}; reports (open the .html) in {out / 'reports'}")
     return 0 if failures == 0 else 1
+
+
+def fleet_step(out: Path, data: Path) -> None:
+    """4. The fleet view: a small simulated fleet, the demo's logs and the real logs into one database and site."""
+    from offline.fleet_sim import FleetSpec, write_fleet
+
+    print("\n== 4. fleet: ingest (Ray) into a DuckDB health database, then the static web report")
+    write_fleet(
+        out / "fleet-sim", FleetSpec(vehicles=3, flights=4, duration_s=20.0, faulty_vehicle=2, fault_from_flight=2, seed=7)
+    )
+    real = [data / "px4_ulog", data / "ardupilot_log171", data / "crazypad" / "motor" / "normal_flight"]
+    real += [data / "crazypad" / "motor" / "cut_propeller_M3_4mm_3.5mm_39.5mm"]
+    own = [out / "fleet-sim"] + [out / name for name in ("healthy", "prop3-bent", "prop1-cracked")]
+    paths = [str(p) for p in own + real if p.is_dir()]
+    db = out / "fleet.duckdb"
+    r = _propwatch("fleet", "ingest", *paths, "--db", str(db), "--format", "crazypad", "--vehicle-from-dir", "1", "--no-progress")
+    print("  " + (r.stdout.strip() or r.stderr.strip()[-400:]).replace("\n", "\n  "))
+    if r.returncode == 2:
+        return
+    r = _propwatch("fleet", "report", "--db", str(db), "--out", str(out / "fleet-site"))
+    print("  " + (r.stdout.strip() or r.stderr.strip()[-400:]))
+    if r.returncode == 0:
+        print(f"  fleet site: {out / 'fleet-site' / 'index.html'}")
 
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="python -m offline.demo", description=__doc__.splitlines()[0])
-    p.add_argument("--out", type=Path, default=REPO / "out" / "demo")
-    p.add_argument("--data", type=Path, default=REPO.parent / "shared" / "data")
-    p.add_argument("--duration-s", type=float, default=40.0)
+    p.add_argument("--out", type=Path, default=REPO / "out" / "demo", help="folder for logs and reports (default out/demo)")
+    p.add_argument("--data", type=Path, default=REPO.parent / "shared" / "data", help="real data (default ../shared/data)")
+    p.add_argument("--duration-s", type=float, default=40.0, help="seconds per simulated flight (default 40)")
     a = p.parse_args(argv)
     return run(a.out, a.data, a.duration_s)
 

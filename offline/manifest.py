@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import datetime as _dt
 import json
+import math
 import platform
 import subprocess
 from pathlib import Path
@@ -42,9 +43,24 @@ def write_manifest(path: str | Path, manifest: dict[str, Any]) -> Path:
     """Write JSON atomically (temp file then rename) so a crash never leaves half a manifest."""
     path = Path(path)
     tmp = path.with_suffix(path.suffix + ".tmp")
-    tmp.write_text(json.dumps(manifest, indent=2, sort_keys=True, default=_jsonable) + "\n", encoding="utf-8")
+    # Strict JSON: NaN/inf are not JSON (other parsers reject them); an undefined figure is null.
+    text = json.dumps(_finite(manifest), indent=2, sort_keys=True, default=_jsonable, allow_nan=False)
+    tmp.write_text(text + "\n", encoding="utf-8")
     tmp.replace(path)
     return path
+
+
+def _finite(o: Any) -> Any:
+    """A copy with every non-finite float (NaN, inf) replaced by None."""
+    if o is not None and not isinstance(o, (dict, list, tuple, str, int, float)):
+        o = _jsonable(o)  # numpy arrays and scalars, paths, dataclasses
+    if isinstance(o, float):
+        return o if math.isfinite(o) else None
+    if isinstance(o, dict):
+        return {k: _finite(v) for k, v in o.items()}
+    if isinstance(o, (list, tuple)):
+        return [_finite(v) for v in o]
+    return o
 
 
 def _jsonable(o: Any) -> Any:

@@ -15,9 +15,13 @@ from monitor.vehicle import REPO_ROOT, load_vehicle
 from offline.crazypad.data import DEFAULT_ROOT, cut_total_mm, load_manifest, select
 from offline.crazypad.vehicle import hover_cmd
 
-pytestmark = pytest.mark.skipif(
-    not (DEFAULT_ROOT / "manifest.csv").is_file(), reason=f"CrazyPAD data not found at {DEFAULT_ROOT} (../shared/data/crazypad)"
-)
+pytestmark = [
+    pytest.mark.realdata,
+    pytest.mark.skipif(
+        not (DEFAULT_ROOT / "manifest.csv").is_file(),
+        reason=f"CrazyPAD data not found at {DEFAULT_ROOT} (../shared/data/crazypad)",
+    ),
+]
 
 
 @pytest.fixture(scope="module")
@@ -80,7 +84,7 @@ def test_hover_command_lies_in_the_real_airborne_range(flights, vehicle):
 
 
 def test_calibration_names_a_cause_and_helps_held_out_flights(flights, vehicle):
-    from offline.crazypad.calibration import calibrate_steady
+    from offline.calibrate.fit import calibrate_steady
     from offline.crazypad.real import summarise
 
     for af in ("E8", "E9"):
@@ -98,7 +102,7 @@ def test_calibration_names_a_cause_and_helps_held_out_flights(flights, vehicle):
 
 def test_calibrated_vehicle_file_round_trips(flights, vehicle, tmp_path):
     from monitor.vehicle import load_vehicle_with_sources
-    from offline.crazypad.calibration import calibrate_steady
+    from offline.calibrate.fit import calibrate_steady
     from offline.crazypad.experiment import write_vehicle
     from offline.crazypad.real import summarise
 

@@ -93,7 +93,7 @@ def test_two_airframe_training_set_keeps_the_esc_curve_for_the_model(vehicle):
 def test_equivalent_speed_ratio_recovers_a_weak_rotor(vehicle):
     from dataclasses import replace
 
-    from offline.crazypad.calibration import equivalent_speed_ratios, predicted_commands
+    from offline.calibrate.fit import equivalent_speed_ratios, predicted_commands
 
     base = replace(vehicle, motor_efficiency=(0.95, 0.92, 1.05, 1.08))
     np.testing.assert_allclose(equivalent_speed_ratios(base, predicted_commands(base)[None]), 1.0, atol=1e-4)

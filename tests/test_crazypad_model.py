@@ -27,6 +27,7 @@ def test_shipped_model_meets_the_contract():
     assert (MODEL.with_suffix(".manifest.json")).is_file()
 
 
+@pytest.mark.realdata
 @pytest.mark.skipif(not SEVERE_CUT.is_file(), reason=f"CrazyPAD data not found at {DEFAULT_ROOT}")
 def test_diagnose_names_the_cut_propeller_with_bitcraze_numbers(capsys):
     from monitor.diagnose.cli import main
@@ -36,23 +37,25 @@ def test_diagnose_names_the_cut_propeller_with_bitcraze_numbers(capsys):
     out = json.loads(capsys.readouterr().out)
     assert code == 0
     names = [p["name"] for p in out["propellers"]]
-    assert names == ["M1", "M2", "M3", "M4"]  # CrazyPAD's numbering, in its order
-    assert [p["px4_rotor"] for p in out["propellers"]] == [1, 4, 2, 3]
-    assert out["verdict"]["faulty_propellers"] == [3]
-    assert out["verdict"]["label"] == 4  # label of "propeller 3 alone", in M numbering
+    assert names == ["M1", "M3", "M4", "M2"]  # CrazyPAD's names beside PX4 rotors 1..4
+    assert [p["px4_rotor"] for p in out["propellers"]] == [1, 2, 3, 4]
+    assert out["verdict"]["faulty_propellers"] == [2] and out["verdict"]["faulty_names"] == ["M3"]
+    assert out["verdict"]["label"] == 3  # label of "PX4 rotor 2 alone": one numbering everywhere
     faulty = [p["name"] for p in out["propellers"] if p["faulty"]]
     assert faulty == ["M3"]
     assert out["verdict"]["fault_probability"][names.index("M3")] > 0.9
 
 
+@pytest.mark.realdata
 @pytest.mark.skipif(not CONTROLLER_LOG.is_file(), reason=f"CrazyPAD data not found at {DEFAULT_ROOT}")
-def test_controller_logs_get_no_verdict_and_say_why(capsys):
-    """Controller-config flights carry no motor commands: the monitor must refuse, not guess."""
+def test_controller_logs_are_diagnosed_from_rebuilt_commands_and_say_so(capsys):
+    """Controller-config flights log no motor commands: the reader rebuilds them with the firmware
+    mixer (monitor.logs.mixers), the output says so, and this healthy flight is called healthy."""
     from monitor.diagnose.cli import main
 
     code = main(
         [str(CONTROLLER_LOG), "--format", "crazypad-controller", "--vehicle", str(VEHICLE), "--model", str(MODEL), "--json"]
     )
     out = json.loads(capsys.readouterr().out)
-    assert code == 1 and out["verdict"] is None
-    assert any("motor commands are not logged" in w for w in out["warnings"])
+    assert code == 0 and out["verdict"]["faulty_propellers"] == []
+    assert any("rebuilt from controller.cmd_thrust" in w for w in out["warnings"])

@@ -160,7 +160,8 @@ def synth_flight(
         if nan_window_s and nan_window_s[0] <= t < nan_window_s[1]:
             roll = float("nan")
         tb = boot0_s + t
-        add(t, mavlink.MAVLink_attitude_message(int(tb * 1000), roll, pitch, 0.3 + 0.01 * t, *rates).pack(ap))
+        yaw = math.remainder(0.3 + 0.01 * t, 2.0 * math.pi)  # ATTITUDE.yaw is in [-pi, pi], as PX4 sends it
+        add(t, mavlink.MAVLink_attitude_message(int(tb * 1000), roll, pitch, yaw, *rates).pack(ap))
     n_srv = int(duration_s * servo_hz)
     for k in range(n_srv):
         t = k / servo_hz + rng.uniform(0, 0.004)

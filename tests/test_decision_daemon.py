@@ -12,8 +12,8 @@ import pytest
 from pymavlink.dialects.v20 import common as mavlink
 from test_daemon_helpers import WALL_T0_S, synth_flight, toy_model, write_tlog
 
-from monitor.daemon.alerts import EventWriter
 from monitor.daemon.config import monitor_config_from_mapping
+from monitor.daemon.events import EventWriter
 from monitor.daemon.link import Link
 from monitor.daemon.pipeline import Pipeline
 from monitor.daemon.service import Daemon
@@ -80,9 +80,9 @@ def test_vibration_only_stream_is_used_and_the_status_says_so(tmp_path, model):
     frames = synth_flight(90.0, servo_hz=0.0) + vibration_frames(90.0, lambda t: 0.3 if t < 50.0 else 1.8)
     d, status, events = run_daemon(tmp_path, model, frames)
     assert any("classifier paused: motor missing" in s and "evidence live: vibration" in s for s in status), status
-    paused = [e for e in events if e["kind"] == "paused"]
+    paused = [e for e in events if e.get("event") == "paused"]
     assert paused and paused[0]["evidence_live"] == ["vibration"] and "motor" in paused[0]["reason"]
-    alerts = [e for e in events if e["kind"] == "decision"]
+    alerts = [e for e in events if e.get("kind") == "decision"]
     assert [(a["level"], a["faulty_propellers"], a["evidence"]) for a in alerts] == [("suspect", [], "vibration")]
     assert alerts[0]["t_s"] > BOOT0_S + 50.0
     assert d.report()["pipeline"]["classified"] == 0  # nothing invented for the missing motor stream
@@ -98,14 +98,14 @@ def test_nan_and_frozen_vibration_is_counted_never_an_alert(tmp_path, model):
     d, _, events = run_daemon(tmp_path, model, frames)
     rejected = d.report()["decision"]["vibration_rejected"]
     assert rejected["nan"] > 100 and rejected["frozen"] > 100, rejected
-    assert not [e for e in events if e["kind"] == "decision"], events
+    assert not [e for e in events if e.get("kind") == "decision"], events
 
 
 def test_a_stream_that_stops_pauses_the_decision_and_it_resumes(tmp_path, model):
     # SERVO_OUTPUT_RAW drops out for 3 s mid-flight (a hole in every stream): paused with the reason, then resumed.
     frames = synth_flight(40.0, hole_s=(20.0, 23.0))
     d, status, events = run_daemon(tmp_path, model, frames)
-    kinds = [e["kind"] for e in events if e["kind"] in ("paused", "resumed")]
+    kinds = [e["event"] for e in events if e.get("event") in ("paused", "resumed")]
     assert "paused" in kinds and "resumed" in kinds[kinds.index("paused") :], events
     assert any(s.startswith("classifier paused:") for s in status)
     assert np.isfinite(d.report()["latency_ms"]["p99"])
@@ -147,7 +147,7 @@ def replay_shipped(tmp_path, tlog):
     d = Daemon(cfg, Link(str(tlog), 191, 0.0), pipeline, EventWriter(events_path), StatusLog())
     d.run()
     events = [json.loads(x) for x in events_path.read_text().splitlines()] if events_path.exists() else []
-    return d, [e for e in events if e["kind"] == "decision"]
+    return d, [e for e in events if e.get("kind") == "decision"]
 
 
 @pytest.mark.slow

@@ -94,7 +94,7 @@ def test_report_writes_png_and_html(capsys, model, logs, tmp_path):
     html = (out / "f3.tlog.html").read_text()
     png = out / "f3.tlog.png"
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and png.stat().st_size > 10_000
-    assert "Label 4" in html and "f3.tlog.png" in html and "Airborne segments used" in html
+    assert "Verdict: label 4: propeller 3 faulty" in html and "f3.tlog.png" in html and "Airborne segments used" in html
 
 
 def test_outside_envelope_is_refused_not_classified(capsys, logs, tmp_path):

@@ -148,6 +148,40 @@ def test_same_spin_pair_without_yaw_signature_is_reported_ambiguous():
     rpm, rates = steady_window(u)
     ev = Evidence()
     ev.add(*window_balance(rpm, rates, GEOM, RATE_HZ), Priors())
-    v = HypothesisBank(Priors(), GEOM).posterior(ev)
-    names = [HYPOTHESES[k] for k in credible_set(v, 0.95)]
+    v = HypothesisBank(Priors(), GEOM).posterior(ev, set_prior=np.full(16, 1 / 16))  # evidence alone
+    names = [HYPOTHESES[k] for k in credible_set(v, 0.99)]
     assert () in names and (1, 2) in names and (3, 4) in names  # healthy, or either same-spin pair
+    ll = dict(zip(HYPOTHESES, v.log_likelihood))
+    # each same-spin pair explains the balance better than any single rotor or cross-spin pair does
+    assert min(ll[(1, 2)], ll[(3, 4)]) > max(ll[(1,)], ll[(2,)], ll[(3,)], ll[(4,)], ll[(1, 3)], ll[(2, 4)])
+    # with the monitor's prior (healthy as likely as all damage together) the verdict stays healthy
+    assert HYPOTHESES[HypothesisBank(Priors(), GEOM).posterior(ev).best] == ()
+
+
+def test_priors_follow_the_assumption_register():
+    from offline.sim.assumptions import REGISTER
+
+    def uniform_std(lo, hi):
+        return (hi - lo) / np.sqrt(12.0)
+
+    p, wide = Priors(), Priors.unmeasured_airframe()
+    # damaged-blade thrust loss at the paper quad's hover speed, drawn as the register draws it
+    rng = np.random.default_rng(0)
+    s2 = (VEHICLE.hover_omega_rad_s / VEHICLE.omega_max_rad_s) ** 2
+    loss = []
+    for k in ("bent", "cracked"):
+        lo, hi = REGISTER[f"{k}_thrust_loss_low_frac"], REGISTER[f"{k}_thrust_loss_high_frac"]
+        a, b = rng.uniform(lo.low, lo.high, 50_000), rng.uniform(hi.low, hi.high, 50_000)
+        loss.append(a + (b - a) * s2)
+    loss = np.concatenate(loss)
+    assert p.loss_mean == pytest.approx(loss.mean(), abs=0.01) and loss.std() <= p.loss_std <= 1.5 * loss.std()
+    # torque per thrust: both signs, and the register's range lies within 2 std
+    c = REGISTER["bent_torque_per_thrust_change_high_frac"]
+    assert c.low < 0 < c.high and max(-c.low, c.high) <= 2 * p.torque_per_thrust_std
+    # an unmeasured airframe: CG and motor spread at the register's ranges (speed spread doubles in thrust)
+    cg = REGISTER["cg_offset_frd_m"]
+    assert wide.cg_offset_std_m == pytest.approx(uniform_std(cg.low, cg.high), rel=0.02)
+    spread = REGISTER["motor_efficiency_spread_frac"]
+    assert wide.healthy_spread_std == pytest.approx(
+        2 * uniform_std(-(spread.low + spread.high) / 2, (spread.low + spread.high) / 2), rel=0.05
+    )

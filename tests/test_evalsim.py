@@ -244,11 +244,16 @@ def test_share_baseline_by_hand():
         omega2_shares(cmd, np.zeros(10, bool))
 
 
-def test_write_set_and_score_with_the_baseline(tmp_path):
+def test_cli_writes_a_set_that_scores_with_the_baseline_and_evaluate(tmp_path):
+    from offline.evalsim.cli import main as evalsim_main
     from offline.evalsim.score import read_tables, score, share_predictor
-    from offline.evalsim.sets import write_set
 
-    out = write_set("effectiveness", tmp_path / "eff", flights=4, seed=0, duration_s=8.0)
+    out = tmp_path / "eff"
+    args = ["--set", "effectiveness", "--out", str(out), "--flights", "4", "--seed", "0", "--duration-s", "8"]
+    assert evalsim_main(args) == 0
+    assert sorted(p.name for p in out.iterdir()) == sorted(
+        ["manifest.json"] + [f"effectiveness_{i:04d}.{e}" for i in range(4) for e in ("tlog", "json")]
+    )
     manifest = json.loads((out / "manifest.json").read_text())
     assert manifest["kind"] == "propwatch-evalsim-set" and manifest["evaluation_only"] is True
     assert manifest["seed"] == 0 and "git_revision" in manifest and "torque_per_thrust_change" in manifest["assumptions"]
@@ -308,3 +313,41 @@ def test_evalsim_shares_no_physics_or_controller_code_with_offline_sim():
             if n.startswith("offline.sim"):
                 assert any(n == a or n.startswith(a + ".") for a in allowed), f"{path} imports {n}"
             assert not n.startswith(("offline.dataset", "offline.classifier", "offline.propellers")), f"{path} imports {n}"
+
+
+def test_score_metrics_by_hand():
+    from offline.evalsim.score import score
+
+    truths = [
+        {"file": "a", "faulty_propellers": []},
+        {"file": "b", "faulty_propellers": [1]},
+        {"file": "c", "faulty_propellers": [2]},
+        {"file": "d", "faulty_propellers": [1, 2]},
+    ]
+    answers = {
+        "a": {
+            "faulty_propellers": [],
+            "fault_probability": [0.1, 0.2, 0.0, 0.0],
+            "hypotheses": [{"faulty_propellers": [], "probability": 1.0}],
+        },
+        "b": {
+            "faulty_propellers": [1],
+            "hypotheses": [{"faulty_propellers": [1], "probability": 0.6}, {"faulty_propellers": [1, 2], "probability": 0.4}],
+        },
+        "c": {"faulty_propellers": [1], "hypotheses": [{"faulty_propellers": [1], "probability": 1.0}]},
+        "d": None,  # the predictor refuses this flight: counted wrong, reported
+    }
+
+    def predictor(table):
+        if answers[table] is None:
+            raise ValueError("no verdict")
+        return answers[table]
+
+    s = score([(t, t["file"]) for t in truths], predictor, "fake").summary()
+    assert s["flights"] == 4 and s["exact_accuracy"] == 0.5
+    assert s["single_flights"] == 2 and s["single_accuracy"] == 0.5
+    assert s["by_label"] == {"1": 1.0, "2": 1.0, "3": 0.0, "6": 0.0}
+    assert s["truth_in_hypotheses"] == 0.5  # a and b of 4 (c's set misses, d gave none)
+    assert s["mean_set_size"] == pytest.approx(4 / 3)
+    assert s["healthy_mean_p_faulty"] == [0.1, 0.2, 0.0, 0.0]
+    assert s["failed"] == [("d", "ValueError: no verdict")]

@@ -2,7 +2,10 @@
 
 One job per module: ``config`` (the frozen settings), ``resampler`` (streaming
 zero-order hold onto the boot-clock grid), ``pipeline`` (messages -> classified
-steps; also used by ``propwatch diagnose``), ``alerts`` (rule, STATUSTEXT,
-events file), ``link`` (the MAVLink connection and everything we send),
-``sdnotify`` (systemd), ``service`` (the loop), ``cli`` (arguments, wiring).
+steps; also used by ``propwatch diagnose``), ``plausible`` (each signal's
+physical envelope), ``alerts`` (rule, STATUSTEXT), ``events`` (the guarded,
+retried events file), ``blind`` (saying when the monitor cannot see),
+``latency`` (fixed histogram), ``link`` (the MAVLink connection, signing,
+allow-lists and everything we send), ``sdnotify`` (systemd), ``service`` (the
+loop), ``cli`` (arguments, wiring).
 """

@@ -1,4 +1,4 @@
-"""The alert sinks (STATUSTEXT queue, events file) and the older consecutive-window rule.
+"""The STATUSTEXT queue (the events file is monitor/daemon/events.py) and the older consecutive-window rule.
 
 The daemon decides with ``monitor.decision.Decision`` (shared with
 ``propwatch diagnose``; ``alerts.rule: sequential``, the default). The rule
@@ -13,17 +13,15 @@ re-arms or silences it). STATUSTEXT is rate-limited on the same clock.
 
 from __future__ import annotations
 
-import json
 import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
 from monitor.daemon.config import AlertConfig
-from monitor.errors import ConfigError
+from monitor.daemon.events import EventWriter  # noqa: F401  (moved; kept importable from here)
 from monitor.labels import N_PROPS
 
 STATUSTEXT_MAX_CHARS = 50
@@ -74,8 +72,8 @@ class StatusTextQueue:
         self.limit = RateLimiter(min_interval_s, clock)
         self.critical_threshold = critical_threshold
         self._pending: dict[int, float] = {}
-
         self._texts: dict[str, int] = {}  # decision announcements: text -> severity
+        self._sent_severity = 99  # MAV_SEVERITY of the last text sent (none yet: any is more severe)
 
     def add(self, alert: Alert) -> None:
         for p in alert.faulty_propellers:
@@ -86,16 +84,27 @@ class StatusTextQueue:
         self._texts[text] = min(severity, self._texts.get(text, severity))
 
     def due(self) -> tuple[str, int] | None:
-        """(text, severity) to send now, or None (nothing pending, or too soon)."""
-        if not (self._pending or self._texts) or not self.limit.allow():
+        """(text, severity) to send now, or None (nothing pending, or too soon).
+
+        An announcement more severe than the last text sent (suspect NOTICE, then fault WARNING, then
+        CRITICAL) does not wait for the rate limit: a fault must not sit behind its own suspect notice.
+        That is at most two extra texts per interval (severity only rises until a text goes out normally).
+        """
+        if not (self._pending or self._texts):
             return None
+        if not self.limit.allow():
+            if not (self._texts and min(self._texts.values()) < self._sent_severity):
+                return None
+            self.limit.restart()
         if self._texts:
             text = min(self._texts, key=lambda t: self._texts[t])  # MAV_SEVERITY: lower is more severe
-            return text, self._texts.pop(text)
+            self._sent_severity = self._texts.pop(text)
+            return text, self._sent_severity
         worst = max(self._pending.values())
         text = statustext(self._pending)
         self._pending = {}
-        return text, (MAV_SEVERITY_CRITICAL if worst >= self.critical_threshold else MAV_SEVERITY_WARNING)
+        self._sent_severity = MAV_SEVERITY_CRITICAL if worst >= self.critical_threshold else MAV_SEVERITY_WARNING
+        return text, self._sent_severity
 
 
 class AlertRule:
@@ -149,29 +158,6 @@ class RateLimiter:
         self._last = now
         return True
 
-
-class EventWriter:
-    """One JSON line per alert, flushed at once so a crash loses nothing already decided."""
-
-    def __init__(self, path: str | Path | None):
-        self.path = Path(path) if path else None
-        self._fh = None
-        if self.path is not None:
-            try:
-                self.path.parent.mkdir(parents=True, exist_ok=True)
-                self._fh = self.path.open("a", encoding="utf-8")
-            except OSError as exc:
-                raise ConfigError(f"{self.path}: cannot open the events file: {exc.strerror or exc}") from exc
-
-    def write(self, alert: Alert) -> None:
-        self.write_event(alert.event())
-
-    def write_event(self, event: dict) -> None:
-        if self._fh is not None:
-            self._fh.write(json.dumps(event) + "\n")
-            self._fh.flush()
-
-    def close(self) -> None:
-        if self._fh is not None:
-            self._fh.close()
-            self._fh = None
+    def restart(self) -> None:
+        """Count an event sent now (outside ``allow``): the next interval starts here."""
+        self._last = self.clock()

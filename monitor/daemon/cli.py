@@ -10,14 +10,16 @@ a bad config, model or connection (via ``monitor.cli``).
 from __future__ import annotations
 
 import argparse
+import gc
 import logging
 import signal
 import sys
 import time
+from pathlib import Path
 
-from monitor.daemon.alerts import EventWriter
-from monitor.daemon.config import load_monitor_config
-from monitor.daemon.link import Link
+from monitor.daemon.config import MonitorConfig, load_monitor_config, parse_address, parse_source
+from monitor.daemon.events import EventWriter
+from monitor.daemon.link import Link, LinkGuard, read_signing_key
 from monitor.daemon.pipeline import Pipeline
 from monitor.daemon.sdnotify import Notifier
 from monitor.daemon.service import Daemon
@@ -36,11 +38,26 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument("--config", help="monitor YAML (see deploy/monitor.yaml); defaults for every key")
     p.add_argument("--events", help="append one JSON line per alert here (overrides events_path)")
     p.add_argument("--model", help="classifier ONNX (overrides model_path)")
-    p.add_argument("--vehicle", help="vehicle YAML whose ESC curve overrides the model's")
+    p.add_argument(
+        "--vehicle", help="vehicle YAML whose ESC curve overrides the model's, or a `propwatch adapt` folder (its model too)"
+    )
     p.add_argument("--report", help="write counters and latency percentiles as JSON at exit")
     p.add_argument("--tlog-speed", type=float, help="for a .tlog: 1 = recorded pace, 0 = as fast as possible")
-    p.add_argument("--log-level", default="INFO", choices=["DEBUG", "INFO", "WARNING", "ERROR"])
+    p.add_argument(
+        "--log-level", default="INFO", choices=["DEBUG", "INFO", "WARNING", "ERROR"], help="logging threshold (default INFO)"
+    )
     return p.parse_args(argv)
+
+
+def guard(cfg: MonitorConfig) -> LinkGuard:
+    c = cfg.link
+    return LinkGuard(
+        signing_key=read_signing_key(c.signing_key_path) if c.signing_key_path else None,
+        signing_link_id=c.signing_link_id,
+        allow_addresses=tuple(parse_address(a) for a in c.allow_addresses),
+        allow_sources=tuple(parse_source(s) for s in c.allow_sources),
+        max_peers=c.max_peers,
+    )
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -49,12 +66,16 @@ def main(argv: list[str] | None = None) -> int:
     logging.basicConfig(level=args.log_level, stream=sys.stderr, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     cfg = load_monitor_config(args.config)
     model_path = args.model or cfg.model_path
+    vehicle = args.vehicle or cfg.vehicle_path
+    if vehicle and Path(vehicle).is_dir():  # a `propwatch adapt` folder: its model and calibrated vehicle
+        model_path = args.model or str(Path(vehicle) / "classifier.onnx")
+        vehicle = str(Path(vehicle) / "vehicle.yaml")
     classifier = Classifier(model_path, threads=cfg.inference.threads)
-    esc = choose_esc(classifier, args.vehicle or cfg.vehicle_path)
+    esc = choose_esc(classifier, vehicle)
     pipeline = Pipeline(classifier, cfg, esc)
     tlog_speed = cfg.link.tlog_speed if args.tlog_speed is None else args.tlog_speed
-    link = Link(args.connect, cfg.link.component_id, tlog_speed, cfg.link.system_id or None)
-    events = EventWriter(args.events or cfg.events_path or None)
+    link = Link(args.connect, cfg.link.component_id, tlog_speed, cfg.link.system_id or None, guard(cfg))
+    events = EventWriter(args.events or cfg.events_path or None, cfg.blind.events_retry_s, cfg.blind.events_backlog)
     daemon = Daemon(cfg, link, pipeline, events, Notifier())
 
     def on_signal(signum, _frame):
@@ -64,6 +85,9 @@ def main(argv: list[str] | None = None) -> int:
     signal.signal(signal.SIGTERM, on_signal)
     signal.signal(signal.SIGINT, on_signal)
     log.info("start-up took %.3f s", time.monotonic() - started)
+    # Everything loaded so far (model, dialect tables) lives until exit: keep it out of the collector's
+    # full passes, which would otherwise walk it in the middle of a step.
+    gc.freeze()
     try:
         return daemon.run()
     finally:

@@ -12,7 +12,7 @@ from pathlib import Path
 from monitor.config import from_mapping, load_dataclass
 from monitor.decision import DecisionConfig
 from monitor.errors import ConfigError
-from monitor.vehicle import REPO_ROOT
+from monitor.resources import shipped
 
 MOTOR_SOURCES = ("servo", "actuator", "esc")
 ALERT_RULES = ("sequential", "consecutive")
@@ -22,6 +22,38 @@ LANDED_STATE_MODES = ("auto", "required", "ignore")
 def _check(cond: bool, key: str, msg: str) -> None:
     if not cond:
         raise ConfigError(f"{key}: {msg}")
+
+
+def _within(value: float, lo: float, hi: float, key: str, lo_open: bool = False) -> None:
+    """Every numeric key has finite bounds: a typo such as 1e9 s must not pass as 'never'."""
+    ok = (lo < value if lo_open else lo <= value) and value <= hi
+    _check(ok, key, f"must be in {'(' if lo_open else '['}{lo:g}, {hi:g}], got {value!r}")
+
+
+def parse_source(text: str) -> tuple[int | None, int | None]:
+    """``"1/1"`` -> (1, 1); ``"1/*"`` -> (1, None): a mavlink-router style SYSID/COMPID filter."""
+    parts = str(text).split("/")
+    try:
+        if len(parts) != 2:
+            raise ValueError
+        ids = tuple(None if p.strip() == "*" else int(p) for p in parts)
+    except ValueError:
+        raise ConfigError(f"link.allow_sources: {text!r} is not SYSID/COMPID (e.g. 1/1 or 1/*)") from None
+    if any(i is not None and not 0 <= i <= 255 for i in ids):
+        raise ConfigError(f"link.allow_sources: {text!r}: ids are 0..255")
+    return ids  # type: ignore[return-value]
+
+
+def parse_address(text: str) -> tuple[str, int | None]:
+    """``"127.0.0.1"`` -> (host, None) any port; ``"127.0.0.1:14580"`` -> (host, port)."""
+    host, _, port = str(text).partition(":")
+    if not host:
+        raise ConfigError(f"link.allow_addresses: {text!r} has no host")
+    if not port:
+        return host, None
+    if not port.isdigit() or not 0 < int(port) < 65536:
+        raise ConfigError(f"link.allow_addresses: {text!r}: port must be 1..65535")
+    return host, int(port)
 
 
 @dataclass(frozen=True)
@@ -37,15 +69,35 @@ class LinkConfig:
     min_rate_fraction: float = 0.8  # warn below this share of the 20 Hz grid rate
     link_timeout_s: float = 3.0  # no autopilot HEARTBEAT for this long = link lost
     tlog_speed: float = 1.0  # .tlog input: 1 = recorded pace, 0 = as fast as it reads
+    # MAVLink 2 signing (pymavlink's): a file holding the 32-byte secret key, raw or as 64 hex digits.
+    # When set, every incoming frame must carry a valid signature (unsigned and MAVLink 1 frames are
+    # refused) and everything we send is signed. '' = off.
+    signing_key_path: str = ""
+    signing_link_id: int = 1  # our link id in the signature (0..255)
+    # Source allow-lists, mavlink-router style; empty = any. Addresses "HOST" or "HOST:PORT" (UDP/TCP
+    # peers); sources "SYSID/COMPID" with * for any ("1/1", "1/*"). Anything else is dropped and counted.
+    allow_addresses: tuple[str, ...] = ()
+    allow_sources: tuple[str, ...] = ()
+    max_peers: int = 8  # udpin: distinct sender addresses remembered for the report (replies go only to the autopilot's)
 
     def __post_init__(self) -> None:
         _check(0 <= self.system_id <= 255, "link.system_id", "must be 0..255")
+        _check(0 <= self.autopilot_component_id <= 255, "link.autopilot_component_id", "must be 0..255")
         _check(1 <= self.component_id <= 255, "link.component_id", "must be 1..255")
-        _check(self.heartbeat_rate_hz > 0, "link.heartbeat_rate_hz", "must be > 0")
+        _within(self.heartbeat_rate_hz, 0.0, 10.0, "link.heartbeat_rate_hz", lo_open=True)
         _check(self.stream_rate_hz >= 20.0, "link.stream_rate_hz", "must be >= 20 (the classifier's grid)")
-        _check(0 < self.min_rate_fraction <= 1, "link.min_rate_fraction", "must be in (0, 1]")
-        _check(self.rate_check_period_s > 0 and self.link_timeout_s > 0, "link", "periods must be > 0")
-        _check(self.tlog_speed >= 0, "link.tlog_speed", "must be >= 0")
+        _within(self.stream_rate_hz, 20.0, 1000.0, "link.stream_rate_hz")
+        _within(self.request_retry_s, 0.1, 3600.0, "link.request_retry_s")
+        _within(self.rate_check_period_s, 0.0, 3600.0, "link.rate_check_period_s", lo_open=True)
+        _within(self.min_rate_fraction, 0.0, 1.0, "link.min_rate_fraction", lo_open=True)
+        _within(self.link_timeout_s, 0.0, 3600.0, "link.link_timeout_s", lo_open=True)
+        _within(self.tlog_speed, 0.0, 1000.0, "link.tlog_speed")
+        _check(0 <= self.signing_link_id <= 255, "link.signing_link_id", "must be 0..255")
+        _within(self.max_peers, 1, 1024, "link.max_peers")
+        for a in self.allow_addresses:
+            parse_address(a)
+        for s in self.allow_sources:
+            parse_source(s)
 
 
 @dataclass(frozen=True)
@@ -60,6 +112,7 @@ class InputConfig:
         _check(self.motor_source in MOTOR_SOURCES, "input.motor_source", f"must be one of {MOTOR_SOURCES}")
         _check(all(1 <= c <= 32 for c in self.motor_outputs), "input.motor_outputs", "channels are 1..32")
         _check(len(set(self.motor_outputs)) == 4, "input.motor_outputs", "must name four different outputs")
+        _check(0 <= self.battery_id <= 255, "input.battery_id", "must be 0..255 (BATTERY_STATUS.id)")
         _check(self.landed_state in LANDED_STATE_MODES, "input.landed_state", f"must be one of {LANDED_STATE_MODES}")
 
 
@@ -72,10 +125,12 @@ class ResampleConfig:
     reorder_s: float = 0.0  # extra wait for reordering within one stream (PX4 sends each in order)
 
     def __post_init__(self) -> None:
-        _check(self.rate_hz > 0, "resample.rate_hz", "must be > 0")
+        _within(self.rate_hz, 0.0, 1000.0, "resample.rate_hz", lo_open=True)
         _check(self.max_gap_s >= 1.0 / self.rate_hz, "resample.max_gap_s", "must be at least one grid period")
-        _check(self.state_max_age_s > 0 and self.battery_max_age_s > 0, "resample", "ages must be > 0")
-        _check(self.reorder_s >= 0, "resample.reorder_s", "must be >= 0")
+        _within(self.max_gap_s, 0.0, 10.0, "resample.max_gap_s")
+        _within(self.state_max_age_s, 0.0, 60.0, "resample.state_max_age_s", lo_open=True)
+        _within(self.battery_max_age_s, 0.0, 600.0, "resample.battery_max_age_s", lo_open=True)
+        _within(self.reorder_s, 0.0, 1.0, "resample.reorder_s")
 
 
 @dataclass(frozen=True)
@@ -85,9 +140,9 @@ class InferenceConfig:
     threads: int = 1
 
     def __post_init__(self) -> None:
-        _check(self.window > 0, "inference.window", "must be > 0")
-        _check(self.every_k_steps >= 1, "inference.every_k_steps", "must be >= 1")
-        _check(self.threads >= 1, "inference.threads", "must be >= 1")
+        _within(self.window, 1, 10_000, "inference.window")
+        _within(self.every_k_steps, 1, 10_000, "inference.every_k_steps")
+        _within(self.threads, 1, 64, "inference.threads")
 
 
 @dataclass(frozen=True)
@@ -120,7 +175,64 @@ class AlertConfig:
         _check(0 < self.threshold <= 1, "alerts.threshold", "must be in (0, 1]")
         _check(self.threshold <= self.critical_threshold <= 1, "alerts.critical_threshold", "must be in [threshold, 1]")
         _check(self.consecutive >= 1, "alerts.consecutive", "must be >= 1")
-        _check(self.refractory_s >= 0 and self.statustext_min_interval_s >= 0, "alerts", "intervals must be >= 0")
+        _within(self.consecutive, 1, 100_000, "alerts.consecutive")
+        _within(self.refractory_s, 0.0, 86_400.0, "alerts.refractory_s")
+        _within(self.statustext_min_interval_s, 0.0, 3600.0, "alerts.statustext_min_interval_s")
+
+    def decision(self) -> DecisionConfig:
+        """The sequential rule's settings; its own checks bound every number (finite, named alerts.*)."""
+        return DecisionConfig(
+            false_alarms_per_hour=self.false_alarms_per_hour,
+            suspect_false_alarms_per_hour=self.suspect_false_alarms_per_hour,
+            aggressive_tilt_deg=self.aggressive_tilt_deg,
+            aggressive_rate_deg_s=self.aggressive_rate_deg_s,
+            collective_step_fraction=self.collective_step_fraction,
+            battery_sag_fraction=self.battery_sag_fraction,
+            min_thrust_loss=self.min_thrust_loss,
+            calibration_path=self.calibration_path,
+        )
+
+
+@dataclass(frozen=True)
+class PlausibleConfig:
+    """Physical envelope of each signal: a sample outside it is never evidence (dropped and counted)."""
+
+    attitude_max_rad: float = 3.1416  # |roll|, |yaw| <= pi (MAVLink ATTITUDE is in [-pi, pi]); |pitch| <= pi/2
+    rate_max_rad_s: float = 35.0  # body rates within the gyro range (PX4 IMUs: 2000 deg/s = 34.9 rad/s)
+    pwm_min_us: float = 1000.0  # motor commands in [min, max] (PX4 PWM_MAIN_MINn/MAXn) ...
+    pwm_max_us: float = 2000.0
+    pwm_disarmed_us: float = 900.0  # ... or exactly the disarmed value (PWM_MAIN_DISn)
+    rpm_max: float = 60_000.0  # motor_source esc: 0 <= rpm <= this
+    battery_max_v: float = 100.0
+    frozen_s: float = 1.0  # a fast stream whose values stay bit-identical this long is a frozen channel
+
+    def __post_init__(self) -> None:
+        _within(self.attitude_max_rad, 3.0, 3.2, "plausible.attitude_max_rad")
+        _within(self.rate_max_rad_s, 1.0, 100.0, "plausible.rate_max_rad_s")
+        _within(self.pwm_min_us, 0.0, 3000.0, "plausible.pwm_min_us")
+        _within(self.pwm_max_us, self.pwm_min_us, 3000.0, "plausible.pwm_max_us", lo_open=True)
+        _within(self.pwm_disarmed_us, 0.0, 3000.0, "plausible.pwm_disarmed_us")
+        _within(self.rpm_max, 1.0, 500_000.0, "plausible.rpm_max")
+        _within(self.battery_max_v, 1.0, 1000.0, "plausible.battery_max_v")
+        _within(self.frozen_s, 0.1, 60.0, "plausible.frozen_s")
+
+
+@dataclass(frozen=True)
+class BlindConfig:
+    """When the monitor cannot see (no motor data, frozen clock, ...) it says so: STATUS, events, STATUSTEXT NOTICE."""
+
+    after_s: float = 1.0  # data missing or implausible this long (monotonic) = blind
+    frozen_clock_s: float = 1.0  # autopilot messages keep coming but its boot clock stands still this long
+    notice_min_interval_s: float = 10.0  # rate limit of the BLIND / recovered NOTICEs to the ground station
+    events_retry_s: float = 5.0  # a failed events-file write is retried this often (the line is kept)
+    events_backlog: int = 1000  # lines kept for retry; older ones are dropped and counted
+
+    def __post_init__(self) -> None:
+        _within(self.after_s, 0.0, 60.0, "blind.after_s")
+        _within(self.frozen_clock_s, 0.1, 60.0, "blind.frozen_clock_s")
+        _within(self.notice_min_interval_s, 0.0, 3600.0, "blind.notice_min_interval_s")
+        _within(self.events_retry_s, 0.1, 3600.0, "blind.events_retry_s")
+        _within(self.events_backlog, 1, 100_000, "blind.events_backlog")
 
     def decision(self) -> DecisionConfig:
         return DecisionConfig(
@@ -137,7 +249,7 @@ class AlertConfig:
 
 @dataclass(frozen=True)
 class MonitorConfig:
-    model_path: str = str(REPO_ROOT / "models" / "classifier.onnx")
+    model_path: str = str(shipped("classifier.onnx"))
     vehicle_path: str = ""  # optional vehicle YAML whose ESC curve overrides the model's
     events_path: str = ""  # JSON lines, one per alert ('' = none; --events overrides)
     link: LinkConfig = field(default_factory=LinkConfig)
@@ -145,6 +257,8 @@ class MonitorConfig:
     resample: ResampleConfig = field(default_factory=ResampleConfig)
     inference: InferenceConfig = field(default_factory=InferenceConfig)
     alerts: AlertConfig = field(default_factory=AlertConfig)
+    plausible: PlausibleConfig = field(default_factory=PlausibleConfig)
+    blind: BlindConfig = field(default_factory=BlindConfig)
 
 
 def load_monitor_config(path: str | Path | None) -> MonitorConfig:

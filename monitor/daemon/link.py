@@ -7,6 +7,14 @@ method here that could send anything that changes the flight.
 URLs: ``udpin:HOST:PORT``, ``udpout:HOST:PORT``, ``tcp:HOST:PORT``, a serial
 device with its baud rate (``/dev/ttyAMA0,921600``), or a ``.tlog`` file
 (played at its recorded pace times ``tlog_speed``; 0 = as fast as it reads).
+
+Trust (``LinkGuard``): with a signing key, pymavlink's MAVLink 2 signing
+verifies every incoming frame (unsigned, MAVLink 1 and badly signed frames
+come out as bad data) and signs everything we send. Source allow-lists by
+address and by SYSID/COMPID drop the rest, counted. On ``udpin`` nothing is
+sent before the autopilot is known, then only to the address its HEARTBEAT
+came from; other senders are remembered in a bounded list for the report,
+never answered.
 """
 
 from __future__ import annotations
@@ -15,7 +23,10 @@ import logging
 import os
 import select
 import time
+from collections import Counter, OrderedDict
 from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 os.environ.setdefault("MAVLINK20", "1")  # ESC_STATUS (id 291) exists only in MAVLink 2 frames
@@ -24,6 +35,7 @@ os.environ.setdefault("MAVLINK_DIALECT", "common")  # mavutil's default 'all' co
 from pymavlink import mavutil  # noqa: E402
 
 from monitor.errors import ConfigError  # noqa: E402
+from monitor.resample import US_PER_S  # noqa: E402
 
 log = logging.getLogger("propwatch.monitor.link")
 
@@ -34,6 +46,44 @@ MAV_STATE_ACTIVE = 4
 NAMED_VALUE_MAX_CHARS = 10
 LOG_SUFFIXES = (".tlog", ".mavlink")
 REOPEN_PERIOD_S = 1.0
+UDP_MAX_PACKET = 65535
+SIGNING_KEY_BYTES = 32
+MAX_SIGNING_STREAMS = 256  # pymavlink keeps one timestamp per (link, sys, comp) it ever saw: keep it bounded
+
+
+@dataclass(frozen=True)
+class LinkGuard:
+    """Who is trusted: a signing key (32 bytes) and allow-lists; the defaults trust everyone, as before."""
+
+    signing_key: bytes | None = None
+    signing_link_id: int = 1
+    allow_addresses: tuple[tuple[str, int | None], ...] = ()  # (host, port or None = any)
+    allow_sources: tuple[tuple[int | None, int | None], ...] = ()  # (sysid, compid), None = any
+    max_peers: int = 8
+
+    def address_ok(self, addr: tuple[str, int]) -> bool:
+        return not self.allow_addresses or any(h == addr[0] and p in (None, addr[1]) for h, p in self.allow_addresses)
+
+    def source_ok(self, sys_id: int, comp_id: int) -> bool:
+        return not self.allow_sources or any(s in (None, sys_id) and c in (None, comp_id) for s, c in self.allow_sources)
+
+
+def read_signing_key(path: str | Path) -> bytes:
+    """A key file holds the 32-byte secret: raw bytes, or 64 hex digits (whitespace ignored)."""
+    path = Path(path)
+    try:
+        raw = path.read_bytes()
+    except OSError as exc:
+        raise ConfigError(f"{path}: cannot read the signing key: {exc.strerror or exc}") from None
+    if len(raw) == SIGNING_KEY_BYTES:
+        return raw
+    try:
+        key = bytes.fromhex(raw.decode("ascii").strip())
+    except (UnicodeDecodeError, ValueError):
+        key = b""
+    if len(key) != SIGNING_KEY_BYTES:
+        raise ConfigError(f"{path}: a signing key is 32 raw bytes or 64 hex digits, got {len(raw)} bytes")
+    return key
 
 
 def split_serial(url: str) -> tuple[str, int | None]:
@@ -48,7 +98,14 @@ def split_serial(url: str) -> tuple[str, int | None]:
 
 
 class Link:
-    def __init__(self, url: str, component_id: int, tlog_speed: float = 1.0, system_id: int | None = None):
+    def __init__(
+        self,
+        url: str,
+        component_id: int,
+        tlog_speed: float = 1.0,
+        system_id: int | None = None,
+        guard: LinkGuard | None = None,
+    ):
         self.url = url
         self.component_id = component_id
         self.is_log = url.lower().endswith(LOG_SUFFIXES)
@@ -63,6 +120,13 @@ class Link:
         self._system_id = system_id
         self._next_open = 0.0
         self._open_failures = 0
+        self.guard = guard or LinkGuard()
+        self.is_udpin = url.startswith(("udpin:", "udp:"))
+        self.peers: OrderedDict[tuple[str, int], int] = OrderedDict()  # udpin senders, bounded, for the report
+        self.rejected: Counter = Counter()  # why frames/datagrams were dropped
+        self._batch_addr: tuple[str, int] | None = None
+        self._autopilot_addr: tuple[str, int] | None = None
+        self._signing: Any = None
         if self.is_log:
             self.open()
         else:
@@ -89,7 +153,18 @@ class Link:
             raise ConfigError(f"--connect {self.url}: {exc}") from exc
         if not self.is_log:
             self.conn.mav.robust_parsing = True
-        log.info("link open: %s", self.url)
+            if self.guard.signing_key is not None:
+                self.conn.setup_signing(
+                    self.guard.signing_key, sign_outgoing=True, allow_unsigned_callback=None, link_id=self.guard.signing_link_id
+                )
+                self._signing = self.conn.mav.signing  # its counters outlive a reopen's connection
+            if self.is_udpin:
+                self.conn.clients = set()  # replies go to the autopilot's address only, once it is known
+                if self._autopilot_addr is not None:
+                    self.conn.clients.add(self._autopilot_addr)
+        elif self.guard.signing_key is not None:
+            log.warning("%s: a recorded log is read without signature checks (its timestamps are in the past)", self.url)
+        log.info("link open: %s%s", self.url, " (MAVLink 2 signing on)" if self.guard.signing_key else "")
 
     def _try_open(self) -> None:
         try:
@@ -137,8 +212,10 @@ class Link:
         ready, _, _ = select.select([fd], [], [], timeout_s)
         if not ready:
             return []
-        data = self.conn.recv(4096)
+        data = self._recv()
         received = time.perf_counter()
+        if data is None:
+            return []
         if not data:
             if self.is_tcp:  # readable and empty: the peer closed the connection
                 raise ConnectionError(f"{self.url}: connection closed by the peer")
@@ -151,7 +228,69 @@ class Link:
         except Exception as exc:  # noqa: BLE001 - pymavlink raises MAVError and struct errors on garbage
             log.debug("parse error: %s", exc)
             return [(_BadData(str(exc)), received)]
+        if self._signing is not None:
+            self.rejected["invalid or missing signature"] += sum(
+                1 for m in msgs if m.get_type() == "BAD_DATA" and "signature" in str(getattr(m, "reason", ""))
+            )
+            if len(self._signing.stream_timestamps) > MAX_SIGNING_STREAMS:
+                self._prune_signing_streams()
+        if self.guard.allow_sources:
+            kept = [
+                m for m in msgs if m.get_type() == "BAD_DATA" or self.guard.source_ok(m.get_srcSystem(), m.get_srcComponent())
+            ]
+            self.rejected["source not allowed"] += len(msgs) - len(kept)
+            msgs = kept
         return [(m, received) for m in msgs]
+
+    def _recv(self) -> bytes | None:
+        """One read; for UDP our own recvfrom, so the sender's address is checked and never added as a peer."""
+        if not self.is_udpin:
+            return self.conn.recv(4096)
+        try:
+            data, addr = self.conn.port.recvfrom(UDP_MAX_PACKET)
+        except (BlockingIOError, InterruptedError):
+            return None
+        if not self.guard.address_ok(addr):
+            self.rejected["address not allowed"] += 1
+            return None
+        self._batch_addr = addr
+        self.peers[addr] = self.peers.pop(addr, 0) + 1
+        while len(self.peers) > self.guard.max_peers:
+            self.peers.popitem(last=False)
+            self.rejected["peers forgotten"] += 1
+        return data
+
+    def autopilot_seen(self) -> None:
+        """The message being handled is the autopilot's HEARTBEAT: udpin answers that address, and only it."""
+        if not self.is_udpin or self.conn is None or self._batch_addr is None:
+            return
+        if self._batch_addr != self._autopilot_addr:
+            if self._autopilot_addr is not None:
+                log.warning("autopilot now at %s:%d (was %s:%d)", *self._batch_addr, *self._autopilot_addr)
+            self._autopilot_addr = self._batch_addr
+            self.conn.clients = {self._batch_addr}
+            self.conn.clients_last_alive = {}
+
+    def _prune_signing_streams(self) -> None:
+        """pymavlink records a timestamp for every (link, sys, comp) that sent a signed-looking frame,
+        valid or not: keep the autopilot's (replay protection) and forget the rest."""
+        keep = self._system_id
+        ts = self._signing.stream_timestamps
+        self._signing.stream_timestamps = {k: v for k, v in ts.items() if k[1] == keep}
+        self.rejected["signing streams forgotten"] += len(ts) - len(self._signing.stream_timestamps)
+
+    def stats(self) -> dict:
+        out: dict[str, Any] = {"rejected": dict(self.rejected), "peers_remembered": len(self.peers)}
+        signing = self._signing
+        if signing is not None:
+            out["signing"] = {
+                "good": signing.goodsig_count,
+                "bad": signing.badsig_count,
+                "refused": self.rejected["invalid or missing signature"],
+            }
+        if self._autopilot_addr is not None:
+            out["autopilot_address"] = f"{self._autopilot_addr[0]}:{self._autopilot_addr[1]}"
+        return out
 
     def _read_log(self, timeout_s: float) -> list[tuple[Any, float]]:
         if self._pending is None:
@@ -203,7 +342,7 @@ class Link:
         )
 
     def request_message_interval(self, target_system: int, target_component: int, message_id: int, rate_hz: float) -> None:
-        interval_us = int(round(1e6 / rate_hz))
+        interval_us = int(round(US_PER_S / rate_hz))
         self._send(
             lambda mav: mav.command_long_encode(
                 target_system,

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections import deque
 from dataclasses import dataclass
 from typing import Any
 
@@ -29,6 +30,7 @@ import numpy as np
 
 from monitor import mavlink_decode as md
 from monitor.daemon.config import MonitorConfig
+from monitor.daemon.plausible import Plausibility
 from monitor.daemon.resampler import GridStep, StreamingHold, StreamSpec
 from monitor.decision import StepInputs
 from monitor.esc import EscCurve
@@ -48,6 +50,7 @@ class StepResult:
     label_probability: np.ndarray | None = None  # (16,)
     latency_s: float | None = None  # from the message that completed the step to its classification
     reason: str = ""  # why an invalid step is invalid
+    data_ok: bool = True  # attitude and motor data present and plausible (airborne or not)
     inputs: StepInputs | None = None  # flight state for the decision's regime tracker
 
     @property
@@ -57,6 +60,14 @@ class StepResult:
 
 def _us(seconds: float) -> int:
     return int(round(seconds * US_PER_S))
+
+
+# A boot clock that goes back by more than this is a discontinuity (the hold restarts); beyond
+# REBOOT_BACK_US, or landing below REBOOT_BOOT_US, it is read as an autopilot reboot.
+CLOCK_BACK_US = 1_000_000
+REBOOT_BACK_US = 10_000_000
+REBOOT_BOOT_US = 30_000_000
+NAN6 = (math.nan,) * 6
 
 
 class Pipeline:
@@ -72,7 +83,10 @@ class Pipeline:
             system_id=config.link.system_id or None,
             component_id=config.link.autopilot_component_id,
             battery_id=config.input.battery_id,
+            reboot_jump_us=CLOCK_BACK_US,
         )
+        self.plausible = Plausibility(config.plausible, esc, config.input.motor_source)
+        self.clock_events: deque[str] = deque(maxlen=8)  # "autopilot rebooted ..." for the service to report
         fast, state = _us(r.max_gap_s), _us(r.state_max_age_s)
         self.hold = StreamingHold(
             period_us(r.rate_hz),
@@ -96,7 +110,14 @@ class Pipeline:
             "skipped_steps": 0,
             "clock_resets": 0,
             "motor_msgs_unmapped": 0,
+            "clock_steps_back": 0,
+            "implausible_samples": 0,
         }
+        self._max_gap_us = fast
+        self._period_us = period_us(r.rate_hz)
+        # Boot times of implausible samples: the grid step whose period holds one is invalid even when
+        # the sample falls between two instants (a 50 Hz stream on the 20 Hz grid), so no window spans it.
+        self._bad_times: deque[int] = deque(maxlen=256)
         # Ring of features, stored twice so any window is one contiguous slice.
         self._ring = np.zeros((2 * self.window, len(self.features)), dtype=np.float32)
         self._head = 0
@@ -117,17 +138,29 @@ class Pipeline:
 
     def feed_sample(self, s: md.Sample, received_s: float) -> list[StepResult]:
         if isinstance(s, md.ClockReset):
-            self.stats["clock_resets"] += 1
+            back_us = s.previous_us - s.timestamp_us
+            if back_us > REBOOT_BACK_US or s.timestamp_us < REBOOT_BOOT_US:
+                self.stats["clock_resets"] += 1
+                self.clock_events.append(
+                    f"autopilot rebooted (boot clock {s.previous_us / US_PER_S:.1f} -> {s.timestamp_us / US_PER_S:.1f} s)"
+                )
+            else:
+                self.stats["clock_steps_back"] += 1
+                self.clock_events.append(f"autopilot clock stepped back {back_us / US_PER_S:.1f} s")
             self.reset()
             return []
         if s.timestamp_us is None:
             return []  # before the boot clock is known: nothing to place it on
         if isinstance(s, md.Attitude):
             vals = (s.roll_rad, s.pitch_rad, s.yaw_rad, s.roll_rate_rad_s, s.pitch_rate_rad_s, s.yaw_rate_rad_s)
+            if self.plausible.attitude(s.timestamp_us, vals) is not None:
+                self.stats["implausible_samples"] += 1
+                self._bad_times.append(s.timestamp_us)
+                vals = NAN6  # never evidence: the instants it would hold become a gap
             return self._push("attitude", s.timestamp_us, vals, received_s)
         if isinstance(s, md.ActuatorOutputs) and s.source == self._source:
-            rpm = self._map(s.first_channel, s.values_us)
-            return [] if rpm is None else self._push("motor", s.timestamp_us, self.esc.cmd_to_rpm(rpm), received_s)
+            cmd = self._map(s.first_channel, s.values_us)
+            return [] if cmd is None else self._push_motor(s.timestamp_us, cmd, True, received_s)
         if isinstance(s, md.Vibration):
             self.vibration.append(s)
             return []
@@ -136,7 +169,7 @@ class Pipeline:
             return []
         if isinstance(s, md.EscRpm) and self.config.input.motor_source == "esc":
             rpm = self._map(s.first_index + 1, s.rpm)
-            return [] if rpm is None else self._push("motor", s.timestamp_us, rpm, received_s)
+            return [] if rpm is None else self._push_motor(s.timestamp_us, rpm, False, received_s)
         if isinstance(s, md.Heartbeat):
             return self._push("armed", s.timestamp_us, (1.0 if s.armed else 0.0,), received_s)
         if isinstance(s, md.LandedState):
@@ -144,12 +177,22 @@ class Pipeline:
                 self.seen_landed = True
             return self._push("landed", s.timestamp_us, (float(s.landed_state),), received_s)
         if isinstance(s, md.Battery):
-            return self._push("battery", s.timestamp_us, (s.voltage_v,), received_s)
+            v = s.voltage_v if self.plausible.battery(s.timestamp_us, s.voltage_v) else math.nan
+            return self._push("battery", s.timestamp_us, (v,), received_s)
         return []
+
+    def _push_motor(self, t_us: int, values: np.ndarray, is_cmd: bool, received_s: float) -> list[StepResult]:
+        if self.plausible.motor(t_us, values) is not None:
+            self.stats["implausible_samples"] += 1
+            self._bad_times.append(t_us)
+            return self._push("motor", t_us, np.full(4, np.nan), received_s)
+        return self._push("motor", t_us, self.esc.cmd_to_rpm(values) if is_cmd else values, received_s)
 
     def reset(self) -> None:
         """Drop everything held (grid and ring); decoding state (autopilot, clock) is kept."""
         self.hold.reset()
+        self.plausible.reset()
+        self._bad_times.clear()
         self._clear()
 
     def flush(self) -> list[StepResult]:
@@ -179,10 +222,14 @@ class Pipeline:
             return bool(md.is_flying(v["landed"][0])) if math.isfinite(v["landed"][0]) else False
         return True
 
-    def _why(self, v: dict[str, np.ndarray], airborne: bool) -> str:
+    def _why(self, v: dict[str, np.ndarray], airborne: bool, t_us: int) -> str:
         if not airborne:
             return "not armed" if v["armed"][0] != 1.0 else "not in the air"
-        bad = [k for k in ("attitude", "motor") if not np.isfinite(v[k]).all()]
+        bad = [k for k in ("attitude", "motor") if not np.isfinite(v[k]).all()] or list(self.plausible.last)
+        for k in bad:  # a sample dropped as implausible is the reason, not a mere gap
+            last = self.plausible.last.get(k)
+            if last is not None and last[0] >= t_us - self._max_gap_us:  # dropped at or after this instant's data
+                return f"{k} implausible: {last[1]}"
         return f"{' and '.join(bad) or 'features'} missing, stale or NaN"
 
     def _step(self, g: GridStep, received_s: float) -> StepResult:
@@ -203,7 +250,11 @@ class Pipeline:
             "yaw_rate_rad_s": att[5:6],
         }
         feats = compute_features(signals, self.features)[0]
-        valid = airborne and bool(np.isfinite(feats).all())
+        bad = self._bad_times
+        while bad and bad[0] <= g.timestamp_us - self._period_us:
+            bad.popleft()
+        tainted = bool(bad) and bad[0] <= g.timestamp_us
+        valid = airborne and not tainted and bool(np.isfinite(feats).all())
         battery_v = float(v["battery"][0])
         inputs = StepInputs(
             airborne,
@@ -215,7 +266,17 @@ class Pipeline:
         )
         if not valid:
             self._clear()
-            return StepResult(g.timestamp_us, airborne, False, 0, battery_v, reason=self._why(v, airborne), inputs=inputs)
+            data_ok = not tainted and bool(np.isfinite(att).all() and np.isfinite(v["motor"]).all())
+            return StepResult(
+                g.timestamp_us,
+                airborne,
+                False,
+                0,
+                battery_v,
+                reason=self._why(v, airborne, g.timestamp_us),
+                data_ok=data_ok,
+                inputs=inputs,
+            )
         self.stats["valid_steps"] += 1
         w = self.window
         self._ring[self._head] = feats

@@ -25,6 +25,11 @@ import numpy as np
 # Beyond this many instants in one go (a link that returns after a long drop),
 # the instants in between are skipped: a window spanning them is invalid anyway.
 MAX_CATCH_UP_STEPS = 1200
+# Hard size of each stream's pending samples. A sample at the same boot time as the newest one
+# replaces it (the batch hold keeps the last written among equal times, so nothing changes); this
+# cap only bites when the clock of one stream runs ahead of the others' without bound: the oldest
+# pending samples are dropped and counted in ``overflow``.
+MAX_PENDING_SAMPLES = 2048
 
 
 @dataclass(frozen=True)
@@ -71,6 +76,7 @@ class StreamingHold:
         self.specs = dict(streams)
         self.reorder_us = reorder_us
         self.late = 0
+        self.overflow = 0
         self.reset()
 
     def reset(self) -> None:
@@ -87,9 +93,15 @@ class StreamingHold:
             self.late += 1  # at or before an instant already emitted
             return []
         v = np.asarray(values, dtype=np.float64).reshape(s.spec.width)
+        if s.times and s.times[-1] == t_us:  # a frozen clock: the newest sample at that time wins, as in hold()
+            s.values[-1] = v
+            return []
         i = bisect.bisect_right(s.times, t_us)
         s.times.insert(i, t_us)
         s.values.insert(i, v)
+        if len(s.times) > MAX_PENDING_SAMPLES:
+            del s.times[0], s.values[0]
+            self.overflow += 1
         s.last_t = t_us if s.last_t is None else max(s.last_t, t_us)
         self.clock_us = t_us if self.clock_us is None else max(self.clock_us, t_us)
         if self.next_g is None:

@@ -11,6 +11,8 @@ from __future__ import annotations
 import os
 import socket
 
+from monitor.resample import US_PER_S
+
 
 class Notifier:
     def __init__(self, environ: dict[str, str] | None = None):
@@ -20,7 +22,7 @@ class Notifier:
         usec = env.get("WATCHDOG_USEC", "")
         pid = env.get("WATCHDOG_PID", "")
         mine = not pid or pid == str(os.getpid())
-        self.watchdog_s = int(usec) / 1e6 if usec.isdigit() and mine else None
+        self.watchdog_s = int(usec) / US_PER_S if usec.isdigit() and mine else None
         self._sock = None
         if self.address:
             self._sock = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)

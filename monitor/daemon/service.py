@@ -19,12 +19,16 @@ from pathlib import Path
 import numpy as np
 
 from monitor import mavlink_decode as md
-from monitor.daemon.alerts import AlertRule, EventWriter, RateLimiter, StatusTextQueue
+from monitor.daemon.alerts import AlertRule, RateLimiter, StatusTextQueue
+from monitor.daemon.blind import BlindTracker, Transition
 from monitor.daemon.config import MonitorConfig
+from monitor.daemon.events import EventWriter
+from monitor.daemon.latency import LatencyHistogram
 from monitor.daemon.link import MAV_CMD_SET_MESSAGE_INTERVAL, Link
 from monitor.daemon.pipeline import Pipeline
 from monitor.daemon.sdnotify import Notifier
 from monitor.decision import Announcement, Decision, EscTelemetry, StepInputs, WindowEvidence, file_sha256
+from monitor.resample import US_PER_S
 
 log = logging.getLogger("propwatch.monitor")
 
@@ -34,6 +38,10 @@ MOTOR_STREAM = {"servo": "SERVO_OUTPUT_RAW", "actuator": "ACTUATOR_OUTPUT_STATUS
 LANDED_RATE_HZ = 2.0  # EXTENDED_SYS_STATE: a state, not a signal
 VIBRATION_RATE_HZ = 10.0  # imbalance evidence beside the classifier (PX4's default stream rate is lower)
 EVIDENCE_FRESH_S = 2.0  # a VIBRATION / ESC_STATUS stream silent for longer is not live evidence
+SINK_REPORT_PERIOD_S = 60.0  # a failing events file is told to the ground station once a minute
+MAV_SEVERITY_WARNING = 4
+REPORT_TOP_N = 20  # the report lists at most this many ignored sources / undecodable kinds
+PAUSE_LOG_PERIOD_S = 2.0  # decision pauses in the journal and events file: at most one per period (flapping data)
 
 
 @dataclass
@@ -44,8 +52,10 @@ class Counters:
     statustexts: int = 0
     stream_requests: int = 0
     internal_errors: int = 0
+    notices: int = 0
+    sink_reports: int = 0
     acks: Counter = field(default_factory=Counter)
-    latencies_s: list = field(default_factory=list)
+    latency: LatencyHistogram = field(default_factory=LatencyHistogram)
 
 
 class Daemon:
@@ -67,9 +77,11 @@ class Daemon:
         )
         self.esc_telemetry = EscTelemetry()
         self._evidence_t: dict[str, float] = {}  # evidence -> boot time (s) it was last usable
-        self._paused = ""
+        self._paused = ""  # why the classifier's evidence stopped while airborne ('' = flowing)
+        self._pause_recorded = ""  # the pause last written to the journal and events file
+        self._pause_log_limit = RateLimiter(PAUSE_LOG_PERIOD_S)
+        self._live: list[str] = []  # evidence live at the last step
         self._airborne = False
-        self._status_text = ""
         self.statustexts = StatusTextQueue(config.alerts.statustext_min_interval_s, config.alerts.critical_threshold)
         self.stop = threading.Event()
         self.counters = Counters()
@@ -83,10 +95,22 @@ class Daemon:
         self._next_watchdog = 0.0
         self._next_bad_log = 0.0
         self._bad_since_log = 0
-        self._classifying_state = False
+        self._classifying_state: bool | None = None  # None: no step yet, the first one sets STATUS
+        self._last_reason = ""
         self._state_log_limit = RateLimiter(2.0)
         self._error_log_limit = RateLimiter(10.0)
-        self._slow: set[str] = set(self.fast_streams())
+        self._fast = self.fast_streams()
+        self._slow: set[str] = set(self._fast)
+        self.blind = BlindTracker(config.blind)
+        self._armed = False
+        self._last_fast_rx: dict[str, float] = {}
+        self._clock_seen: int | None = None
+        self._clock_moved_at = time.monotonic()
+        self._next_sink_report = 0.0
+        self._link_up_at = 0.0
+        self._tick_reason: str | None = None  # the loop's own blindness (link, clock, streams), else None
+        self._status_base = ""
+        self._status_sent = ""
 
     def fast_streams(self) -> tuple[str, ...]:
         return ("ATTITUDE", MOTOR_STREAM[self.cfg.input.motor_source])
@@ -111,7 +135,12 @@ class Daemon:
                 continue
             for msg, received in batch:
                 self.handle(msg, received)
-            self.tick(time.monotonic())
+            try:
+                self.tick(time.monotonic())
+            except Exception:  # noqa: BLE001 - housekeeping must not stop the monitor in flight either
+                self.counters.internal_errors += 1
+                if self._error_log_limit.allow():
+                    log.exception("error in the loop's periodic work (%d so far); continuing", self.counters.internal_errors)
             if self.link.is_log and self.link.eof:
                 for step in self.pipeline.flush():
                     self._on_step(step)
@@ -144,16 +173,27 @@ class Daemon:
             log.info("autopilot: system %d component %d", dec.system_id, dec.component_id)
         if self._system_id is not None and msg.get_srcSystem() == self._system_id and msg.get_srcComponent() == dec.component_id:
             self._rates[kind] += 1
+            now = time.monotonic()
+            if kind in self._fast:
+                self._last_fast_rx[kind] = now
+            if dec.clock_us != self._clock_seen:
+                self._clock_seen, self._clock_moved_at = dec.clock_us, now
             if kind == "HEARTBEAT":
-                self._last_autopilot_hb = time.monotonic()
+                self._armed = bool(getattr(msg, "base_mode", 0) & md.MAV_MODE_FLAG_SAFETY_ARMED)
+                self._last_autopilot_hb = now
+                self.link.autopilot_seen()
                 if not self._link_up:
                     self._link_up = True
+                    self._link_up_at = now
                     log.info("link up: autopilot heartbeat received")
-                    self.notifier.status(f"link up: autopilot {self._system_id}")
+                    self._set_status(f"link up: autopilot {self._system_id}")
             elif kind == "COMMAND_ACK" and msg.command == MAV_CMD_SET_MESSAGE_INTERVAL:
                 self.counters.acks[int(msg.result)] += 1
                 if msg.result != 0:
                     log.warning("stream-rate request refused by the autopilot (MAV_RESULT %d)", msg.result)
+        while self.pipeline.clock_events:  # reboot or clock step: blind until good data flows again
+            what = self.pipeline.clock_events.popleft()
+            self._transition(self.blind.enter("autopilot rebooted" if "reboot" in what else "clock stepped back", what))
         for step in steps:
             self._on_step(step)
         if self.pipeline.vibration or self.pipeline.esc_samples:
@@ -165,7 +205,7 @@ class Daemon:
         vib, esc = self.pipeline.vibration, self.pipeline.esc_samples
         self.pipeline.vibration, self.pipeline.esc_samples = [], []
         for v in vib:
-            t = v.timestamp_us / 1e6
+            t = v.timestamp_us / US_PER_S
             before = sum(self.decision.vibration.rejected.values())
             for a in self.decision.vibration_sample(t, v.vibration, self._airborne):
                 self._announce(a, int(v.timestamp_us // 1000))
@@ -173,46 +213,29 @@ class Daemon:
                 self._evidence_t["vibration"] = t
         for e in esc:
             if self.esc_telemetry.observe(e.rpm) == "":
-                self._evidence_t["esc_rpm"] = e.timestamp_us / 1e6
+                self._evidence_t["esc_rpm"] = e.timestamp_us / US_PER_S
 
     def live_evidence(self, t_s: float) -> list[str]:
         """Which evidence is flowing now: classifier (motor stream + attitude), vibration, esc_rpm."""
         return [k for k, last in sorted(self._evidence_t.items()) if t_s - last <= EVIDENCE_FRESH_S]
 
-    def _set_status(self, text: str) -> None:
-        if text != self._status_text:
-            self._status_text = text
-            self.notifier.status(text)
-
     def _decide(self, step) -> None:
         """The shared decision rule on one grid step (pause when a stream stopped, never freeze it)."""
-        t = step.timestamp_us / 1e6
+        t = step.timestamp_us / US_PER_S
         self._airborne = step.airborne
         self.decision.step(t, step.inputs or StepInputs(step.airborne))
         if step.valid:
             self._evidence_t["classifier"] = t
-        live = self.live_evidence(t)
+        live = self._live = self.live_evidence(t)
         if step.airborne and not step.valid:
             if self._paused != step.reason:
                 self._paused = step.reason
-                self.decision.pause(step.reason)
-                motor = MOTOR_STREAM[self.cfg.input.motor_source]
-                log.warning("t=%d ms: decision paused: %s", step.time_boot_ms, step.reason)
-                self.events.write_event(
-                    {
-                        "kind": "paused",
-                        "time_boot_ms": step.time_boot_ms,
-                        "reason": step.reason,
-                        "evidence_live": live,
-                        "classifier_input": motor,
-                    }
-                )
+                self._record_pause(step.time_boot_ms, step.reason, live)
             self._set_status(f"classifier paused: {step.reason}; evidence live: {', '.join(live) or 'none'}")
         elif step.valid and self._paused:
-            self.events.write_event({"kind": "resumed", "time_boot_ms": step.time_boot_ms, "evidence_live": live})
-            log.info("t=%d ms: decision resumed", step.time_boot_ms)
             self._paused = ""
-            self.decision.resume()
+            self._record_resume(step.time_boot_ms, live)
+        self._apply_pause()
         if step.valid:
             self._set_status(f"airborne: deciding; evidence live: {', '.join(live)}")
         elif not step.airborne and not self._paused:
@@ -220,46 +243,101 @@ class Daemon:
         if not step.valid or step.fault_probability is None:
             return
         if step.latency_s is not None:
-            self.counters.latencies_s.append(step.latency_s)
+            self.counters.latency.add(step.latency_s)
+        self._send_named_values(step)
         ev = WindowEvidence(step.fault_probability, step.label_probability)
         for a in self.decision.window_evidence(t, ev):
             self._announce(a, step.time_boot_ms, step)
 
+    def _apply_pause(self) -> None:
+        """The decision pauses while a stream is stopped (``_paused``) or the monitor is blind; else it runs."""
+        reason = f"blind: {self.blind.reason}" if self.blind.blind else self._paused
+        if reason != self.decision.paused_reason:
+            if reason:
+                self.decision.pause(reason)
+            else:
+                self.decision.resume()
+
+    def _record_pause(self, time_boot_ms: int, reason: str, live: list[str]) -> None:
+        """Journal and events line for a pause; flapping data is rate-limited (a pause and its resume go together)."""
+        if self._pause_recorded and reason == self._pause_recorded:
+            return
+        if not self._pause_log_limit.allow():
+            return
+        self._pause_recorded = reason
+        log.warning("t=%d ms: decision paused: %s", time_boot_ms, reason)
+        self.events.write_record(
+            {
+                "event": "paused",
+                "time_boot_ms": time_boot_ms,
+                "reason": reason,
+                "evidence_live": live,
+                "classifier_input": MOTOR_STREAM[self.cfg.input.motor_source],
+            }
+        )
+
+    def _record_resume(self, time_boot_ms: int, live: list[str]) -> None:
+        if not self._pause_recorded:
+            return
+        self._pause_recorded = ""
+        log.info("t=%d ms: decision resumed", time_boot_ms)
+        self.events.write_record({"event": "resumed", "time_boot_ms": time_boot_ms, "evidence_live": live})
+
     def _announce(self, a: Announcement, time_boot_ms: int, step=None) -> None:
         self.counters.alerts += 1
-        event = {**a.event(), "time_boot_ms": time_boot_ms}
+        event = {"event": "alert", **a.event(), "time_boot_ms": time_boot_ms}
         if step is not None and step.fault_probability is not None:
             event["probabilities"] = [round(float(p), 4) for p in step.fault_probability]
             event["battery_v"] = None if math.isnan(step.battery_v) else round(step.battery_v, 2)
         log.warning("%s t=%d ms: %s (%s evidence)", a.level.upper(), time_boot_ms, a.text, a.evidence)
+        # The ground station first: a failing disk must never delay or lose the alert itself.
         self.statustexts.add_text(a.text, a.severity)
-        self._send_statustext()  # STATUSTEXT first: the pilot before the disk
-        self.events.write_event(event)
+        self._send_statustext()
         self._set_status(f"last alert: {a.text} at t={time_boot_ms} ms")
+        self.events.write_record(event)
+
+    def _send_named_values(self, step) -> None:
+        if self.cfg.alerts.named_value_float:
+            for i, v in enumerate(step.fault_probability):
+                self.link.send_named_value_float(step.time_boot_ms, f"PWF{i + 1}", float(v))
+
+    def _blind_step(self, step) -> None:
+        """Blindness seen from one grid step: bad data while airborne for ``blind.after_s``, or good data again."""
+        if step.data_ok:
+            if self._tick_reason is None:  # a lost link or frozen clock ends at the next tick that clears it
+                self._transition(self.blind.recover())
+        elif step.airborne:
+            self._transition(self.blind.data(False, *_blind_reason(step.reason)))
 
     def _on_step(self, step) -> None:
         if self.sequential:
+            self._blind_step(step)
             self._decide(step)
             return
-        if step.valid != self._classifying_state:
+        stopped = self._classifying_state is True and not step.valid  # classification was running and stops
+        flipped = step.valid != self._classifying_state
+        if flipped or (not step.valid and step.reason != self._last_reason):
             self._classifying_state = step.valid
             if step.valid:
+                self._last_reason = ""
                 log.info("t=%d ms: buffering (classification after %d valid steps)", step.time_boot_ms, self.pipeline.window)
-                self.notifier.status("airborne: classifying")
-            elif self._state_log_limit.allow():  # NaN flapping must not flood the journal
-                log.info("t=%d ms: not classifying: %s", step.time_boot_ms, step.reason)
-                self.notifier.status(f"not classifying: {step.reason}")
+                self._set_status("airborne: classifying")
+            else:
+                self._last_reason = step.reason
+                self._set_status(f"not classifying: {step.reason}")  # a datagram, only on change
+                # The journal hears of each stop (NaN flapping rate-limited); a new reason while stopped is STATUS only.
+                if stopped and self._state_log_limit.allow():
+                    log.info("t=%d ms: not classifying: %s", step.time_boot_ms, step.reason)
+        self._blind_step(step)
         if not step.valid:
             self.rule.reset()
             return
         if step.fault_probability is None:
             return
         if step.latency_s is not None:
-            self.counters.latencies_s.append(step.latency_s)
+            self.counters.latency.add(step.latency_s)
+        self._send_named_values(step)
         p = step.fault_probability
-        if self.cfg.alerts.named_value_float:
-            for i, v in enumerate(p):
-                self.link.send_named_value_float(step.time_boot_ms, f"PWF{i + 1}", float(v))
         alert = self.rule.update(step.time_boot_ms, p, step.label_probability, step.battery_v)
         if alert is None:
             return
@@ -272,16 +350,84 @@ class Daemon:
             alert.label,
             np.array2string(np.asarray(alert.fault_probability), precision=3),
         )
-        self.notifier.status(f"last alert: {text} at t={alert.time_boot_ms} ms")
-        self.events.write(alert)
+        # The ground station first: a failing disk must never delay or lose the alert itself.
         self.statustexts.add(alert)
         self._send_statustext()
+        self._set_status(f"last alert: {text} at t={alert.time_boot_ms} ms")
+        self.events.write(alert)
 
     def _send_statustext(self) -> None:
         due = self.statustexts.due()
         if due is not None:
             self.counters.statustexts += 1
             self.link.send_statustext(*due)
+
+    # -- blind spells, sink failures, systemd STATUS ---------------------------------------
+    def _transition(self, t: Transition | None) -> None:
+        if t is None:
+            return
+        if t.blind:
+            log.warning("BLIND: %s", t.detail)
+        else:
+            log.info("recovered: %s (blind %.1f s)", t.detail, t.duration_s)
+        record = t.record(self._clock_seen // 1000 if self._clock_seen is not None else None)
+        if self.sequential:
+            self._apply_pause()  # blind: the decision adds nothing; recovered: it runs again unless a stream is stopped
+            record["decision"] = "paused" if self.decision.paused_reason else "running"
+        self._publish_status()
+        self.events.write_record(record)
+        self._send_notice()
+
+    def _send_notice(self) -> None:
+        due = self.blind.due()
+        if due is not None:
+            self.counters.notices += 1
+            self.link.send_statustext(*due)
+
+    def _set_status(self, text: str) -> None:
+        self._status_base = text
+        self._publish_status()
+
+    def _publish_status(self) -> None:
+        text = f"BLIND: {self.blind.detail}" if self.blind.blind else self._status_base
+        if self.blind.blind and self.sequential:
+            text += f"; decision paused, evidence live: {', '.join(self._live) or 'none'}"
+        if self.events.failing:
+            text += f"; events file failing ({self.events.last_error}, {self.events.pending} waiting)"
+        if text and text != self._status_sent:
+            self._status_sent = text
+            self.notifier.status(text)
+
+    def _check_blind(self, now: float) -> None:
+        """Blindness seen from the loop: a lost link, a frozen autopilot clock, a fast stream gone."""
+        found = self._loop_blindness(now)
+        self._tick_reason = None if found is None else found[0]
+        if found is not None:
+            self._transition(self.blind.enter(*found))
+
+    def _loop_blindness(self, now: float) -> tuple[str, str] | None:
+        b = self.cfg.blind
+        if self._system_id is None:
+            return None
+        if not self._link_up and self._last_autopilot_hb is not None:
+            return "link lost", "link lost: no autopilot heartbeat"
+        fresh = [k for k, t in self._last_fast_rx.items() if now - t < b.frozen_clock_s]
+        if fresh and now - self._clock_moved_at >= b.frozen_clock_s:
+            return "autopilot clock frozen", f"autopilot clock frozen for {now - self._clock_moved_at:.1f} s"
+        if self._armed and self._link_up:
+            for name, what in zip(self._fast, ("attitude", "motor")):
+                t = self._last_fast_rx.get(name, self._link_up_at)
+                if now - t >= max(b.after_s, self.cfg.resample.max_gap_s):
+                    return f"no {what} data", f"no {name} from the autopilot"
+        return None
+
+    def _check_sink(self, now: float) -> None:
+        self.events.retry()
+        if self.events.failing and now >= self._next_sink_report:
+            self._next_sink_report = now + SINK_REPORT_PERIOD_S
+            self.counters.sink_reports += 1
+            self.link.send_statustext("PROPWATCH: events file write failing", MAV_SEVERITY_WARNING)
+        self._publish_status()
 
     # -- periodic work -------------------------------------------------------------------
     def tick(self, now: float) -> None:
@@ -299,13 +445,17 @@ class Daemon:
         if self._link_up and self._last_autopilot_hb is not None and now - self._last_autopilot_hb > link.link_timeout_s:
             self._link_up = False
             log.warning("link lost: no autopilot heartbeat for %.1f s", now - self._last_autopilot_hb)
-            self.notifier.status("link lost")
+            self._set_status("link lost")
         if now - self._rate_window_start >= link.rate_check_period_s:
             self._check_rates(now)
         if self.notifier.watchdog_s and now >= self._next_watchdog:
             self.notifier.watchdog()
             self._next_watchdog = now + self.notifier.watchdog_s / 2
         self._send_statustext()  # alerts held back by the rate limit
+        if not self.link.is_log:  # a log replayed fast has no wall-clock meaning for blindness
+            self._check_blind(now)
+        self._send_notice()
+        self._check_sink(now)
         if self._bad_since_log and now >= self._next_bad_log:
             log.warning("%d unparseable packets/bytes dropped (%d in total)", self._bad_since_log, self.counters.bad_data)
             self._bad_since_log = 0
@@ -348,9 +498,9 @@ class Daemon:
 
     # -- reporting -----------------------------------------------------------------------
     def report(self) -> dict:
-        lat = np.asarray(self.counters.latencies_s, dtype=np.float64) * 1e3
-        pct = (lambda q: float(np.percentile(lat, q))) if len(lat) else (lambda q: math.nan)
         c = self.counters
+        lat = c.latency
+        ev = self.events
         return {
             "messages": c.messages,
             "bad_data": c.bad_data,
@@ -358,12 +508,30 @@ class Daemon:
             "statustexts": c.statustexts,
             "stream_requests": c.stream_requests,
             "internal_errors": c.internal_errors,
+            "notices": c.notices,
+            "blind_spells": self.blind.spells,
+            "blind_now": self.blind.reason,
+            "events_file": {
+                "written": ev.written,
+                "failures": ev.failures,
+                "pending": ev.pending,
+                "dropped": ev.dropped,
+                "reported_to_gcs": c.sink_reports,
+            },
+            "implausible": dict(self.pipeline.plausible.dropped),
+            "link": self.link.stats(),
             "acks": {str(k): v for k, v in c.acks.items()},
             "pipeline": dict(self.pipeline.stats),
             "late_samples": self.pipeline.hold.late,
-            "ignored": {f"{s}/{k}": n for (s, k), n in self.pipeline.decoder.ignored.items()},
-            "undecodable": dict(self.pipeline.decoder.undecodable),
-            "latency_ms": {"n": int(len(lat)), "p50": pct(50), "p99": pct(99), "max": float(lat.max()) if len(lat) else math.nan},
+            "hold_overflow": self.pipeline.hold.overflow,
+            "ignored": {f"{s}/{k}": n for (s, k), n in self.pipeline.decoder.ignored.most_common(REPORT_TOP_N)},
+            "undecodable": dict(self.pipeline.decoder.undecodable.most_common(REPORT_TOP_N)),
+            "latency_ms": {
+                "n": lat.n,
+                "p50": lat.percentile_s(50) * 1e3,
+                "p99": lat.percentile_s(99) * 1e3,
+                "max": lat.max_s * 1e3,
+            },
             "decision": self.decision.verdict() if self.sequential else None,
             "esc_rejected": dict(self.esc_telemetry.rejected),
         }
@@ -384,3 +552,12 @@ class Daemon:
 
     def write_report(self, path: str | Path) -> None:
         Path(path).write_text(json.dumps(self.report(), indent=2, default=float) + "\n", encoding="utf-8")
+
+
+def _blind_reason(step_reason: str) -> tuple[str, str]:
+    """(short reason, detail) of an airborne step without usable data."""
+    if "implausible" in step_reason:
+        return ("implausible attitude" if step_reason.startswith("attitude") else "implausible motor data"), step_reason
+    if step_reason.startswith("attitude") and "motor" not in step_reason:
+        return "no attitude data", step_reason
+    return "no motor data", step_reason

@@ -1,20 +1,30 @@
 """``propwatch diagnose LOG [LOG...] [--json] [--report DIR]``.
 
-Output with ``--json`` (stdout), for one LOG::
+Numbering, one for every output (text, HTML, PNG, JSON): propellers are in PX4
+quad-X order (1 front-right CCW, 2 rear-left CCW, 3 front-left CW, 4 rear-right
+CW); ``label`` is 1..16 over PX4 rotor sets (1 none, 2-5 rotor 1..4 alone, 6-11
+pairs, 12-15 triples, 16 all; monitor/labels.py). Each rotor is shown by the
+vehicle's own name with its PX4 number beside it, e.g. CrazyPAD's
+``M3 (PX4 rotor 2)``.
+
+Output with ``--json`` (stdout), for one LOG (every key: docs/diagnose-json.md)::
 
     {"log": PATH,
-     "verdict": {"label": N, "faulty_propellers": [...], "fault_probability": [p1, p2, p3, p4],
+     "verdict": {"label": N, "faulty_propellers": [PX4 numbers], "faulty_names": [...],
+                 "fault_probability": [p1, p2, p3, p4],
                  "confidence": "confident" | "suspect" | "uncertain", "label_probability_of_verdict": p,
                  "agreeing_windows": share, "faulty_probability_required": 0.9} | null,
      "windows": n, "warnings": [...], "reason": null | "why there is no verdict",
-     "propellers": [{"propeller": 1, "name": "M1", "fault_probability": p, "faulty": bool, "suspect": bool}, ...],
+     "propellers": [{"propeller": 1, "px4_rotor": 1, "name": "M1", "fault_probability": p, "faulty": bool,
+                     "suspect": bool}, ...],
      "label_probability": [16 values] | null,
      "airborne_segments": [{"start_boot_s", "stop_boot_s", "steps"}, ...],
      "timeline": {"t_boot_s": [...], "fault_probability": [[p1..p4], ...], "label": [...]},
      "hop_steps": k,
-     "envelope": {"airborne_mean_rpm", "trained_mean_rpm", "rpm_ratio", "large_attitude_fraction"},
+     "envelope": {"airborne_mean_rpm", "trained_mean_rpm", "rpm_ratio", "rpm_z", "large_attitude_fraction"},
      "decision": {"alerts": [{"t_boot_s", "level": "suspect" | "fault", "propellers", "text"}, ...],
-                  "final": {...}}}
+                  "final": {...}},
+     "baseline": {"basis", "shares", "deviation_spreads", "rotors_beyond_3_spreads", "verdict"}}  (--vehicle DIR only)
 
 Confidence: a propeller is FAULTY only when the verdict's label has mean
 probability >= 0.9 over the windows (``confident``); below that the verdict
@@ -26,31 +36,41 @@ log: when in the flight it would have said suspect / fault, on which propeller.
 
 For several LOGs: ``{"results": [one object as above per LOG, in order]}``;
 a log that cannot be read appears as ``{"log": PATH, "error": "..."}``.
-Propellers are in PX4 order; ``name`` is the vehicle's own numbering. Times are
-seconds on the autopilot's boot clock; a timeline point is the end of its window.
+Times are seconds on the autopilot's boot clock; a timeline point is the end of
+its window. Floats are rounded to 6 decimals.
 
 Exit code: 0 every log got a confident verdict; 3 some log got a verdict that
 is not confident (suspect or uncertain: no confident verdict); 1 some log got
 no verdict at all (the reason says why: outside the model's envelope, no
 airborne flight, ...); 2 some log could not be read (unknown format, missing
-messages) or bad arguments. The highest applies: 2 > 1 > 3 > 0.
+messages, damaged beyond reading, larger or longer than ``--max-seconds``
+allows, messages that stop advancing time) or bad arguments. The highest
+applies: 2 > 1 > 3 > 0. Whatever a reader raises ends in one of these codes.
+With ``--json`` stdout holds only the JSON: anything a library prints while
+reading goes to stderr (at most a few lines, then a count).
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
+import io
 import json
 import sys
 from pathlib import Path
 
-from monitor.diagnose.engine import Diagnosis, diagnose_table
+from monitor.diagnose.engine import Diagnosis, describe_label, diagnose_table, rotor_name, round_floats
 from monitor.errors import PropwatchError
 from monitor.esc import EscCurve
-from monitor.logs import read_log
+from monitor.logs import read_raw, to_flight_table
+from monitor.logs.guards import DEFAULT_MAX_SECONDS, check_size, check_time_advances
 from monitor.model import Classifier, choose_esc
-from monitor.vehicle import DEFAULT_VEHICLE, REPO_ROOT, load_vehicle
+from monitor.progress import bar
+from monitor.resources import shipped
+from monitor.vehicle import DEFAULT_VEHICLE, load_vehicle
 
-DEFAULT_MODEL = REPO_ROOT / "models" / "classifier.onnx"
+DEFAULT_MODEL = shipped("classifier.onnx")
+BIG_LOG_BYTES = 1_000_000  # a single log this large takes seconds to read: show a bar
 
 
 def default_model(vehicle_yaml: str | None) -> Path:
@@ -61,7 +81,7 @@ def default_model(vehicle_yaml: str | None) -> Path:
     envelope checks then say whether the log fits it.
     """
     if vehicle_yaml:
-        own = REPO_ROOT / "models" / f"{Path(vehicle_yaml).stem}-classifier.onnx"
+        own = shipped(f"{Path(vehicle_yaml).stem}-classifier.onnx")
         if own.is_file():
             return own
     return DEFAULT_MODEL
@@ -88,43 +108,81 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         "--vehicle",
         default=None,
         help="vehicle YAML whose ESC curve converts motor commands to RPM "
-        "(default: the model's metadata vehicle.esc, else the paper's fit = models/vehicle.yaml)",
+        "(default: the model's metadata vehicle.esc, else the paper's fit = models/vehicle.yaml), or a "
+        "`propwatch adapt` output folder: its vehicle.yaml, classifier.onnx and healthy baseline",
     )
     # Windows are 5 s long; at a 1 s hop consecutive ones share 4 s: a finer hop costs
     # inference time without adding information to a post-flight verdict.
     p.add_argument("--hop", type=int, default=20, help="classify one window every HOP grid steps (default 20 = 1 s)")
+    p.add_argument(
+        "--max-seconds",
+        type=float,
+        default=DEFAULT_MAX_SECONDS,
+        help=f"longest log accepted, in seconds of its own clock (default {DEFAULT_MAX_SECONDS:g} = 3 h); "
+        "also bounds the file size read (1 MB per second)",
+    )
     p.add_argument("--json", action="store_true", help="print JSON to stdout")
-    p.add_argument("--report", metavar="DIR", default=None, help="write PNG + HTML reports into DIR")
+    p.add_argument(
+        "--report",
+        metavar="DIR",
+        default=None,
+        help="write a PNG + HTML report per log into DIR (their paths are printed on stderr)",
+    )
     return p.parse_args(argv)
 
 
-def diagnose_file(path: str, clf: Classifier, esc: EscCurve, fmt: str | None, hop: int, vehicle=None):
-    table = read_log(path, fmt=fmt, esc=esc, rate_hz=clf.info.sample_rate_hz, extras=False)
+def diagnose_file(
+    path: str, clf: Classifier, esc: EscCurve, fmt: str | None, hop: int, vehicle=None, max_seconds: float = DEFAULT_MAX_SECONDS
+):
+    check_size(path, max_seconds)
+    raw = read_raw(path, fmt, extras=False)
+    streams = {k: getattr(raw, k) for k in ("motor_cmd", "attitude_rad", "rates_rad_s")}
+    check_time_advances(streams, path, max_seconds)
+    table = to_flight_table(raw, esc=esc, rate_hz=clf.info.sample_rate_hz)
     return table, diagnose_table(table, clf, hop=hop, esc=esc, vehicle=vehicle)
+
+
+class _PrintTrap(io.TextIOBase):
+    """Stands in for stdout while logs are read: libraries' prints go to stderr, a few lines then a count."""
+
+    KEEP = 5
+
+    def __init__(self) -> None:
+        self.lines = 0
+
+    def writable(self) -> bool:
+        return True
+
+    def write(self, text: str) -> int:
+        for line in text.splitlines():
+            if line.strip():
+                self.lines += 1
+                if self.lines <= self.KEEP:
+                    print(f"propwatch diagnose: (reader) {line}", file=sys.stderr)
+        return len(text)
+
+    def report(self) -> None:
+        if self.lines > self.KEEP:
+            print(f"propwatch diagnose: (reader) ... {self.lines - self.KEEP} more line(s) not shown", file=sys.stderr)
+        self.lines = 0
 
 
 def format_text(d: Diagnosis) -> str:
     lines = [f"== {d.source}"]
+    names = [p["name"] for p in d.propellers]
     if d.verdict is None:
         lines.append(f"no verdict: {d.reason}")
     else:
-        faulty = d.verdict["faulty_propellers"]
         conf = d.verdict.get("confidence", "confident")
         lines.append(
-            f"verdict: label {d.verdict['label']} ("
-            + (
-                "no faulty propeller"
-                if not faulty
-                else "faulty propeller(s) " + ", ".join(d.propellers[i - 1]["name"] for i in faulty)
-            )
-            + f"), from {d.windows} windows: {conf} (label probability "
+            f"verdict: {describe_label(d.verdict['label'], names, conf)}, from {d.windows} windows: {conf} (label probability "
             + f"{d.verdict.get('label_probability_of_verdict', float('nan')):.2f}, "
             + f"{100 * d.verdict.get('agreeing_windows', float('nan')):.0f} % of windows agree; marked FAULTY from "
             + f"{d.verdict.get('faulty_probability_required', float('nan')):.2f})"
         )
         for p in d.propellers:
             lines.append(
-                f"  propeller {p['propeller']} ({p['name']}): P(faulty) = {p['fault_probability']:.3f}"
+                f"  {rotor_name(p['name'], p['propeller'])}: P(faulty) = {p['fault_probability']:.3f}"
                 + ("  <- FAULTY" if p["faulty"] else "  <- suspect" if p.get("suspect") else "")
             )
     if d.decision is not None:
@@ -133,13 +191,17 @@ def format_text(d: Diagnosis) -> str:
             "  in-flight rule: " + ("; ".join(f"{a['text']} at {a['t_boot_s']:.1f} s" for a in alerts) if alerts else "no alert")
         )
     if d.physics is not None:
-        names = [p["name"] for p in d.propellers]
         eff = ", ".join(
-            f"{n} {m:.2f}±{s:.2f}" for n, m, s in zip(names, d.physics.rotor_effectiveness, d.physics.rotor_effectiveness_std)
+            f"{rotor_name(n, i + 1)} {m:.2f}±{s:.2f}"
+            for i, (n, m, s) in enumerate(zip(names, d.physics.rotor_effectiveness, d.physics.rotor_effectiveness_std))
         )
         lines.append(f"  rotor effectiveness (fraction of nominal thrust, moment balance over {d.physics.windows} x 5 s): {eff}")
         sets = " or ".join(
-            ("{" + ",".join(names[i - 1] for i in h["faulty_propellers"]) + "}" if h["faulty_propellers"] else "healthy")
+            (
+                "{" + ", ".join(rotor_name(names[i - 1], i) for i in h["faulty_propellers"]) + "}"
+                if h["faulty_propellers"]
+                else "healthy"
+            )
             + f" p={h['probability']:.2f}"
             for h in d.physics.hypotheses
         )
@@ -164,19 +226,49 @@ def main(argv: list[str] | None = None) -> int:
     if args.hop < 1:
         print("propwatch diagnose: --hop must be >= 1", file=sys.stderr)
         return 2
+    if not 0 < args.max_seconds <= 7 * 86400:
+        print("propwatch diagnose: --max-seconds must be in (0, 604800]", file=sys.stderr)
+        return 2
+    baseline = None
+    if args.vehicle and Path(args.vehicle).is_dir():
+        # A `propwatch adapt` folder: its calibrated vehicle, its model, its airframe's healthy baseline.
+        from monitor.baseline import BASELINE_FILE, HealthyBaseline
+
+        folder = Path(args.vehicle)
+        args.vehicle = str(folder / "vehicle.yaml")
+        args.model = args.model or str(folder / "classifier.onnx")
+        baseline = HealthyBaseline.load(folder / BASELINE_FILE)
     clf = Classifier(args.model or default_model(args.vehicle))
     # The daemon's rule, so both convert commands identically: --vehicle, else the model's own ESC curve.
     esc = choose_esc(clf, args.vehicle or "")
     vehicle = load_vehicle(args.vehicle or DEFAULT_VEHICLE)  # geometry for the moment-balance evidence
     results, code = [], 0
-    for path in args.logs:
+    # Several or long logs: a bar in bytes read (rate and ETA), on a terminal only; reading dominates the time.
+    sizes = [Path(p).stat().st_size if Path(p).is_file() else 0 for p in args.logs]
+    progress = bar(sum(sizes), "B", "diagnose", unit_scale=True) if len(args.logs) > 1 or sum(sizes) > BIG_LOG_BYTES else None
+    trap = _PrintTrap()
+    for path, size in zip(args.logs, sizes):
+        if progress is not None:
+            progress.set_postfix_str(Path(path).name)
         try:
-            table, d = diagnose_file(path, clf, esc, args.fmt, args.hop, vehicle)
+            with contextlib.redirect_stdout(trap):
+                table, d = diagnose_file(path, clf, esc, args.fmt, args.hop, vehicle, args.max_seconds)
         except PropwatchError as exc:
             results.append({"log": path, "error": str(exc)})
             print(f"propwatch diagnose: error: {exc}", file=sys.stderr)
             code = worse(code, 2)
+            if progress is not None:
+                progress.update(size)
             continue
+        except Exception as exc:  # noqa: BLE001 - a reader's own failure (struct.error, pymavlink's bare
+            # exceptions, MemoryError...) on input it did not expect: still "could not be read", never a traceback.
+            msg = f"{path}: cannot read: {type(exc).__name__}: {exc}"
+            results.append({"log": path, "error": msg})
+            print(f"propwatch diagnose: error: {msg}", file=sys.stderr)
+            code = worse(code, 2)
+            continue
+        finally:
+            trap.report()
         if d.verdict is None:
             code = worse(code, 1)
         elif d.verdict.get("confidence") != "confident":
@@ -184,13 +276,26 @@ def main(argv: list[str] | None = None) -> int:
         if args.report:
             from monitor.diagnose.report import write_report
 
-            write_report(d, table, Path(args.report))
-        results.append(d.to_json())
+            page = write_report(d, table, Path(args.report))
+            print(f"report: {page} and {page.with_suffix('.png')}", file=sys.stderr)
+        res = d.to_json()
+        if baseline is not None:
+            res["baseline"] = baseline.compare(table)
+        results.append(res)
+        if progress is not None:
+            progress.update(size)
         if not args.json:
             print(format_text(d))
+            if baseline is not None and "deviation_spreads" in res["baseline"]:
+                b = res["baseline"]
+                print(
+                    "  vs this airframe's healthy baseline (spreads): " + ", ".join(f"{x:+.1f}" for x in b["deviation_spreads"])
+                )
+    if progress is not None:
+        progress.close()
     if args.json:
         out = results[0] if len(results) == 1 else {"results": results}
-        json.dump(out, sys.stdout, allow_nan=False)
+        json.dump(round_floats(out), sys.stdout, allow_nan=False)
         sys.stdout.write("\n")
     return code
 

@@ -24,7 +24,6 @@ its suspect / fault announcements and final state.
 
 from __future__ import annotations
 
-import re
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -35,7 +34,7 @@ from monitor.errors import ModelError
 from monitor.esc import EscCurve
 from monitor.features import compute_features, signals_needed, sliding_windows, valid_windows
 from monitor.flight import FlightTable
-from monitor.labels import LABEL_TABLE, label_for
+from monitor.labels import LABEL_TABLE
 from monitor.model import Classifier
 from monitor.resample import US_PER_S
 
@@ -49,6 +48,7 @@ RPM_RATIO_WARN = (0.85, 1.15)
 RPM_RATIO_REFUSE = (0.6, 1.6)
 # The paper's flights are gentle; beyond this attitude the model has not been trained.
 LARGE_ATTITUDE_RAD = np.deg2rad(45.0)
+QUADROTOR = "MAV_TYPE_QUADROTOR"  # the one vehicle type the models are for (pymavlink's MAV_TYPE name)
 RPM_FEATURES = ("rpm_1", "rpm_2", "rpm_3", "rpm_4", "rpm_mean")
 
 
@@ -69,9 +69,13 @@ class Diagnosis:
     physics: PhysicsEvidence | None = None  # rotor effectiveness and the sets the moment balance allows
 
     def to_json(self) -> dict:
-        """The ``--json`` object. Propeller numbers are the vehicle's own (``FlightTable.motor_names``,
-        e.g. CrazyPAD's M1..M4) when they are a renumbering of 1..4; PX4 order otherwise."""
-        out = {
+        """The ``--json`` object (every key documented in docs/diagnose-json.md).
+
+        One numbering everywhere: propellers, labels and probability columns are in PX4
+        rotor order; each propeller's ``name`` is the vehicle's own (``FlightTable.motor_names``,
+        e.g. CrazyPAD's M3 for PX4 rotor 2) and stands beside its PX4 number.
+        """
+        return {
             "log": self.source,
             "verdict": self.verdict,
             "windows": self.windows,
@@ -88,70 +92,38 @@ class Diagnosis:
             "rotor_effectiveness": self.physics.rotor_effectiveness if self.physics else None,
             "rotor_effectiveness_std": self.physics.rotor_effectiveness_std if self.physics else None,
         }
-        own = vehicle_numbers([p["name"] for p in self.propellers]) if self.propellers else None
-        return renumber(out, own) if own else out
 
 
-def vehicle_numbers(names: list[str]) -> list[int] | None:
-    """Vehicle number of each PX4 rotor (``["M1", "M3", "M4", "M2"]`` -> [1, 3, 4, 2]); None if identity/unnumbered."""
-    nums = []
-    for n in names:
-        m = re.search(r"(\d+)$", n)
-        nums.append(int(m.group(1)) if m else 0)
-    return nums if sorted(nums) == [1, 2, 3, 4] and nums != [1, 2, 3, 4] else None
+def rotor_name(name: str, px4_rotor: int) -> str:
+    """A rotor as people should read it: the vehicle's name with the PX4 number beside it."""
+    return f"propeller {px4_rotor}" if name == str(px4_rotor) else f"{name} (PX4 rotor {px4_rotor})"
 
 
-def renumber(out: dict, own: list[int]) -> dict:
-    """Express a diagnosis JSON in the vehicle's own propeller numbers (``own[i]`` for PX4 rotor i+1)."""
+def describe_label(label: int, names, confidence: str = "confident") -> str:
+    """``label 3: M3 (PX4 rotor 2) faulty``; labels are PX4 rotor sets (monitor.labels).
 
-    def relabel(label: int) -> int:
-        return label_for([own[i - 1] for i in LABEL_TABLE[label]])
+    Only a ``confident`` verdict calls propellers faulty: a ``suspect`` or ``uncertain`` one says so
+    instead (``label 3: M3 (PX4 rotor 2) suspect``).
+    """
+    faulty = LABEL_TABLE[label]
+    if not faulty:
+        return f"label {label}: no faulty propeller" + ("" if confidence == "confident" else f" ({confidence})")
+    if all(names[i - 1] == str(i) for i in faulty):  # the vehicle numbers its rotors as PX4 does
+        what = ("propeller " if len(faulty) == 1 else "propellers ") + ", ".join(map(str, faulty))
+    else:
+        what = ", ".join(rotor_name(names[i - 1], i) for i in faulty)
+    return f"label {label}: {what} {'faulty' if confidence == 'confident' else confidence}"
 
-    def reorder(p4: list[float]) -> list[float]:
-        r = [0.0] * 4
-        for i, v in enumerate(p4):
-            r[own[i] - 1] = v
-        return r
 
-    out = dict(out)
-    v = out["verdict"]
-    if v is not None:
-        out["verdict"] = {
-            **v,
-            "label": relabel(v["label"]),
-            "faulty_propellers": sorted(own[i - 1] for i in v["faulty_propellers"]),
-            "fault_probability": reorder(v["fault_probability"]),
-        }
-    if out.get("hypotheses"):
-        out["hypotheses"] = [
-            {**h, "faulty_propellers": sorted(own[i - 1] for i in h["faulty_propellers"])} for h in out["hypotheses"]
-        ]
-    for key in ("rotor_effectiveness", "rotor_effectiveness_std"):
-        if out.get(key) is not None:
-            out[key] = reorder(out[key])
-    out["propellers"] = sorted(
-        ({**p, "propeller": own[p["propeller"] - 1], "px4_rotor": p["propeller"]} for p in out["propellers"]),
-        key=lambda p: p["propeller"],
-    )
-    if out["label_probability"] is not None:
-        lp = [0.0] * 16
-        for k, v_ in enumerate(out["label_probability"]):
-            lp[relabel(k + 1) - 1] = v_
-        out["label_probability"] = lp
-    if out["timeline"]:
-        t = dict(out["timeline"])
-        t["fault_probability"] = [reorder(row) for row in t["fault_probability"]]
-        t["label"] = [relabel(k) for k in t["label"]]
-        out["timeline"] = t
-    if out.get("decision"):
-        dec = dict(out["decision"])
-        dec["alerts"] = [{**a, "propellers": sorted(own[i - 1] for i in a["propellers"])} for a in dec["alerts"]]
-        out["decision"] = dec
-    out["propeller_numbering"] = {
-        "names": [p["name"] for p in out["propellers"]],
-        "px4_rotor": [p["px4_rotor"] for p in out["propellers"]],
-    }
-    return out
+def round_floats(obj, digits: int = 6):
+    """``obj`` with every float rounded (JSON readers get 239.7, not 239.70000000000002)."""
+    if isinstance(obj, float):
+        return round(obj, digits)
+    if isinstance(obj, dict):
+        return {k: round_floats(v, digits) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [round_floats(v, digits) for v in obj]
+    return obj
 
 
 def window_ends(table: FlightTable, feats: np.ndarray, window: int, hop: int) -> np.ndarray:
@@ -178,9 +150,18 @@ def envelope_checks(
     figures = {} if figures is None else figures
     unit = table.extras.get("motor_cmd_unit")
     if esc is not None and unit is not None and unit != esc.cmd_unit:
+        from monitor.resources import display_path, vehicles_for_cmd_unit
+
+        fits = [f"--vehicle {display_path(p)}" for p in vehicles_for_cmd_unit(unit)]
         return warnings, (
             f"vehicle outside the model's envelope: its motor commands are in '{unit}' but the model's "
             f"ESC curve takes '{esc.cmd_unit}' (another class of vehicle); use a model trained for it"
+            + (f": try {' or '.join(fits)}" if fits else "")
+        )
+    vehicle_type = table.extras.get("vehicle_type", "")
+    if vehicle_type and not vehicle_type.startswith(QUADROTOR + " "):
+        return warnings, (
+            f"not a quad-X multicopter: the log says {vehicle_type}; the model knows four rotors in PX4 quad-X order"
         )
     air = table.airborne
     if not air.any():
@@ -297,6 +278,7 @@ def diagnose_table(
     d.verdict = {
         "label": label,
         "faulty_propellers": list(LABEL_TABLE[label]),
+        "faulty_names": [table.motor_names[i - 1] for i in LABEL_TABLE[label]],
         "fault_probability": [float(x) for x in p],
         "confidence": confidence,
         "label_probability_of_verdict": round(float(mean_labels[label - 1]), 4),
@@ -307,6 +289,7 @@ def diagnose_table(
     d.propellers = [
         {
             "propeller": i + 1,
+            "px4_rotor": i + 1,
             "name": table.motor_names[i],
             "fault_probability": float(p[i]),
             "faulty": (i + 1) in LABEL_TABLE[label] and confidence == "confident",

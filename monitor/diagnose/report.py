@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from monitor.diagnose.engine import Diagnosis
+from monitor.diagnose.engine import Diagnosis, describe_label, rotor_name
 from monitor.errors import PropwatchError
 from monitor.flight import FlightTable
 from monitor.resample import US_PER_S
@@ -30,45 +30,84 @@ def _stem(source: str, out_dir: Path) -> str:
     return stem
 
 
-def plot(d: Diagnosis, table: FlightTable, png: Path) -> None:
+# The daemon's default alert threshold on P(faulty) (monitor.daemon.config.AlertConfig), drawn for reference.
+ALERT_THRESHOLD = 0.9
+
+
+def broken_at_gaps(t_s: np.ndarray, y: np.ndarray, max_step_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """``(t, y)`` with a NaN row inserted wherever consecutive points are more than ``max_step_s`` apart,
+    so a line is not drawn across a landed gap."""
+    t_s, y = np.asarray(t_s, dtype=np.float64), np.asarray(y, dtype=np.float64)
+    if len(t_s) < 2:
+        return t_s, y
+    cut = np.flatnonzero(np.diff(t_s) > max_step_s * 1.5) + 1
+    return np.insert(t_s, cut, np.nan), np.insert(y, cut, np.nan, axis=0)
+
+
+def unwrap_deg(angle_rad: np.ndarray) -> np.ndarray:
+    """Degrees, unwrapped across +-180 over the measured samples (NaN stays NaN), so yaw draws no spikes."""
+    a = np.asarray(angle_rad, dtype=np.float64)
+    out = np.full_like(a, np.nan)
+    ok = np.isfinite(a)
+    out[ok] = np.rad2deg(np.unwrap(a[ok]))
+    return out
+
+
+def _not_logged(ax, what: str) -> None:
+    ax.set_yticks([])
+    ax.text(0.5, 0.5, f"{what}: not logged", transform=ax.transAxes, ha="center", va="center", color="0.4", fontsize=11)
+
+
+def plot(d: Diagnosis, table: FlightTable, png: Path, threshold: float = ALERT_THRESHOLD) -> None:
     try:
         import matplotlib
 
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
+        from matplotlib.patches import Patch
     except ImportError as exc:
         raise PropwatchError("--report needs matplotlib (pip install 'propwatch[logs]')") from exc
     t = table.timestamp_us / US_PER_S
     fig, ax = plt.subplots(4, 1, figsize=(11, 10), sharex=True)
-    names = table.motor_names
+    names = [rotor_name(n, i + 1) for i, n in enumerate(table.motor_names)]
     if d.timeline:
-        tl = np.asarray(d.timeline["fault_probability"])
+        step_s = d.hop_steps / table.rate_hz
+        tl, p = broken_at_gaps(d.timeline["t_boot_s"], d.timeline["fault_probability"], step_s)
         for i in range(4):
-            ax[0].plot(d.timeline["t_boot_s"], tl[:, i], ".-", ms=2, lw=0.8, label=f"propeller {i + 1} ({names[i]})")
+            ax[0].plot(tl, p[:, i], ".-", ms=2, lw=0.8, label=names[i])
+    else:
+        _not_logged(ax[0], "no window classified, so P(faulty)")
+    ax[0].axhline(threshold, color="tab:red", ls="--", lw=0.8, label=f"alert threshold {threshold:g}")
     ax[0].set_ylim(-0.02, 1.02)
-    ax[0].set_ylabel("P(faulty)")
-    ax[0].legend(loc="upper right", fontsize=8)
+    ax[0].set_ylabel("P(faulty) per window")
+    handles, labels = ax[0].get_legend_handles_labels()
+    handles.append(Patch(color="tab:green", alpha=0.15, lw=0))
+    labels.append("airborne")
+    ax[0].legend(handles, labels, loc="upper left", fontsize=8, ncol=3)
     title = (
         "no verdict: " + (d.reason or "")
         if d.verdict is None
-        else f"label {d.verdict['label']}, faulty {d.verdict['faulty_propellers'] or 'none'}"
+        else describe_label(d.verdict["label"], list(table.motor_names), d.verdict.get("confidence", "confident"))
     )
     ax[0].set_title(f"{Path(d.source).name}: {title}", fontsize=10)
     rpm_known = np.isfinite(table.motor_rpm).any()
     motor = table.motor_rpm if rpm_known else table.motor_cmd
-    for i in range(4):
-        ax[1].plot(t, motor[:, i], lw=0.7, label=f"{i + 1} ({names[i]})")
+    _signals(ax[1], t, [(motor[:, i], names[i]) for i in range(4)], "motor commands")
     ax[1].set_ylabel("target RPM" if rpm_known else f"command ({table.extras.get('motor_cmd_unit', '')})")
-    ax[1].legend(loc="upper right", fontsize=8)
-    for name, lab in (("roll_rad", "roll"), ("pitch_rad", "pitch"), ("yaw_rad", "yaw")):
-        ax[2].plot(t, np.rad2deg(getattr(table, name)), lw=0.7, label=lab)
+    attitude = [
+        (np.rad2deg(table.roll_rad), "roll"),
+        (np.rad2deg(table.pitch_rad), "pitch"),
+        (unwrap_deg(table.yaw_rad), "yaw (unwrapped)"),
+    ]
+    _signals(ax[2], t, attitude, "attitude")
     ax[2].set_ylabel("attitude (deg)")
-    ax[2].legend(loc="upper right", fontsize=8)
-    for name, lab in (("roll_rate_rad_s", "roll rate"), ("pitch_rate_rad_s", "pitch rate"), ("yaw_rate_rad_s", "yaw rate")):
-        ax[3].plot(t, np.rad2deg(getattr(table, name)), lw=0.7, label=lab)
+    rates = [
+        (np.rad2deg(getattr(table, name)), lab)
+        for name, lab in (("roll_rate_rad_s", "roll rate"), ("pitch_rate_rad_s", "pitch rate"), ("yaw_rate_rad_s", "yaw rate"))
+    ]
+    _signals(ax[3], t, rates, "body rates")
     ax[3].set_ylabel("body rate (deg/s)")
     ax[3].set_xlabel("autopilot boot time (s)")
-    ax[3].legend(loc="upper right", fontsize=8)
     for a in ax:
         for s in d.segments:
             a.axvspan(s["start_boot_s"], s["stop_boot_s"], color="tab:green", alpha=0.08, lw=0)
@@ -78,18 +117,34 @@ def plot(d: Diagnosis, table: FlightTable, png: Path) -> None:
     plt.close(fig)
 
 
+def _signals(ax, t: np.ndarray, series: list[tuple[np.ndarray, str]], what: str) -> None:
+    """Plot each (values, label); a series never measured is named as not logged instead of drawn empty."""
+    missing = [lab for y, lab in series if not np.isfinite(y).any()]
+    for y, lab in series:
+        if np.isfinite(y).any():
+            ax.plot(t, y, lw=0.7, label=lab)
+    if len(missing) == len(series):
+        _not_logged(ax, what)
+    else:
+        if missing:
+            ax.text(0.01, 0.04, "not logged: " + ", ".join(missing), transform=ax.transAxes, color="0.4", fontsize=8)
+        ax.legend(loc="upper right", fontsize=8)
+
+
 def page(d: Diagnosis, png_name: str) -> str:
     e = html.escape
     rows = "".join(
-        f"<tr><td>{p['propeller']}</td><td>{e(p['name'])}</td><td>{p['fault_probability']:.3f}</td>"
-        f"<td>{'FAULTY' if p['faulty'] else 'ok'}</td></tr>"
+        f"<tr><td>{e(p['name'])}</td><td>{p['propeller']}</td><td>{p['fault_probability']:.3f}</td>"
+        f"<td>{'FAULTY' if p['faulty'] else 'suspect' if p.get('suspect') else 'ok'}</td></tr>"
         for p in d.propellers
     )
+    conf = d.verdict.get("confidence", "confident") if d.verdict is not None else ""
     verdict = (
         f"<p><b>No verdict:</b> {e(d.reason or '')}</p>"
         if d.verdict is None
-        else f"<p><b>Label {d.verdict['label']}</b>, faulty propellers: {d.verdict['faulty_propellers'] or 'none'}"
-        f" ({d.windows} windows)</p><table border=1 cellpadding=4><tr><th>propeller (PX4)</th><th>name</th>"
+        else f"<p><b>Verdict: {e(describe_label(d.verdict['label'], [p['name'] for p in d.propellers], conf))}</b>"
+        f" ({d.windows} windows; {conf}: label probability {d.verdict.get('label_probability_of_verdict', float('nan')):.2f},"
+        f" {100 * d.verdict.get('agreeing_windows', float('nan')):.0f} % of windows agree)</p><table border=1 cellpadding=4><tr><th>propeller</th><th>PX4 rotor</th>"
         f"<th>P(faulty)</th><th>verdict</th></tr>{rows}</table>"
     )
     segs = "".join(

@@ -31,6 +31,8 @@ def detect_format(path: str | Path) -> str:
             head = f.read(16)
     except OSError as exc:
         raise LogFormatError(f"{path}: cannot open: {exc.strerror or exc}") from exc
+    if not head:
+        raise LogFormatError(f"{path}: empty file (0 bytes): nothing was logged")
     if head.startswith(ULOG_MAGIC):
         return "ulog"
     if head.startswith(DATAFLASH_HEAD):
@@ -39,7 +41,10 @@ def detect_format(path: str | Path) -> str:
         return "tlog"
     suffixes = "".join(path.suffixes).lower()
     if ".csv" in suffixes:
-        raise LogFormatError(f"{path}: CSV logs need --format NAME (a column mapping in monitor/formats.yaml)")
+        from monitor.logs.csvlog import load_formats
+
+        names = ", ".join(sorted(load_formats()))
+        raise LogFormatError(f"{path}: CSV logs need --format NAME, one of: {names} (column mappings in monitor/formats.yaml)")
     raise LogFormatError(f"{path}: unknown log format (expected .tlog, .ulg, DataFlash .bin, or CSV with --format)")
 
 

@@ -18,6 +18,7 @@ import numpy as np
 
 from monitor.config import from_mapping, read_yaml
 from monitor.errors import ConfigError, LogFormatError
+from monitor.logs.mixers import MIXERS, mix
 from monitor.logs.raw import DEFAULT_MIN_HEIGHT_M, RawFlight, Stream
 from monitor.logs.units import M_S2_PER_G, RAD_PER_DEG, US_PER_MS, US_PER_S, V_PER_MV
 
@@ -58,6 +59,30 @@ _NONE = ColumnSpec()
 
 
 @dataclass(frozen=True)
+class MixerSpec:
+    """Motor commands rebuilt from logged controller outputs (``monitor.logs.mixers``)."""
+
+    kind: str = ""  # "": no mixer; else one of monitor.logs.mixers.MIXERS
+    thrust: str = ""  # column names of the controller's outputs, firmware units
+    roll: str = ""
+    pitch: str = ""
+    yaw: str = ""
+    # For PX4 rotors 1..4, which mixer output (1-based, the vehicle's own numbering) drives it.
+    outputs_to_px4: tuple[int, int, int, int] = (1, 2, 3, 4)
+
+    def __post_init__(self) -> None:
+        if self.kind and self.kind not in MIXERS:
+            raise ConfigError(f"mixer.kind: unknown mixer {self.kind!r} (known: {', '.join(MIXERS)})")
+        if self.kind and not all((self.thrust, self.roll, self.pitch, self.yaw)):
+            raise ConfigError("mixer: thrust, roll, pitch and yaw columns are all needed")
+        if sorted(self.outputs_to_px4) != [1, 2, 3, 4]:
+            raise ConfigError(f"mixer.outputs_to_px4: must be a permutation of 1..4, got {list(self.outputs_to_px4)}")
+
+    def columns(self) -> list[str]:
+        return [self.thrust, self.roll, self.pitch, self.yaw] if self.kind else []
+
+
+@dataclass(frozen=True)
 class CsvFormat:
     description: str
     time: ColumnSpec
@@ -85,6 +110,12 @@ class CsvFormat:
     # Optional second set of motor columns (PX4 order), e.g. the PWM applied after battery
     # compensation: FlightTable.extras["motor_cmd_applied"], same unit as ``motors``.
     motors_applied: tuple[str, str, str, str] | None = None
+    # Where no motor command is logged: rebuild it from the controller's outputs.
+    mixer: MixerSpec = MixerSpec()
+    # World-frame acceleration (NED after scale), e.g. an estimator's: FlightTable.extras["accel_ned_m_s2"].
+    acc_world_n: ColumnSpec = _NONE
+    acc_world_e: ColumnSpec = _NONE
+    acc_world_d: ColumnSpec = _NONE
     min_height_m: float = DEFAULT_MIN_HEIGHT_M
     delimiter: str = ","
 
@@ -99,7 +130,7 @@ class CsvFormat:
     def required_columns(self) -> list[str]:
         """Columns that must be in the file: time, motors, and every signal not marked ``required: false``."""
         specs = [getattr(self, f.name) for f in fields(self)]
-        out = [self.time.column] + [m for m in self.motors if m]
+        out = [self.time.column] + [m for m in self.motors if m] + self.mixer.columns()
         out += [c.column for c in specs if isinstance(c, ColumnSpec) and c.column and c.required]
         return list(dict.fromkeys(out))
 
@@ -156,8 +187,17 @@ def _parse(text: str, delimiter: str, path: Path) -> tuple[list[str], np.ndarray
         header = [h.strip() for h in next(reader)]
     except StopIteration:
         raise LogFormatError(f"{path}: empty CSV file") from None
+    except csv.Error as exc:  # binary junk: NUL bytes, a bare CR inside a field
+        raise LogFormatError(f"{path}: not a CSV file: {exc}") from None
     rows, bad = [], 0
-    for row in reader:
+    while True:
+        try:
+            row = next(reader)
+        except StopIteration:
+            break
+        except csv.Error:  # one damaged line: skipped like a malformed row
+            bad += 1
+            continue
         if len(row) != len(header):
             bad += 1
             continue
@@ -202,7 +242,12 @@ def read_csv(path: str | Path, fmt: str | CsvFormat, formats_path: str | Path = 
         if getattr(spec, what).column is None:
             warnings.append(f"{what} is not logged in format {_name(spec, formats_path)!r}")
     motors = np.stack([data[:, col[m]] if m else np.full(len(data), np.nan) for m in spec.motors], axis=1)
-    if not any(spec.motors):
+    if not any(spec.motors) and spec.mixer.kind:
+        mx = spec.mixer
+        own = mix(mx.kind, *(data[:, col[c]] for c in mx.columns()))
+        motors = own[:, [k - 1 for k in mx.outputs_to_px4]]
+        warnings.append(f"motor commands rebuilt from {', '.join(mx.columns())} with the {mx.kind} mixer (not logged)")
+    elif not any(spec.motors):
         warnings.append(f"motor commands are not logged in format {_name(spec, formats_path)!r}")
 
     def opt(*specs: ColumnSpec) -> Stream | None:
@@ -214,6 +259,9 @@ def read_csv(path: str | Path, fmt: str | CsvFormat, formats_path: str | Path = 
     extra = {}
     if spec.motors_applied and all(m in col for m in spec.motors_applied):
         extra["motor_cmd_applied"] = Stream.build(t_us, np.stack([data[:, col[m]] for m in spec.motors_applied], axis=1))
+    acc_world = opt(spec.acc_world_n, spec.acc_world_e, spec.acc_world_d)
+    if acc_world is not None:
+        extra["accel_ned_m_s2"] = acc_world
     height = opt(spec.height)
     if height is not None:
         height = Stream(height.t_us, height.values - height.values[0])

@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from monitor.errors import LogFormatError
+from monitor.logs.guards import check_marker_gaps
 from monitor.logs.raw import EVENT_MAX_AGE_US, RawFlight, Stream
 from monitor.logs.units import V_PER_CV, deg_to_rad, ms_to_us, wrap_pi
 
@@ -67,6 +68,7 @@ def read_dataflash(path: str | Path) -> RawFlight:
     path = Path(path)
     if not path.is_file():
         raise LogFormatError(f"{path}: no such file")
+    check_marker_gaps(path, (b"\xa3\x95",), "DataFlash")
     err = io.StringIO()
     rows: dict[str, list] = {k: [] for k in ("cmd", "att", "rate", "imu", "bat", "armed", "alt", "ekf")}
     try:

@@ -93,6 +93,7 @@ class RawFlight:
     vel_ned_m_s: Stream | None = None
     pos_ned_m: Stream | None = None
     motor_names: tuple[str, str, str, str] = ("1", "2", "3", "4")
+    vehicle_type: str = ""  # the log's MAV_TYPE name ("MAV_TYPE_QUADROTOR", ...); "" when it does not say
     extra_streams: dict[str, Stream] = field(default_factory=dict)  # reader-specific, held into FlightTable.extras
     min_height_m: float = DEFAULT_MIN_HEIGHT_M
     warnings: list[str] = field(default_factory=list)
@@ -177,6 +178,8 @@ def to_flight_table(raw: RawFlight, esc: EscCurve | None = None, rate_hz: float 
         "motor_cmd_unit": raw.cmd_unit,
         "stream_rates_hz": {n: getattr(raw, n).rate_hz() for n in ("motor_cmd", "attitude_rad", "rates_rad_s")},
     }
+    if raw.vehicle_type:
+        extras["vehicle_type"] = raw.vehicle_type
     if raw.esc_rpm is not None and len(raw.esc_rpm):
         extras["esc_rpm"] = held(raw.esc_rpm, 4)
     if raw.height_m is not None and len(raw.height_m) and not (raw.landed is not None and len(raw.landed)):

@@ -19,6 +19,7 @@ from pathlib import Path
 
 from monitor import mavlink_decode as md
 from monitor.errors import LogFormatError
+from monitor.logs.guards import check_marker_gaps
 from monitor.logs.mavbulk import unpack_frames
 from monitor.logs.raw import RawFlight, Stream
 from monitor.logs.units import US_PER_MS
@@ -51,6 +52,18 @@ def _next_is_frame(buf: bytes, off: int) -> bool:
     return off >= len(buf) or (off + TS_BYTES < len(buf) and buf[off + TS_BYTES] in (V1_MAGIC, V2_MAGIC))
 
 
+def _next_magic(buf: bytes, start: int, n: int) -> int:
+    """Index of the next MAVLink magic byte at or after ``start`` (``n`` if none), in C-speed steps."""
+    width = 256
+    while start < n:
+        end = min(start + width, n)
+        hits = [i for i in (buf.find(b"\xfd", start, end), buf.find(b"\xfe", start, end)) if i >= 0]
+        if hits:
+            return min(hits)
+        start, width = end, min(width * 2, 1 << 20)
+    return n
+
+
 def iter_frames(buf: bytes, wanted=WANTED_IDS):
     """Yield (offset, frame bytes) for wanted ids; returns (skipped_bytes, truncated) via StopIteration.value."""
     n, off, skipped, last_ts = len(buf), 0, 0, None
@@ -66,7 +79,9 @@ def iter_frames(buf: bytes, wanted=WANTED_IDS):
         else:
             if p + 10 > n and magic in (V1_MAGIC, V2_MAGIC):
                 return skipped, True
-            off, skipped = off + 1, skipped + 1
+            # Not a magic byte: every start before the next one would be skipped one by one; jump there.
+            step = max(min(_next_magic(buf, p + 1, n), n - 1) - TS_BYTES - off, 1)
+            off, skipped = off + step, skipped + step
             continue
         ts = int.from_bytes(buf[off : off + TS_BYTES], "big")
         if last_ts is not None and abs(ts - last_ts) > MAX_TS_JUMP_US and not _next_is_frame(buf, p + flen):
@@ -151,6 +166,7 @@ def read_tlog(path: str | Path, system_id: int | None = None, extras: bool = Tru
     path = Path(path)
     if not path.is_file():
         raise LogFormatError(f"{path}: no such file")
+    check_marker_gaps(path, (bytes([V1_MAGIC]), bytes([V2_MAGIC])), "MAVLink")
     buf = path.read_bytes()
     mav, mavlink_map = _mavlink()
     dec = md.MavlinkDecoder(system_id=system_id)

@@ -61,6 +61,16 @@ def _cut_off_bytes(path: Path) -> int:
     return max(0, off - n) if off > n else (n - off)
 
 
+def mav_type_name(mav_type) -> str:
+    """``MAV_TYPE_QUADROTOR`` for PX4's MAV_TYPE parameter 2 (pymavlink's enum); "" when not logged."""
+    if mav_type is None:
+        return ""
+    from pymavlink.dialects.v20 import common
+
+    entry = common.enums["MAV_TYPE"].get(int(mav_type))
+    return f"{entry.name} ({int(mav_type)})" if entry else f"MAV_TYPE {int(mav_type)}"
+
+
 def _topic(ulog, name: str) -> dict | None:
     sets = [d for d in ulog.data_list if d.name == name]
     if not sets:
@@ -124,6 +134,7 @@ def read_ulog(path: str | Path) -> RawFlight:
     height = None if pos is None else Stream(pos.t_us, -(pos.values[:, 2] - pos.values[0, 2]))
     return RawFlight(
         source=str(path),
+        vehicle_type=mav_type_name(ulog.initial_parameters.get("MAV_TYPE")),
         cmd_unit="us",
         motor_cmd=cmd,
         attitude_rad=Stream(q.t_us, quat_wxyz_to_euler_zyx(q.values)),

@@ -11,11 +11,11 @@ import math
 
 import numpy as np
 
+from monitor.resample import US_PER_S  # noqa: F401  (the one definition; re-exported for the readers)
 from monitor.vehicle import GRAVITY_M_S2
 
 RAD_PER_DEG = math.pi / 180.0
 US_PER_MS = 1000
-US_PER_S = 1_000_000
 V_PER_MV = 1e-3
 V_PER_CV = 1e-2  # ArduCopter 3.3's CURR.Volt is an int16 in centivolts
 M_S2_PER_G = GRAVITY_M_S2

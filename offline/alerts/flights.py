@@ -18,6 +18,7 @@ import numpy as np
 
 from monitor.labels import LABEL_MASKS
 from monitor.model import Classifier
+from monitor.resample import US_PER_S
 from monitor.vehicle import VehicleConfig
 from offline.dataset.generate import DatasetSpec, routes, simulate_flights, vehicle_variant
 from offline.dataset.onset import SwitchedPropellers
@@ -183,7 +184,9 @@ def _from_table(table, clf: Classifier, truth_props, onset_log_s: float, boot_of
     ts = np.asarray(table.timestamp_us, dtype=np.int64)
     rate = float(table.rate_hz)
     # Step j is at (j + 1) / rate s of this flight; the onset is on the log's clock (boot offset + onset).
-    onset_s = (boot_offset_us + onset_log_s * 1e6 - ts[0]) / 1e6 + 1.0 / rate if math.isfinite(onset_log_s) else math.inf
+    onset_s = (
+        (boot_offset_us + onset_log_s * US_PER_S - ts[0]) / US_PER_S + 1.0 / rate if math.isfinite(onset_log_s) else math.inf
+    )
     rates = np.abs(np.stack([table.roll_rate_rad_s, table.pitch_rate_rad_s, table.yaw_rate_rad_s], axis=1))
     acc = table.accel_frd_m_s2 if table.accel_frd_m_s2 is not None else np.full((len(ts), 3), np.nan)
     return AlertFlight(

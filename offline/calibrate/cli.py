@@ -15,7 +15,6 @@ from pathlib import Path
 from monitor.flight import FlightTable
 from monitor.logs import read_log
 from monitor.vehicle import DEFAULT_VEHICLE, VehicleConfig, load_vehicle_with_sources
-from offline.calibrate.calibrate import CalibrationResult, calibrate
 from offline.calibrate.terms import TERMS
 
 
@@ -40,7 +39,8 @@ def read_measured(path: Path, fmt: str | None, vehicle: VehicleConfig) -> list[F
     return [read_log(path, fmt, esc=vehicle.esc)]
 
 
-def summary(r: CalibrationResult) -> str:
+def summary(r) -> str:
+    """Plain-text summary of an ``offline.calibrate.calibrate.CalibrationResult``."""
     lines = [
         f"cause: {r.cause or 'none (no discrepancy stands out above the noise)'}"
         + (f"  (confidence {r.confidence:.3f})" if r.cause else "")
@@ -72,6 +72,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"propwatch calibrate: unknown term(s) {', '.join(unknown)} (known: {', '.join(TERMS)})", file=sys.stderr)
         return 2
     tables = [t for p in args.measured for t in read_measured(p, args.format, loaded.config)]
+    from offline.calibrate.calibrate import calibrate  # scipy: only once there is work to do
+
     result = calibrate(tables, loaded.config, terms)
     if args.out:
         from offline.calibrate.writer import write_calibrated

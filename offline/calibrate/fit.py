@@ -18,15 +18,16 @@ refit all chosen terms jointly, stop when no identifiable term lowers it by
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.optimize import least_squares
 
 from monitor.vehicle import VehicleConfig
-from offline.calibrate.physics import SpeedScale, angular_accel, residuals, rotor_forces
+from offline.calibrate.physics import G_M_S2, SpeedScale, angular_accel, residuals, rotor_forces, trim_commands
 from offline.calibrate.prepare import Segment
-from offline.calibrate.terms import Term, apply_terms, stacked
+from offline.calibrate.terms import TERMS, Term, apply_terms, stacked
 
 BLOCK_S = 5.0
 MAX_LAG = 40  # samples (2 s at 20 Hz) for the autocorrelation time
@@ -343,3 +344,191 @@ def select_terms(data: Data, nominal: VehicleConfig, candidates: list[Term]) -> 
         # Reweight by what is left: the next term competes against the current model's residual.
         sigma = {k: max(v, noise_floor(k)) for k, v in rms_by_signal(current.residuals, data.fit_masks).items()}
     return Selection(res0, nominal_bic, nominal_sigma, steps, current)
+
+
+# ---------------------------------------------------------------------------
+# Steady-state view (was offline/crazypad/calibration.py; one calibrator, issue 14).
+#
+# For logs without body rates or full attitude (CrazyPAD's motor logs: no pitch, no rates), the
+# equation-error view above cannot run; what such logs do carry is the per-motor command the
+# controller settles at in steady flight. Data: per flight, the mean command of each motor over
+# its steady phases. Model: the trim commands of the vehicle with the term applied
+# (``offline.calibrate.physics.trim_commands``). The same term library (``TERMS``) is fitted by
+# least squares, ranked by BIC on the fit flights (k parameters, n = 4 x flights means) and
+# chosen greedily while it lowers BIC by ``MIN_DELTA_BIC``. What no term explains is reported
+# as an unexplained residual, in commands and in units of the flights' own flight-to-flight
+# spread, rather than forced onto a term.
+
+
+STEADY_CANDIDATES = ("motor_efficiency", "cg_offset", "mass", "esc_curve")
+
+
+def predicted_commands(vehicle: VehicleConfig) -> np.ndarray:
+    """(4,) trim command in unaccelerated level flight, PX4 rotor order."""
+    return trim_commands(vehicle, np.array([vehicle.mass_kg * G_M_S2]))[0]
+
+
+@dataclass
+class SteadyTermResult:
+    name: str
+    params: dict[str, float]
+    fit_rms_cmd: float
+    holdout_rms_cmd: float
+    bic: float
+    vehicle: VehicleConfig = field(repr=False)
+
+    def to_dict(self) -> dict:
+        return {
+            "term": self.name,
+            "params": {k: round(v, 6) for k, v in self.params.items()},
+            "fit_rms_cmd": round(self.fit_rms_cmd, 1),
+            "holdout_rms_cmd": round(self.holdout_rms_cmd, 1),
+            "bic": round(self.bic, 2),
+        }
+
+
+def _steady_rms(vehicle: VehicleConfig, measured: np.ndarray) -> float:
+    return float(np.sqrt(np.mean((measured - predicted_commands(vehicle)) ** 2))) if len(measured) else float("nan")
+
+
+def _steady_bic(rms: float, n: int, k: int) -> float:
+    return n * math.log(max(rms, 1e-9) ** 2) + k * math.log(n)
+
+
+def fit_steady_terms(nominal: VehicleConfig, terms: list[Term], fit_cmd: np.ndarray) -> VehicleConfig:
+    """Least squares of the trim commands to the per-flight mean commands (F, 4)."""
+    x0 = stacked(nominal, terms, "get")
+    scale = stacked(nominal, terms, "scale")
+    lo, hi = stacked(nominal, terms, "lower"), stacked(nominal, terms, "upper")
+
+    def resid(z: np.ndarray) -> np.ndarray:
+        v = apply_terms(nominal, terms, x0 + z * scale)
+        return (fit_cmd - predicted_commands(v)).ravel() / 1000.0
+
+    sol = least_squares(resid, np.zeros_like(x0), bounds=((lo - x0) / scale, (hi - x0) / scale), x_scale=1.0)
+    return apply_terms(nominal, terms, x0 + sol.x * scale)
+
+
+def steady_param_dict(vehicle: VehicleConfig, terms: list[Term]) -> dict[str, float]:
+    values = stacked(vehicle, terms, "get")
+    names = [p for t in terms for p in t.params]
+    return dict(zip(names, map(float, values)))
+
+
+@dataclass
+class SteadyCalibration:
+    airframe: str
+    nominal: VehicleConfig
+    calibrated: VehicleConfig
+    cause: str | None
+    ranking: list[SteadyTermResult]
+    nominal_fit_rms_cmd: float
+    nominal_holdout_rms_cmd: float
+    calibrated_holdout_rms_cmd: float
+    fit_files: list[str]
+    holdout_files: list[str]
+    calibrated_bias_rms_cmd: float = float("nan")  # RMS over motors of (mean measured - model) on the fit flights
+    spread_rms_cmd: float = float("nan")  # flight-to-flight std of the per-motor means (RMS over motors)
+
+    @property
+    def unexplained(self) -> dict:
+        """The residual no chosen term explains, in commands and in flight-to-flight spreads.
+
+        Beyond ~3 spreads of the mean (spread / sqrt(flights)) something outside the library is
+        there. Caveat of this view: ``motor_efficiency`` has four parameters for four per-motor
+        means, so whenever it is a candidate any static per-motor pattern is absorbed by it; only
+        phase-dependent effects (hover vs cruise) or a library without it leave a residual here.
+        """
+        n = max(len(self.fit_files), 1)
+        se = self.spread_rms_cmd / math.sqrt(n) if self.spread_rms_cmd > 0 else float("nan")
+        return {"rms_cmd": self.calibrated_bias_rms_cmd, "in_standard_errors": self.calibrated_bias_rms_cmd / se}
+
+    def to_dict(self) -> dict:
+        return {
+            "airframe": self.airframe,
+            "unexplained_residual": {k: round(float(v), 3) for k, v in self.unexplained.items()},
+            "cause": self.cause,
+            "why": TERMS[self.cause].why if self.cause else "no term beats the nominal model",
+            "ranking": [r.to_dict() for r in self.ranking],
+            "nominal_fit_rms_cmd": round(self.nominal_fit_rms_cmd, 1),
+            "holdout_rms_cmd": {
+                "nominal": round(self.nominal_holdout_rms_cmd, 1),
+                "calibrated": round(self.calibrated_holdout_rms_cmd, 1),
+            },
+            "calibrated_terms": {
+                "motor_efficiency": list(self.calibrated.motor_efficiency),
+                "cg_offset_frd_m": list(self.calibrated.cg_offset_frd_m),
+                "mass_kg": self.calibrated.mass_kg,
+            },
+            "fit_files": self.fit_files,
+            "holdout_files": self.holdout_files,
+        }
+
+
+def calibrate_steady(
+    airframe: str,
+    nominal: VehicleConfig,
+    fit_cmd: np.ndarray,
+    holdout_cmd: np.ndarray,
+    fit_files: list[str],
+    holdout_files: list[str],
+    candidates=STEADY_CANDIDATES,
+) -> SteadyCalibration:
+    """Fit each candidate on ``fit_cmd`` (F, 4 mean commands, PX4 order), rank, keep the cause.
+
+    The calibrated vehicle carries the cause; a second term is added when it
+    lowers the fit BIC by ``MIN_DELTA_BIC`` again (greedy, as ``offline.calibrate.fit``).
+    """
+    n = fit_cmd.size
+    base_rms = _steady_rms(nominal, fit_cmd)
+    base_bic = _steady_bic(base_rms, n, 0)
+    ranking = []
+    for name in candidates:
+        v = fit_steady_terms(nominal, [TERMS[name]], fit_cmd)
+        k = len(TERMS[name].params)
+        ranking.append(
+            SteadyTermResult(
+                name,
+                steady_param_dict(v, [TERMS[name]]),
+                _steady_rms(v, fit_cmd),
+                _steady_rms(v, holdout_cmd),
+                _steady_bic(_steady_rms(v, fit_cmd), n, k),
+                v,
+            )
+        )
+    ranking.sort(key=lambda r: r.bic)
+    chosen: list[str] = []
+    best_bic, calibrated = base_bic, nominal
+    for r in ranking:
+        terms = [TERMS[t] for t in chosen + [r.name]]
+        v = fit_steady_terms(nominal, terms, fit_cmd)
+        b = _steady_bic(_steady_rms(v, fit_cmd), n, sum(len(t.params) for t in terms))
+        if b < best_bic - MIN_DELTA_BIC:
+            chosen.append(r.name)
+            best_bic, calibrated = b, v
+    return SteadyCalibration(
+        airframe,
+        nominal,
+        calibrated,
+        chosen[0] if chosen else None,
+        ranking,
+        base_rms,
+        _steady_rms(nominal, holdout_cmd),
+        _steady_rms(calibrated, holdout_cmd),
+        fit_files,
+        holdout_files,
+        float(np.sqrt(np.mean((np.mean(fit_cmd, axis=0) - predicted_commands(calibrated)) ** 2))),
+        float(np.sqrt(np.mean(np.std(fit_cmd, axis=0, ddof=1) ** 2))) if len(fit_cmd) > 1 else float("nan"),
+    )
+
+
+def equivalent_speed_ratios(calibrated: VehicleConfig, fault_cmd: np.ndarray) -> np.ndarray:
+    """(4,) per-rotor speed scale, relative to the calibrated airframe, that reproduces ``fault_cmd``.
+
+    ``fault_cmd`` (F, 4) are the mean commands of flights of one condition; the
+    common part (extra mass, battery) is divided out (geometric mean 1), so a
+    value below 1 is a rotor that lost thrust: thrust factor = ratio**2.
+    """
+    v = fit_steady_terms(calibrated, [TERMS["motor_efficiency"]], fault_cmd)
+    r = np.asarray(v.motor_efficiency) / np.asarray(calibrated.motor_efficiency)
+    return r / np.exp(np.mean(np.log(r)))

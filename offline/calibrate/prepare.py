@@ -33,6 +33,7 @@ from scipy.signal import savgol_coeffs
 
 from monitor.errors import LogFormatError
 from monitor.flight import FlightTable, true_runs
+from monitor.resample import US_PER_S
 from monitor.vehicle import VehicleConfig
 
 SG_WINDOW = 7  # samples (0.35 s at 20 Hz): long enough to average noise, short against manoeuvres
@@ -225,7 +226,7 @@ def _segment(tab: FlightTable, k: int, a: int, b: int, dt: float, vehicle: Vehic
     acc = None if tab.accel_frd_m_s2 is None else tab.accel_frd_m_s2[sl].astype(np.float64)
     if acc is not None and np.any(np.isnan(acc)):
         acc = None
-    t = (tab.timestamp_us[sl] - tab.timestamp_us[sl][0]) * 1e-6
+    t = (tab.timestamp_us[sl] - tab.timestamp_us[sl][0]) / US_PER_S
     valid = np.ones(b - a, dtype=bool)
     h = SG_WINDOW // 2
     h = max(h, SG_WINDOW_TRANSLATION // 2)

@@ -26,9 +26,10 @@ import numpy as np
 from monitor.config import to_mapping
 from monitor.model import Classifier
 from monitor.vehicle import DEFAULT_VEHICLE, load_vehicle
-from offline.classifier.card import write_card
+from offline.classifier.card import ablation_card_table, write_card
+from offline.classifier.card_tables import TABLES_FILE, CardTable, load_tables, upsert_table
 from offline.classifier.evaluate import Result, evaluate_dataset, format_table
-from offline.classifier.experiments import EXPERIMENTS, ablation_table
+from offline.classifier.experiments import EVAL_SETS, EXPERIMENTS
 from offline.classifier.export import export_onnx
 from offline.classifier.onboard import DAEMON_ALERTS, RULES, ShiftFlights, rule_sweep, simulate_onset
 from offline.classifier.train import TrainConfig, load_checkpoint, train
@@ -102,13 +103,24 @@ def result_from_dict(d: dict) -> Result:
     )
 
 
-def ablation_from(folder: Path) -> str:
+def ablation_from(folder: Path) -> CardTable | None:
+    """The ablation card table from a folder of experiments JSON (rows in EXPERIMENTS order), None when empty."""
     rows = []
     for name in EXPERIMENTS:
         f = folder / f"{name}.json"
         if f.is_file():
             rows.append(json.loads(f.read_text(encoding="utf-8")))
-    return ablation_table(rows) if rows else ""
+    return ablation_card_table(rows, EVAL_SETS) if rows else None
+
+
+def write_card_from(out: Path, manifest: dict, results: list[Result], ablation_dir: Path | None) -> Path:
+    """Refresh the ablation table from ``ablation_dir`` (when given and not empty), then write the card from the
+    manifest and the tracked tables file only."""
+    tables_path = out / TABLES_FILE
+    table = ablation_from(ablation_dir) if ablation_dir is not None else None
+    if table is not None:
+        upsert_table(tables_path, table)
+    return write_card(out / "classifier.card.md", manifest, results, load_tables(tables_path))
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -129,8 +141,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument(
         "--ablation",
         type=Path,
-        default=Path("out/experiments"),
-        help="folder of experiments JSON (python -m offline.classifier.experiments) to quote in the card",
+        default=None,
+        help="folder of experiments JSON (python -m offline.classifier.experiments): refreshes the ablation table in "
+        f"{TABLES_FILE}; the build also records the shipped row there (default out/experiments)",
     )
     p.add_argument(
         "--checkpoint",
@@ -139,15 +152,19 @@ def main(argv: list[str] | None = None) -> int:
         "out/experiments/ROW.pt) instead of training it again; its config and training data must match",
     )
     p.add_argument(
-        "--card-only", action="store_true", help="rewrite the card from the existing manifest (e.g. after new ablation runs)"
+        "--card-only",
+        action="store_true",
+        help=f"rewrite the card from the existing manifest and {TABLES_FILE} only (plus --ablation when given)",
     )
     a = p.parse_args(argv)
     if a.card_only:
         manifest = json.loads((a.out / "classifier.manifest.json").read_text(encoding="utf-8"))
         results = [result_from_dict(r) for r in manifest["figures"]["results"]]
-        write_card(a.out / "classifier.card.md", manifest, results, ablation_from(a.ablation))
+        write_card_from(a.out, manifest, results, a.ablation)
         print(f"rewrote {a.out / 'classifier.card.md'}")
         return 0
+    if a.ablation is None:
+        a.ablation = Path("out/experiments")
     t0 = time.time()
     vehicle = load_vehicle(a.vehicle)
     kind = propeller_kind()
@@ -220,7 +237,7 @@ def main(argv: list[str] | None = None) -> int:
         build_seconds=round(time.time() - t0, 1),
     )
     write_manifest(a.out / "classifier.manifest.json", manifest)
-    write_card(a.out / "classifier.card.md", manifest, results, ablation_from(a.ablation))
+    write_card_from(a.out, manifest, results, a.ablation)
     print(f"wrote {onnx_path}, classifier.card.md, classifier.manifest.json in {time.time() - t0:.0f} s")
     return 0
 

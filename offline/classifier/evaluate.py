@@ -124,7 +124,7 @@ def plot_confusion(r: Result, path: str | Path) -> Path:
     rows = r.confusion.sum(axis=1, keepdims=True)
     frac = r.confusion / np.maximum(rows, 1)
     fig, ax = plt.subplots(figsize=(8, 7))
-    im = ax.imshow(frac, cmap="Blues", vmin=0, vmax=1)
+    im = ax.imshow(100 * frac, cmap="Blues", vmin=0, vmax=100)
     for i in range(16):
         for j in range(16):
             if r.confusion[i, j]:
@@ -141,10 +141,10 @@ def plot_confusion(r: Result, path: str | Path) -> Path:
     ax.set_xticks(ticks, [str(k + 1) for k in ticks])
     ax.set_yticks(ticks, [f"{k + 1} {n}" for k, n in enumerate(class_names())], fontsize=6)
     ax.set_xlabel("predicted label")
-    ax.set_ylabel("true label")
+    ax.set_ylabel("true label (faulty PX4 rotors)")
     ax.set_title(f"{r.name}: accuracy {100 * r.accuracy:.2f} % over {r.windows} windows (row %)")
-    fig.colorbar(im, ax=ax, fraction=0.046)
+    fig.colorbar(im, ax=ax, fraction=0.046, label="share of the true label's windows (%)")
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    fig.savefig(path, dpi=110, bbox_inches="tight")  # the long y tick labels must not clip the axis label
     plt.close(fig)
     return path

@@ -15,7 +15,6 @@ import numpy as np
 from monitor.errors import ModelError
 from monitor.model import Classifier
 from offline.classifier.evaluate import evaluate_dataset, format_table, plot_confusion
-from offline.classifier.train import load_checkpoint, predict_probabilities
 from offline.dataset.records import load_dataset
 
 
@@ -31,6 +30,8 @@ class LoadedModel:
             self.dataset_name, self.test_flights = split.get("dataset_name", ""), split.get("test_flights")
             self.predict = c.predict
         else:
+            from offline.classifier.train import load_checkpoint, predict_probabilities  # torch only for a .pt
+
             m = load_checkpoint(path)
             self.features, self.window, self.rate = m.config.features, m.config.window, m.sample_rate_hz
             self.vehicle = m.vehicle.get("name", "")

@@ -97,6 +97,11 @@ EXPERIMENTS: dict[str, tuple[tuple[str, ...], dict]] = {
     "varied x60 flights +yaw robust dropout": (("R-varied",), {**_YAW_ROBUST_20, "dropout": 0.3}),
 }
 EVAL_SETS = ("A-bent", "B-bent", "C-bent", "A-cracked", "B-cracked", "C-cracked")
+# Row groups by the data folder they need (`--only base` / `--only x60`, as `make card` runs them).
+ROW_GROUPS = {
+    "x60": tuple(n for n in EXPERIMENTS if "x60" in n),
+    "base": tuple(n for n in EXPERIMENTS if "x60" not in n),
+}
 
 
 def pooled(parts: list[FaultDataset]) -> tuple[FaultDataset, np.ndarray]:
@@ -164,7 +169,11 @@ def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="python -m offline.classifier.experiments", description=__doc__)
     p.add_argument("--data", type=Path, default=Path("out/data"))
     p.add_argument("--out", type=Path, default=Path("out/experiments"))
-    p.add_argument("--only", default=",".join(EXPERIMENTS))
+    p.add_argument(
+        "--only",
+        default=",".join(EXPERIMENTS),
+        help="comma-separated rows, or a group: base (data with R-mixed, R-varied 30/label), x60 (R-varied 60/label)",
+    )
     p.add_argument("--hop", type=int, default=10, help="evaluation window hop")
     p.add_argument("--epochs", type=int, default=TrainConfig.epochs)
     p.add_argument("--train-stride", type=int, default=TrainConfig.train_stride)
@@ -175,7 +184,9 @@ def main(argv: list[str] | None = None) -> int:
     base = TrainConfig(epochs=a.epochs, train_stride=a.train_stride, channels=a.channels, features=PAPER_FEATURES)
     cache: dict = {}
     rows = []
-    for name in [n.strip() for n in a.only.split(",") if n.strip()]:
+    names = [n.strip() for n in a.only.split(",") if n.strip()]
+    names = [r for n in names for r in ROW_GROUPS.get(n, (n,))]
+    for name in names:
         rows.append(run_one(name, a.data, a.out, base, a.hop, cache, a.reuse))
         (a.out / f"{name}.json").write_text(json.dumps(rows[-1], indent=2) + "\n", encoding="utf-8")
     print(ablation_table(rows))

@@ -7,7 +7,6 @@ normalisation, labels, vehicle, training manifest).
 
 from __future__ import annotations
 
-import io
 import json
 from pathlib import Path
 
@@ -19,7 +18,7 @@ from monitor.model import INPUT_NAME, META_PREFIX, OUTPUT_FAULTS, OUTPUT_LABELS
 from offline.classifier.cnn import ContractModule
 from offline.classifier.train import TrainedModel
 
-OPSET = 17
+OPSET = 18  # the dynamo exporter's lowest supported opset
 
 
 def metadata(m: TrainedModel) -> dict[str, object]:
@@ -44,21 +43,21 @@ def export_onnx(m: TrainedModel, path: str | Path, extra_metadata: dict | None =
     path.parent.mkdir(parents=True, exist_ok=True)
     module = ContractModule(m.net).eval()
     example = torch.zeros(2, m.config.window, len(m.config.features))
-    buf = io.BytesIO()
-    # The TorchScript exporter: a small static CNN needs nothing from the dynamo path,
-    # and it writes one self-contained file (no external data).
-    torch.onnx.export(
+    # torch's current (dynamo) exporter: torch.export traces the module, onnxscript translates it.
+    batch = torch.export.Dim("batch", min=1)
+    program = torch.onnx.export(
         module,
         (example,),
-        buf,
-        dynamo=False,
+        dynamo=True,
         input_names=[INPUT_NAME],
         output_names=[OUTPUT_LABELS, OUTPUT_FAULTS],
-        dynamic_axes={INPUT_NAME: {0: "batch"}, OUTPUT_LABELS: {0: "batch"}, OUTPUT_FAULTS: {0: "batch"}},
+        dynamic_shapes=({0: batch},),
         opset_version=OPSET,
-        do_constant_folding=True,
+        optimize=True,
+        verbose=False,
     )
-    model = onnx.load_from_string(buf.getvalue())
+    # One self-contained file (the weights inside, no external data): the monitor loads bytes.
+    model = program.model_proto
     meta = {**metadata(m), **(extra_metadata or {})}
     del model.metadata_props[:]
     for k, v in meta.items():

@@ -6,15 +6,16 @@ import argparse
 from pathlib import Path
 
 from monitor.model import Classifier
-from offline.classifier.export import export_onnx
-from offline.classifier.train import load_checkpoint
 
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="propwatch export", description=__doc__)
-    p.add_argument("checkpoint", type=Path)
+    p.add_argument("checkpoint", type=Path, help="checkpoint written by propwatch train (.pt)")
     p.add_argument("--out", type=Path, required=True, help="ONNX path")
     a = p.parse_args(argv)
+    from offline.classifier.export import export_onnx  # torch: only once there is work to do
+    from offline.classifier.train import load_checkpoint
+
     path = export_onnx(load_checkpoint(a.checkpoint), a.out)
     info = Classifier(path).info  # the monitor's own loader must accept it
     print(f"wrote {path}: {len(info.features)} features x {info.window} steps at {info.sample_rate_hz} Hz")

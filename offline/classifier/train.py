@@ -21,6 +21,7 @@ from torch import nn
 from monitor.errors import ModelError
 from monitor.features import PAPER_FEATURES, SAMPLE_RATE_HZ, WINDOW_STEPS, Normalizer, check_feature_names
 from monitor.labels import LABEL_MASKS
+from monitor.progress import bar
 from offline.classifier.cnn import YAW_EFFECTIVENESS_INPUTS, CnnConfig, FaultCnn
 from offline.classifier.windows import gather, window_index
 from offline.dataset.records import FaultDataset
@@ -152,6 +153,7 @@ def train(ds: FaultDataset, cfg: TrainConfig, log=print) -> TrainedModel:
             sched = torch.optim.lr_scheduler.OneCycleLR(opt, max_lr=cfg.learning_rate, total_steps=n_batches_total + cfg.epochs)
         net.train()
         tot, correct, count = 0.0, 0, 0
+        progress = bar(n_batches, "batch", f"epoch {epoch + 1}/{cfg.epochs}")  # rate and ETA inside the epoch
         for b in range(n_batches):
             bi = idx[b * cfg.batch_size : (b + 1) * cfg.batch_size]
             x = torch.from_numpy(gather(feats, bi, cfg.window))
@@ -167,6 +169,8 @@ def train(ds: FaultDataset, cfg: TrainConfig, log=print) -> TrainedModel:
             tot += loss.item() * len(bi)
             count += len(bi)
             correct += int((_predicted_labels(net, logits) == label_index[bi[:, 0]]).sum())
+            progress.update()
+        progress.close()
         row = {"epoch": epoch + 1, "loss": tot / count, "train_accuracy": correct / count, "windows": count}
         history.append(row)
         log(

@@ -1,4 +1,8 @@
-"""``propwatch train``: train the CNN on one or more data sets (npz) and save a checkpoint."""
+"""``propwatch train``: train the CNN on one or more data sets (npz) and save a checkpoint.
+
+torch is imported when training starts, not to parse arguments (``--help`` stays fast); options left
+out take ``offline.classifier.train.TrainConfig``'s defaults.
+"""
 
 from __future__ import annotations
 
@@ -7,8 +11,8 @@ import json
 from pathlib import Path
 
 from monitor.features import PAPER_FEATURES, check_feature_names
-from offline.classifier.train import TrainConfig, save_checkpoint, train
-from offline.dataset.records import concat, load_dataset
+
+DEFAULT = "default: TrainConfig's"
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -18,36 +22,38 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--features", default=",".join(PAPER_FEATURES), help="comma-separated feature names (default: the paper's ten)"
     )
-    p.add_argument("--head", choices=("softmax16", "multilabel4"), default="softmax16")
-    p.add_argument("--epochs", type=int, default=TrainConfig.epochs)
-    p.add_argument("--train-stride", type=int, default=TrainConfig.train_stride, help="use every k-th window per epoch")
-    p.add_argument("--test-fraction", type=float, default=TrainConfig.test_fraction, help="flights held out per label")
-    p.add_argument("--channels", type=int, default=TrainConfig.channels)
-    p.add_argument("--dense", type=int, default=TrainConfig.dense)
-    p.add_argument("--learning-rate", type=float, default=TrainConfig.learning_rate)
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--threads", type=int, default=1)
+    p.add_argument(
+        "--head",
+        choices=("softmax16", "multilabel4"),
+        default="softmax16",
+        help="softmax16: one of the 16 labels; multilabel4: independent P(faulty) per propeller (default softmax16)",
+    )
+    p.add_argument("--epochs", type=int, default=None, help=f"passes over the training windows ({DEFAULT})")
+    p.add_argument("--train-stride", type=int, default=None, help=f"use every k-th window per epoch ({DEFAULT})")
+    p.add_argument("--test-fraction", type=float, default=None, help=f"flights held out per label ({DEFAULT})")
+    p.add_argument("--channels", type=int, default=None, help=f"convolution channels per block ({DEFAULT})")
+    p.add_argument("--dense", type=int, default=None, help=f"width of the dense layer ({DEFAULT})")
+    p.add_argument("--learning-rate", type=float, default=None, help=f"Adam learning rate ({DEFAULT})")
+    p.add_argument("--seed", type=int, default=0, help="seed for the split, initialisation and batches (default 0)")
+    p.add_argument("--threads", type=int, default=1, help="torch CPU threads (default 1)")
     return p
 
 
 def main(argv: list[str] | None = None) -> int:
     a = build_parser().parse_args(argv)
+    from offline.classifier.train import TrainConfig, save_checkpoint, train
+    from offline.dataset.records import concat, load_dataset
+
     features = tuple(f.strip() for f in a.features.split(",") if f.strip())
     check_feature_names(features)
     parts = [load_dataset(p) for p in a.datasets]
     ds = parts[0] if len(parts) == 1 else concat(parts, "+".join(d.name for d in parts))
-    cfg = TrainConfig(
-        features=features,
-        head=a.head,
-        epochs=a.epochs,
-        train_stride=a.train_stride,
-        test_fraction=a.test_fraction,
-        channels=a.channels,
-        dense=a.dense,
-        learning_rate=a.learning_rate,
-        seed=a.seed,
-        threads=a.threads,
-    )
+    given = {
+        k: getattr(a, k)
+        for k in ("epochs", "train_stride", "test_fraction", "channels", "dense", "learning_rate")
+        if getattr(a, k) is not None
+    }
+    cfg = TrainConfig(features=features, head=a.head, seed=a.seed, threads=a.threads, **given)
     m = train(ds, cfg)
     m.training_manifest = {
         "datasets": [str(p) for p in a.datasets],

@@ -22,11 +22,12 @@ from pathlib import Path
 import numpy as np
 
 from monitor.errors import LogFormatError
-from monitor.vehicle import REPO_ROOT, load_vehicle, load_vehicle_with_sources
+from monitor.resources import shipped
+from monitor.vehicle import load_vehicle, load_vehicle_with_sources
 from offline.crazypad.data import DEFAULT_ROOT, load_manifest, select
 
-DEFAULT_VEHICLE = REPO_ROOT / "models" / "crazyflie.yaml"
-SHIPPED_MODEL = REPO_ROOT / "models" / "crazyflie-classifier.onnx"
+DEFAULT_VEHICLE = shipped("crazyflie.yaml")
+SHIPPED_MODEL = shipped("crazyflie-classifier.onnx")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -41,9 +42,11 @@ def build_parser() -> argparse.ArgumentParser:
         if name != "analyse":
             s.add_argument("--out", required=name == "run", default=None, help="output folder")
         if name == "run":
-            s.add_argument("--flights-per-label", type=int, default=20)
-            s.add_argument("--epochs", type=int, default=8)
-            s.add_argument("--seed", type=int, default=0)
+            s.add_argument(
+                "--flights-per-label", type=int, default=20, help="simulated flights per label for training (default 20)"
+            )
+            s.add_argument("--epochs", type=int, default=8, help="training epochs (default 8)")
+            s.add_argument("--seed", type=int, default=0, help="seed of simulation and training (default 0)")
             s.add_argument("--ship", action="store_true", help=f"copy the calibrated model to {SHIPPED_MODEL}")
     return p
 
@@ -56,7 +59,7 @@ def _root(args) -> Path:
 
 
 def analyse(root: Path, vehicle_path: str) -> dict:
-    from offline.crazypad.calibration import calibrate_steady, equivalent_speed_ratios
+    from offline.calibrate.fit import calibrate_steady, equivalent_speed_ratios
     from offline.crazypad.real import summarise
     from offline.crazypad.vehicle import bitcraze_order
 
@@ -148,6 +151,9 @@ def ship(model: Path, report_json: Path) -> Path:
         "features": rep["features"],
         "window_steps": rep["window_steps"],
     }
-    path = SHIPPED_MODEL.with_suffix(".manifest.json")
-    path.write_text(json.dumps(manifest, indent=2, sort_keys=True, default=str) + "\n", encoding="utf-8")
+    from offline.crazypad.card import write_card
+    from offline.manifest import write_manifest
+
+    path = write_manifest(SHIPPED_MODEL.with_suffix(".manifest.json"), manifest)
+    write_card(path)  # the card comes from the manifest, never by hand
     return path

@@ -28,7 +28,6 @@ from monitor.vehicle import REPO_ROOT
 DEFAULT_ROOT = REPO_ROOT.parent / "shared" / "data" / "crazypad"
 INTACT_SPAN_MM = 47.0  # tip-to-tip span of an intact Crazyflie propeller (data set README)
 AIRFRAMES = ("E8", "E9")
-ROLES = ("calibration", "holdout", "evaluation")
 
 # Depth bins for the report, by total span removed (both blades), mm.
 DEPTH_BINS: tuple[tuple[str, float, float], ...] = (

@@ -2,7 +2,7 @@
 
 1. read every motor-config flight through the project's reader;
 2. calibrate each airframe (E8, E9) on its ``calibration`` healthy flights
-   (``offline.crazypad.calibration``), score on its ``holdout`` flights, and
+   (``offline.calibrate.fit.calibrate_steady``), score on its ``holdout`` flights, and
    check the gain in the simulator too (mission flown by the nominal and the
    calibrated vehicle against the held-out real flights);
 3. simulate the training set by one recipe (``offline.crazypad.simdata``) on
@@ -15,8 +15,9 @@
 Signals: CrazyPAD motor logs have the four motor commands, roll and yaw; no
 pitch and no body rates. The classifier uses the commands only, as each
 motor's share of the mean (``rpm_rel_1..4``): roll and yaw carry estimator
-offsets the simulator does not have, and controller logs (gyro rates, no
-commands) cannot be diagnosed at all.
+offsets the simulator does not have. Controller logs (gyro rates, no logged
+commands) get commands rebuilt by the firmware mixer (``monitor.logs.mixers``);
+this experiment still scores the motor logs only, as before.
 """
 
 from __future__ import annotations
@@ -33,7 +34,7 @@ from monitor.config import to_mapping
 from monitor.labels import label_from_mask
 from monitor.model import Classifier
 from monitor.vehicle import VehicleConfig, load_vehicle_with_sources
-from offline.crazypad.calibration import SteadyCalibration, calibrate_steady
+from offline.calibrate.fit import SteadyCalibration, calibrate_steady
 from offline.crazypad.data import AIRFRAMES, DEFAULT_ROOT, CrazypadFlight, load_manifest, select
 from offline.crazypad.mission import CRAZYPAD, batch_waypoints, sim_config
 from offline.crazypad.real import FlightSummary, core_mask, read_flight
@@ -278,11 +279,11 @@ def run(
     epochs: int = 8,
     log=print,
 ) -> dict:
-    from monitor.vehicle import REPO_ROOT
+    from monitor.resources import shipped
     from offline.classifier.export import export_onnx
     from offline.classifier.train import TrainConfig, train
 
-    vehicle_path = vehicle_path or REPO_ROOT / "models" / "crazyflie.yaml"
+    vehicle_path = vehicle_path or shipped("crazyflie.yaml")
     loaded = load_vehicle_with_sources(vehicle_path)
     nominal = loaded.config
     out.mkdir(parents=True, exist_ok=True)

@@ -33,7 +33,6 @@ class CrazypadMission:
     travel_x_m: float = 2.0  # go_to(x=2.0, y=0.0)
     cruise_m_s: float = 0.5  # the script asks 0.3 m/s; real peaks are ~0.65 m/s, mean over a leg ~0.4 m/s
     duration_s: float = 18.0  # two legs of ~7.5 s airborne each, back to back, plus the slower approaches
-    hover_s: float = 0.0  # the simulated flight starts in hover at the start point
 
     def waypoints_ned_m(self) -> np.ndarray:
         """(6, 3): climb, out to x = 2 m, descend; climb, back, descend (the simulator repeats the route)."""

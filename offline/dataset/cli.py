@@ -3,11 +3,14 @@
 Examples:
   propwatch dataset --sets A,B,C --fault bent --out out/data            # A-bent.npz, B-bent.npz, C-bent.npz
   propwatch dataset --name R --waypoints random --payload 0,0.6 --wind 3 --fault mixed --out out/data
+  propwatch dataset --name RR --waypoints random --payload 0,0.6 --fault varied --physics randomised \
+      --propellers quadratic --out out/data  # every flight's physics drawn from offline/sim/assumptions.py
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 from pathlib import Path
 
 from monitor.errors import ConfigError
@@ -38,16 +41,37 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--fault", default="bent", help=f"comma-separated, each one of {', '.join(FAULTS)}")
     p.add_argument("--waypoints", default="A", help="custom set: comma-separated routes A, B, random (cycled over flights)")
     p.add_argument("--payload", type=_range, default=(0.0, 0.0), help="custom set: extra kg, LOW,HIGH uniform per flight")
-    p.add_argument("--flights-per-label", type=int, default=2)
+    p.add_argument("--flights-per-label", type=int, default=2, help="simulated flights for each of the 16 labels (default 2)")
     p.add_argument("--duration", type=float, default=80.0, help="seconds per flight (paper: 80)")
-    p.add_argument("--propellers", choices=("lstm", "quadratic"), default="lstm")
+    p.add_argument(
+        "--propellers", choices=("lstm", "quadratic"), default="lstm", help="propeller model (offline.propellers; default lstm)"
+    )
     p.add_argument("--wind", type=float, default=0.0, help="max steady wind, m/s (random per vehicle variant)")
     p.add_argument("--motor-efficiency-spread", type=float, default=0.0, help="+- fraction per rotor per variant")
     p.add_argument("--cg-offset", type=float, default=0.0, help="max horizontal CG offset, m, per variant")
     p.add_argument("--variants", type=int, default=1, help="vehicle variants carrying the randomised terms")
+    p.add_argument(
+        "--physics",
+        choices=("fixed", "randomised"),
+        default="fixed",
+        help="randomised: draw every flight's physics and fault signatures from the assumption register "
+        "(needs --propellers quadratic; replaces --wind/--motor-efficiency-spread/--cg-offset/--variants)",
+    )
     p.add_argument("--sensor-noise", type=float, default=1.0, help="scale of the simulator's gyro/attitude noise (0 = off)")
-    p.add_argument("--vehicle", type=Path, default=DEFAULT_VEHICLE)
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--vehicle", type=Path, default=DEFAULT_VEHICLE, help="vehicle YAML (default models/vehicle.yaml)")
+    p.add_argument("--seed", type=int, default=0, help="seed of routes, variants, noise and faults (default 0)")
+    p.add_argument(
+        "--chunk-flights", type=int, default=64, help="flights per simulator call and per Ray task (part of the data set)"
+    )
+    p.add_argument(
+        "--ray",
+        nargs="?",
+        const="auto",
+        default=None,
+        metavar="ADDRESS",
+        help="simulate chunks as Ray tasks: local Ray without ADDRESS, else join the cluster at HOST:PORT (same arrays as without)",
+    )
+    p.add_argument("--workers", type=int, default=None, help="with --ray: worker processes (local) or tasks in flight")
     return p
 
 
@@ -62,6 +86,8 @@ def specs_from_args(a: argparse.Namespace) -> list[DatasetSpec]:
         cg_offset_max_m=a.cg_offset,
         vehicle_variants=a.variants,
         sensor_noise_scale=a.sensor_noise,
+        chunk_flights=a.chunk_flights,
+        physics=a.physics,
     )
     specs = []
     sets = [s.strip() for s in a.sets.split(",") if s.strip()]
@@ -91,11 +117,21 @@ def specs_from_args(a: argparse.Namespace) -> list[DatasetSpec]:
 def main(argv: list[str] | None = None) -> int:
     a = build_parser().parse_args(argv)
     vehicle = load_vehicle(a.vehicle)
-    for spec in specs_from_args(a):
-        ds = generate(spec, vehicle)
-        path = save_dataset(a.out / f"{spec.name}.npz", ds)
-        write_manifest(a.out / f"{spec.name}.manifest.json", ds.manifest)
-        print(f"wrote {path}: {ds.n_flights} flights x {ds.n_steps} steps ({ds.n_steps / ds.sample_rate_hz:.0f} s)")
+    if a.chunk_flights < 1:
+        raise ConfigError(f"--chunk-flights: must be >= 1, got {a.chunk_flights}")
+    specs = specs_from_args(a)
+    run_chunks, session = None, contextlib.nullcontext()
+    if a.ray:
+        from fleet.raycluster import ray_session
+        from offline.dataset.ray_shard import ray_chunks
+
+        run_chunks, session = ray_chunks(a.ray, a.workers), ray_session(a.ray, a.workers)  # one Ray for every set
+    with session:
+        for spec in specs:
+            ds = generate(spec, vehicle, run_chunks=run_chunks)
+            path = save_dataset(a.out / f"{spec.name}.npz", ds)
+            write_manifest(a.out / f"{spec.name}.manifest.json", ds.manifest)
+            print(f"wrote {path}: {ds.n_flights} flights x {ds.n_steps} steps ({ds.n_steps / ds.sample_rate_hz:.0f} s)")
     return 0
 
 

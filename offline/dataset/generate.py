@@ -6,6 +6,15 @@ cracked, or each bent or cracked at random (``fault="mixed"``), or one of those 
 (random routes, payload ranges, wind, randomised model terms) are drawn per
 flight or per vehicle variant from the spec's seed, so a data set is a pure
 function of (spec, vehicle, code).
+
+``physics="randomised"``: every flight's physics is drawn from the register of
+unmeasured assumptions (``offline/sim/assumptions.py``): flight i gets
+``draw_flight(register, SeedSequence([seed, i]))`` whatever the chunking, so
+flights can be sharded by index. Each damaged rotor gets its own drawn
+signature (bent or cracked ranges) in place of the fixed ``BENT``/``CRACKED``,
+applied by the analytic propellers (``propellers="quadratic"``: an LSTM learned
+one signature per condition). Telemetry delay, jitter and drops are applied to
+the logged signals. The manifest records the register's ranges and the rule.
 """
 
 from __future__ import annotations
@@ -20,12 +29,14 @@ from monitor.config import to_mapping
 from monitor.errors import ConfigError
 from monitor.features import SAMPLE_RATE_HZ
 from monitor.labels import LABEL_MASKS
+from monitor.progress import bar, interactive
 from monitor.vehicle import VehicleConfig
 from offline.dataset.records import FaultDataset, concat
 from offline.manifest import make_manifest
 
 FAULTS = ("bent", "cracked", "mixed", "varied")
 ROUTES = ("A", "B", "random")
+PHYSICS = ("fixed", "randomised")
 
 
 @dataclass(frozen=True)
@@ -44,6 +55,7 @@ class DatasetSpec:
     sensor_noise_scale: float = 1.0  # times the simulator's default gyro and attitude noise; 0 = off
     seed: int = 0
     chunk_flights: int = 64  # flights per simulator call (memory)
+    physics: str = "fixed"  # "randomised": every flight's physics drawn from the assumption register
 
     def __post_init__(self) -> None:
         if self.fault not in FAULTS:
@@ -55,6 +67,21 @@ class DatasetSpec:
             raise ConfigError("flights_per_label and vehicle_variants: must be >= 1")
         if not 0.0 <= self.payload_kg[0] <= self.payload_kg[1]:
             raise ConfigError(f"payload_kg: need 0 <= low <= high, got {self.payload_kg}")
+        if self.physics not in PHYSICS:
+            raise ConfigError(f"physics: must be one of {PHYSICS}, got {self.physics!r}")
+        if self.physics == "randomised":
+            if self.propellers != "quadratic":
+                raise ConfigError(
+                    "propellers: physics 'randomised' draws a signature per damaged rotor, which only the analytic "
+                    "'quadratic' propellers apply (each LSTM learned one signature)"
+                )
+            clash = (
+                [k for k in ("wind_max_m_s", "motor_efficiency_spread", "cg_offset_max_m") if getattr(self, k) != 0.0]
+                + (["vehicle_variants"] if self.vehicle_variants != 1 else [])
+                + (["sensor_noise_scale"] if self.sensor_noise_scale != 1.0 else [])
+            )
+            if clash:
+                raise ConfigError(f"{', '.join(clash)}: drawn from the assumption register under physics 'randomised'")
 
 
 # The paper's three simulated sets (Table 4.2) on its 1.5 kg quad; C's 1.95 kg is 0.45 kg of payload.
@@ -165,7 +192,14 @@ def from_log(
     )
 
 
-def generate(spec: DatasetSpec, vehicle: VehicleConfig, log=print) -> FaultDataset:
+def generate(spec: DatasetSpec, vehicle: VehicleConfig, log=print, run_chunks=None, *, register=None) -> FaultDataset:
+    """The data set of ``spec``; ``register`` (randomised physics only) defaults to ``assumptions.REGISTER``.
+
+    ``run_chunks`` maps the list of chunk jobs ``(function, keyword arguments)`` to their results, in
+    order; default: one after another in this process (``offline.dataset.ray_shard`` runs them as Ray
+    tasks: same chunks, same seeds, same arrays)."""
+    if spec.physics == "randomised":
+        return _generate_randomised(spec, vehicle, log, register, run_chunks)
     rng = np.random.default_rng([spec.seed, 0])
     cond = flight_conditions(spec.fault, spec.flights_per_label, rng)
     n = len(cond)
@@ -184,23 +218,140 @@ def generate(spec: DatasetSpec, vehicle: VehicleConfig, log=print) -> FaultDatas
         vehicle={"name": vehicle.name, "esc": to_mapping(vehicle.esc)},
         variants=[to_mapping(v) for v in variants] if _randomised(spec) else None,
     )
-    parts, order = [], []
+    jobs, order = [], []
+    progress = bar(n, "flight", f"dataset {spec.name}") if interactive() else None
     for v, veh in enumerate(variants):
         idx = np.flatnonzero(variant_of == v)
         for c0 in range(0, len(idx), spec.chunk_flights):
             chunk = idx[c0 : c0 + spec.chunk_flights]
             seed = int(np.random.default_rng([spec.seed, 1, v, c0]).integers(2**31))
-            flight_log = simulate_flights(veh, wps[chunk], cond[chunk], payload[chunk], spec, seed)
-            parts.append(
-                from_log(flight_log, spec.name, vehicle, cond[chunk], payload[chunk], tuple(names[i] for i in chunk), manifest)
-            )
+            kw = dict(vehicle=veh, waypoints=wps[chunk], conditions=cond[chunk], payload_kg=payload[chunk], spec=spec, seed=seed)
+            jobs.append((simulate_flights, kw))
             order.append(chunk)
-            log(f"{spec.name}: simulated {sum(len(o) for o in order)}/{n} flights")
+    parts = []
+    for chunk, flight_log in zip(order, (run_chunks or _one_after_another)(jobs)):
+        parts.append(
+            from_log(flight_log, spec.name, vehicle, cond[chunk], payload[chunk], tuple(names[i] for i in chunk), manifest)
+        )
+        if progress is not None:
+            progress.update(len(chunk))
+        else:
+            log(f"{spec.name}: simulated {sum(len(o) for o in order[: len(parts)])}/{n} flights")
+    if progress is not None:
+        progress.close()
     ds = parts[0] if len(parts) == 1 else concat(parts, spec.name)
     back = np.argsort(np.concatenate(order))  # restore label order
     ds = ds.subset(back)
     return dataclasses.replace(ds, manifest=manifest)
 
 
+def _one_after_another(jobs: list[tuple]):
+    for fn, kw in jobs:
+        yield fn(**kw)
+
+
 def _randomised(spec: DatasetSpec) -> bool:
     return spec.wind_max_m_s > 0 or spec.motor_efficiency_spread > 0 or spec.cg_offset_max_m > 0
+
+
+def flight_sim_seed(seed: int, i: int) -> int:
+    """Flight i's simulator seed (sensor noise) under randomised physics, a function of (seed, i) only."""
+    return int(np.random.SeedSequence([int(seed), int(i), 1]).generate_state(1)[0])
+
+
+def simulate_randomised(
+    spec: DatasetSpec, vehicle: VehicleConfig, idx: np.ndarray, cond: np.ndarray, payload: np.ndarray, wps: np.ndarray, register
+) -> dict[str, np.ndarray]:
+    """Flights ``idx`` (indices into the data set) with their drawn physics -> canonical signals (float32).
+
+    Everything per flight comes from (spec.seed, index): a shard of indices gives the same flights as the whole.
+    """
+    from offline.propellers import build_propellers
+    from offline.sim.assumptions import draw_flights
+    from offline.sim.perflight import PerFlightTerms
+    from offline.sim.simulator import simulate
+    from offline.sim.telemetry import degrade_flight
+
+    phys = draw_flights(register, spec.seed, idx)
+    grid = np.empty((len(idx), 4), dtype=object)
+    for b, (f, row) in enumerate(zip(phys, cond)):
+        for r, c in enumerate(row):
+            grid[b, r] = f.healthy_signature(r) if c == 0 else f.signature(r, "bent" if c == 1 else "cracked")
+    seeds = np.array([flight_sim_seed(spec.seed, i) for i in idx])
+    props = build_propellers(vehicle, cond, kind="quadratic", rng_seed=seeds, rotor_signatures=grid)
+    flog = simulate(
+        vehicle,
+        wps,
+        props,
+        sim_config(spec),
+        payload_kg=payload,
+        seed=seeds,
+        per_flight=PerFlightTerms.from_flights(phys, vehicle),
+    )
+    sig = flog.signals()
+    out = {k: np.empty(np.shape(v), np.float32) for k, v in sig.items()}
+    for b, f in enumerate(phys):
+        one = degrade_flight(
+            {k: v[b] for k, v in sig.items()},
+            float(flog.log_rate_hz),
+            f["attitude_log_delay_s"],
+            f["telemetry_jitter_std_s"],
+            f["telemetry_drop_prob"],
+            np.random.default_rng([int(f["noise_seed"]) % 2**63, 1]),
+        )
+        for k, v in one.items():
+            out[k][b] = v
+    return out
+
+
+class _Signals:
+    """A FlightLog-like holder of canonical signals (for ``from_log``)."""
+
+    def __init__(self, signals: dict[str, np.ndarray], rate_hz: float):
+        self._signals, self.log_rate_hz = signals, rate_hz
+
+    def signals(self) -> dict[str, np.ndarray]:
+        return self._signals
+
+
+def _generate_randomised(spec: DatasetSpec, vehicle: VehicleConfig, log, register, run_chunks=None) -> FaultDataset:
+    from offline.sim.assumptions import REGISTER
+
+    register = REGISTER if register is None else register
+    rng = np.random.default_rng([spec.seed, 0])
+    cond = flight_conditions(spec.fault, spec.flights_per_label, rng)
+    n = len(cond)
+    payload = rng.uniform(spec.payload_kg[0], spec.payload_kg[1], n)
+    wps, names = routes(spec, n, seed=spec.seed)
+    manifest = make_manifest(
+        "fault-dataset",
+        to_mapping(spec),
+        spec.seed,
+        name=spec.name,
+        vehicle={"name": vehicle.name, "esc": to_mapping(vehicle.esc)},
+        assumptions=register.to_mapping(),
+        physics_draws={
+            "rule": "flight i: offline.sim.assumptions.draw_flight(register, SeedSequence([seed, i])); "
+            "simulator noise seed offline.dataset.generate.flight_sim_seed(seed, i); flights in label order",
+            "seed": spec.seed,
+            "flights": n,
+        },
+    )
+    chunks = [np.arange(c0, min(n, c0 + spec.chunk_flights)) for c0 in range(0, n, spec.chunk_flights)]
+    jobs = [
+        (
+            simulate_randomised,
+            dict(spec=spec, vehicle=vehicle, idx=idx, cond=cond[idx], payload=payload[idx], wps=wps[idx], register=register),
+        )
+        for idx in chunks
+    ]
+    parts = []
+    for idx, sig in zip(chunks, (run_chunks or _one_after_another)(jobs)):
+        parts.append(
+            from_log(
+                _Signals(sig, SAMPLE_RATE_HZ), spec.name, vehicle, cond[idx], payload[idx], tuple(names[i] for i in idx), manifest
+            )
+        )
+        log(f"{spec.name}: simulated {idx[-1] + 1}/{n} flights (randomised physics)")
+    ds = parts[0] if len(parts) == 1 else concat(parts, spec.name)
+    return dataclasses.replace(ds, manifest=manifest)

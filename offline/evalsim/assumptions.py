@@ -17,7 +17,7 @@ ASSUMPTIONS: dict[str, dict[str, str]] = {
     },
     "torque_per_thrust_change": {
         "value": "bent -8..-2 %, cracked -12..-4 % (FALLING); effectiveness set 0 or -5 %",
-        "why": "training assumed +2..+10 % (rising); unmeasured, so evaluate on the opposite sign",
+        "why": "training's drag torque at equal speed rises 2-10 % (per unit thrust +10..+30 %); unmeasured, so evaluate on the opposite sign",
     },
     "flutter": {
         "value": "thrust noise 0.5-1 % (bent), 1-3 % (cracked), Gauss-Markov, 50 ms correlation",

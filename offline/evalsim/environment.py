@@ -19,26 +19,12 @@ class Wind:
 
     The Dryden spectrum's low-altitude form is first order in each component with
     time constant L/V; with the length scales of a few metres of altitude and
-    the few-m/s airspeeds here, L/V is 1-4 s.
+    the few-m/s airspeeds here, L/V is 1-4 s. ``flight.simulate_flights`` steps it.
     """
 
     mean_ned_m_s: Vec3 = (0.0, 0.0, 0.0)
     gust_std_m_s: Vec3 = (0.0, 0.0, 0.0)
     gust_time_constant_s: Vec3 = (3.0, 3.0, 1.0)
-
-
-class WindProcess:
-    def __init__(self, cfg: Wind, rng: np.random.Generator):
-        self.mean = np.asarray(cfg.mean_ned_m_s, dtype=np.float64)
-        self.std = np.asarray(cfg.gust_std_m_s, dtype=np.float64)
-        self.tau = np.asarray(cfg.gust_time_constant_s, dtype=np.float64)
-        self.rng = rng
-        self.gust = self.std * rng.standard_normal(3)
-
-    def step(self, dt_s: float) -> np.ndarray:
-        a = np.exp(-dt_s / self.tau)
-        self.gust = a * self.gust + self.std * np.sqrt(1.0 - a * a) * self.rng.standard_normal(3)
-        return self.mean + self.gust
 
 
 @dataclass(frozen=True)

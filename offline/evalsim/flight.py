@@ -15,6 +15,7 @@ import numpy as np
 
 from monitor.esc import PAPER_ESC, RAD_S_PER_RPM
 from monitor.labels import label_for
+from monitor.resample import US_PER_S
 from offline.evalsim import frames
 from offline.evalsim.airframe import Airframe, Damage, thrust_torque_factors
 from offline.evalsim.controller import CascadeController, qmul
@@ -208,6 +209,7 @@ def simulate_flights(specs: list[FlightSpec]) -> list[FlightLog]:
     flutter_a = np.exp(-dt / FLUTTER_TAU_S)
     w_h = np.array([[a.hover_omega_rad_s] for a in afs])
     eff_sqrt = np.sqrt(np.array([a.motor_thrust_efficiency for a in afs]))
+    distinct_esc = any(a.esc != v0.esc for a in afs)
     esc_sag = np.array([a.esc_rpm_per_volt for a in afs])
     esc_ref = np.array([a.esc_reference_v for a in afs])
     omega_lo = np.array([[a.omega_min_rad_s] for a in afs])
@@ -321,7 +323,7 @@ def simulate_flights(specs: list[FlightSpec]) -> list[FlightLog]:
         pwm = ctrl.pwm_us(thrust_cmd)
         # The vehicle's ESC: its own curve, RPM sagging with pack voltage; weak motors slower.
         sag = (1.0 - esc_sag * np.maximum(esc_ref - volt, 0.0))[:, None]
-        rpm = np.stack([a.esc.cmd_to_rpm(pwm[i]) for i, a in enumerate(afs)]) if _distinct_esc(afs) else v0.esc.cmd_to_rpm(pwm)
+        rpm = np.stack([a.esc.cmd_to_rpm(pwm[i]) for i, a in enumerate(afs)]) if distinct_esc else v0.esc.cmd_to_rpm(pwm)
         omega_target = np.clip(rpm * sag * RAD_S_PER_RPM * eff_sqrt, omega_lo, omega_hi)
         if np.any(flutter_std > 0):
             flutter = flutter_a * flutter + flutter_std * np.sqrt(1 - flutter_a**2) * nz[:, N_FLUTTER]
@@ -381,7 +383,7 @@ def simulate_flights(specs: list[FlightSpec]) -> list[FlightLog]:
         out.append(
             FlightLog(
                 time_s=t_s,
-                timestamp_us=BOOT_OFFSET_US + np.rint(t_s * 1e6).astype(np.int64),
+                timestamp_us=BOOT_OFFSET_US + np.rint(t_s * US_PER_S).astype(np.int64),
                 pos_ned_m=r["pos"],
                 vel_ned_m_s=r["vel"],
                 q_world_body=r["q"],
@@ -433,10 +435,6 @@ def _plan(spec: FlightSpec) -> dict:
 def _set_mass(mr: PerRotorMultirotor, mass_kg: float) -> None:
     mr.mass = mass_kg
     mr.weight = np.array([0.0, 0.0, -mass_kg * mr.g])
-
-
-def _distinct_esc(afs: list[Airframe]) -> bool:
-    return any(a.esc != afs[0].esc for a in afs)
 
 
 def _tilt(q: np.ndarray, small_angle_rad: np.ndarray) -> np.ndarray:

@@ -9,6 +9,9 @@ NEVER used for training or model selection (see the package docstring).
 | onset | a fault (single propeller or pair, 5-20 % thrust loss) starting mid-flight at a recorded time |
 | hidden | per airframe one hidden effect (CG, weak motor, motor lag, linear drag, ESC curve): 2 healthy + 4 single faults |
 | effectiveness | one rotor losing exactly 5, 10 or 20 % thrust, torque per thrust unchanged or falling |
+| paper_torque_rising | CONTROL: ``paper`` flight for flight (same seeds, routes, losses) but the damaged blade's
+  drag torque at equal speed RISES by |δ| (training's ``torque_factor = 1 + gain``) instead of its torque per
+  thrust falling by |δ| |
 
 ``flights`` is the number of flights; labels / nuisances / patterns cycle, so
 ``flights=32`` on ``paper`` gives every label twice. Flight i of a set depends
@@ -31,12 +34,11 @@ from monitor.vehicle import DEFAULT_VEHICLE, load_vehicle
 from offline.evalsim.airframe import Airframe, Damage
 from offline.evalsim.environment import Sensors, Telemetry, Wind
 from offline.evalsim.flight import FlightSpec, simulate_flights, truth
+from offline.evalsim.names import DEFAULT_DURATION_S, SET_NAMES
 from offline.manifest import make_manifest, write_manifest
 from offline.sim.io_tlog import write_tlog
 
-SET_NAMES = ("paper", "shift", "healthy", "onset", "hidden", "effectiveness")
 _SET_CODES = {n: i + 101 for i, n in enumerate(SET_NAMES)}
-DEFAULT_DURATION_S = 80.0
 BATCH = 32  # flights integrated together (memory ~ BATCH * duration)
 
 # Route box (NED, m): new routes, not offline/sim's box (±15 m, 4..16 m up).
@@ -140,6 +142,20 @@ def _paper(v, seed, i, duration_s) -> FlightSpec:
     kind = "bent" if (i // 16) % 2 == 0 else "cracked"
     af = _base(v, rng).with_(damage=_damage(rng, LABEL_TABLE[label], kind))
     return _spec("paper", seed, i, af, rng, duration_s, nuisance=kind)
+
+
+def _paper_torque_rising(v, seed, i, duration_s) -> FlightSpec:
+    """``paper``'s flight i with the damaged blade's drag torque RISING by |δ| at equal speed, as training's
+    ``torque_factor = 1 + gain`` (offline/propellers/faults.py): per unit thrust that is
+    (1 + |δ|) / (1 - loss) - 1, i.e. +10..+35 % where ``paper`` has -2..-12 %."""
+    spec = _paper(v, seed, i, duration_s)
+    d = spec.airframe.damage
+    change = tuple(
+        (1.0 + abs(dq)) / (1.0 - loss) - 1.0 if loss > 0 else 0.0
+        for dq, loss in zip(d.torque_per_thrust_change, d.thrust_loss_at_hover, strict=True)
+    )
+    rising = replace(d, torque_per_thrust_change=change)
+    return replace(spec, name=f"paper_torque_rising_{i:04d}", airframe=spec.airframe.with_(damage=rising))
 
 
 def _shift(v, seed, i, duration_s) -> FlightSpec:
@@ -256,6 +272,7 @@ _BUILDERS: dict[str, tuple[Callable, int]] = {
     "onset": (_onset, len(ONSET_PATTERNS)),
     "hidden": (_hidden, 6 * len(HIDDEN_EFFECTS)),
     "effectiveness": (_effectiveness, 12),
+    "paper_torque_rising": (_paper_torque_rising, 16),
 }
 
 

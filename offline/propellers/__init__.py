@@ -27,10 +27,11 @@ from pathlib import Path
 import numpy as np
 
 from monitor.errors import ConfigError
+from monitor.resources import shipped
 from monitor.vehicle import VehicleConfig
 from offline.propellers.faults import CONDITIONS, SIGNATURES, FaultSignature, signature_table
 
-MODELS_DIR = Path(__file__).resolve().parents[2] / "models" / "propellers"
+MODELS_DIR = shipped("propellers")
 KINDS = ("quadratic", "lstm")
 
 __all__ = ["CONDITIONS", "KINDS", "MODELS_DIR", "SIGNATURES", "FaultSignature", "build_propellers", "check_conditions"]
@@ -52,21 +53,40 @@ def build_propellers(
     conditions: np.ndarray,
     kind: str = "lstm",
     models_dir: str | Path = MODELS_DIR,
-    rng_seed: int | None = None,
+    rng_seed=None,
     *,
     vibration: bool = True,
     signatures: dict[str, FaultSignature] | None = None,
+    rotor_signatures: np.ndarray | None = None,
 ):
     """A batched ``PropellerModel`` for ``conditions`` (B, 4).
 
     ``rng_seed`` seeds the blade phases and flutter (None means seed 0, so runs
-    are deterministic by default). ``vibration=False`` gives the mean forces
+    are deterministic by default; a sequence of B seeds gives each flight its own
+    generator, quadratic kind). ``vibration=False`` gives the mean forces
     only. ``signatures`` overrides the default fault magnitudes (quadratic kind,
-    and the vibration of the LSTM kind).
+    and the vibration of the LSTM kind). ``rotor_signatures``, a (B, 4) object
+    array of ``FaultSignature`` (one per rotor, e.g. drawn from the assumption
+    register), replaces the per-condition table; only the quadratic kind can
+    apply it, since each LSTM learned one signature.
     """
     cond = check_conditions(conditions)
-    rng = np.random.default_rng(0 if rng_seed is None else rng_seed)
+    if np.ndim(rng_seed) == 1:  # one seed per flight: each flight's vibration independent of the batch
+        if len(rng_seed) != len(cond):
+            raise ConfigError(f"rng_seed: {len(rng_seed)} per-flight seeds for {len(cond)} flights")
+        rng = [np.random.default_rng([int(s), 2]) for s in rng_seed]
+    else:
+        rng = np.random.default_rng(0 if rng_seed is None else rng_seed)
     table = signature_table(signatures)
+    if rotor_signatures is not None:
+        grid = np.asarray(rotor_signatures, dtype=object)
+        if grid.shape != cond.shape or not all(isinstance(x, FaultSignature) for x in grid.ravel()):
+            raise ConfigError(f"rotor_signatures: expected a {cond.shape} grid of FaultSignature, got shape {grid.shape}")
+        if kind != "quadratic":
+            raise ConfigError(
+                f"rotor_signatures: only kind 'quadratic' applies a signature per rotor ({kind!r} learned one per condition)"
+            )
+        table = grid
     if kind == "quadratic":
         from offline.propellers.quadratic import QuadraticFaultPropeller
 

@@ -187,11 +187,14 @@ def mape_percent(y_true: np.ndarray, y_pred: np.ndarray, mask: np.ndarray) -> fl
     return float(100.0 * np.mean(np.abs(y_pred[mask] - y_true[mask]) / np.abs(y_true[mask])))
 
 
-def evaluate(model: StackedLstm, s: np.ndarray, y: np.ndarray, cfg: TrainConfig) -> dict:
+def evaluate(model: StackedLstm, s: np.ndarray, y: np.ndarray, cfg: TrainConfig, formula=None) -> dict:
     """Test-split MAPE (%) of the LSTM run statefully over the whole sweep, and of a kF·ω² fit on the same split.
 
     The quadratic baseline is the paper's Eqs. (2), (3): ``y = k·s²`` per output,
-    least squares through the origin on the training part.
+    least squares through the origin on the training part. ``formula`` (a
+    ``FaultSignature``, or a callable s -> (T, 2)) is the load cell's own
+    noise-free mean map: its MAPE is the floor the chosen noise sets, which an
+    LSTM that learned the formula back reaches and cannot beat.
     """
     n_train = split_index(len(s), cfg.test_fraction)
     pred, _ = model.run(s[None, :])
@@ -205,7 +208,18 @@ def evaluate(model: StackedLstm, s: np.ndarray, y: np.ndarray, cfg: TrainConfig)
         out[f"quadratic_{name}_mape_pct"] = mape_percent(y[test, j], k * s[test] ** 2, mask)
         out[f"quadratic_{name}_k"] = k
         out[f"n_test_{name}"] = int(mask.sum())
+    if formula is not None:
+        f = formula(s) if callable(formula) else formula_of(formula, s)
+        for j, name in enumerate(("thrust", "torque")):
+            mask = y[test, j] >= cfg.mape_min_fraction
+            out[f"formula_{name}_mape_pct"] = mape_percent(y[test, j], f[test, j], mask)
     return out
+
+
+def formula_of(signature, s: np.ndarray) -> np.ndarray:
+    """(T, 2) the load cell's noise-free mean map for one signature, in the LSTM's normalised units."""
+    s2 = np.square(s)
+    return np.stack([s2 * signature.thrust_factor(s), s2 * signature.torque_factor(s)], axis=-1)
 
 
 def config_dict(cfg: TrainConfig) -> dict:

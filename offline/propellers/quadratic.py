@@ -12,12 +12,13 @@ from __future__ import annotations
 import numpy as np
 
 from monitor.vehicle import VehicleConfig
-from offline.propellers.faults import FaultSignature
-from offline.propellers.vibration import FaultVibration
+from offline.propellers.vibration import FaultVibration, per_rotor
 
 
-def _per_rotor(signatures: tuple[FaultSignature, ...], conditions: np.ndarray, attr: str) -> np.ndarray:
-    return np.array([getattr(s, attr) for s in signatures], dtype=np.float64)[conditions]
+def _per_rotor(signatures, conditions: np.ndarray, attr: str) -> np.ndarray:
+    """(B, 4) values of ``attr``: from a table indexed by condition code, or from a (B, 4) grid of
+    signatures (one per rotor, e.g. drawn from the assumption register)."""
+    return per_rotor(signatures, conditions, attr)
 
 
 class QuadraticFaultPropeller:
@@ -25,7 +26,7 @@ class QuadraticFaultPropeller:
         self,
         vehicle: VehicleConfig,
         conditions: np.ndarray,
-        signatures: tuple[FaultSignature, ...],
+        signatures,  # tuple indexed by condition code, or a (B, 4) grid of FaultSignature
         rng: np.random.Generator,
         vibration: bool = True,
     ):

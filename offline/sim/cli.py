@@ -43,7 +43,12 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument("--waypoint-set", choices=("A", "B"), default=None, help="fly the paper's named route instead")
     p.add_argument("--seed", type=int, default=0, help="seed of sensor noise and propeller vibration")
     p.add_argument("--duration-s", type=float, default=80.0, help="flight duration (default 80 s, as the paper)")
-    p.add_argument("--format", choices=("npz", "tlog"), default="npz")
+    p.add_argument(
+        "--format",
+        choices=("npz", "tlog"),
+        default="npz",
+        help="npz: arrays with ground truth; tlog: a PX4-like MAVLink log that diagnose reads (default npz)",
+    )
     p.add_argument("--vehicle", type=Path, default=DEFAULT_VEHICLE, help="vehicle YAML (default models/vehicle.yaml)")
     p.add_argument(
         "--propellers", choices=("lstm", "quadratic"), default="lstm", help="propeller model (offline.propellers; default lstm)"

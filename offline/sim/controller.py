@@ -113,8 +113,16 @@ class ControllerState:
 
 class Controller:
     def __init__(
-        self, cfg: ControllerConfig, vehicle: VehicleConfig, mass_kg: np.ndarray, position_dt_s: float, control_dt_s: float
+        self,
+        cfg: ControllerConfig,
+        vehicle: VehicleConfig,
+        mass_kg: np.ndarray,
+        position_dt_s: float,
+        control_dt_s: float,
+        gains: dict[str, np.ndarray] | None = None,
     ):
+        """``gains``: per-flight values (B,) of ControllerConfig gain fields, overriding ``cfg`` for those
+        flights (the loops' gains become (B, 3) arrays); None keeps ``cfg`` for every flight."""
         self.cfg = cfg
         self.vehicle = vehicle
         self.mass_kg = np.asarray(mass_kg, dtype=np.float64).reshape(-1)
@@ -140,6 +148,8 @@ class Controller:
         self.vel_p = np.array([cfg.mpc_xy_vel_p_acc, cfg.mpc_xy_vel_p_acc, cfg.mpc_z_vel_p_acc])
         self.vel_i = np.array([cfg.mpc_xy_vel_i_acc, cfg.mpc_xy_vel_i_acc, cfg.mpc_z_vel_i_acc])
         self.vel_d = np.array([cfg.mpc_xy_vel_d_acc, cfg.mpc_xy_vel_d_acc, cfg.mpc_z_vel_d_acc])
+        if gains:
+            self._per_flight_gains(cfg, gains)
         self.tan_tilt_max = math.tan(math.radians(cfg.mpc_tiltmax_air_deg))
         self.thrust_max_n = 4 * self.rotor_thrust_max_n * cfg.mpc_thr_max
         self.thrust_min_n = 4 * self.rotor_thrust_max_n * cfg.mpc_thr_min
@@ -223,6 +233,30 @@ class Controller:
         self._r3 = np.empty((n, 3))
         self._u3 = np.empty((n, 3))
         self._t3 = np.empty((n, 3))
+
+    def _per_flight_gains(self, cfg: ControllerConfig, gains: dict[str, np.ndarray]) -> None:
+        n = len(self.mass_kg)
+        unknown = sorted(set(gains) - set(cfg.__dict__))
+        if unknown:
+            raise ConfigError(f"controller gains: unknown fields {unknown}")
+
+        def g(name: str) -> np.ndarray:
+            v = np.broadcast_to(np.asarray(gains.get(name, getattr(cfg, name)), dtype=np.float64), (n,))
+            if not np.all(np.isfinite(v)) or np.any(v < 0):
+                raise ConfigError(f"controller.{name}: per-flight gains must be finite and >= 0")
+            return v
+
+        def axes(x: str, y: str, z: str) -> np.ndarray:
+            return np.stack([g(x), g(y), g(z)], axis=1)
+
+        self.rate_p = axes("mc_rollrate_p", "mc_pitchrate_p", "mc_yawrate_p")
+        self.rate_i = axes("mc_rollrate_i", "mc_pitchrate_i", "mc_yawrate_i")
+        self.rate_d = axes("mc_rollrate_d", "mc_pitchrate_d", "mc_yawrate_d")
+        self.att_p = axes("mc_roll_p", "mc_pitch_p", "mc_yaw_p")
+        self.pos_p = axes("mpc_xy_p", "mpc_xy_p", "mpc_z_p")
+        self.vel_p = axes("mpc_xy_vel_p_acc", "mpc_xy_vel_p_acc", "mpc_z_vel_p_acc")
+        self.vel_i = axes("mpc_xy_vel_i_acc", "mpc_xy_vel_i_acc", "mpc_z_vel_i_acc")
+        self.vel_d = axes("mpc_xy_vel_d_acc", "mpc_xy_vel_d_acc", "mpc_z_vel_d_acc")
 
     def initial_state(self, n: int, yaw_rad: float = 0.0) -> ControllerState:
         q = np.zeros((n, 4))

@@ -30,7 +30,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from monitor.vehicle import GRAVITY_M_S2, VehicleConfig
-from offline.sim.quat import rotate_body_to_world, rotate_world_to_body, state_products_map
+from offline.sim.quat import rotate_body_to_world, rotate_world_to_body, rotation_matrices, state_products_map
 
 
 @dataclass
@@ -63,35 +63,50 @@ class VehicleState:
         return cls(packed, np.broadcast_to(np.asarray(omega_rad_s, dtype=np.float64), (n, 4)).copy())
 
 
+def _step_map(dt: float, inertia_diag_kg_m2: np.ndarray, arms: np.ndarray, spin_sign) -> np.ndarray:
+    """(57, 11): features [vec(x outer x) (49), thrust (4), drag torque (4)], x = [q, w], map to
+    [dq (4), dw (3), -dt R[:, 2] (3), total thrust (1)]."""
+    ixx, iyy, izz = inertia_diag_kg_m2
+    # Euler's equations for a diagonal inertia: wdot_i += k_i w_j w_k (i, j, k cyclic).
+    gyro = np.zeros((3, 3, 3))
+    gyro[1, 2, 0] = (iyy - izz) / ixx
+    gyro[2, 0, 1] = (izz - ixx) / iyy
+    gyro[0, 1, 2] = (ixx - iyy) / izz
+    # A thrust T along -z at (x, y, z) from the CG gives the moment (x, y, z) x (0, 0, -T) = (-y T, x T, 0); a drag
+    # torque's yaw moment is spin_sign * torque (a CCW rotor yaws the nose right, +z FRD).
+    products = state_products_map(dt, gyro.reshape(9, 3))  # (49, 10): [-dt z (3), dq (4), gyro dw (3)]
+    m = np.zeros((57, 11))
+    m[:49, 0:4] = products[:, 3:7]
+    m[:49, 4:7] = products[:, 7:10]
+    m[:49, 7:10] = products[:, 0:3]
+    m[49:53, 4] = -dt * arms[:, 1] / ixx
+    m[49:53, 5] = dt * arms[:, 0] / iyy
+    m[49:53, 10] = 1.0
+    m[53:57, 6] = dt * np.asarray(spin_sign) / izz
+    return m
+
+
 class Dynamics:
     """Forces, moments and integration for a batch of one vehicle type."""
 
-    def __init__(self, vehicle: VehicleConfig, mass_kg: np.ndarray, dt_s: float):
+    def __init__(self, vehicle: VehicleConfig, mass_kg: np.ndarray, dt_s: float, per_flight=None):
+        """``per_flight`` (``offline.sim.perflight.PerFlightTerms``): each flight's own inertia, arms, motor,
+        drag and wind instead of the vehicle's; None keeps the fixed path (bit-identical to before)."""
         self.dt_s = dt = float(dt_s)
         self.mass_kg = np.asarray(mass_kg, dtype=np.float64).reshape(-1)
         n = len(self.mass_kg)
         self.inv_mass = (1.0 / self.mass_kg)[:, None]
-        ixx, iyy, izz = np.array(vehicle.inertia_diag_kg_m2, dtype=np.float64)
-        arms = np.array(vehicle.rotor_positions_frd_m, dtype=np.float64) - np.array(vehicle.cg_offset_frd_m)
-        # Euler's equations for a diagonal inertia: wdot_i += k_i w_j w_k (i, j, k cyclic).
-        gyro = np.zeros((3, 3, 3))
-        gyro[1, 2, 0] = (iyy - izz) / ixx
-        gyro[2, 0, 1] = (izz - ixx) / iyy
-        gyro[0, 1, 2] = (ixx - iyy) / izz
-        # One matmul per step: features [vec(x outer x) (49), thrust (4), drag torque (4)], x = [q, w],
-        # map to [dq (4), dw (3), -dt R[:, 2] (3), total thrust (1)]. A thrust T along -z at
-        # (x, y, z) from the CG gives the moment (x, y, z) x (0, 0, -T) = (-y T, x T, 0); a drag
-        # torque's yaw moment is spin_sign * torque (a CCW rotor yaws the nose right, +z FRD).
-        products = state_products_map(dt, gyro.reshape(9, 3))  # (49, 10): [-dt z (3), dq (4), gyro dw (3)]
-        m = np.zeros((57, 11))
-        m[:49, 0:4] = products[:, 3:7]
-        m[:49, 4:7] = products[:, 7:10]
-        m[:49, 7:10] = products[:, 0:3]
-        m[49:53, 4] = -dt * arms[:, 1] / ixx
-        m[49:53, 5] = dt * arms[:, 0] / iyy
-        m[49:53, 10] = 1.0
-        m[53:57, 6] = dt * np.asarray(vehicle.spin_sign) / izz
-        self.step_map = m
+        self.per_flight = per_flight
+        if per_flight is None:
+            arms = np.array(vehicle.rotor_positions_frd_m, dtype=np.float64) - np.array(vehicle.cg_offset_frd_m)
+            self.step_map = _step_map(dt, np.array(vehicle.inertia_diag_kg_m2, dtype=np.float64), arms, vehicle.spin_sign)
+        else:
+            if per_flight.n != n:
+                raise ValueError(f"per_flight: {per_flight.n} flights for a batch of {n}")
+            arms = per_flight.rotor_positions_frd_m - per_flight.cg_offset_frd_m[:, None, :]
+            self.step_map = np.stack(
+                [_step_map(dt, per_flight.inertia_diag_kg_m2[b], arms[b], vehicle.spin_sign) for b in range(n)]
+            )  # (B, 57, 11): one map per flight, applied as a batched matmul
         self.motor_alpha = 1.0 - math.exp(-dt / vehicle.motor_time_constant_s)
         self.efficiency = np.array(vehicle.motor_efficiency, dtype=np.float64)
         self.drag = np.array(vehicle.linear_drag_n_per_m_s, dtype=np.float64)
@@ -121,6 +136,25 @@ class Dynamics:
         self._alpha0, self._dt0 = np.array(self.motor_alpha), np.array(dt)
         self.force_body_n = np.zeros((n, 3))  # non-gravity force of the last step with drag, body FRD
         self.last_total_thrust_n = np.zeros(n)
+        self.esc_offset_rad_s = None
+        self.spin_up = None  # rotor inertia / dt, (B, 1): the spin-up yaw reaction J dω/dt
+        if per_flight is not None:
+            pf = per_flight
+            self.motor_alpha = 1.0 - np.exp(-dt / pf.motor_time_constant_s)[:, None]
+            self._alpha0 = self.motor_alpha
+            self.efficiency = pf.motor_efficiency.copy()
+            self.esc_offset_rad_s = pf.esc_offset_rad_s.copy()
+            self.drag = pf.linear_drag_n_per_m_s.copy()
+            self.wind_ned_m_s = np.broadcast_to(pf.wind_mean_ned_m_s, (n, 3)).copy()  # rewritten with gusts
+            self.has_drag = bool(np.any(self.drag > 0))
+            self.voltage_scale = np.ones((n, 1))  # (V / V_full)^k, rewritten by the simulator
+            if np.any(pf.rotor_inertia_kg_m2 > 0):
+                self.spin_up = (pf.rotor_inertia_kg_m2 / dt)[:, None]
+            self._out3 = np.empty((n, 1, 11))
+            self._out = self._out3[:, 0, :]
+            self._d_att, self._d_zdt, self._d_total = self._out[:, :7], self._out[:, 7:10], self._out[:, 10:11]
+            self._total_thrust = self._out[:, 10]
+            self._features3 = self._features[:, None, :]
 
     def specific_force_frd_m_s2(self) -> np.ndarray:
         """What an IMU at the CG measures after the last step: non-gravity force / mass, body FRD."""
@@ -129,8 +163,14 @@ class Dynamics:
         return self.force_body_n * self.inv_mass
 
     def motor_target(self, omega_cmd_rad_s: np.ndarray) -> np.ndarray:
-        """Speed each rotor settles at for a commanded speed (per-motor efficiency)."""
-        return omega_cmd_rad_s * self.efficiency
+        """Speed each rotor settles at for a commanded speed (per-motor efficiency; per flight also the
+        ESC offset and the battery-voltage scale)."""
+        if self.esc_offset_rad_s is None:
+            return omega_cmd_rad_s * self.efficiency
+        out = omega_cmd_rad_s * self.efficiency
+        out += self.esc_offset_rad_s
+        out *= self.voltage_scale
+        return np.maximum(out, 0.0, out=out)
 
     def step(self, s: VehicleState, omega_target_rad_s: np.ndarray, propellers) -> tuple[np.ndarray, np.ndarray]:
         """Advance ``s`` by dt in place; returns this step's (thrust_n, torque_nm)."""
@@ -143,17 +183,33 @@ class Dynamics:
         thrust, torque = propellers(om, dt)
         self._f_thrust[...] = thrust
         self._f_torque[...] = torque
+        if self.spin_up is not None:
+            # Accelerating a rotor takes motor torque; its reaction on the body has the drag torque's sign.
+            self._f_torque += np.multiply(self.spin_up, d, d)
         p, x, x_col, x_row = self._state_views
         if p is not s.packed:  # [q, w] and its broadcasting views, made once per state array
             p = s.packed
             x = p[:, 6:13]
             p, x, x_col, x_row = self._state_views = (p, x, x[:, :, None], x[:, None, :])
         np.multiply(x_col, x_row, self._outer)
-        out = np.matmul(self._features, self.step_map, self._out)
+        if self.per_flight is None:
+            out = np.matmul(self._features, self.step_map, self._out)
+        else:
+            np.matmul(self._features3, self.step_map, self._out3)
+            out = self._out
         self.last_total_thrust_n = self._total_thrust
 
         # Linear, with the attitude at the start of the step: dv = dt (R f_body / m + g).
-        if self.has_drag:
+        if self.has_drag and self.per_flight is not None:
+            # The same formula through one rotation matrix per flight (np.cross is slow on small batches).
+            q, v = s.q_world_body, s.vel_ned_m_s
+            rot = rotation_matrices(q)
+            f_body = self.force_body_n
+            f_body[:, :2] = 0.0
+            f_body[:, 2] = -out[:, 10]
+            f_body -= self.drag * np.matmul((v - self.wind_ned_m_s)[:, None, :], rot)[:, 0]
+            dv = np.matmul(rot, f_body[:, :, None])[:, :, 0] * (self.inv_mass * dt)
+        elif self.has_drag:
             q, v = s.q_world_body, s.vel_ned_m_s
             f_body = self.force_body_n
             f_body[:, :2] = 0.0

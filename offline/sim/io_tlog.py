@@ -27,6 +27,7 @@ import numpy as np
 from pymavlink.dialects.v20 import common as mavlink2
 
 from monitor.esc import RPM_PER_RAD_S
+from monitor.logs.units import US_PER_MS, US_PER_S, V_PER_MV
 from monitor.mavlink_esc import encode_esc_status
 from offline.sim.log import FlightLog
 from offline.sim.quat import rotate_world_to_body
@@ -99,7 +100,7 @@ def _write(fh, log: FlightLog, i: int, wall_boot_us: int, battery_full_v: float,
         fh.write(data)
 
     next_hb = next_slow = None
-    slow_period_us = int(round(1e6 / SLOW_RATE_HZ))
+    slow_period_us = int(round(US_PER_S / SLOW_RATE_HZ))
     for j, t in enumerate(ts):
         t = int(t)
         # HEARTBEAT first (a reader learns the autopilot's system id from it), then the time-stamped
@@ -117,8 +118,8 @@ def _write(fh, log: FlightLog, i: int, wall_boot_us: int, battery_full_v: float,
                     3,
                 ),
             )
-            next_hb = (t // 1_000_000 + 1) * 1_000_000
-        t_ms = t // 1000
+            next_hb = (t // US_PER_S + 1) * US_PER_S
+        t_ms = t // US_PER_MS
         emit(
             t,
             mav.attitude_encode(
@@ -152,9 +153,9 @@ def _write(fh, log: FlightLog, i: int, wall_boot_us: int, battery_full_v: float,
         if heartbeat_due:
             emit(t, mav.extended_sys_state_encode(mavlink2.MAV_VTOL_STATE_UNDEFINED, mavlink2.MAV_LANDED_STATE_IN_AIR))
         if next_slow is None or t >= next_slow:
-            mv = int(round(volt[j] * 1000))
+            mv = int(round(volt[j] / V_PER_MV))
             ca = int(round(amp[j] * 100))
-            cells = [int(round(volt[j] * 1000 / N_CELLS))] * N_CELLS + [65535] * (10 - N_CELLS)
+            cells = [int(round(volt[j] / V_PER_MV / N_CELLS))] * N_CELLS + [65535] * (10 - N_CELLS)
             emit(t, mav.sys_status_encode(0, 0, 0, 0, mv, ca, int(remaining[j]), 0, 0, 0, 0, 0, 0))
             emit(
                 t,

@@ -108,3 +108,32 @@ def state_products_map(dt_s: float, gyro_map: np.ndarray) -> np.ndarray:
     m[:4, 4:, 3:7] = 0.5 * dt_s * QUAT_MUL_PURE.reshape(4, 3, 4)
     m[4:, 4:, 7:] = dt_s * gyro_map.reshape(3, 3, 3)
     return m.reshape(49, 10)
+
+
+def _quat_to_rot_map() -> np.ndarray:
+    """M (16, 9) with vec(R_world_body) = vec(q q^T) @ M for a unit quaternion (w, x, y, z)."""
+    m = np.zeros((16, 9))
+    w, x, y, z = range(4)
+
+    def put(row: int, col: int, terms) -> None:
+        for coef, i, j in terms:
+            m[i * 4 + j, row * 3 + col] += coef
+
+    put(0, 0, [(1, w, w), (1, x, x), (-1, y, y), (-1, z, z)])
+    put(0, 1, [(2, x, y), (-2, w, z)])
+    put(0, 2, [(2, x, z), (2, w, y)])
+    put(1, 0, [(2, x, y), (2, w, z)])
+    put(1, 1, [(1, w, w), (-1, x, x), (1, y, y), (-1, z, z)])
+    put(1, 2, [(2, y, z), (-2, w, x)])
+    put(2, 0, [(2, x, z), (-2, w, y)])
+    put(2, 1, [(2, y, z), (2, w, x)])
+    put(2, 2, [(1, w, w), (-1, x, x), (-1, y, y), (1, z, z)])
+    return m
+
+
+QUAT_TO_ROT = _quat_to_rot_map()
+
+
+def rotation_matrices(q: np.ndarray) -> np.ndarray:
+    """R_world_body (B, 3, 3) of unit quaternions (B, 4), as one outer product and one matmul."""
+    return (np.multiply(q[:, :, None], q[:, None, :]).reshape(len(q), 16) @ QUAT_TO_ROT).reshape(len(q), 3, 3)

@@ -20,13 +20,16 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from monitor.errors import ConfigError, ModelError
+from monitor.resample import US_PER_S
 from monitor.vehicle import VehicleConfig
 from offline.sim.battery import Battery
 from offline.sim.controller import Controller, ControllerConfig, clip_in_place
 from offline.sim.dynamics import GRAVITY_M_S2, Dynamics, VehicleState
 from offline.sim.log import BOOT_OFFSET_US, FlightLog
 from offline.sim.mission import START_NED_M
+from offline.sim.perflight import PerFlightTerms
 from offline.sim.quat import quat_to_euler
+from offline.sim.wind import gust_series
 
 Vec3 = tuple[float, float, float]
 NOISE_CHUNK_S = 1.0  # gyro noise is drawn per flight in blocks of this much flight time
@@ -122,8 +125,14 @@ def simulate(
     payload_kg: np.ndarray | float = 0.0,
     seed=0,
     progress: bool = False,
+    per_flight: PerFlightTerms | None = None,
 ) -> FlightLog:
-    """Simulate B flights through ``waypoints_ned_m`` (B, N, 3); see the module doc for seeds."""
+    """Simulate B flights through ``waypoints_ned_m`` (B, N, 3); see the module doc for seeds.
+
+    ``per_flight``: each flight's own drawn physics (``offline.sim.perflight``: motors, ESC, geometry,
+    inertia, drag, gusty wind, battery sag, controller gains, gyro bias and noise levels) in place of
+    the vehicle's and ``sim``'s single values; None runs the fixed simulator, unchanged.
+    """
     wps = np.asarray(waypoints_ned_m, dtype=np.float64)
     if wps.ndim != 3 or wps.shape[2] != 3 or wps.shape[1] < 1 or not np.all(np.isfinite(wps)):
         raise ConfigError(f"waypoints_ned_m: expected finite (B, N, 3), got shape {wps.shape}")
@@ -137,10 +146,31 @@ def simulate(
     k_pos = sim.physics_rate_hz // sim.position_rate_hz
     k_log = sim.physics_rate_hz // sim.log_rate_hz
     dt = 1.0 / sim.physics_rate_hz
-    dyn = Dynamics(vehicle, mass, dt)
-    ctrl = Controller(sim.controller, vehicle, mass, 1.0 / sim.position_rate_hz, 1.0 / sim.control_rate_hz)
+    pf = per_flight
+    dyn = Dynamics(vehicle, mass, dt, pf)
+    ctrl = Controller(
+        sim.controller, vehicle, mass, 1.0 / sim.position_rate_hz, 1.0 / sim.control_rate_hz, None if pf is None else pf.gains
+    )
     esc = vehicle.esc
     battery = Battery(vehicle, n)
+    gusts = None
+    if pf is not None:
+        battery.r_ohm = pf.battery_internal_resistance_ohm.copy()
+        n_pos = sim.n_physics_steps // k_pos + 1
+        gusts = np.stack(
+            [
+                gust_series(
+                    n_pos,
+                    1.0 / sim.position_rate_hz,
+                    float(pf.turbulence_sigma_w_m_s[i]),
+                    float(np.linalg.norm(pf.wind_mean_ned_m_s[i])),
+                    -sim.start_ned_m[2],
+                    np.random.default_rng(int(pf.noise_seeds[i])),
+                )
+                for i in range(n)
+            ],
+            axis=1,
+        )  # (steps, B, 3), time-major like the gyro noise
 
     hover = np.sqrt(mass * GRAVITY_M_S2 / (4 * vehicle.kf_n_per_rad_s2))[:, None] * np.ones(4)
     state = VehicleState.hover(n, sim.start_ned_m, hover)
@@ -150,10 +180,10 @@ def simulate(
     seqs = [s.spawn(2) for s in flight_seed_sequences(seed, n)]
     gyro_rngs = [np.random.default_rng(s[0]) for s in seqs]
     att_rngs = [np.random.default_rng(s[1]) for s in seqs]
-    gyro_bias = np.array(vehicle.gyro_bias_frd_rad_s, dtype=np.float64)
+    gyro_bias = np.array(vehicle.gyro_bias_frd_rad_s, dtype=np.float64) if pf is None else pf.gyro_bias_frd_rad_s
     chunk = max(1, int(round(NOISE_CHUNK_S * sim.control_rate_hz)))
     gyro_noise = np.zeros((chunk, n, 3))  # time-major, so one control step's noise is a plain view
-    noise_on = sim.gyro_noise_std_rad_s > 0
+    noise_on = sim.gyro_noise_std_rad_s > 0 if pf is None else bool(np.any(pf.gyro_noise_std_rad_s > 0))
 
     T = sim.n_log_samples
     # PWM and the waypoint error are worked out after the loop from the logged command and
@@ -175,7 +205,10 @@ def simulate(
     if progress:
         from tqdm import tqdm
 
-        bar = tqdm(total=T, unit="log", desc=f"simulate {n} flight(s)", leave=False)
+        # The n flights advance together, one log step at a time: the bar counts flights done (fractions
+        # of each), so its rate and ETA are in flights.
+        bar = tqdm(total=n, unit="flight", unit_scale=True, desc="simulate", leave=False)
+        per_step = n / T
 
     # The ESC turns PWM into speed through its fit; the command is the speed the controller
     # asks for, inside the ESC's range. PWM itself (its inverse) is only needed for the log.
@@ -190,11 +223,15 @@ def simulate(
     update_position, update_attitude, motor_target, step = ctrl.update_position, ctrl.update_attitude, dyn.motor_target, dyn.step
     pos, vel, q, rates, omega = state.pos_ned_m, state.vel_ned_m_s, state.q_world_body, state.rates_frd_rad_s, state.omega_rad_s
     noise_std, log_dt = sim.gyro_noise_std_rad_s, 1.0 / sim.log_rate_hz
+    if pf is not None:
+        noise_std = pf.gyro_noise_std_rad_s[:, None]
     prop = _checked(propellers, (n, 4))  # the first step only
     j_ctrl = 0
     for k in range(sim.n_physics_steps):
         if k % k_pos == 0:
             update_position(cstate, pos, vel, wps)
+            if gusts is not None:
+                np.add(pf.wind_mean_ned_m_s, gusts[k // k_pos], dyn.wind_ned_m_s)
         if k % k_ctrl == 0:
             gyro = np.add(rates, gyro_bias, gyro_buf)
             if noise_on:
@@ -224,8 +261,10 @@ def simulate(
             wp_index[:, j] = cstate.waypoint_index
             battery_v[:, j] = battery.update(np.einsum("ij,ij->i", torque, omega), log_dt)
             battery_a[:, j] = battery.current_a
+            if pf is not None:  # battery sag on the speed an open-loop ESC reaches
+                dyn.voltage_scale[:, 0] = (battery_v[:, j] / battery.full_v) ** pf.esc_voltage_exponent
             if bar is not None:
-                bar.update(1)
+                bar.update(per_step)
     if bar is not None:
         bar.close()
     # In place and by blocks of samples, so peak memory stays that of the logs themselves.
@@ -255,12 +294,13 @@ def simulate(
         )
 
     roll, pitch, yaw = quat_to_euler(log["q_world_body"])
-    if sim.attitude_noise_std_rad > 0:
-        att_noise = np.stack([g.standard_normal((T, 3)) for g in att_rngs]) * sim.attitude_noise_std_rad
+    att_std = sim.attitude_noise_std_rad if pf is None else pf.attitude_noise_std_rad[:, None, None]
+    if np.any(np.asarray(att_std) > 0):
+        att_noise = np.stack([g.standard_normal((T, 3)) for g in att_rngs]) * att_std
         roll, pitch = roll + att_noise[..., 0], pitch + att_noise[..., 1]
         yaw = (yaw + att_noise[..., 2] + math.pi) % (2 * math.pi) - math.pi
     time_s = np.arange(1, T + 1) / sim.log_rate_hz
-    timestamp_us = BOOT_OFFSET_US + np.round(np.arange(1, T + 1) * (1e6 / sim.log_rate_hz)).astype(np.int64)
+    timestamp_us = BOOT_OFFSET_US + np.round(np.arange(1, T + 1) * (US_PER_S / sim.log_rate_hz)).astype(np.int64)
     return FlightLog(
         time_s=time_s,
         timestamp_us=timestamp_us,

@@ -1,0 +1,132 @@
+"""Soak test of the onboard monitor: a long flight at real pace over UDP loopback, RSS sampled every minute.
+
+    python bench/bench_soak.py                     # 60-minute flight at real pace (the issue's soak)
+    python bench/bench_soak.py --minutes 5 --sample-s 10   # a shorter run
+
+As ``bench_daemon.py`` (``propwatch replay`` as PX4 on udpout, ``propwatch
+monitor`` on udpin), but long: the daemon's resident memory is read from
+/proc every ``--sample-s`` seconds, and the run ends with its RSS at start
+and end, the largest rise between consecutive samples, a least-squares RSS
+slope in MB per hour over the second half (flat = bounded buffers), the
+latency percentiles from the daemon's own report and its CPU share (process
+CPU time / wall time, from /proc). Results print as text, or JSON with
+``--json``; ``--out FILE`` also writes the JSON there as the run goes (so a
+run cut short still leaves its samples).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import signal
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+
+REPO = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(REPO / "bench"))
+from bench_daemon import build_inputs, cpu_seconds, free_udp_port, rss_mb  # noqa: E402
+
+
+def run(args) -> dict:
+    with tempfile.TemporaryDirectory() as tmp:
+        work = Path(tmp)
+        model, tlog = build_inputs(args, work)
+        port = free_udp_port()
+        report = work / "report.json"
+        cmd = [sys.executable, "-m", "monitor", "--connect", f"udpin:127.0.0.1:{port}", "--model", str(model)]
+        cmd += ["--report", str(report), "--events", str(work / "events.jsonl"), "--log-level", "WARNING"]
+        d = subprocess.Popen(cmd, cwd=REPO, stderr=subprocess.PIPE, text=True)
+        lines: list[str] = []
+        threading.Thread(target=lambda: lines.extend(d.stderr), daemon=True).start()
+        time.sleep(3.0)  # start-up (the 'ready' line is INFO, below --log-level WARNING)
+        if d.poll() is not None:
+            raise SystemExit("daemon exited:\n" + "".join(lines))
+        replay = [sys.executable, "-m", "monitor.cli", "replay", str(tlog), "--connect", f"udpout:127.0.0.1:{port}"]
+        replay += ["--speed", "1", "--linger", "0.5", "--log-level", "WARNING"]
+        cpu0, t0 = cpu_seconds(d.pid), time.monotonic()
+        samples = [(0.0, rss_mb(d.pid))]
+        r = subprocess.Popen(replay, cwd=REPO)
+        next_sample = t0 + args.sample_s
+        result: dict = {}
+        while r.poll() is None:
+            time.sleep(0.5)
+            now = time.monotonic()
+            if now >= next_sample:
+                samples.append((round(now - t0, 1), rss_mb(d.pid)))
+                next_sample += args.sample_s
+                result = summarize(samples, cpu_seconds(d.pid) - cpu0, now - t0, None, args)
+                if args.out:
+                    Path(args.out).write_text(json.dumps(result, indent=2) + "\n")
+        cpu1, t1 = cpu_seconds(d.pid), time.monotonic()
+        samples.append((round(t1 - t0, 1), rss_mb(d.pid)))
+        d.send_signal(signal.SIGTERM)
+        d.wait(30)
+        rep = json.loads(report.read_text())
+    result = summarize(samples, cpu1 - cpu0, t1 - t0, rep, args)
+    if args.out:
+        Path(args.out).write_text(json.dumps(result, indent=2) + "\n")
+    return result
+
+
+def summarize(samples, cpu_s: float, wall_s: float, rep: dict | None, args) -> dict:
+    t = np.array([s[0] for s in samples]) / 3600.0
+    rss = np.array([s[1] for s in samples])
+    half = t >= t[-1] / 2
+    slope = float(np.polyfit(t[half], rss[half], 1)[0]) if half.sum() >= 3 else float("nan")
+    out = {
+        "flight_minutes": args.minutes,
+        "wall_s": round(wall_s, 1),
+        "rss_start_mb": round(float(rss[0]), 1),
+        "rss_end_mb": round(float(rss[-1]), 1),
+        "rss_max_mb": round(float(rss.max()), 1),
+        "rss_max_step_mb": round(float(np.diff(rss).max()), 2) if len(rss) > 1 else 0.0,
+        "rss_slope_second_half_mb_per_h": round(slope, 2),
+        "cpu_percent": round(100.0 * cpu_s / wall_s, 2) if wall_s > 0 else float("nan"),
+        "rss_samples": [[s[0], round(s[1], 1)] for s in samples],
+        "load_average": os.getloadavg(),
+    }
+    if rep is not None:
+        lat = rep["latency_ms"]
+        out |= {
+            "latency_p50_ms": round(lat["p50"], 3),
+            "latency_p99_ms": round(lat["p99"], 3),
+            "latency_max_ms": round(lat["max"], 3),
+            "classified_steps": rep["pipeline"]["classified"],
+            "messages": rep["messages"],
+            "alerts": rep["alerts"],
+            "blind_spells": rep.get("blind_spells"),
+        }
+    return out
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--minutes", type=float, default=60.0, help="flight length at real pace (default 60)")
+    p.add_argument("--sample-s", type=float, default=60.0, help="RSS sampling period (default 60 s)")
+    p.add_argument("--tlog", help="replay this .tlog instead of a synthetic flight")
+    p.add_argument("--model", help="ONNX model (default models/classifier.onnx, else the tests' toy model)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--out", help="also write the JSON result here (updated at every sample)")
+    p.add_argument("--json", action="store_true")
+    args = p.parse_args(argv)
+    res = run(args)
+    if args.json:
+        print(json.dumps(res, indent=2))
+        return 0
+    for k, v in res.items():
+        if k != "rss_samples":
+            print(f"{k:34s} {v}")
+    flat = abs(res["rss_slope_second_half_mb_per_h"]) < 5.0
+    print(f"RSS {'flat' if flat else 'NOT flat'} (second-half slope {res['rss_slope_second_half_mb_per_h']} MB/h)")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,79 @@
+"""The torque-sign check (issue 12): flip the sign of the damaged blade's torque-per-thrust change.
+
+Two randomised data sets of our simulator, identical but for the register's torque-per-thrust range
+of damaged blades: +2..+10 % (what the shipped classifier's training assumed, always up) and
+-10..-2 %. The airframe is nominal (CG, motor spread and arm errors at their nominal values) so the
+only change is the sign. Single-propeller accuracy must move by <= 2 points between the two; printed
+for the moment balance, the shipped CNN and the omega^2-share baseline.
+
+Run: ``python bench/bench_torque_sign.py [--flights-per-label 2] [--duration-s 60]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_localise import cnn_verdicts, physics_verdicts, share_verdicts  # noqa: E402
+
+from monitor.effectiveness import HypothesisBank, Priors, RotorGeometry  # noqa: E402
+from monitor.model import Classifier  # noqa: E402
+from monitor.vehicle import DEFAULT_VEHICLE, REPO_ROOT, load_vehicle  # noqa: E402
+from offline.dataset.generate import DatasetSpec, generate  # noqa: E402
+from offline.physics_calibration import nominal_register  # noqa: E402
+
+TORQUE_TERMS = [f"{k}_torque_per_thrust_change_{s}_frac" for k in ("bent", "cracked") for s in ("low", "high")]
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--flights-per-label", type=int, default=2, help="flights per label and sign (default 2)")
+    ap.add_argument("--duration-s", type=float, default=60.0, help="flight length (default 60 s)")
+    ap.add_argument("--seed", type=int, default=23, help="data set seed, the same for both signs")
+    args = ap.parse_args(argv)
+    vehicle = load_vehicle(DEFAULT_VEHICLE)
+    geometry, priors = RotorGeometry.from_vehicle(vehicle), Priors()
+    bank = HypothesisBank(priors, geometry)
+    clf = Classifier(REPO_ROOT / "models" / "classifier.onnx")
+    single = {}
+    for sign, (lo, hi) in (("up", (0.02, 0.10)), ("down", (-0.10, -0.02))):
+        reg = nominal_register()
+        for name in TORQUE_TERMS:
+            reg = reg.with_range(name, lo, hi)
+        spec = DatasetSpec(
+            name=f"torque-{sign}",
+            fault="varied",
+            waypoints=("random",),
+            flights_per_label=args.flights_per_label,
+            duration_s=args.duration_s,
+            propellers="quadratic",
+            physics="randomised",
+            seed=args.seed,
+        )
+        ds = generate(spec, vehicle, log=lambda *_: None, register=reg)
+        truth = [tuple(i + 1 for i in range(4) if c[i]) for c in ds.conditions]
+        idx = [i for i, t in enumerate(truth) if len(t) == 1]
+        preds = {
+            "physics": [p[0] for p in physics_verdicts(ds, bank, geometry, priors)],
+            "cnn": cnn_verdicts(ds, clf),
+            "share": share_verdicts(ds),
+        }
+        single[sign] = {k: float(np.mean([p[i] == truth[i] for i in idx])) for k, p in preds.items()}
+        print(
+            f"torque per thrust {sign:4s} ({lo:+.2f}..{hi:+.2f}): single-propeller exact "
+            + "  ".join(f"{k} {100 * v:5.1f} %" for k, v in single[sign].items())
+            + f"  ({len(idx)} flights)",
+            flush=True,
+        )
+    for k in single["up"]:
+        moved = 100 * abs(single["up"][k] - single["down"][k])
+        print(f"{k:8s} moves {moved:5.1f} points: {'PASS' if moved <= 2.0 else 'FAIL'} (<= 2)")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,217 @@
+"""``fleet ingest``: new logs -> diagnose (serial or Ray tasks) -> rows committed per batch.
+
+The driver is the only writer. It finds the logs, hashes their content, skips
+hashes already in the database (a re-run is incremental and idempotent), runs
+``fleet.worker.process_log`` on the rest as Ray tasks (``max_retries``: a task
+whose worker process dies is run again) and inserts the rows it gets back in
+transactions of ``batch_rows``. A log that fails even after the retries
+becomes an error row; nothing crashes the run.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+from fleet.discover import content_hash, find_logs
+from fleet.raycluster import cluster_cpus, ray_session
+from fleet.schema import export_parquet, forget_errors, insert_rows, known_files, known_hashes, open_db, update_mtimes
+from fleet.worker import IngestSettings, empty_row, process_log, utc_naive
+
+TASK_MAX_RETRIES = 3  # a worker killed mid-log (OOM killer, preempted node) costs a re-run, not a row
+IN_FLIGHT_PER_CPU = 4  # tasks queued per cluster CPU: keeps workers busy without holding every result
+
+
+@dataclass
+class IngestSummary:
+    db: str
+    found: int = 0
+    hashed: int = 0  # files read to hash them (the others kept path, size and mtime since ingest)
+    already_known: int = 0
+    duplicate_content: int = 0  # same bytes under two paths in this run: one row
+    new: int = 0
+    ok: int = 0
+    no_verdict: int = 0
+    error: int = 0
+    bytes_new: int = 0
+    mode: str = "serial"
+    workers: int = 1
+    ray_start_s: float = 0.0
+    process_s: float = 0.0  # first task submitted -> last row committed
+    total_s: float = 0.0
+    worker_pids: list[int] = field(default_factory=list)
+    export: str | None = None
+
+    def to_json(self) -> dict:
+        out = asdict(self)
+        out["logs_per_s"] = round(self.new / self.process_s, 3) if self.process_s > 0 else None
+        out["mb_per_s"] = round(self.bytes_new / 1e6 / self.process_s, 3) if self.process_s > 0 else None
+        return out
+
+
+def _progress(total: int, enabled: bool):
+    try:
+        from tqdm import tqdm
+    except ImportError:
+        enabled = False
+        tqdm = None
+    if not enabled or tqdm is None:
+
+        class _Null:
+            def update(self, n=1):
+                pass
+
+            def close(self):
+                pass
+
+        return _Null()
+    return tqdm(total=total, unit="log", desc="ingest", file=sys.stderr, dynamic_ncols=True, smoothing=0.1)
+
+
+def ingest(
+    paths: list[str],
+    db: str | Path,
+    settings: IngestSettings | None = None,
+    ray_address: str | None = "auto",
+    workers: int | None = None,
+    batch_rows: int = 32,
+    progress: bool = True,
+    export: str | Path | None = None,
+    retry_errors: bool = False,
+    rehash: bool = False,
+) -> IngestSummary:
+    """Ingest every new log under ``paths`` into ``db``. ``ray_address`` None or "off": in this process.
+
+    ``rehash``: read every file to hash it, even one whose path, size and mtime match its row.
+    """
+    t0 = time.perf_counter()
+    settings = settings or IngestSettings()
+    summary = IngestSummary(db=str(db))
+    mtime_of: dict[str, int] = {}
+    logs = find_logs(paths)
+    summary.found = len(logs)
+    con = open_db(db)
+    try:
+        seen_files = {} if rehash else known_files(con)
+        hashed = []
+        for p in logs:
+            st = p.stat()
+            stored = seen_files.get(str(p))
+            if stored and stored[:2] == (st.st_size, st.st_mtime_ns):
+                h = stored[2]  # same path, size and modification time as when ingested: not re-read
+            else:
+                h = content_hash(p)
+                summary.hashed += 1
+            mtime_of[str(p)] = st.st_mtime_ns
+            hashed.append((p, h, st.st_size))
+        if retry_errors:
+            forget_errors(con, {h for _, h, _ in hashed})
+        known = known_hashes(con)
+        todo, seen, touched = [], set(), []
+        for p, h, size in hashed:
+            if h in known:
+                summary.already_known += 1
+                if str(p) in seen_files and seen_files[str(p)][2] == h and seen_files[str(p)][1] != mtime_of[str(p)]:
+                    touched.append((mtime_of[str(p)], h))  # same bytes, new mtime: remember it, skip re-reading next time
+            elif h in seen:
+                summary.duplicate_content += 1
+            else:
+                seen.add(h)
+                todo.append((str(p), h, size))
+        update_mtimes(con, touched)
+        summary.new = len(todo)
+        summary.bytes_new = sum(s for _, _, s in todo)
+        if todo:
+            if ray_address in (None, "off"):
+                _run_serial(con, todo, settings, summary, batch_rows, progress, mtime_of)
+            else:
+                _run_ray(con, todo, settings, summary, batch_rows, progress, mtime_of, ray_address, workers)
+        if export:
+            summary.export = str(export_parquet(con, export))
+    finally:
+        con.close()
+    summary.total_s = time.perf_counter() - t0
+    return summary
+
+
+class _Writer:
+    """Buffers rows and commits them per batch; counts statuses."""
+
+    def __init__(self, con, summary: IngestSummary, batch_rows: int, bar, mtime_of: dict[str, int]):
+        self.con, self.summary, self.batch_rows, self.bar = con, summary, max(1, batch_rows), bar
+        self.mtime_of = mtime_of
+        self.rows: list[dict] = []
+        self.pids: set[int] = set()
+
+    def add(self, row: dict) -> None:
+        row["mtime_ns"] = self.mtime_of.get(row["path"])  # as the driver saw it when hashing
+        self.rows.append(row)
+        setattr(self.summary, row["status"], getattr(self.summary, row["status"]) + 1)
+        if row.get("worker_pid"):
+            self.pids.add(row["worker_pid"])
+        self.bar.update(1)
+        if len(self.rows) >= self.batch_rows:
+            self.flush()
+
+    def flush(self) -> None:
+        insert_rows(self.con, self.rows)
+        self.rows = []
+
+    def close(self) -> None:
+        self.flush()
+        self.bar.close()
+        self.summary.worker_pids = sorted(self.pids)
+
+
+def _run_serial(con, todo, settings, summary, batch_rows, progress, mtime_of) -> None:
+    w = _Writer(con, summary, batch_rows, _progress(len(todo), progress), mtime_of)
+    t = time.perf_counter()
+    try:
+        for path, h, size in todo:
+            w.add(process_log(path, h, size, settings))
+    finally:
+        w.close()
+    summary.process_s = time.perf_counter() - t
+
+
+def _run_ray(con, todo, settings, summary, batch_rows, progress, mtime_of, address, workers) -> None:
+    t = time.perf_counter()
+    with ray_session(address, workers) as ray:
+        summary.ray_start_s = time.perf_counter() - t
+        summary.mode = "ray"
+        summary.workers = workers or cluster_cpus(ray)
+        task = ray.remote(max_retries=TASK_MAX_RETRIES, num_cpus=1)(process_log)
+        settings_ref = ray.put(settings)
+        window = (workers or cluster_cpus(ray)) * IN_FLIGHT_PER_CPU
+        w = _Writer(con, summary, batch_rows, _progress(len(todo), progress), mtime_of)
+        t = time.perf_counter()
+        pending: dict = {}
+        queue = iter(todo)
+        try:
+            while True:
+                for job in queue:
+                    pending[task.remote(*job, settings_ref)] = job
+                    if len(pending) >= window:
+                        break
+                if not pending:
+                    break
+                done, _ = ray.wait(list(pending), num_returns=1)
+                for ref in done:
+                    path, h, size = pending.pop(ref)
+                    try:
+                        row = ray.get(ref)
+                    except ray.exceptions.RayError as exc:
+                        row = empty_row(Path(path), h, size)
+                        row.update(
+                            status="error",
+                            error=f"{path}: failed after {TASK_MAX_RETRIES} retries: {type(exc).__name__}",
+                            ingested_at=utc_naive(time.time() * 1e6),
+                        )
+                    w.add(row)
+        finally:
+            for ref in pending:
+                ray.cancel(ref, force=True)
+            w.close()
+        summary.process_s = time.perf_counter() - t

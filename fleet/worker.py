@@ -1,0 +1,187 @@
+"""One log -> one database row: what a Ray task (or the serial loop) runs.
+
+Reads the log with ``monitor.logs``, picks the classifier whose ESC command unit
+matches the log's (so a mixed fleet of PX4 quads and Crazyflies gets each its
+model), runs ``monitor.diagnose.engine.diagnose_table``, and adds who flew it
+and when (``fleet.identity``). Never raises for a bad log: the row says why.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import hashlib
+import json
+import os
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from fleet.identity import identify
+from monitor import __version__ as PROPWATCH_VERSION
+from monitor.errors import PropwatchError
+from monitor.vehicle import REPO_ROOT
+
+SHIPPED_MODELS = (REPO_ROOT / "models" / "classifier.onnx", REPO_ROOT / "models" / "crazyflie-classifier.onnx")
+
+
+@dataclass(frozen=True)
+class IngestSettings:
+    """What every worker needs to turn a log into a row (picklable, frozen)."""
+
+    models: tuple[str, ...] = ()  # empty: the shipped models, chosen per log by motor command unit
+    vehicle_yaml: str | None = None  # ESC curve for every log (as ``diagnose --vehicle``)
+    csv_format: str | None = None  # mapping for .csv/.csv.gz logs (monitor/formats.yaml)
+    hop: int = 20
+    vehicle_from_dir: int | None = None  # folder level naming the vehicle when the log carries no id
+
+    def model_paths(self) -> tuple[Path, ...]:
+        if self.models:
+            return tuple(Path(m) for m in self.models)
+        if self.vehicle_yaml:
+            from monitor.diagnose.cli import default_model
+
+            return (default_model(self.vehicle_yaml),)
+        return tuple(p for p in SHIPPED_MODELS if p.is_file())
+
+
+_MODELS: dict[tuple[str, str | None], tuple] = {}  # per worker process: (path, vehicle) -> (clf, esc, id, version)
+
+
+def _model(path: Path, vehicle_yaml: str | None):
+    key = (str(path), vehicle_yaml)
+    if key not in _MODELS:
+        from monitor.model import Classifier, choose_esc
+        from monitor.vehicle import load_vehicle
+
+        clf = Classifier(path)
+        esc = choose_esc(clf, vehicle_yaml or "")
+        version = hashlib.sha256(path.read_bytes()).hexdigest()[:12]
+        name = (clf.info.metadata.get("vehicle") or {}).get("name", "")
+        vehicle = load_vehicle(vehicle_yaml or vehicle_for_model(path))  # geometry for diagnose's physics evidence
+        _MODELS[key] = (clf, esc, f"{path.name}" + (f" ({name})" if name else ""), version, vehicle)
+    return _MODELS[key]
+
+
+def vehicle_for_model(path: Path) -> Path:
+    """The vehicle YAML shipped beside a model (``NAME-classifier.onnx`` -> ``models/NAME.yaml``), else the paper quad's."""
+    from monitor.vehicle import DEFAULT_VEHICLE
+
+    stem = path.name.removesuffix(".onnx").removesuffix("classifier").rstrip("-")
+    own = REPO_ROOT / "models" / f"{stem}.yaml"
+    return own if stem and own.is_file() else DEFAULT_VEHICLE
+
+
+def choose_model(settings: IngestSettings, cmd_unit: str):
+    """The first model whose ESC curve takes this command unit, else the first (its envelope check refuses)."""
+    loaded = [_model(p, settings.vehicle_yaml) for p in settings.model_paths()]
+    if not loaded:
+        raise PropwatchError("no classifier model found (give --model)")
+    return next((m for m in loaded if m[1].cmd_unit == cmd_unit), loaded[0])
+
+
+def utc_naive(unix_us: float) -> _dt.datetime:
+    """UTC as a naive datetime (the database's TIMESTAMP columns are UTC)."""
+    return _dt.datetime.fromtimestamp(unix_us / 1e6, _dt.timezone.utc).replace(tzinfo=None)
+
+
+def log_format(path: Path, csv_format: str | None) -> str:
+    from monitor.logs import detect_format
+
+    name = path.name.lower()
+    if name.endswith((".csv", ".csv.gz")):
+        if not csv_format:
+            raise PropwatchError(f"{path}: CSV logs need --format NAME (a column mapping in monitor/formats.yaml)")
+        return csv_format
+    return detect_format(path)
+
+
+def vehicle_from_dir(path: Path, level: int | None) -> str | None:
+    if not level:
+        return None
+    parents = path.resolve().parents
+    return parents[level - 1].name if level - 1 < len(parents) else None
+
+
+def empty_row(path: Path, log_hash: str, size_bytes: int) -> dict:
+    from fleet.schema import COLUMN_NAMES
+
+    row = dict.fromkeys(COLUMN_NAMES)
+    row.update(log_hash=log_hash, path=str(path), size_bytes=size_bytes, propwatch_version=PROPWATCH_VERSION, warnings=[])
+    return row
+
+
+def process_log(path: str, log_hash: str, size_bytes: int, settings: IngestSettings) -> dict:
+    """The row for one log; a log that cannot be read gives ``status='error'`` and the reason."""
+    t0, cpu0 = time.perf_counter(), time.process_time()
+    p = Path(path)
+    row = empty_row(p, log_hash, size_bytes)
+    row["worker_pid"] = os.getpid()  # not stored: lets the driver (and tests) see where it ran
+    try:
+        _diagnose_into(row, p, settings)
+    except PropwatchError as exc:
+        row.update(status="error", error=str(exc))
+    except Exception as exc:  # noqa: BLE001 - a third-party parser choking on a foreign file is a bad log, not a crash
+        row.update(status="error", error=f"{p}: cannot be read ({type(exc).__name__}: {exc})")
+    if row["vehicle_id"] is None and (vid := vehicle_from_dir(p, settings.vehicle_from_dir)):
+        row.update(vehicle_id=vid, vehicle_id_source=f"dir:{settings.vehicle_from_dir}")
+    if row["start_time_utc"] is None:
+        try:
+            row.update(start_time_utc=utc_naive(p.stat().st_mtime * 1e6), start_time_source="file:mtime")
+        except OSError:
+            pass
+    row["ingested_at"] = utc_naive(time.time() * 1e6)
+    row["process_s"] = time.perf_counter() - t0
+    row["process_cpu_s"] = time.process_time() - cpu0
+    return row
+
+
+def _diagnose_into(row: dict, path: Path, settings: IngestSettings) -> None:
+    from monitor.diagnose.engine import diagnose_table
+    from monitor.logs import read_raw, to_flight_table
+
+    if row["size_bytes"] == 0:
+        raise PropwatchError(f"{path}: empty file (0 bytes)")
+    fmt = log_format(path, settings.csv_format)
+    row["format"] = fmt
+    raw = read_raw(path, fmt, extras=False)
+    clf, esc, model_id, model_version, vehicle = choose_model(settings, raw.cmd_unit)
+    row.update(model_id=model_id, model_version=model_version)
+    table = to_flight_table(raw, esc=esc, rate_hz=clf.info.sample_rate_hz)
+    try:
+        ident = identify(path, fmt)
+    except Exception as exc:  # noqa: BLE001 - the id is extra: a log readable for diagnosis is still diagnosed
+        row["warnings"].append(f"vehicle id / clock not read: {type(exc).__name__}: {exc}")
+    else:
+        row.update(vehicle_id=ident.vehicle_id, vehicle_id_source=ident.vehicle_id_source)
+        if ident.utc_minus_boot_us is not None and len(table):
+            start_us = int(table.timestamp_us[0]) + ident.utc_minus_boot_us
+            row["start_time_utc"] = utc_naive(start_us)
+            row["start_time_source"] = ident.time_source
+    d = diagnose_table(table, clf, hop=settings.hop, esc=esc, vehicle=vehicle)
+    out = d.to_json()
+    row.update(
+        duration_s=len(table) / table.rate_hz,
+        airborne_s=float(np.sum(table.airborne)) / table.rate_hz,
+        status="ok" if d.verdict is not None else "no_verdict",
+        error=d.reason,
+        windows=d.windows,
+        propeller_names=list(table.motor_names),
+        diagnosis=json.dumps(out, allow_nan=False),
+    )
+    row["warnings"] = row["warnings"] + list(d.warnings)
+    if d.verdict is not None:  # PX4 rotor order (the JSON may be in the vehicle's own numbering)
+        row.update(
+            verdict_label=int(d.verdict["label"]),
+            faulty_propellers=[int(i) for i in d.verdict["faulty_propellers"]],
+            p_faulty=[float(x) for x in d.verdict["fault_probability"]],
+        )
+    # Physics evidence (rotor effectiveness, hypotheses) in PX4 rotor order, as p_faulty: from the Diagnosis
+    # itself (the JSON may be renumbered to the vehicle's own numbers); NULL when diagnose gives none.
+    ev = getattr(d, "physics", None)
+    hyp = getattr(ev, "hypotheses", None) if ev is not None else out.get("hypotheses")
+    row["hypotheses"] = json.dumps(hyp) if hyp is not None else None
+    for key in ("rotor_effectiveness", "rotor_effectiveness_std"):
+        v = getattr(ev, key, None) if ev is not None else out.get(key)
+        row[key] = [float(x) for x in v] if v is not None else None

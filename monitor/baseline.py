@@ -1,0 +1,167 @@
+"""A healthy baseline of one airframe: what its own healthy flights look like.
+
+Every real vehicle holds a static per-motor spread (healthy Crazyflies: 4-8 % of the mean
+command, ``../shared/data/crazypad/README.md``), so "rotor 3 works harder than the others" is
+evidence of a fault only relative to *this* airframe's healthy flights. ``propwatch adapt``
+stores one (``baseline.json`` in its output folder); ``propwatch diagnose --vehicle DIR`` compares
+each flight with it.
+
+Shares: each rotor's flight-mean of omega^2 (RPM from the ESC fit, squared) over the mean of the
+four, over the airborne samples; the motor command's share where no ESC fit applies (``basis``).
+Spread: the flight-to-flight std of each share, floored at ``SPREAD_FLOOR`` so that two or
+three flights that happen to agree do not make every later flight an outlier.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+from monitor.errors import ConfigError
+from monitor.flight import FlightTable
+
+BASELINE_FILE = "baseline.json"
+# Floor of the flight-to-flight std of a share. One airframe's shares drift between sessions by more than
+# the std within one (CrazyPAD E9: logs 00-02 std <= 0.008, log03 is 0.056 off on M1; E8 std up to 0.026),
+# so two or three flights of one session must not make every later healthy flight an outlier.
+SPREAD_FLOOR = 0.02
+OUTLIER_SPREADS = 3.0  # a share this many spreads from the airframe's healthy mean is not healthy
+
+
+def _rows_and_basis(table: FlightTable) -> tuple[np.ndarray, np.ndarray, str]:
+    """Airborne rows with all four values known, their per-rotor values, and the basis.
+
+    omega^2 (kRPM^2) where RPM is known (the ESC fit or ESC telemetry), as ``monitor.share_baseline``;
+    the raw command where no RPM is known for any airborne row.
+    """
+    rpm = np.asarray(table.motor_rpm, dtype=np.float64)
+    rows = table.airborne & np.all(np.isfinite(rpm), axis=1)
+    if rows.any():
+        return rows, (rpm[rows] / 1000.0) ** 2, "omega2"
+    cmd = np.asarray(table.motor_cmd, dtype=np.float64)
+    rows = table.airborne & np.all(np.isfinite(cmd), axis=1)
+    if not rows.any():
+        raise ConfigError(f"{table.source}: no airborne step with all four motor values: no shares")
+    return rows, cmd[rows], "command"
+
+
+def flight_shares(table: FlightTable) -> tuple[np.ndarray, str]:
+    """(4,) each rotor's airborne mean omega^2 (or command) over the mean of the four, and the basis."""
+    _, x, basis = _rows_and_basis(table)
+    mean = np.mean(x, axis=0)
+    return mean / np.mean(mean), basis
+
+
+def share_noise(table: FlightTable) -> np.ndarray:
+    """(4,) within-flight std of each rotor's per-sample share (grid rate), airborne samples."""
+    _, x, _ = _rows_and_basis(table)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        s = x / np.mean(x, axis=1, keepdims=True)
+    return np.nanstd(s, axis=0)
+
+
+@dataclass(frozen=True)
+class HealthyBaseline:
+    basis: str  # "omega2" or "command"
+    shares_mean: tuple[float, float, float, float]  # PX4 rotor order
+    shares_std: tuple[float, float, float, float]  # flight-to-flight, ddof=1 (0 with one flight)
+    noise_std: tuple[float, float, float, float]  # within-flight std of the per-sample share, mean over flights
+    activity: tuple[float, float, float, float] | None  # native-rate command activity (>= 50 Hz logs), else None
+    rate_hz: float  # grid the shares and noise were measured on
+    n_flights: int
+    files: tuple[str, ...]
+    motor_names: tuple[str, str, str, str]
+
+    def spread(self) -> np.ndarray:
+        return np.maximum(np.asarray(self.shares_std), SPREAD_FLOOR)
+
+    def deviation(self, shares: np.ndarray) -> np.ndarray:
+        """(4,) how many spreads each share is from this airframe's healthy mean."""
+        return (np.asarray(shares) - np.asarray(self.shares_mean)) / self.spread()
+
+    def compare(self, table: FlightTable) -> dict:
+        """A flight against the baseline: its shares, their deviation, and the rotors beyond 3 spreads."""
+        shares, basis = flight_shares(table)
+        if basis != self.basis:
+            return {"basis": basis, "note": f"baseline measured on {self.basis} shares, this log gives {basis}: not compared"}
+        dev = self.deviation(shares)
+        out = [int(i) + 1 for i in np.flatnonzero(np.abs(dev) > OUTLIER_SPREADS)]
+        return {
+            "basis": basis,
+            "shares": [round(float(s), 4) for s in shares],
+            "deviation_spreads": [round(float(d), 2) for d in dev],
+            "rotors_beyond_3_spreads": out,
+            "verdict": self.verdict(dev),
+        }
+
+    def verdict(self, dev: np.ndarray) -> str:
+        """What the shares alone can say. A rotor that works harder than this airframe's healthy
+        flights is an *imbalance* near it: a damaged propeller and a CG offset toward that rotor
+        (a mass near it) move the shares alike, and on the real CrazyPAD flights no share, activity
+        or vibration evidence told them apart (offline/crazypad/README.md), so both are named."""
+        k = int(np.argmax(dev))
+        if dev[k] <= OUTLIER_SPREADS:
+            return f"no rotor beyond {OUTLIER_SPREADS:g} spreads of this airframe's healthy flights"
+        return f"imbalance near {self.motor_names[k]}: CG offset or damage"
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, d: dict, origin: str = "") -> HealthyBaseline:
+        try:
+            act = d["activity"]
+            return cls(
+                basis=str(d["basis"]),
+                shares_mean=tuple(map(float, d["shares_mean"])),
+                shares_std=tuple(map(float, d["shares_std"])),
+                noise_std=tuple(map(float, d["noise_std"])),
+                activity=None if act is None else tuple(map(float, act)),
+                rate_hz=float(d["rate_hz"]),
+                n_flights=int(d["n_flights"]),
+                files=tuple(map(str, d["files"])),
+                motor_names=tuple(map(str, d["motor_names"])),
+            )
+        except (KeyError, TypeError, ValueError) as exc:
+            raise ConfigError(f"{origin or 'baseline'}: malformed healthy baseline: {exc!r}") from exc
+
+    def save(self, path: str | Path) -> Path:
+        path = Path(path)
+        tmp = path.with_suffix(path.suffix + ".tmp")
+        tmp.write_text(json.dumps(self.to_dict(), indent=2, allow_nan=False) + "\n", encoding="utf-8")
+        tmp.replace(path)
+        return path
+
+    @classmethod
+    def load(cls, path: str | Path) -> HealthyBaseline:
+        path = Path(path)
+        try:
+            return cls.from_dict(json.loads(path.read_text(encoding="utf-8")), str(path))
+        except (OSError, json.JSONDecodeError) as exc:
+            raise ConfigError(f"{path}: cannot read the healthy baseline: {exc}") from exc
+
+
+def baseline_from_tables(tables: list[FlightTable], files: list[str], activity: np.ndarray | None = None) -> HealthyBaseline:
+    """The baseline of flights already checked as healthy (``offline.adapt.checks``)."""
+    per = [flight_shares(t) for t in tables]
+    bases = {b for _, b in per}
+    if len(bases) != 1:
+        raise ConfigError(f"healthy logs mix share bases {sorted(bases)}: give logs of one kind")
+    basis = bases.pop()
+    sh = np.array([s for s, _ in per])
+    std = sh.std(axis=0, ddof=1) if len(sh) > 1 else np.zeros(4)
+    noise = np.mean([share_noise(t) for t in tables], axis=0)
+    return HealthyBaseline(
+        basis=basis,
+        shares_mean=tuple(map(float, sh.mean(axis=0))),
+        shares_std=tuple(map(float, std)),
+        noise_std=tuple(map(float, noise)),
+        activity=None if activity is None else tuple(map(float, activity)),
+        rate_hz=float(tables[0].rate_hz),
+        n_flights=len(tables),
+        files=tuple(files),
+        motor_names=tuple(tables[0].motor_names),
+    )

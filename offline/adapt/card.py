@@ -1,0 +1,64 @@
+"""The card of an adapted model, written from its manifest (``adapt.manifest.json``)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+
+def _row(name: str, s: dict) -> str:
+    exact = f"{s['exact']}/{s['scored']}" if s["scored"] else "n/a"
+    fa = f"{s['healthy_false_alarms']}/{s['healthy']}" if s["healthy"] else "n/a"
+    return f"| {name} | {exact} | {fa} |"
+
+
+def card_markdown(m: dict) -> str:
+    cal, base, cfg = m["calibration"], m["baseline"], m["config"]
+    un = cal.get("unexplained_residual", {})
+    lines = [
+        "# propwatch adapted classifier card",
+        "",
+        f"Written by `offline/adapt/card.py` from `adapt.manifest.json` (`propwatch adapt`, git revision "
+        f"{m.get('git_revision')}, seed {m.get('seed')}).",
+        "",
+        f"**Healthy logs** ({len(m['healthy'])}): " + ", ".join(f"`{Path(p).name}`" for p in m["healthy"]) + ".",
+        f"Held out from calibration and scored: {len(m['held_out_healthy'])}.",
+        "",
+        f"**Calibration** (steady-state view, `offline/calibrate/fit.py`): cause `{cal['cause']}` ({cal['why']}); "
+        f"held-out RMS command error {cal['holdout_rms_cmd']['nominal']} -> {cal['holdout_rms_cmd']['calibrated']}; "
+        f"unexplained residual {un.get('rms_cmd')} command units ({un.get('in_standard_errors')} standard errors).",
+        "",
+        f"**Healthy baseline** ({base['basis']} shares, PX4 order, names {', '.join(base['motor_names'])}): mean "
+        + ", ".join(f"{x:.3f}" for x in base["shares_mean"])
+        + "; flight-to-flight std "
+        + ", ".join(f"{x:.4f}" for x in base["shares_std"])
+        + "; within-flight noise "
+        + ", ".join(f"{x:.4f}" for x in base["noise_std"])
+        + ("; native-rate command activity " + ", ".join(f"{x:.4f}" for x in base["activity"]) if base.get("activity") else "")
+        + ".",
+        "",
+        f"**Training** (simulation only; {m['assumptions']}): mission `{cfg['mission']}`, {cfg['flights_per_label']} "
+        f"flights per label, features {', '.join(cfg['features'])}, window {cfg['window']}, {cfg['epochs']} epochs, "
+        f"CNN {cfg['blocks']} blocks x {cfg['channels']} channels, dense {cfg['dense']}.",
+        "",
+        "**Gain over the nominal model** (same recipe and network, trained around the nominal vehicle), on the held-out",
+        "healthy logs and the `--labelled` logs:",
+        "",
+        "| model | exact label | called faulty, of the flights whose truth is healthy (held-out healthy + labelled healthy) |",
+        "|---|---|---|",
+        _row("nominal", m["scores"]["nominal"]["summary"]),
+        _row("adapted", m["scores"]["adapted"]["summary"]),
+        "",
+        "| log | truth | nominal | adapted |",
+        "|---|---|---|---|",
+    ]
+    for a, b in zip(m["scores"]["nominal"]["logs"], m["scores"]["adapted"]["logs"]):
+        lines.append(f"| `{Path(a['log']).name}` | {a['truth_label']} | {a['label']} | {b['label']} |")
+    return "\n".join(lines) + "\n"
+
+
+def write_card(manifest_path: str | Path, card_path: str | Path) -> Path:
+    m = json.loads(Path(manifest_path).read_text(encoding="utf-8"))
+    card_path = Path(card_path)
+    card_path.write_text(card_markdown(m), encoding="utf-8")
+    return card_path

@@ -1,0 +1,96 @@
+"""The Crazyflie classifier's card, written from its manifest (never by hand).
+
+``card_markdown(manifest)`` reads only ``manifest["shipped"]`` (what ``propwatch crazypad
+run --ship`` stores beside the model): calibration per airframe, split, recipe, features and the
+per-condition table of every trained variant. Every figure in the card comes from there.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+from offline.crazypad.vehicle import PROJECT_INDEX_OF_BITCRAZE
+
+PAPER_REAL_ACCURACY = 0.7632  # Tong et al., real-flight accuracy of their calibrated model (labels 1-5, own quad)
+VARIANT_TITLES = {
+    "nominal": "nominal sim",
+    "calibrated": "calibrated sim (shipped)",
+    "calibrated_own": "calibrated, own airframe",
+}
+
+
+def _pct(v) -> str:
+    return "n/a" if v is None or (isinstance(v, float) and math.isnan(v)) else f"{100 * v:.1f} %"
+
+
+def _bitcraze(project4) -> str:
+    return ", ".join(f"M{k} {project4[PROJECT_INDEX_OF_BITCRAZE[f'M{k}']]:.3f}" for k in range(1, 5))
+
+
+def card_markdown(manifest: dict, model_name: str = "crazyflie-classifier.onnx") -> str:
+    s = manifest["shipped"]
+    table, cal, split, recipe = s["table"], s["calibration"], s["split"], s["recipe"]
+    variants = [v for v in VARIANT_TITLES if v in table] + [v for v in table if v not in VARIANT_TITLES]
+    shipped = "calibrated" if "calibrated" in table else variants[0]
+    n_fit = len(split["calibration"])
+    n_hold = len(split["holdout"])
+    lines = [
+        f"# propwatch Crazyflie classifier card (`models/{model_name}`)",
+        "",
+        "Written by `offline/crazypad/card.py` from `crazyflie-classifier.manifest.json` (built by `make crazypad`,",
+        f"`propwatch crazypad run --ship`; git revision {manifest.get('git_revision', 'unknown')}, seed {manifest.get('seed')}).",
+        "Same contract as `models/classifier.onnx` (16 labels, `fault_probability` per propeller in PX4 order).",
+        "",
+        f"**Inputs.** {', '.join(f'`{f}`' for f in s['features'])} at 20 Hz, window {s['window_steps']} steps.",
+        "",
+        "**Calibration** (steady-state view of `offline/calibrate/fit.py`, per airframe, healthy flights with an even",
+        "log number; held-out = odd):",
+        "",
+        "| airframe | cause | calibrated motor efficiency | held-out RMS command error, nominal -> calibrated |",
+        "|---|---|---|---|",
+    ]
+    for af, c in sorted(cal.items()):
+        eff = c["calibrated_terms"]["motor_efficiency"]
+        h = c["holdout_rms_cmd"]
+        lines.append(f"| {af} | {c['cause']} | {_bitcraze(eff)} | {h['nominal']} -> {h['calibrated']} |")
+    lines += [
+        "",
+        f"**Training.** Simulated CrazyPAD missions only, labels {recipe['labels'][0]}-{recipe['labels'][-1]}, "
+        f"{recipe['flights_per_label']} flights per label, thrust loss {recipe['thrust_loss']} of a cut rotor, healthy "
+        f"rotors +-{recipe['healthy_jitter']}, command noise {recipe['cmd_noise']} of the share per sample, seed "
+        f"{recipe['seed']}.",
+        "",
+        f"**Real-flight accuracy** (exact label; {n_fit} healthy flights calibrate, {n_hold} healthy flights and "
+        f"{split['evaluation']} fault/mass flights are only scored; a mass or string flight counts as correct when "
+        "called healthy):",
+        "",
+        "| condition | flights | "
+        + " | ".join(f"accuracy: {VARIANT_TITLES.get(v, v)}" for v in variants)
+        + " | called faulty (shipped) |",
+        "|---|---|" + "---|" * len(variants) + "---|",
+    ]
+    from offline.crazypad.experiment import GROUP_ORDER
+
+    order = [g for g in GROUP_ORDER + ("all",) if g in table[shipped]]
+    order += [g for g in table[shipped] if g not in order]
+    for group in order:
+        row = table[shipped][group]
+        cells = [_pct(table[v].get(group, {}).get("accuracy")) for v in variants]
+        lines.append(f"| {group} | {row['flights']} | " + " | ".join(cells) + f" | {_pct(row.get('called_faulty'))} |")
+    lines += [
+        "",
+        f"The paper's real-flight figure ({100 * PAPER_REAL_ACCURACY:.2f} %, Tong et al.) is on labels 1-5 of its own",
+        "quadrotor; it is not like-for-like with any row above.",
+    ]
+    return "\n".join(lines) + "\n"
+
+
+def write_card(manifest_path: str | Path, card_path: str | Path | None = None) -> Path:
+    manifest_path = Path(manifest_path)
+    manifest = json.loads(manifest_path.read_text(encoding="utf-8"))
+    name = manifest["shipped"].get("model", "crazyflie-classifier.onnx")
+    card_path = Path(card_path) if card_path else manifest_path.with_name(Path(name).stem + ".card.md")
+    card_path.write_text(card_markdown(manifest, name), encoding="utf-8")
+    return card_path

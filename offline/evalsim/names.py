@@ -1,0 +1,4 @@
+"""Set names and defaults, importable without RotorPy (which imports torch): keeps ``--help`` fast."""
+
+SET_NAMES = ("paper", "shift", "healthy", "onset", "hidden", "effectiveness", "paper_torque_rising")
+DEFAULT_DURATION_S = 80.0

@@ -1,0 +1,113 @@
+"""``propwatch adapt``: refusals by name, the healthy baseline, and a tiny end-to-end run (issue 14)."""
+
+from __future__ import annotations
+
+import json
+import struct
+
+import numpy as np
+import pytest
+
+from monitor.baseline import HealthyBaseline
+from monitor.vehicle import REPO_ROOT
+from offline.adapt.checks import NotHealthyError, vehicle_type_problem
+from offline.adapt.pipeline import AdaptConfig, adapt, parse_labelled, read_healthy
+
+CRAZYPAD = REPO_ROOT.parent / "shared" / "data" / "crazypad" / "motor"
+CRAZYFLIE = REPO_ROOT / "models" / "crazyflie.yaml"
+needs_crazypad = pytest.mark.skipif(not CRAZYPAD.is_dir(), reason=f"CrazyPAD data not found at {CRAZYPAD}")
+HEALTHY_E9 = [str(CRAZYPAD / "normal_flight" / f"E9_log0{i}.csv.gz") for i in range(4)]
+
+
+def _tlog(path, mav_type: int) -> str:
+    from pymavlink.dialects.v20 import common as mavlink2
+
+    mav = mavlink2.MAVLink(None, srcSystem=1, srcComponent=1)
+    with open(path, "wb") as fh:
+        for k in range(3):
+            fh.write(struct.pack(">Q", 1_700_000_000_000_000 + k * 1_000_000))
+            fh.write(mav.heartbeat_encode(mav_type, mavlink2.MAV_AUTOPILOT_PX4, 0, 0, 0, 3).pack(mav))
+    return str(path)
+
+
+def test_a_hexa_or_vtol_tlog_is_refused_by_name(tmp_path):
+    from pymavlink.dialects.v20 import common as mavlink2
+
+    assert vehicle_type_problem(_tlog(tmp_path / "quad.tlog", mavlink2.MAV_TYPE_QUADROTOR), None) is None
+    assert "MAV_TYPE_HEXAROTOR" in vehicle_type_problem(_tlog(tmp_path / "hexa.tlog", mavlink2.MAV_TYPE_HEXAROTOR), None)
+    vtol = _tlog(tmp_path / "vtol.tlog", mavlink2.MAV_TYPE_VTOL_QUADROTOR)
+    with pytest.raises(NotHealthyError, match=r"vtol\.tlog: refused: .*MAV_TYPE_VTOL_QUADROTOR"):
+        adapt([vtol], REPO_ROOT / "models" / "vehicle.yaml", tmp_path / "out")
+    assert not (tmp_path / "out").exists()  # nothing half-written
+
+
+def test_a_log_that_never_flies_is_refused(tmp_path):
+    n = 400
+    lines = [
+        "timestamp_us,motor_pwm_us_1,motor_pwm_us_2,motor_pwm_us_3,motor_pwm_us_4,roll_rad,pitch_rad,yaw_rad,"
+        "roll_rate_rad_s,pitch_rate_rad_s,yaw_rate_rad_s"
+    ]
+    lines += [f"{1_000_000 + 10_000 * i},1000,1000,1000,1000,0,0,0,0,0,0" for i in range(n)]  # disarmed idle
+    path = tmp_path / "ground.csv"
+    path.write_text("\n".join(lines))
+    with pytest.raises(NotHealthyError, match=r"ground\.csv: refused as healthy: 0\.0 s airborne"):
+        adapt([str(path)], REPO_ROOT / "models" / "vehicle.yaml", tmp_path / "out", fmt="propwatch")
+
+
+def test_labelled_spec():
+    assert parse_labelled("a.csv=healthy") == ("a.csv", 1)
+    assert parse_labelled("a.csv=2") == ("a.csv", 3)  # label 3 = propeller 2 alone
+    assert parse_labelled("x=y/a.csv=1+2") == ("x=y/a.csv", 6)
+    assert parse_labelled("a.csv") == ("a.csv", None)
+
+
+@pytest.mark.realdata
+@needs_crazypad
+def test_a_loaded_vehicle_given_as_healthy_is_refused_by_name():
+    from monitor.vehicle import load_vehicle
+
+    bad = str(CRAZYPAD / "add_weight_W3_near_M3" / "E9_log00.csv.gz")
+    with pytest.raises(NotHealthyError, match=r"add_weight_W3_near_M3/E9_log00\.csv\.gz: refused as healthy: rotor 2 \(M3\)"):
+        read_healthy(HEALTHY_E9[:3] + [bad], "crazypad", load_vehicle(CRAZYFLIE))
+
+
+@pytest.mark.realdata
+@needs_crazypad
+def test_adapt_end_to_end_tiny(tmp_path):
+    cfg = AdaptConfig(mission="crazypad", flights_per_label=1, epochs=1, window=40, channels=4, blocks=1, dense=8)
+    cut = str(CRAZYPAD / "cut_propeller_M3_3mm" / "E9_log00.csv.gz") + "=2"
+    res = adapt(HEALTHY_E9, CRAZYFLIE, tmp_path, fmt="crazypad", labelled=[cut], cfg=cfg)
+    for key in ("model", "vehicle", "baseline", "card", "manifest"):
+        assert (tmp_path / res[key].rsplit("/", 1)[-1]).is_file(), key
+    manifest = json.loads((tmp_path / "adapt.manifest.json").read_text())
+    assert manifest["calibration"]["cause"] == "motor_efficiency"  # the CrazyPAD README's finding for E9
+    assert manifest["held_out_healthy"] == HEALTHY_E9[1::2]
+    assert res["scores"]["adapted"]["scored"] == 3  # 2 held-out healthy + 1 labelled
+    base = HealthyBaseline.load(tmp_path / "baseline.json")
+    assert base.n_flights == 4 and base.motor_names == ("M1", "M3", "M4", "M2") and base.activity is not None
+    # The baseline sees the cut M3 (PX4 rotor 2) far outside this airframe's healthy spread.
+    from monitor.logs import read_log
+    from monitor.vehicle import load_vehicle
+
+    cut_table = read_log(cut.rsplit("=", 1)[0], fmt="crazypad", esc=load_vehicle(CRAZYFLIE).esc)
+    seen = base.compare(cut_table)
+    assert seen["basis"] == "omega2" and seen["deviation_spreads"][1] > 3.0 and 2 in seen["rotors_beyond_3_spreads"]
+    assert seen["verdict"] == "imbalance near M3: CG offset or damage"
+    healthy = base.compare(read_log(HEALTHY_E9[0], fmt="crazypad", esc=load_vehicle(CRAZYFLIE).esc))
+    assert healthy["verdict"].startswith("no rotor beyond 3 spreads")
+    from offline.adapt.card import card_markdown
+
+    assert (tmp_path / "card.md").read_text() == card_markdown(manifest)
+    # diagnose --vehicle DIR uses the folder's model and baseline.
+    from monitor.diagnose.cli import main
+
+    assert main([cut.rsplit("=", 1)[0], "--format", "crazypad", "--vehicle", str(tmp_path), "--json"]) in (0, 1)
+
+
+def test_baseline_deviation_by_hand():
+    b = HealthyBaseline(
+        "omega2", (1.1, 0.9, 1.0, 1.0), (0.05, 0.0, 0.01, 0.03), (0.1,) * 4, None, 20.0, 3, ("a",), ("1", "2", "3", "4")
+    )
+    # spreads floored at 0.02: 0.05, 0.02, 0.02, 0.03
+    np.testing.assert_allclose(b.deviation(np.array([1.2, 0.9, 0.94, 1.0])), [2.0, 0.0, -3.0, 0.0])
+    assert HealthyBaseline.from_dict(json.loads(json.dumps(b.to_dict()))) == b
