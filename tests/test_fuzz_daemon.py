@@ -276,6 +276,21 @@ def test_blind_pauses_the_sequential_decision_and_says_why(toy, tmp_path):
     assert blind == [("blind", "paused"), ("recovered", "running")], ev
 
 
+def test_a_lost_motor_stream_pauses_the_sequential_decision_until_it_returns(toy, tmp_path):
+    cfg = {"alerts": {**QUICK["alerts"], "rule": "sequential"}, "blind": {"after_s": 0.0}}
+    daemon, link = make_daemon(toy, tmp_path / "ev.jsonl", cfg)
+    feed(daemon, px4_stream(100.0, 107.0))
+    feed(daemon, [m for m in px4_stream(107.0, 110.0) if m.get_type() != "SERVO_OUTPUT_RAW"])
+    assert daemon.blind.reason == "no motor data" and daemon.decision.paused_reason == "blind: no motor data"
+    held = daemon.decision.windows
+    feed(daemon, px4_stream(110.0, 116.0))  # a new 5-s window fills, then is classified
+    assert not daemon.blind.blind and daemon.decision.paused_reason == ""
+    assert daemon.decision.windows > held  # evidence flows again
+    ev = [(e["event"], e.get("decision")) for e in _events(tmp_path / "ev.jsonl")]
+    assert ev[0] == ("paused", None) and ("blind", "paused") in ev, ev  # the step's reason first, then blind
+    assert ev[-2:] == [("resumed", None), ("recovered", "running")], ev
+
+
 @pytest.mark.parametrize(
     "case,restart_s,reason",
     [("step back 5 s", 103.0, "clock stepped back"), ("reboot", 2.0, "autopilot rebooted")],

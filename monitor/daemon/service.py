@@ -235,11 +235,12 @@ class Daemon:
         elif step.valid and self._paused:
             self._paused = ""
             self._record_resume(step.time_boot_ms, live)
-        self._apply_pause()
         if step.valid:
             self._set_status(f"airborne: deciding; evidence live: {', '.join(live)}")
         elif not step.airborne and not self._paused:
             self._set_status(f"not deciding: {step.reason}")
+        self._blind_step(step)  # after the step's own pause state, so a recovered line says whether it runs
+        self._apply_pause()
         if not step.valid or step.fault_probability is None:
             return
         if step.latency_s is not None:
@@ -311,7 +312,6 @@ class Daemon:
 
     def _on_step(self, step) -> None:
         if self.sequential:
-            self._blind_step(step)
             self._decide(step)
             return
         stopped = self._classifying_state is True and not step.valid  # classification was running and stops
