@@ -80,6 +80,7 @@ import numpy as np
 
 from monitor.errors import ConfigError
 from monitor.labels import N_PROPS
+from monitor.resources import shipped
 
 LEVELS = ("none", "suspect", "fault")
 LLR_CLIP = math.log(0.999 / 0.001)  # |logit P| beyond P = 0.999 is the network's over-confidence, not evidence
@@ -91,7 +92,8 @@ FROZEN_REPEATS = 20  # identical float readings in a row: a stuck stream
 VIBE_BASELINE_S = 10.0  # airborne seconds that define the flight's own vibration level
 BASELINE_S = 10.0  # classified seconds that define the airframe's own baseline evidence
 VIBE_MIN_RATIO = 1.5  # CUSUM reference: the smallest rise over baseline worth calling (log-ratio drift)
-DEFAULT_CALIBRATION = Path(__file__).resolve().parent.parent / "models" / "decision-calibration.json"
+# The checkout's models/decision-calibration.json, or the installed package data (monitor/resources.py).
+DEFAULT_CALIBRATION = shipped("decision-calibration.json")
 
 
 def _check(cond: bool, key: str, msg: str) -> None:
