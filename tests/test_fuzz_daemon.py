@@ -291,6 +291,32 @@ def test_a_lost_motor_stream_pauses_the_sequential_decision_until_it_returns(toy
     assert ev[-2:] == [("resumed", None), ("recovered", "running")], ev
 
 
+def test_flapping_data_pauses_the_decision_at_every_step_but_is_written_at_most_once_per_period(toy, tmp_path):
+    from monitor.daemon.alerts import RateLimiter
+    from monitor.daemon.pipeline import StepResult
+    from monitor.daemon.service import PAUSE_LOG_PERIOD_S
+
+    cfg = {"alerts": {**QUICK["alerts"], "rule": "sequential"}, "blind": {"after_s": 60.0}}
+    daemon, _ = make_daemon(toy, tmp_path / "ev.jsonl", cfg)
+    now = [0.0]
+    daemon._pause_log_limit = RateLimiter(PAUSE_LOG_PERIOD_S, lambda: now[0])
+    why = "motor missing, stale or NaN"
+
+    def step(k, valid):
+        return StepResult(100_000_000 + 50_000 * k, True, valid, 50 if valid else 0, 16.0, reason="" if valid else why)
+
+    for k in range(200):  # NaN every other step, all within one period of the limit
+        daemon._on_step(step(k, k % 2 == 1))
+        assert daemon.decision.paused_reason == ("" if k % 2 else why)  # the decision itself follows every step
+    lines = [e["event"] for e in _events(tmp_path / "ev.jsonl")]
+    assert lines == ["paused", "resumed"], lines  # not 100 of each
+    daemon._on_step(step(200, False))  # the motor stream now stays away: held back by the limit ...
+    now[0] = PAUSE_LOG_PERIOD_S + 0.1
+    daemon._on_step(step(201, False))  # ... and written at the next step once the period is over
+    ev = _events(tmp_path / "ev.jsonl")
+    assert [e["event"] for e in ev] == ["paused", "resumed", "paused"] and ev[-1]["reason"] == why
+
+
 @pytest.mark.parametrize(
     "case,restart_s,reason",
     [("step back 5 s", 103.0, "clock stepped back"), ("reboot", 2.0, "autopilot rebooted")],

@@ -228,9 +228,8 @@ class Daemon:
             self._evidence_t["classifier"] = t
         live = self._live = self.live_evidence(t)
         if step.airborne and not step.valid:
-            if self._paused != step.reason:
-                self._paused = step.reason
-                self._record_pause(step.time_boot_ms, step.reason, live)
+            self._paused = step.reason
+            self._record_pause(step.time_boot_ms, step.reason, live)  # at every such step: one held back is written later
             self._set_status(f"classifier paused: {step.reason}; evidence live: {', '.join(live) or 'none'}")
         elif step.valid and self._paused:
             self._paused = ""
@@ -260,8 +259,12 @@ class Daemon:
                 self.decision.resume()
 
     def _record_pause(self, time_boot_ms: int, reason: str, live: list[str]) -> None:
-        """Journal and events line for a pause; flapping data is rate-limited (a pause and its resume go together)."""
-        if self._pause_recorded and reason == self._pause_recorded:
+        """Journal and events line for a pause (or a new reason); flapping data is rate-limited.
+
+        A pause held back by the limit is written at a later step of the same pause (within
+        ``PAUSE_LOG_PERIOD_S``); one that ends first is not written, and neither is its resume.
+        """
+        if reason == self._pause_recorded:
             return
         if not self._pause_log_limit.allow():
             return
