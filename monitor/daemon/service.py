@@ -1,8 +1,10 @@
 """The daemon's loop: link in, pipeline, alerts out, heartbeats, rate checks, watchdog.
 
 State that lives across loop turns is kept here (link health, stream rates,
-pending stream requests); the per-step work is in ``pipeline``, the alert
-rule in ``alerts``, the socket in ``link``.
+pending stream requests, blind spells, decision pauses); the per-step work is in
+``pipeline``, the decision in ``monitor.decision`` (``alerts.rule: sequential``,
+the default; the older rule in ``alerts``), the events file in ``events``, the
+socket in ``link``.
 """
 
 from __future__ import annotations
