@@ -4,13 +4,16 @@ Scores three verdicts on flights of the evaluation-only simulator (offline/evals
 its own controller and damage model, torque per thrust FALLING; never used for training or selection)
 and reads our own simulator's figures from ``bench/bench_localise.py``'s JSON:
 - ``moment balance``: monitor.effectiveness' most probable set (nominal-airframe priors);
-- ``shipped CNN``: models/classifier.onnx through monitor.diagnose;
+- each classifier given with ``--model NAME=PATH`` (default ``shipped CNN`` = models/classifier.onnx), through
+  monitor.diagnose;
 - ``ω²-share``: the rotor with the largest flight-mean share of ω² (singles only, no training).
 
 Run (about 20 min on 2 idle cores; sets are written once and reused)::
 
     python bench/bench_localise.py --json out/localise-ours.json
     python bench/bench_generalisation.py --out out/generalisation --ours out/localise-ours.json --card
+
+Give both scripts the same ``--model`` options to compare models side by side.
 
 ``--card`` upserts the table into models/classifier.card-tables.json (then ``make card-text``).
 """
@@ -19,12 +22,16 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 from pathlib import Path
 
 from monitor.diagnose.physics import predict_table
 from monitor.vehicle import DEFAULT_VEHICLE, REPO_ROOT, load_vehicle
 from offline.evalsim.score import classifier_predictor, read_tables, score, share_predictor
 from offline.evalsim.sets import write_set
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_localise import model_paths  # noqa: E402
 
 SETS = {"paper": 32, "shift": 32, "healthy": 22}  # flights: two per label (bent-like, cracked-like); 2 x 11 nuisances
 
@@ -33,13 +40,11 @@ def pct(x) -> str:
     return "-" if x is None else f"{100 * x:.1f} %"
 
 
-def evaluate(out: Path, seed: int) -> dict:
+def evaluate(out: Path, seed: int, models: dict[str, Path]) -> dict:
     vehicle = load_vehicle(DEFAULT_VEHICLE)
-    predictors = {
-        "moment balance": lambda t: predict_table(t, vehicle),
-        "shipped CNN": classifier_predictor(),
-        "ω²-share": share_predictor(),
-    }
+    predictors = {"moment balance": lambda t: predict_table(t, vehicle)}
+    predictors.update({name: classifier_predictor(path) for name, path in models.items()})
+    predictors["ω²-share"] = share_predictor()
     res = {}
     for name, n in SETS.items():
         folder = out / name
@@ -58,12 +63,17 @@ def evaluate(out: Path, seed: int) -> dict:
 
 def card_rows(evalsim: dict, ours: list[dict]) -> list[tuple[str, ...]]:
     rows = []
-    keys = {"moment balance": "physics", "shipped CNN": "cnn", "ω²-share": "share"}
-    for pred, key in keys.items():
+    for pred in next(iter(evalsim.values())):
         for r in ours:
-            acc, acc1 = r[key]
-            setsz = f"{r['physics_set_size']:.2f} / {pct(r['physics_set_coverage'])}" if key == "physics" else "-"
-            rows.append(("ours " + r["set"], pred, "-" if key == "share" else pct(acc), pct(acc1), setsz, str(r["flights"])))
+            if pred == "moment balance":
+                (acc, acc1), setsz = r["physics"], f"{r['physics_set_size']:.2f} / {pct(r['physics_set_coverage'])}"
+            elif pred == "ω²-share":
+                (acc, acc1), setsz = (None, r["share"][1]), "-"
+            elif pred in r["models"]:
+                (acc, acc1), setsz = r["models"][pred], "-"
+            else:
+                continue
+            rows.append(("ours " + r["set"], pred, pct(acc), pct(acc1), setsz, str(r["flights"])))
         for name, by in evalsim.items():
             s = by[pred]
             setsz = "-" if s["mean_set_size"] is None else f"{s['mean_set_size']:.2f} / {pct(s['truth_in_hypotheses'])}"
@@ -83,10 +93,11 @@ def main(argv=None) -> int:
     ap.add_argument("--ours", help="bench_localise.py --json output (our simulator's rows)")
     ap.add_argument("--seed", type=int, default=0, help="evalsim set seed (default 0)")
     ap.add_argument("--card", action="store_true", help="upsert the table into models/classifier.card-tables.json")
+    ap.add_argument("--model", action="append", help="NAME=PATH of a classifier to score (repeatable; default the shipped one)")
     args = ap.parse_args(argv)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    evalsim = evaluate(out, args.seed)
+    evalsim = evaluate(out, args.seed, model_paths(args.model))
     ours = json.loads(Path(args.ours).read_text()) if args.ours else []
     (out / "generalisation.json").write_text(json.dumps({"evalsim": evalsim, "ours": ours}, indent=1))
     if args.card:

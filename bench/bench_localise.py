@@ -5,9 +5,10 @@ simulated (offline.dataset, LSTM propellers as the shipped classifier was traine
 gets three verdicts:
 - ``physics``: the most probable propeller set of the moment-balance hypothesis bank
   (monitor.effectiveness, nominal priors, no airframe baseline), its 95 % credible set and size;
-- ``cnn``: the shipped classifier, the label with the highest mean probability over its windows;
+- each classifier given with ``--model NAME=PATH`` (default: the shipped one), the label with the highest mean
+  probability over its windows;
 - ``share``: the ω²-share baseline (the rotor with the largest flight-mean share of ω²; always one rotor).
-Run: ``python bench/bench_localise.py [--flights-per-label 1] [--duration-s 80] [--json out.json]``.
+Run: ``python bench/bench_localise.py [--flights-per-label 1] [--duration-s 80] [--model NAME=PATH ...] [--json out.json]``.
 """
 
 from __future__ import annotations
@@ -15,6 +16,7 @@ from __future__ import annotations
 import argparse
 import json
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -53,6 +55,19 @@ def cnn_verdicts(ds, clf: Classifier, hop: int = 10):
     return out
 
 
+def model_paths(specs: list[str] | None) -> dict[str, Path]:
+    """``--model NAME=PATH`` options as {name: path}; none given: the shipped model as "shipped CNN"."""
+    if not specs:
+        return {"shipped CNN": REPO_ROOT / "models" / "classifier.onnx"}
+    out = {}
+    for spec in specs:
+        name, sep, path = spec.partition("=")
+        if not sep or not name or not path:
+            raise SystemExit(f"--model {spec!r}: expected NAME=PATH")
+        out[name] = Path(path)
+    return out
+
+
 def score(truth, pred):
     truth = [tuple(t) for t in truth]
     single = [i for i, t in enumerate(truth) if len(t) == 1]
@@ -67,11 +82,12 @@ def main(argv=None) -> int:
     ap.add_argument("--duration-s", type=float, default=80.0, help="flight length (paper: 80 s)")
     ap.add_argument("--json", help="write the table as JSON here")
     ap.add_argument("--seed", type=int, default=101, help="data set seed (not the training seeds)")
+    ap.add_argument("--model", action="append", help="NAME=PATH of a classifier to score (repeatable; default the shipped one)")
     args = ap.parse_args(argv)
     vehicle = load_vehicle(DEFAULT_VEHICLE)
     geometry, priors = RotorGeometry.from_vehicle(vehicle), Priors()
     bank = HypothesisBank(priors, geometry)
-    clf = Classifier(REPO_ROOT / "models" / "classifier.onnx")
+    models = {name: Classifier(path) for name, path in model_paths(args.model).items()}
     rows = []
     for name in ("A", "B", "C"):
         for fault in ("bent", "cracked"):
@@ -87,9 +103,9 @@ def main(argv=None) -> int:
             ds = generate(spec, vehicle, log=lambda *_: None)
             truth = [tuple(i + 1 for i in range(4) if c[i]) for c in ds.conditions]
             phys = physics_verdicts(ds, bank, geometry, priors)
-            row = {"set": spec.name, "flights": ds.n_flights}
-            for key, pred in (("physics", [p[0] for p in phys]), ("cnn", cnn_verdicts(ds, clf)), ("share", share_verdicts(ds))):
-                row[key] = score(truth, pred)
+            row = {"set": spec.name, "flights": ds.n_flights, "physics": score(truth, [p[0] for p in phys])}
+            row["models"] = {label: score(truth, cnn_verdicts(ds, clf)) for label, clf in models.items()}
+            row["share"] = score(truth, share_verdicts(ds))
             row["physics_set_coverage"] = float(np.mean([t in p[1] for t, p in zip(truth, phys)]))
             row["physics_set_size"] = float(np.mean([len(p[1]) for p in phys]))
             healthy = [p[2] for t, p in zip(truth, phys) if not t]
@@ -98,7 +114,8 @@ def main(argv=None) -> int:
             rows.append(row)
             print(
                 f"{spec.name:10s} n={row['flights']:3d}  exact all/single  physics {100 * row['physics'][0]:5.1f}/{100 * row['physics'][1]:5.1f}"
-                f"  cnn {100 * row['cnn'][0]:5.1f}/{100 * row['cnn'][1]:5.1f}  share -/{100 * row['share'][1]:5.1f}"
+                + "".join(f"  {n} {100 * a:5.1f}/{100 * a1:5.1f}" for n, (a, a1) in row["models"].items())
+                + f"  share -/{100 * row['share'][1]:5.1f}"
                 f"  | physics set cover {100 * row['physics_set_coverage']:5.1f} % size {row['physics_set_size']:.2f}"
                 f"  healthy max mean P(faulty) {row['physics_healthy_p_faulty_max']:.2f}  ({row['seconds']} s)",
                 flush=True,

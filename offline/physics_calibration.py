@@ -28,26 +28,11 @@ import numpy as np
 from monitor.effectiveness import HYPOTHESES, Evidence, HypothesisBank, Priors, RotorGeometry, credible_set, window_balance
 from monitor.vehicle import DEFAULT_VEHICLE, load_vehicle
 from offline.dataset.generate import DatasetSpec, generate
-from offline.sim.assumptions import REGISTER
+from offline.sim.assumptions import REGISTER, nominal_airframe
 
-AIRFRAME_TERMS = (
-    "cg_offset_frd_m",
-    "motor_efficiency_spread_frac",
-    "arm_position_error_m",
-    "esc_offset_rpm",
-    "healthy_torque_per_thrust_spread_frac",
-)
 INFLATIONS = (1.0, 1.5, 2.0, 3.0, 4.0, 6.0)
 WARMUP_STEPS = 100
 TARGET_COVERAGE = 0.95
-
-
-def nominal_register():
-    reg = REGISTER
-    for name in AIRFRAME_TERMS:
-        nominal = reg[name].nominal
-        reg = reg.with_range(name, nominal, nominal)
-    return reg
 
 
 def flight_balances(ds, geometry: RotorGeometry):
@@ -80,7 +65,7 @@ def calibrate(flights_per_label: int, duration_s: float, seed: int, log=print) -
     geometry = RotorGeometry.from_vehicle(vehicle)
     out = {"seed": seed, "flights_per_label": flights_per_label, "duration_s": duration_s, "regimes": {}}
     for regime, register, base in (
-        ("nominal", nominal_register(), Priors()),
+        ("nominal", nominal_airframe(), Priors()),
         ("unmeasured", REGISTER, Priors.unmeasured_airframe()),
     ):
         spec = DatasetSpec(

@@ -173,3 +173,23 @@ def test_randomised_physics_refuses_what_it_cannot_apply():
         DatasetSpec("R", physics="randomised", propellers="quadratic", wind_max_m_s=2.0)
     with pytest.raises(ConfigError, match="physics"):
         DatasetSpec("R", physics="sometimes")
+
+
+def test_nominal_airframe_fixes_the_airframe_terms_and_draws_everything_else():
+    from offline.dataset.generate import DatasetSpec
+    from offline.sim.assumptions import AIRFRAME_TERMS, nominal_airframe
+
+    reg = nominal_airframe()
+    for name in AIRFRAME_TERMS:
+        assert reg[name].low == reg[name].high == REGISTER[name].nominal
+    seq = np.random.SeedSequence([5, 0])
+    fixed, drawn = draw_flight(reg, seq), draw_flight(REGISTER, seq)
+    assert np.all(np.asarray(fixed.values["cg_offset_frd_m"]) == REGISTER["cg_offset_frd_m"].nominal)
+    assert np.allclose(fixed.motor_efficiency(), 1.0) and not np.allclose(drawn.motor_efficiency(), 1.0)
+    # the damaged blade's terms are still drawn, the same as under the full register
+    key = "bent_torque_per_thrust_change_low_frac"
+    np.testing.assert_array_equal(fixed.values[key], drawn.values[key])
+    with pytest.raises(ConfigError, match="airframe"):
+        DatasetSpec("R", airframe="nominal")  # only randomised physics draws an airframe
+    with pytest.raises(ConfigError, match="airframe"):
+        DatasetSpec("R", physics="randomised", propellers="quadratic", airframe="guessed")

@@ -57,6 +57,13 @@ def build_parser() -> argparse.ArgumentParser:
         help="randomised: draw every flight's physics and fault signatures from the assumption register "
         "(needs --propellers quadratic; replaces --wind/--motor-efficiency-spread/--cg-offset/--variants)",
     )
+    p.add_argument(
+        "--airframe",
+        choices=("drawn", "nominal"),
+        default="drawn",
+        help="with --physics randomised: drawn (default) also draws the airframe's CG, motor spread, arm and ESC errors; "
+        "nominal keeps them as the vehicle file says (a calibrated airframe, see propwatch adapt)",
+    )
     p.add_argument("--sensor-noise", type=float, default=1.0, help="scale of the simulator's gyro/attitude noise (0 = off)")
     p.add_argument("--vehicle", type=Path, default=DEFAULT_VEHICLE, help="vehicle YAML (default models/vehicle.yaml)")
     p.add_argument("--seed", type=int, default=0, help="seed of routes, variants, noise and faults (default 0)")
@@ -88,6 +95,7 @@ def specs_from_args(a: argparse.Namespace) -> list[DatasetSpec]:
         sensor_noise_scale=a.sensor_noise,
         chunk_flights=a.chunk_flights,
         physics=a.physics,
+        airframe=a.airframe,
     )
     specs = []
     sets = [s.strip() for s in a.sets.split(",") if s.strip()]

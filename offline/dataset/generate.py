@@ -37,6 +37,7 @@ from offline.manifest import make_manifest
 FAULTS = ("bent", "cracked", "mixed", "varied")
 ROUTES = ("A", "B", "random")
 PHYSICS = ("fixed", "randomised")
+AIRFRAMES = ("drawn", "nominal")
 
 
 @dataclass(frozen=True)
@@ -56,6 +57,9 @@ class DatasetSpec:
     seed: int = 0
     chunk_flights: int = 64  # flights per simulator call (memory)
     physics: str = "fixed"  # "randomised": every flight's physics drawn from the assumption register
+    # Under randomised physics: "drawn" draws the airframe's own terms too (an unmeasured airframe); "nominal"
+    # fixes them (offline.sim.assumptions.AIRFRAME_TERMS), as for an airframe `propwatch adapt` calibrated.
+    airframe: str = "drawn"
 
     def __post_init__(self) -> None:
         if self.fault not in FAULTS:
@@ -69,6 +73,10 @@ class DatasetSpec:
             raise ConfigError(f"payload_kg: need 0 <= low <= high, got {self.payload_kg}")
         if self.physics not in PHYSICS:
             raise ConfigError(f"physics: must be one of {PHYSICS}, got {self.physics!r}")
+        if self.airframe not in AIRFRAMES:
+            raise ConfigError(f"airframe: must be one of {AIRFRAMES}, got {self.airframe!r}")
+        if self.airframe != "drawn" and self.physics != "randomised":
+            raise ConfigError("airframe: only physics 'randomised' draws an airframe")
         if self.physics == "randomised":
             if self.propellers != "quadratic":
                 raise ConfigError(
@@ -315,9 +323,11 @@ class _Signals:
 
 
 def _generate_randomised(spec: DatasetSpec, vehicle: VehicleConfig, log, register, run_chunks=None) -> FaultDataset:
-    from offline.sim.assumptions import REGISTER
+    from offline.sim.assumptions import REGISTER, nominal_airframe
 
     register = REGISTER if register is None else register
+    if spec.airframe == "nominal":
+        register = nominal_airframe(register)
     rng = np.random.default_rng([spec.seed, 0])
     cond = flight_conditions(spec.fault, spec.flights_per_label, rng)
     n = len(cond)

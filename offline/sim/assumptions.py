@@ -478,6 +478,24 @@ class AssumptionRegister:
 
 REGISTER = AssumptionRegister()
 
+# The airframe's own terms: what `propwatch adapt` measures from the vehicle's healthy flights. Fixed at
+# their nominal values they give the register of a calibrated airframe ("the vehicle is as its file says").
+AIRFRAME_TERMS = (
+    "cg_offset_frd_m",
+    "motor_efficiency_spread_frac",
+    "arm_position_error_m",
+    "esc_offset_rpm",
+    "healthy_torque_per_thrust_spread_frac",
+)
+
+
+def nominal_airframe(register: AssumptionRegister = REGISTER) -> AssumptionRegister:
+    """``register`` with the airframe's own terms (``AIRFRAME_TERMS``) at their nominal values."""
+    for name in AIRFRAME_TERMS:
+        nominal = register[name].nominal
+        register = register.with_range(name, nominal, nominal)
+    return register
+
 
 def _child_rng(seq: np.random.SeedSequence, name: str) -> np.random.Generator:
     key = tuple(seq.spawn_key) + (zlib.crc32(name.encode()),)

@@ -1,0 +1,109 @@
+"""The verdict as a small set of propeller-set hypotheses with a stated coverage (issue 12, point 4).
+
+A flight's score over the 16 propeller sets is the classifier's mean label probability over its windows,
+optionally times the moment balance's likelihood of each set (``monitor.effectiveness``), renormalised.
+Split conformal prediction turns that score into a set: on flights of our own simulator with randomised
+physics that the classifier never saw, the threshold is the score the truth reached in all but
+``1 - coverage`` of them (``offline.classifier.conformal`` fits it and writes ``<model>.sets.json`` beside
+the model). Every set scoring at least the threshold is a hypothesis; the most probable one is always in.
+One member: the verdict is that set. More: physics could not tell them apart, and the output says so.
+
+The coverage holds for flights like the calibration flights (whole flights of that simulator, the
+airframe as its file says); it is a statement about that population, not a promise on any one log.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from monitor.errors import ModelError
+from monitor.labels import LABEL_TABLE, N_LABELS
+
+SCORES = ("classifier", "classifier x moment balance")
+MAX_TEXT_CHARS = 50  # MAVLink STATUSTEXT text field
+
+
+@dataclass(frozen=True)
+class SetRule:
+    score: str  # one of SCORES
+    threshold: float  # a set is a hypothesis when its score >= threshold
+    coverage: float  # target fraction of calibration flights whose truth is in the set
+    calibration_flights: int
+    source: str = ""
+
+    def __post_init__(self) -> None:
+        if self.score not in SCORES:
+            raise ModelError(f"{self.source}: score must be one of {SCORES}, got {self.score!r}")
+        if not (0.0 < self.threshold <= 1.0 and 0.0 < self.coverage < 1.0):
+            raise ModelError(f"{self.source}: threshold must be in (0, 1] and coverage in (0, 1)")
+
+
+def rule_path(model_path: str | Path) -> Path:
+    """Where the set rule of ``model_path`` lives: ``classifier.onnx`` -> ``classifier.sets.json``."""
+    p = Path(model_path)
+    return p.with_name(p.stem + ".sets.json")
+
+
+def load_rule(model_path: str | Path) -> SetRule | None:
+    """The set rule beside ``model_path``, None when the model has none (an older or adapted model)."""
+    path = rule_path(model_path)
+    if not path.is_file():
+        return None
+    try:
+        d = json.loads(path.read_text(encoding="utf-8"))
+        r = d["rule"]
+        return SetRule(
+            score=str(r["score"]),
+            threshold=float(r["threshold"]),
+            coverage=float(r["coverage"]),
+            calibration_flights=int(r["calibration_flights"]),
+            source=str(path),
+        )
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise ModelError(f"{path}: not a set rule ({exc})") from exc
+
+
+def flight_score(label_probability: np.ndarray, physics_log_likelihood: np.ndarray | None, score: str) -> np.ndarray:
+    """(16,) score of each propeller set (label order), summing to 1.
+
+    ``label_probability``: the classifier's mean probability per label over the flight's windows.
+    ``physics_log_likelihood``: the moment balance's marginal log-likelihood per set, or None when the log
+    gave no usable balance (then the classifier's probability alone is the score, whatever ``score`` says).
+    """
+    p = np.asarray(label_probability, dtype=np.float64)
+    if p.shape != (N_LABELS,) or not np.all(np.isfinite(p)):
+        raise ValueError(f"label_probability must be {N_LABELS} finite values")
+    if score == "classifier x moment balance" and physics_log_likelihood is not None:
+        ll = np.asarray(physics_log_likelihood, dtype=np.float64)
+        logp = np.log(np.maximum(p, 1e-12)) + (ll - ll.max())
+        p = np.exp(logp - logp.max())
+    return p / p.sum()
+
+
+def hypothesis_set(scores: np.ndarray, threshold: float) -> list[dict]:
+    """Every set scoring >= ``threshold`` (the best one always), most probable first, as JSON-ready dicts."""
+    order = np.argsort(-scores, kind="stable")
+    keep = [int(k) for k in order if scores[k] >= threshold] or [int(order[0])]
+    return [{"faulty_propellers": list(LABEL_TABLE[k + 1]), "probability": round(float(scores[k]), 4)} for k in keep]
+
+
+def _name(props: list[int]) -> str:
+    return "+".join(str(p) for p in props) if props else "none"
+
+
+def alert_text(hypotheses: list[dict]) -> str:
+    """STATUSTEXT for a hypothesis set: ``PROP 3 FAULT`` for one faulty set, ``PROP 1 or 1+2?`` when physics
+    could not tell them apart, ``PROP OK`` for healthy alone; at most 50 characters."""
+    sets = [h["faulty_propellers"] for h in hypotheses]
+    if len(sets) == 1:
+        return f"PROP {_name(sets[0])} FAULT" if sets[0] else "PROP OK"
+    text = "PROP " + " or ".join(_name(s) for s in sets) + "?"
+    if len(text) <= MAX_TEXT_CHARS:
+        return text
+    # Too many to list: the propellers any hypothesis names.
+    props = sorted({p for s in sets for p in s})
+    return f"PROP {_name(props)}? {len(sets)} sets possible"[:MAX_TEXT_CHARS]

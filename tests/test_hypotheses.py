@@ -1,0 +1,86 @@
+"""The verdict as a hypothesis set: conformal threshold, set, fused score, alert text, rule file."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from monitor.errors import ModelError
+from monitor.hypotheses import MAX_TEXT_CHARS, alert_text, flight_score, hypothesis_set, load_rule, rule_path
+from monitor.labels import LABEL_TABLE
+from offline.classifier.conformal import conformal_threshold, measure
+
+
+def _flights(rng, n, sharp):
+    """n flights of 16-label scores: the truth gets a Dirichlet-drawn share that grows with ``sharp``."""
+    truth = rng.integers(0, 16, n)
+    g = rng.gamma(np.ones((n, 16)))
+    g[np.arange(n), truth] += rng.gamma(sharp, size=n)  # a Dirichlet draw with the truth's weight raised
+    return g / g.sum(axis=1, keepdims=True), truth
+
+
+def test_conformal_threshold_holds_its_coverage_on_new_flights():
+    rng = np.random.default_rng(3)
+    cal, cal_truth = _flights(rng, 400, sharp=2.0)
+    thr = conformal_threshold(cal[np.arange(400), cal_truth], 0.9)
+    new, new_truth = _flights(rng, 4000, sharp=2.0)
+    m = measure(new, new_truth, thr)
+    assert 0.88 <= m["truth_in_set"] <= 0.94  # split conformal: >= 0.9 in expectation, not far above
+    # A threshold that ignores the calibration (the best label alone) covers far less on these flights.
+    assert measure(new, new_truth, 1.0)["truth_in_set"] < 0.5
+
+
+def test_conformal_threshold_refuses_too_few_flights():
+    with pytest.raises(ValueError, match="cannot support coverage"):
+        conformal_threshold(np.full(10, 0.5), 0.95)
+
+
+def test_hypothesis_set_keeps_the_best_and_orders_by_probability():
+    s = np.full(16, 0.01)
+    s[1], s[5] = 0.5, 0.36  # label 2 = {1}, label 6 = {1, 2}
+    s /= s.sum()
+    hs = hypothesis_set(s, 0.2)
+    assert [h["faulty_propellers"] for h in hs] == [[1], [1, 2]]
+    assert hs[0]["probability"] > hs[1]["probability"]
+    assert [h["faulty_propellers"] for h in hypothesis_set(s, 0.99)] == [[1]]  # nothing reaches it: the best alone
+
+
+def test_moment_balance_likelihood_moves_the_score():
+    p = np.full(16, 1 / 16)
+    ll = np.zeros(16)
+    ll[3] = 8.0  # the balance strongly favours label 4 = {3}
+    fused = flight_score(p, ll, "classifier x moment balance")
+    assert np.argmax(fused) == 3 and fused.sum() == pytest.approx(1.0)
+    assert np.allclose(flight_score(p, ll, "classifier"), p)  # the classifier alone ignores it
+    assert np.allclose(flight_score(p, None, "classifier x moment balance"), p)  # no balance: classifier alone
+    with pytest.raises(ValueError):
+        flight_score(np.full(16, np.nan), None, "classifier")
+
+
+def test_alert_text_says_what_physics_cannot_tell():
+    one = [{"faulty_propellers": [3], "probability": 0.97}]
+    assert alert_text(one) == "PROP 3 FAULT"
+    two = [{"faulty_propellers": [1], "probability": 0.6}, {"faulty_propellers": [1, 2], "probability": 0.3}]
+    assert alert_text(two) == "PROP 1 or 1+2?"
+    with_ok = [{"faulty_propellers": [1, 2], "probability": 0.5}, {"faulty_propellers": [], "probability": 0.4}]
+    assert alert_text(with_ok) == "PROP 1+2 or none?"
+    every = [{"faulty_propellers": list(v), "probability": 1 / 16} for v in LABEL_TABLE.values()]
+    assert len(alert_text(every)) <= MAX_TEXT_CHARS and "1+2+3+4" in alert_text(every)
+
+
+def test_rule_file_is_read_and_a_bad_one_is_named(tmp_path):
+    model = tmp_path / "classifier.onnx"
+    assert load_rule(model) is None  # no rule beside the model: none
+    rule = {"rule": {"score": "classifier", "threshold": 0.2, "coverage": 0.95, "calibration_flights": 160}}
+    rule_path(model).write_text(json.dumps(rule))
+    r = load_rule(model)
+    assert (r.score, r.threshold, r.coverage, r.calibration_flights) == ("classifier", 0.2, 0.95, 160)
+    rule["rule"]["threshold"] = 1.5
+    rule_path(model).write_text(json.dumps(rule))
+    with pytest.raises(ModelError, match="classifier.sets.json"):
+        load_rule(model)
+    rule_path(model).write_text("{not json")
+    with pytest.raises(ModelError, match="classifier.sets.json"):
+        load_rule(model)
