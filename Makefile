@@ -6,7 +6,7 @@ STAMP := $(VENV)/.installed
 DATA ?= ../shared/data
 OUT ?= out
 
-.PHONY: setup demo test lint bench models propellers classifier crazypad clean calibrate-physics evaluate-physics dataset-randomised card card-text
+.PHONY: setup demo test lint bench models propellers classifier crazypad clean calibrate-physics evaluate-physics dataset-randomised card card-text calibrate-alerts evaluate-alerts
 
 $(STAMP): pyproject.toml
 	$(PY) -m venv $(VENV)
@@ -88,6 +88,18 @@ card-text: $(STAMP)
 # diagnose every held-out flight; --ship refreshes models/crazyflie-classifier.onnx.
 crazypad: $(STAMP)
 	$(BIN)/propwatch crazypad run --data $(DATA)/crazypad --out $(OUT)/crazypad --ship
+
+# Alert decisions (issue 13; docs/ALERTS.md). calibrate-alerts rewrites models/decision-calibration.json from
+# healthy randomised flights (HOURS); evaluate-alerts scores the rules on independent flights and writes
+# $(OUT)/alerts/alerts.{json,md} for the card. The issue's size is the default (10 h healthy, 200 onsets):
+# hours of CPU on 2 cores; e.g. `make evaluate-alerts ALERT_ARGS="--healthy-hours 1 --onset-flights 64"`.
+HOURS ?= 2
+ALERT_ARGS ?=
+calibrate-alerts: $(STAMP)
+	$(BIN)/python -m offline.alerts.evaluate --calibrate --calibration-hours $(HOURS) --healthy-hours 0.05 --onset-flights 4 --out $(OUT)/alerts-calibration
+
+evaluate-alerts: $(STAMP)
+	$(BIN)/python -m offline.alerts.evaluate --out $(OUT)/alerts $(ALERT_ARGS)
 
 clean:
 	rm -rf $(VENV) $(OUT) .pytest_cache

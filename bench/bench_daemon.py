@@ -3,6 +3,9 @@
     python bench/bench_daemon.py                      # 10-minute flight at real pace (the measure)
     python bench/bench_daemon.py --minutes 1 --speed 10   # quick run (6 s)
 
+``--rule consecutive`` runs the older alert rule instead of the decision
+layer (``monitor/decision.py``, the default), to see what the layer costs.
+
 Two processes, as deployed: ``propwatch replay`` plays the flight as PX4 would
 (udpout) and ``propwatch monitor`` listens (udpin) and classifies at every
 20 Hz step. Printed figures, with the issue's targets:
@@ -80,6 +83,12 @@ def build_inputs(args, work: Path) -> tuple[Path, Path]:
     return model, write_tlog(work / "flight.tlog", synth_flight(args.minutes * 60.0, faulty=(3,), seed=args.seed))
 
 
+def rule_config(work: Path, rule: str) -> Path:
+    path = work / "monitor.yaml"
+    path.write_text(f"alerts:\n  rule: {rule}\n")
+    return path
+
+
 def run(args) -> dict:
     with tempfile.TemporaryDirectory() as tmp:
         work = Path(tmp)
@@ -98,6 +107,8 @@ def run(args) -> dict:
             str(report),
             "--events",
             str(work / "events.jsonl"),
+            "--config",
+            str(rule_config(work, args.rule)),
         ]
         t_spawn = time.monotonic()
         d = subprocess.Popen(cmd, cwd=REPO, stderr=subprocess.PIPE, text=True)
@@ -152,6 +163,8 @@ def run(args) -> dict:
             "tlog": str(args.tlog or "synthetic"),
             "messages": rep["messages"],
             "classified_steps": rep["pipeline"]["classified"],
+            "rule": args.rule,
+            "load_average": os.getloadavg(),
         },
         "latency_p50_ms": round(lat["p50"], 3),
         "latency_p99_ms": round(lat["p99"], 3),
@@ -176,8 +189,8 @@ class _NullLink:
 def run_inprocess(args) -> dict:
     from pymavlink.dialects.v20 import common as mavlink
 
-    from monitor.daemon.alerts import EventWriter
-    from monitor.daemon.config import MonitorConfig
+    from monitor.daemon.config import monitor_config_from_mapping
+    from monitor.daemon.events import EventWriter
     from monitor.daemon.pipeline import Pipeline
     from monitor.daemon.sdnotify import Notifier
     from monitor.daemon.service import Daemon
@@ -193,7 +206,7 @@ def run_inprocess(args) -> dict:
     msgs = [m for f in frames for m in (parser.parse_buffer(f) or [])]
     best = None
     for _ in range(args.repeat):
-        cfg = MonitorConfig()
+        cfg = monitor_config_from_mapping({"alerts": {"rule": args.rule}})
         daemon = Daemon(cfg, _NullLink(), Pipeline(clf, cfg, choose_esc(clf, "")), EventWriter(None), Notifier({}))
         c0 = time.process_time()
         for i, m in enumerate(msgs):
@@ -210,6 +223,7 @@ def run_inprocess(args) -> dict:
         "cpu_us_per_message": round(1e6 * best / len(msgs), 2),
         "cpu_ms_per_classified_step": round(1e3 * best / max(classified, 1), 4),
         "cpu_percent_at_real_pace": round(100.0 * best / (args.minutes * 60.0), 3),
+        "rule": args.rule,
         "load_average": os.getloadavg(),
     }
 
@@ -224,6 +238,12 @@ def main(argv=None) -> int:
     p.add_argument("--json", action="store_true")
     p.add_argument("--inprocess", action="store_true", help="time the normal path in process (CPU per message)")
     p.add_argument("--repeat", type=int, default=3, help="--inprocess: best of this many runs")
+    p.add_argument(
+        "--rule",
+        choices=("sequential", "consecutive"),
+        default="sequential",
+        help="alerts.rule: sequential (the default: the shared decision layer) or consecutive (the older rule)",
+    )
     args = p.parse_args(argv)
     if args.inprocess:
         print(json.dumps(run_inprocess(args), indent=2))

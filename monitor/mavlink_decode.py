@@ -87,6 +87,16 @@ class EscRpm:
 
 
 @dataclass(frozen=True)
+class Vibration:
+    """VIBRATION (#241). PX4 fills x = gyro coning metric, y = gyro and z = accelerometer high-frequency
+    vibration metrics (filtered |delta - previous delta| of the IMU integrals); clipping = cumulative counts."""
+
+    timestamp_us: int
+    vibration: tuple[float, float, float]  # (x, y, z) as sent
+    clipping: tuple[int, int, int]
+
+
+@dataclass(frozen=True)
 class Battery:
     timestamp_us: int | None
     voltage_v: float
@@ -116,7 +126,7 @@ class ClockReset:
     previous_us: int
 
 
-Sample = Attitude | ActuatorOutputs | EscRpm | Battery | Heartbeat | LandedState | ClockReset
+Sample = Attitude | ActuatorOutputs | EscRpm | Vibration | Battery | Heartbeat | LandedState | ClockReset
 
 
 def _register_esc_in_loaded_dialects() -> None:
@@ -262,6 +272,16 @@ class MavlinkDecoder:
         t = self._stamp(int(m.time_usec), out)
         out.append(EscRpm(t, int(m.index), tuple(_float(r) for r in m.rpm)))
 
+    def _vibration(self, m: Any, out: list[Sample]) -> None:
+        if int(m.time_usec) == 0:  # some stacks leave it unset: place it at the latest boot time
+            if self.clock_us is None:
+                return
+            t = self.clock_us
+        else:
+            t = self._stamp(int(m.time_usec), out)
+        vib = (_float(m.vibration_x), _float(m.vibration_y), _float(m.vibration_z))
+        out.append(Vibration(t, vib, (int(m.clipping_0), int(m.clipping_1), int(m.clipping_2))))
+
     def _battery(self, m: Any, out: list[Sample]) -> None:
         if int(m.id) != self.battery_id:
             return
@@ -287,6 +307,7 @@ _HANDLERS = {
     "SERVO_OUTPUT_RAW": MavlinkDecoder._servo,
     "ACTUATOR_OUTPUT_STATUS": MavlinkDecoder._actuator,
     "ESC_STATUS": MavlinkDecoder._esc,
+    "VIBRATION": MavlinkDecoder._vibration,
     "BATTERY_STATUS": MavlinkDecoder._battery,
     "SYS_STATUS": MavlinkDecoder._sys_status,
     "HEARTBEAT": MavlinkDecoder._heartbeat,
@@ -299,6 +320,7 @@ STREAM_IDS = {
     "SERVO_OUTPUT_RAW": 36,
     "ACTUATOR_OUTPUT_STATUS": 375,
     "ESC_STATUS": ESC_STATUS_ID,
+    "VIBRATION": 241,
     "BATTERY_STATUS": 147,
     "SYS_STATUS": 1,
     "EXTENDED_SYS_STATE": 245,

@@ -101,7 +101,8 @@ def test_adapt_end_to_end_tiny(tmp_path):
     # diagnose --vehicle DIR uses the folder's model and baseline.
     from monitor.diagnose.cli import main
 
-    assert main([cut.rsplit("=", 1)[0], "--format", "crazypad", "--vehicle", str(tmp_path), "--json"]) in (0, 1)
+    # A verdict (3: not a confident one, which a tiny adapt run may well give) or a stated refusal; never unreadable.
+    assert main([cut.rsplit("=", 1)[0], "--format", "crazypad", "--vehicle", str(tmp_path), "--json"]) in (0, 1, 3)
 
 
 def test_baseline_deviation_by_hand():

@@ -410,6 +410,28 @@ def test_statustext_rate_limit_merges_and_never_drops_an_alert():
     assert q.due() is None
 
 
+def test_statustext_escalation_is_not_held_behind_its_own_notice():
+    from monitor.daemon.alerts import StatusTextQueue
+
+    clock = FakeClock()
+    q = StatusTextQueue(5.0, 0.95, clock)
+    q.add_text("PROP 3 SUSPECT", 5)
+    assert q.due() == ("PROP 3 SUSPECT", 5)
+    clock.t += 1.0
+    q.add_text("PROP 1 SUSPECT", 5)  # as severe as the last: waits for the rate limit
+    assert q.due() is None
+    q.add_text("PROP 3 FAULT p=0.97", 4)  # more severe: goes out now
+    assert q.due() == ("PROP 3 FAULT p=0.97", 4)
+    clock.t += 1.0
+    assert q.due() is None  # the NOTICE still waits; the interval restarted with the WARNING
+    q.add_text("PROP 1 or 1+3?", 2)
+    assert q.due() == ("PROP 1 or 1+3?", 2)  # CRITICAL: more severe again
+    clock.t += 1.0
+    assert q.due() is None
+    clock.t += 5.0
+    assert q.due() == ("PROP 1 SUSPECT", 5)  # never dropped
+
+
 def test_an_exception_inside_the_pipeline_is_logged_and_survived(tmp_path, toy, caplog):
     from test_daemon_helpers import write_tlog
 

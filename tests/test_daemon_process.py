@@ -13,6 +13,7 @@ import signal
 import socket
 import subprocess
 import sys
+import tempfile
 import threading
 import time
 from pathlib import Path
@@ -74,7 +75,24 @@ class Proc:
         return rc
 
 
+# These tests exercise the link, streams and sinks with a toy model whose faults are present from the
+# first sample: they run the daemon on the consecutive-window rule. The sequential decision rule (the
+# default, which alerts on a change, see monitor/decision.py) has its own tests in test_decision*.py.
+CONSECUTIVE_RULE = "alerts:\n  rule: consecutive\n"
+_RULE_DIR = Path(tempfile.mkdtemp(prefix="propwatch-rule-"))
+
+
+def with_consecutive_rule(text: str) -> str:
+    if "rule:" in text:
+        return text
+    return text.replace("alerts:\n", CONSECUTIVE_RULE, 1) if "alerts:\n" in text else text + "\n" + CONSECUTIVE_RULE
+
+
 def monitor_cmd(*args: str) -> list[str]:
+    if "--config" not in args:
+        cfg = _RULE_DIR / "consecutive.yaml"
+        cfg.write_text(CONSECUTIVE_RULE)
+        args = (*args, "--config", str(cfg))
     return [PY, "-m", "monitor", *args]
 
 
@@ -92,7 +110,7 @@ def fly_over_udp(tmp_path, model, frames, speed, config_text="", extra=()):
     """Daemon on udpin, replay stub on udpout; returns (daemon, replay, events, requests, received, report)."""
     port = free_udp_port()
     tlog = write_tlog(tmp_path / "flight.tlog", frames)
-    cfg = write_config(tmp_path / "monitor.yaml", config_text or "alerts:\n  refractory_s: 60\n")
+    cfg = write_config(tmp_path / "monitor.yaml", with_consecutive_rule(config_text or "alerts:\n  refractory_s: 60\n"))
     paths = {k: tmp_path / f"{k}.jsonl" for k in ("events", "requests", "received")}
     report = tmp_path / "report.json"
     d = Proc(
@@ -199,11 +217,12 @@ def test_link_drop_and_return_and_a_stream_that_stops(tmp_path, model):
 def test_runs_without_torch_on_a_tlog(tmp_path, model):
     tlog = write_tlog(tmp_path / "f.tlog", synth_flight(10.0, faulty=(1,)))
     events = tmp_path / "ev.jsonl"
+    cfg = write_config(tmp_path / "rule.yaml", CONSECUTIVE_RULE)
     code = (
         "import sys; sys.modules['torch'] = None\n"
         "from monitor.cli import main\n"
         f"rc = main(['monitor', '--connect', {str(tlog)!r}, '--model', {str(model)!r}, '--tlog-speed', '0',"
-        f" '--events', {str(events)!r}])\n"
+        f" '--events', {str(events)!r}, '--config', {str(cfg)!r}])\n"
         "assert 'offline' not in sys.modules and sys.modules['torch'] is None\n"
         "sys.exit(rc)\n"
     )

@@ -38,10 +38,16 @@ def toy(tmp_path_factory):
 # --- row 1: the events file fails ------------------------------------------------------
 
 
+# The consecutive rule alerts 1 s after the first window; the sequential rule (the default) needs the
+# analytic fault threshold's worth of evidence first (about 8 s of saturated windows for the toy model).
+RULES = {"consecutive": 112.0, "sequential": 125.0}
+
+
+@pytest.mark.parametrize("rule", sorted(RULES))
 @pytest.mark.parametrize("path", ["/dev/full", "/dev/null/not-a-dir/events.jsonl"])
-def test_an_unwritable_events_file_never_stops_or_delays_an_alert(toy, path):
-    daemon, link = make_daemon(toy, path, QUICK)
-    feed(daemon, px4_stream(100.0, 112.0, faulty=(3,)))
+def test_an_unwritable_events_file_never_stops_or_delays_an_alert(toy, path, rule):
+    daemon, link = make_daemon(toy, path, {"alerts": {**QUICK["alerts"], "rule": rule}})
+    feed(daemon, px4_stream(100.0, RULES[rule], faulty=(3,)))
     texts = link.statustexts()
     alerts = [t for t in texts if t[0].startswith("PROP 3 FAULT")]
     assert daemon.counters.alerts >= 1 and alerts, texts  # the ground station heard of the fault
@@ -240,6 +246,75 @@ def test_frozen_clock_is_blind_in_status_events_and_notice_then_recovers(toy, tm
     assert texts[-2:] == ["PROPWATCH BLIND: autopilot clock frozen", "PROPWATCH OK: monitoring again"]
     ev = _events(tmp_path / "ev.jsonl")
     assert [e["event"] for e in ev] == ["blind", "recovered"] and ev[0]["reason"] == "autopilot clock frozen"
+
+
+def test_blind_pauses_the_sequential_decision_and_says_why(toy, tmp_path):
+    # The default rule: a blind spell pauses the decision (nothing added, nothing frozen into an alert),
+    # STATUS and the events line say so, and it runs again when the monitor sees again.
+    cfg = {**BLIND_FAST, "alerts": {**QUICK["alerts"], "rule": "sequential"}}
+    daemon, link = make_daemon(toy, tmp_path / "ev.jsonl", cfg)
+    feed(daemon, px4_stream(100.0, 108.0))
+    assert daemon.pipeline.stats["classified"] > 0 and daemon.decision.paused_reason == ""
+    frozen = [
+        decoded(mavlink.MAVLink_attitude_message(108_000, 0.01, 0.01, 0.3, 0.0, 0.0, 0.0)),
+        decoded(mavlink.MAVLink_servo_output_raw_message(108_000_000, 0, 1450, 1451, 1449, 1450, 0, 0, 0, 0)),
+    ]
+    end = time.monotonic() + 0.4
+    while time.monotonic() < end:
+        for m in frozen:
+            daemon.handle(m, time.perf_counter())
+        daemon.tick(time.monotonic())
+        time.sleep(0.01)
+    assert daemon.decision.paused_reason == "blind: autopilot clock frozen"
+    status = daemon.notifier.statuses()[-1]
+    assert status.startswith("BLIND: autopilot clock frozen") and "decision paused" in status, status
+    feed(daemon, px4_stream(108.02, 111.0, seed=1))
+    assert not daemon.blind.blind and daemon.decision.paused_reason == ""
+    assert daemon.notifier.statuses()[-1].startswith("airborne: deciding")
+    ev = _events(tmp_path / "ev.jsonl")
+    blind = [(e["event"], e.get("decision")) for e in ev if e["event"] in ("blind", "recovered")]
+    assert blind == [("blind", "paused"), ("recovered", "running")], ev
+
+
+def test_a_lost_motor_stream_pauses_the_sequential_decision_until_it_returns(toy, tmp_path):
+    cfg = {"alerts": {**QUICK["alerts"], "rule": "sequential"}, "blind": {"after_s": 0.0}}
+    daemon, link = make_daemon(toy, tmp_path / "ev.jsonl", cfg)
+    feed(daemon, px4_stream(100.0, 107.0))
+    feed(daemon, [m for m in px4_stream(107.0, 110.0) if m.get_type() != "SERVO_OUTPUT_RAW"])
+    assert daemon.blind.reason == "no motor data" and daemon.decision.paused_reason == "blind: no motor data"
+    held = daemon.decision.windows
+    feed(daemon, px4_stream(110.0, 116.0))  # a new 5-s window fills, then is classified
+    assert not daemon.blind.blind and daemon.decision.paused_reason == ""
+    assert daemon.decision.windows > held  # evidence flows again
+    ev = [(e["event"], e.get("decision")) for e in _events(tmp_path / "ev.jsonl")]
+    assert ev[0] == ("paused", None) and ("blind", "paused") in ev, ev  # the step's reason first, then blind
+    assert ev[-2:] == [("resumed", None), ("recovered", "running")], ev
+
+
+def test_flapping_data_pauses_the_decision_at_every_step_but_is_written_at_most_once_per_period(toy, tmp_path):
+    from monitor.daemon.alerts import RateLimiter
+    from monitor.daemon.pipeline import StepResult
+    from monitor.daemon.service import PAUSE_LOG_PERIOD_S
+
+    cfg = {"alerts": {**QUICK["alerts"], "rule": "sequential"}, "blind": {"after_s": 60.0}}
+    daemon, _ = make_daemon(toy, tmp_path / "ev.jsonl", cfg)
+    now = [0.0]
+    daemon._pause_log_limit = RateLimiter(PAUSE_LOG_PERIOD_S, lambda: now[0])
+    why = "motor missing, stale or NaN"
+
+    def step(k, valid):
+        return StepResult(100_000_000 + 50_000 * k, True, valid, 50 if valid else 0, 16.0, reason="" if valid else why)
+
+    for k in range(200):  # NaN every other step, all within one period of the limit
+        daemon._on_step(step(k, k % 2 == 1))
+        assert daemon.decision.paused_reason == ("" if k % 2 else why)  # the decision itself follows every step
+    lines = [e["event"] for e in _events(tmp_path / "ev.jsonl")]
+    assert lines == ["paused", "resumed"], lines  # not 100 of each
+    daemon._on_step(step(200, False))  # the motor stream now stays away: held back by the limit ...
+    now[0] = PAUSE_LOG_PERIOD_S + 0.1
+    daemon._on_step(step(201, False))  # ... and written at the next step once the period is over
+    ev = _events(tmp_path / "ev.jsonl")
+    assert [e["event"] for e in ev] == ["paused", "resumed", "paused"] and ev[-1]["reason"] == why
 
 
 @pytest.mark.parametrize(

@@ -71,7 +71,9 @@ def sign_and_pack(msgs, key: bytes | None, mavlink1: bool = False) -> list[tuple
 
 def run_daemon(tmp_path, classifier, frames, config: dict, extra_senders: int = 0, sender_addr="127.0.0.1"):
     """Daemon on udpin in a thread; ``frames`` sent paced from one socket (the autopilot's)."""
-    cfg = monitor_config_from_mapping({"alerts": {"refractory_s": 60.0}, **config})
+    # The link is under test, not the rule: the consecutive rule alerts within a short flight whose fault is
+    # present from take-off (the sequential rule's own tests are in test_decision*.py and test_fuzz_daemon.py).
+    cfg = monitor_config_from_mapping({"alerts": {"refractory_s": 60.0, "rule": "consecutive"}, **config})
     rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     rx.bind(("127.0.0.1", 0))
     port = rx.getsockname()[1]

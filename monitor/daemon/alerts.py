@@ -1,6 +1,11 @@
-"""The alert rule (per propeller), the STATUSTEXT wording, and the events file.
+"""The STATUSTEXT queue (the events file is monitor/daemon/events.py) and the older consecutive-window rule.
 
-Rule, per propeller: P(faulty) >= threshold in ``consecutive`` classified
+The daemon decides with ``monitor.decision.Decision`` (shared with
+``propwatch diagnose``; ``alerts.rule: sequential``, the default). The rule
+below is kept as ``alerts.rule: consecutive`` and as the comparison row of
+``make evaluate-alerts``.
+
+Consecutive rule, per propeller: P(faulty) >= threshold in ``consecutive`` classified
 windows in a row raises an alert, then that propeller stays quiet for
 ``refractory_s`` seconds of ``time.monotonic()`` (a wall-clock step never
 re-arms or silences it). STATUSTEXT is rate-limited on the same clock.
@@ -67,19 +72,39 @@ class StatusTextQueue:
         self.limit = RateLimiter(min_interval_s, clock)
         self.critical_threshold = critical_threshold
         self._pending: dict[int, float] = {}
+        self._texts: dict[str, int] = {}  # decision announcements: text -> severity
+        self._sent_severity = 99  # MAV_SEVERITY of the last text sent (none yet: any is more severe)
 
     def add(self, alert: Alert) -> None:
         for p in alert.faulty_propellers:
             self._pending[p] = max(self._pending.get(p, 0.0), alert.fault_probability[p - 1])
 
+    def add_text(self, text: str, severity: int) -> None:
+        """A worded announcement; what waits for the rate limit is sent later, most severe first."""
+        self._texts[text] = min(severity, self._texts.get(text, severity))
+
     def due(self) -> tuple[str, int] | None:
-        """(text, severity) to send now, or None (nothing pending, or too soon)."""
-        if not self._pending or not self.limit.allow():
+        """(text, severity) to send now, or None (nothing pending, or too soon).
+
+        An announcement more severe than the last text sent (suspect NOTICE, then fault WARNING, then
+        CRITICAL) does not wait for the rate limit: a fault must not sit behind its own suspect notice.
+        That is at most two extra texts per interval (severity only rises until a text goes out normally).
+        """
+        if not (self._pending or self._texts):
             return None
+        if not self.limit.allow():
+            if not (self._texts and min(self._texts.values()) < self._sent_severity):
+                return None
+            self.limit.restart()
+        if self._texts:
+            text = min(self._texts, key=lambda t: self._texts[t])  # MAV_SEVERITY: lower is more severe
+            self._sent_severity = self._texts.pop(text)
+            return text, self._sent_severity
         worst = max(self._pending.values())
         text = statustext(self._pending)
         self._pending = {}
-        return text, (MAV_SEVERITY_CRITICAL if worst >= self.critical_threshold else MAV_SEVERITY_WARNING)
+        self._sent_severity = MAV_SEVERITY_CRITICAL if worst >= self.critical_threshold else MAV_SEVERITY_WARNING
+        return text, self._sent_severity
 
 
 class AlertRule:
@@ -132,3 +157,7 @@ class RateLimiter:
             return False
         self._last = now
         return True
+
+    def restart(self) -> None:
+        """Count an event sent now (outside ``allow``): the next interval starts here."""
+        self._last = self.clock()

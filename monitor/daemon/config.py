@@ -10,10 +10,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from monitor.config import from_mapping, load_dataclass
+from monitor.decision import DecisionConfig
 from monitor.errors import ConfigError
 from monitor.resources import shipped
 
 MOTOR_SOURCES = ("servo", "actuator", "esc")
+ALERT_RULES = ("sequential", "consecutive")
 LANDED_STATE_MODES = ("auto", "required", "ignore")
 
 
@@ -145,7 +147,18 @@ class InferenceConfig:
 
 @dataclass(frozen=True)
 class AlertConfig:
-    # Threshold and run length chosen on the shipped classifier (bc948c1) over simulated flights on random
+    # sequential: monitor.decision (CUSUM; thresholds from the false-alarm rates below), shared with diagnose.
+    # consecutive: the older rule below (threshold x consecutive windows), kept for comparison.
+    rule: str = "sequential"
+    false_alarms_per_hour: float = 0.1  # fault level (WARNING / CRITICAL)
+    suspect_false_alarms_per_hour: float = 2.0  # suspect level (NOTICE)
+    aggressive_tilt_deg: float = 45.0  # windows holding a manoeuvre beyond this add no evidence
+    aggressive_rate_deg_s: float = 200.0
+    collective_step_fraction: float = 0.12  # payload drop / pick-up: 5-s median RPM change that discounts evidence
+    battery_sag_fraction: float = 0.04  # voltage lost within one window that discounts evidence
+    min_thrust_loss: float = 0.05  # the omega^2-share evidence is tuned to this per-rotor thrust loss
+    calibration_path: str = ""  # '' = models/decision-calibration.json (threshold calibration of the model)
+    # Consecutive rule. Threshold and run length chosen on the shipped classifier (bc948c1) over simulated flights on random
     # routes: 8 healthy x 80 s (0.165 flight-hours) and 8 single-propeller faults (bent/cracked, each rotor).
     # 0.8 x 3 windows: 60.7 false alarms per flight-hour; 0.9 x 20 windows (1 s): none, every fault named
     # right, first alert 5.9 s into the flight (5 s of window + 1 s). Tighten further per airframe.
@@ -157,12 +170,27 @@ class AlertConfig:
     named_value_float: bool = False  # send each probability as NAMED_VALUE_FLOAT PWF1..PWF4
 
     def __post_init__(self) -> None:
+        _check(self.rule in ALERT_RULES, "alerts.rule", f"must be one of {ALERT_RULES}")
+        self.decision()  # bounds of the sequential rule's keys, named alerts.*
         _check(0 < self.threshold <= 1, "alerts.threshold", "must be in (0, 1]")
         _check(self.threshold <= self.critical_threshold <= 1, "alerts.critical_threshold", "must be in [threshold, 1]")
         _check(self.consecutive >= 1, "alerts.consecutive", "must be >= 1")
         _within(self.consecutive, 1, 100_000, "alerts.consecutive")
         _within(self.refractory_s, 0.0, 86_400.0, "alerts.refractory_s")
         _within(self.statustext_min_interval_s, 0.0, 3600.0, "alerts.statustext_min_interval_s")
+
+    def decision(self) -> DecisionConfig:
+        """The sequential rule's settings; its own checks bound every number (finite, named alerts.*)."""
+        return DecisionConfig(
+            false_alarms_per_hour=self.false_alarms_per_hour,
+            suspect_false_alarms_per_hour=self.suspect_false_alarms_per_hour,
+            aggressive_tilt_deg=self.aggressive_tilt_deg,
+            aggressive_rate_deg_s=self.aggressive_rate_deg_s,
+            collective_step_fraction=self.collective_step_fraction,
+            battery_sag_fraction=self.battery_sag_fraction,
+            min_thrust_loss=self.min_thrust_loss,
+            calibration_path=self.calibration_path,
+        )
 
 
 @dataclass(frozen=True)
@@ -205,6 +233,18 @@ class BlindConfig:
         _within(self.notice_min_interval_s, 0.0, 3600.0, "blind.notice_min_interval_s")
         _within(self.events_retry_s, 0.1, 3600.0, "blind.events_retry_s")
         _within(self.events_backlog, 1, 100_000, "blind.events_backlog")
+
+    def decision(self) -> DecisionConfig:
+        return DecisionConfig(
+            false_alarms_per_hour=self.false_alarms_per_hour,
+            suspect_false_alarms_per_hour=self.suspect_false_alarms_per_hour,
+            aggressive_tilt_deg=self.aggressive_tilt_deg,
+            aggressive_rate_deg_s=self.aggressive_rate_deg_s,
+            collective_step_fraction=self.collective_step_fraction,
+            battery_sag_fraction=self.battery_sag_fraction,
+            min_thrust_loss=self.min_thrust_loss,
+            calibration_path=self.calibration_path,
+        )
 
 
 @dataclass(frozen=True)

@@ -32,6 +32,7 @@ from monitor import mavlink_decode as md
 from monitor.daemon.config import MonitorConfig
 from monitor.daemon.plausible import Plausibility
 from monitor.daemon.resampler import GridStep, StreamingHold, StreamSpec
+from monitor.decision import StepInputs
 from monitor.esc import EscCurve
 from monitor.features import compute_features
 from monitor.model import Classifier
@@ -50,6 +51,7 @@ class StepResult:
     latency_s: float | None = None  # from the message that completed the step to its classification
     reason: str = ""  # why an invalid step is invalid
     data_ok: bool = True  # attitude and motor data present and plausible (airborne or not)
+    inputs: StepInputs | None = None  # flight state for the decision's regime tracker
 
     @property
     def time_boot_ms(self) -> int:
@@ -121,6 +123,9 @@ class Pipeline:
         self._head = 0
         self._count = 0
         self._since_inference = 0
+        # VIBRATION and ESC_STATUS samples since the caller last took them (the decision validates them).
+        self.vibration: list[md.Vibration] = []
+        self.esc_samples: list[md.EscRpm] = []
 
     # -- input -----------------------------------------------------------------------
     def feed(self, msg: Any, received_s: float | None = None) -> list[StepResult]:
@@ -156,6 +161,12 @@ class Pipeline:
         if isinstance(s, md.ActuatorOutputs) and s.source == self._source:
             cmd = self._map(s.first_channel, s.values_us)
             return [] if cmd is None else self._push_motor(s.timestamp_us, cmd, True, received_s)
+        if isinstance(s, md.Vibration):
+            self.vibration.append(s)
+            return []
+        if isinstance(s, md.EscRpm) and self.config.input.motor_source != "esc":
+            self.esc_samples.append(s)  # telemetry beside the commanded RPM: evidence, not the motor stream
+            return []
         if isinstance(s, md.EscRpm) and self.config.input.motor_source == "esc":
             rpm = self._map(s.first_index + 1, s.rpm)
             return [] if rpm is None else self._push_motor(s.timestamp_us, rpm, False, received_s)
@@ -245,11 +256,26 @@ class Pipeline:
         tainted = bool(bad) and bad[0] <= g.timestamp_us
         valid = airborne and not tainted and bool(np.isfinite(feats).all())
         battery_v = float(v["battery"][0])
+        inputs = StepInputs(
+            airborne,
+            float(np.mean(v["motor"])),
+            float(max(abs(att[0]), abs(att[1]))),
+            float(np.max(np.abs(att[3:6]))),
+            battery_v,
+            v["motor"],
+        )
         if not valid:
             self._clear()
             data_ok = not tainted and bool(np.isfinite(att).all() and np.isfinite(v["motor"]).all())
             return StepResult(
-                g.timestamp_us, airborne, False, 0, battery_v, reason=self._why(v, airborne, g.timestamp_us), data_ok=data_ok
+                g.timestamp_us,
+                airborne,
+                False,
+                0,
+                battery_v,
+                reason=self._why(v, airborne, g.timestamp_us),
+                data_ok=data_ok,
+                inputs=inputs,
             )
         self.stats["valid_steps"] += 1
         w = self.window
@@ -258,10 +284,10 @@ class Pipeline:
         self._head = (self._head + 1) % w
         self._count = min(self._count + 1, w)
         if self._count < w:
-            return StepResult(g.timestamp_us, True, True, self._count, battery_v)
+            return StepResult(g.timestamp_us, True, True, self._count, battery_v, inputs=inputs)
         self._since_inference -= 1
         if self._since_inference > 0:
-            return StepResult(g.timestamp_us, True, True, w, battery_v)
+            return StepResult(g.timestamp_us, True, True, w, battery_v, inputs=inputs)
         self._since_inference = self.config.inference.every_k_steps
         window = self._ring[self._head : self._head + w]  # oldest first
         labels, faults = self.classifier.predict(window[None])
@@ -275,4 +301,5 @@ class Pipeline:
             faults[0].astype(np.float64),
             labels[0].astype(np.float64),
             time.perf_counter() - received_s,
+            inputs=inputs,
         )

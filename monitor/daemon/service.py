@@ -1,14 +1,17 @@
 """The daemon's loop: link in, pipeline, alerts out, heartbeats, rate checks, watchdog.
 
 State that lives across loop turns is kept here (link health, stream rates,
-pending stream requests); the per-step work is in ``pipeline``, the alert
-rule in ``alerts``, the socket in ``link``.
+pending stream requests, blind spells, decision pauses); the per-step work is in
+``pipeline``, the decision in ``monitor.decision`` (``alerts.rule: sequential``,
+the default; the older rule in ``alerts``), the events file in ``events``, the
+socket in ``link``.
 """
 
 from __future__ import annotations
 
 import json
 import logging
+import math
 import threading
 import time
 from collections import Counter
@@ -26,6 +29,8 @@ from monitor.daemon.latency import LatencyHistogram
 from monitor.daemon.link import MAV_CMD_SET_MESSAGE_INTERVAL, Link
 from monitor.daemon.pipeline import Pipeline
 from monitor.daemon.sdnotify import Notifier
+from monitor.decision import Announcement, Decision, EscTelemetry, StepInputs, WindowEvidence, file_sha256
+from monitor.resample import US_PER_S
 
 log = logging.getLogger("propwatch.monitor")
 
@@ -33,9 +38,12 @@ READ_TIMEOUT_S = 0.1  # select() returns at once when data comes; this only pace
 BAD_DATA_LOG_PERIOD_S = 5.0
 MOTOR_STREAM = {"servo": "SERVO_OUTPUT_RAW", "actuator": "ACTUATOR_OUTPUT_STATUS", "esc": "ESC_STATUS"}
 LANDED_RATE_HZ = 2.0  # EXTENDED_SYS_STATE: a state, not a signal
+VIBRATION_RATE_HZ = 10.0  # imbalance evidence beside the classifier (PX4's default stream rate is lower)
+EVIDENCE_FRESH_S = 2.0  # a VIBRATION / ESC_STATUS stream silent for longer is not live evidence
 SINK_REPORT_PERIOD_S = 60.0  # a failing events file is told to the ground station once a minute
 MAV_SEVERITY_WARNING = 4
 REPORT_TOP_N = 20  # the report lists at most this many ignored sources / undecodable kinds
+PAUSE_LOG_PERIOD_S = 2.0  # decision pauses in the journal and events file: at most one per period (flapping data)
 
 
 @dataclass
@@ -62,6 +70,20 @@ class Daemon:
         self.events = events
         self.notifier = notifier or Notifier({})
         self.rule = AlertRule(config.alerts)
+        self.sequential = config.alerts.rule == "sequential"
+        self.decision = Decision(
+            config.alerts.decision(),
+            config.resample.rate_hz,
+            pipeline.window,
+            model_sha256=file_sha256(pipeline.classifier.path),
+        )
+        self.esc_telemetry = EscTelemetry()
+        self._evidence_t: dict[str, float] = {}  # evidence -> boot time (s) it was last usable
+        self._paused = ""  # why the classifier's evidence stopped while airborne ('' = flowing)
+        self._pause_recorded = ""  # the pause last written to the journal and events file
+        self._pause_log_limit = RateLimiter(PAUSE_LOG_PERIOD_S)
+        self._live: list[str] = []  # evidence live at the last step
+        self._airborne = False
         self.statustexts = StatusTextQueue(config.alerts.statustext_min_interval_s, config.alerts.critical_threshold)
         self.stop = threading.Event()
         self.counters = Counters()
@@ -176,8 +198,127 @@ class Daemon:
             self._transition(self.blind.enter("autopilot rebooted" if "reboot" in what else "clock stepped back", what))
         for step in steps:
             self._on_step(step)
+        if self.pipeline.vibration or self.pipeline.esc_samples:
+            self._side_evidence()
+
+    # -- evidence and the decision ---------------------------------------------------------
+    def _side_evidence(self) -> None:
+        """VIBRATION and ESC_STATUS since the last message: validated (bad ones counted), then used."""
+        vib, esc = self.pipeline.vibration, self.pipeline.esc_samples
+        self.pipeline.vibration, self.pipeline.esc_samples = [], []
+        for v in vib:
+            t = v.timestamp_us / US_PER_S
+            before = sum(self.decision.vibration.rejected.values())
+            for a in self.decision.vibration_sample(t, v.vibration, self._airborne):
+                self._announce(a, int(v.timestamp_us // 1000))
+            if sum(self.decision.vibration.rejected.values()) == before:
+                self._evidence_t["vibration"] = t
+        for e in esc:
+            if self.esc_telemetry.observe(e.rpm) == "":
+                self._evidence_t["esc_rpm"] = e.timestamp_us / US_PER_S
+
+    def live_evidence(self, t_s: float) -> list[str]:
+        """Which evidence is flowing now: classifier (motor stream + attitude), vibration, esc_rpm."""
+        return [k for k, last in sorted(self._evidence_t.items()) if t_s - last <= EVIDENCE_FRESH_S]
+
+    def _decide(self, step) -> None:
+        """The shared decision rule on one grid step (pause when a stream stopped, never freeze it)."""
+        t = step.timestamp_us / US_PER_S
+        self._airborne = step.airborne
+        self.decision.step(t, step.inputs or StepInputs(step.airborne))
+        if step.valid:
+            self._evidence_t["classifier"] = t
+        live = self._live = self.live_evidence(t)
+        if step.airborne and not step.valid:
+            self._paused = step.reason
+            self._record_pause(step.time_boot_ms, step.reason, live)  # at every such step: one held back is written later
+            self._set_status(f"classifier paused: {step.reason}; evidence live: {', '.join(live) or 'none'}")
+        elif step.valid and self._paused:
+            self._paused = ""
+            self._record_resume(step.time_boot_ms, live)
+        if step.valid:
+            self._set_status(f"airborne: deciding; evidence live: {', '.join(live)}")
+        elif not step.airborne and not self._paused:
+            self._set_status(f"not deciding: {step.reason}")
+        self._blind_step(step)  # after the step's own pause state, so a recovered line says whether it runs
+        self._apply_pause()
+        if not step.valid or step.fault_probability is None:
+            return
+        if step.latency_s is not None:
+            self.counters.latency.add(step.latency_s)
+        self._send_named_values(step)
+        ev = WindowEvidence(step.fault_probability, step.label_probability)
+        for a in self.decision.window_evidence(t, ev):
+            self._announce(a, step.time_boot_ms, step)
+
+    def _apply_pause(self) -> None:
+        """The decision pauses while a stream is stopped (``_paused``) or the monitor is blind; else it runs."""
+        reason = f"blind: {self.blind.reason}" if self.blind.blind else self._paused
+        if reason != self.decision.paused_reason:
+            if reason:
+                self.decision.pause(reason)
+            else:
+                self.decision.resume()
+
+    def _record_pause(self, time_boot_ms: int, reason: str, live: list[str]) -> None:
+        """Journal and events line for a pause (or a new reason); flapping data is rate-limited.
+
+        A pause held back by the limit is written at a later step of the same pause (within
+        ``PAUSE_LOG_PERIOD_S``); one that ends first is not written, and neither is its resume.
+        """
+        if reason == self._pause_recorded:
+            return
+        if not self._pause_log_limit.allow():
+            return
+        self._pause_recorded = reason
+        log.warning("t=%d ms: decision paused: %s", time_boot_ms, reason)
+        self.events.write_record(
+            {
+                "event": "paused",
+                "time_boot_ms": time_boot_ms,
+                "reason": reason,
+                "evidence_live": live,
+                "classifier_input": MOTOR_STREAM[self.cfg.input.motor_source],
+            }
+        )
+
+    def _record_resume(self, time_boot_ms: int, live: list[str]) -> None:
+        if not self._pause_recorded:
+            return
+        self._pause_recorded = ""
+        log.info("t=%d ms: decision resumed", time_boot_ms)
+        self.events.write_record({"event": "resumed", "time_boot_ms": time_boot_ms, "evidence_live": live})
+
+    def _announce(self, a: Announcement, time_boot_ms: int, step=None) -> None:
+        self.counters.alerts += 1
+        event = {"event": "alert", **a.event(), "time_boot_ms": time_boot_ms}
+        if step is not None and step.fault_probability is not None:
+            event["probabilities"] = [round(float(p), 4) for p in step.fault_probability]
+            event["battery_v"] = None if math.isnan(step.battery_v) else round(step.battery_v, 2)
+        log.warning("%s t=%d ms: %s (%s evidence)", a.level.upper(), time_boot_ms, a.text, a.evidence)
+        # The ground station first: a failing disk must never delay or lose the alert itself.
+        self.statustexts.add_text(a.text, a.severity)
+        self._send_statustext()
+        self._set_status(f"last alert: {a.text} at t={time_boot_ms} ms")
+        self.events.write_record(event)
+
+    def _send_named_values(self, step) -> None:
+        if self.cfg.alerts.named_value_float:
+            for i, v in enumerate(step.fault_probability):
+                self.link.send_named_value_float(step.time_boot_ms, f"PWF{i + 1}", float(v))
+
+    def _blind_step(self, step) -> None:
+        """Blindness seen from one grid step: bad data while airborne for ``blind.after_s``, or good data again."""
+        if step.data_ok:
+            if self._tick_reason is None:  # a lost link or frozen clock ends at the next tick that clears it
+                self._transition(self.blind.recover())
+        elif step.airborne:
+            self._transition(self.blind.data(False, *_blind_reason(step.reason)))
 
     def _on_step(self, step) -> None:
+        if self.sequential:
+            self._decide(step)
+            return
         stopped = self._classifying_state is True and not step.valid  # classification was running and stops
         flipped = step.valid != self._classifying_state
         if flipped or (not step.valid and step.reason != self._last_reason):
@@ -192,11 +333,7 @@ class Daemon:
                 # The journal hears of each stop (NaN flapping rate-limited); a new reason while stopped is STATUS only.
                 if stopped and self._state_log_limit.allow():
                     log.info("t=%d ms: not classifying: %s", step.time_boot_ms, step.reason)
-        if step.data_ok:
-            if self._tick_reason is None:  # a lost link or frozen clock ends at the next tick that clears it
-                self._transition(self.blind.recover())
-        elif step.airborne:
-            self._transition(self.blind.data(False, *_blind_reason(step.reason)))
+        self._blind_step(step)
         if not step.valid:
             self.rule.reset()
             return
@@ -204,10 +341,8 @@ class Daemon:
             return
         if step.latency_s is not None:
             self.counters.latency.add(step.latency_s)
+        self._send_named_values(step)
         p = step.fault_probability
-        if self.cfg.alerts.named_value_float:
-            for i, v in enumerate(p):
-                self.link.send_named_value_float(step.time_boot_ms, f"PWF{i + 1}", float(v))
         alert = self.rule.update(step.time_boot_ms, p, step.label_probability, step.battery_v)
         if alert is None:
             return
@@ -240,8 +375,12 @@ class Daemon:
             log.warning("BLIND: %s", t.detail)
         else:
             log.info("recovered: %s (blind %.1f s)", t.detail, t.duration_s)
+        record = t.record(self._clock_seen // 1000 if self._clock_seen is not None else None)
+        if self.sequential:
+            self._apply_pause()  # blind: the decision adds nothing; recovered: it runs again unless a stream is stopped
+            record["decision"] = "paused" if self.decision.paused_reason else "running"
         self._publish_status()
-        self.events.write_record(t.record(self._clock_seen // 1000 if self._clock_seen is not None else None))
+        self.events.write_record(record)
         self._send_notice()
 
     def _send_notice(self) -> None:
@@ -256,6 +395,8 @@ class Daemon:
 
     def _publish_status(self) -> None:
         text = f"BLIND: {self.blind.detail}" if self.blind.blind else self._status_base
+        if self.blind.blind and self.sequential:
+            text += f"; decision paused, evidence live: {', '.join(self._live) or 'none'}"
         if self.events.failing:
             text += f"; events file failing ({self.events.last_error}, {self.events.pending} waiting)"
         if text and text != self._status_sent:
@@ -333,6 +474,9 @@ class Daemon:
         if self.cfg.input.landed_state != "ignore" and "ATTITUDE" in names:
             self.link.request_message_interval(sysid, comp, md.STREAM_IDS["EXTENDED_SYS_STATE"], LANDED_RATE_HZ)
             self.counters.stream_requests += 1
+        if self.sequential and "ATTITUDE" in names:
+            self.link.request_message_interval(sysid, comp, md.STREAM_IDS["VIBRATION"], VIBRATION_RATE_HZ)
+            self.counters.stream_requests += 1
         log.info("requested %s at %.0f Hz (MAV_CMD_SET_MESSAGE_INTERVAL)", ", ".join(names), self.cfg.link.stream_rate_hz)
 
     def _check_rates(self, now: float) -> None:
@@ -393,6 +537,8 @@ class Daemon:
                 "p99": lat.percentile_s(99) * 1e3,
                 "max": lat.max_s * 1e3,
             },
+            "decision": self.decision.verdict() if self.sequential else None,
+            "esc_rejected": dict(self.esc_telemetry.rejected),
         }
 
     def summary(self) -> None:

@@ -11,26 +11,41 @@ Output with ``--json`` (stdout), for one LOG (every key: docs/diagnose-json.md):
 
     {"log": PATH,
      "verdict": {"label": N, "faulty_propellers": [PX4 numbers], "faulty_names": [...],
-                 "fault_probability": [p1, p2, p3, p4]} | null,
+                 "fault_probability": [p1, p2, p3, p4],
+                 "confidence": "confident" | "suspect" | "uncertain", "label_probability_of_verdict": p,
+                 "agreeing_windows": share, "faulty_probability_required": 0.9} | null,
      "windows": n, "warnings": [...], "reason": null | "why there is no verdict",
-     "propellers": [{"propeller": 1, "px4_rotor": 1, "name": "M1", "fault_probability": p, "faulty": bool}, ...],
+     "propellers": [{"propeller": 1, "px4_rotor": 1, "name": "M1", "fault_probability": p, "faulty": bool,
+                     "suspect": bool}, ...],
      "label_probability": [16 values] | null,
      "airborne_segments": [{"start_boot_s", "stop_boot_s", "steps"}, ...],
      "timeline": {"t_boot_s": [...], "fault_probability": [[p1..p4], ...], "label": [...]},
      "hop_steps": k,
      "envelope": {"airborne_mean_rpm", "trained_mean_rpm", "rpm_ratio", "rpm_z", "large_attitude_fraction"},
+     "decision": {"alerts": [{"t_boot_s", "level": "suspect" | "fault", "propellers", "text"}, ...],
+                  "final": {...}},
      "baseline": {"basis", "shares", "deviation_spreads", "rotors_beyond_3_spreads", "verdict"}}  (--vehicle DIR only)
+
+Confidence: a propeller is FAULTY only when the verdict's label has mean
+probability >= 0.9 over the windows (``confident``); below that the verdict
+is ``suspect`` (at least half the windows agree on its label) or
+``uncertain``, and says the label probability and the share of windows that
+agree. ``decision`` is the onboard daemon's own rule (monitor.decision: a
+CUSUM whose thresholds follow alerts.false_alarms_per_hour) replayed over the
+log: when in the flight it would have said suspect / fault, on which propeller.
 
 For several LOGs: ``{"results": [one object as above per LOG, in order]}``;
 a log that cannot be read appears as ``{"log": PATH, "error": "..."}``.
 Times are seconds on the autopilot's boot clock; a timeline point is the end of
 its window. Floats are rounded to 6 decimals.
 
-Exit code: 0 every log got a verdict; 1 some log got no verdict (the reason
-says why: outside the model's envelope, no airborne flight, ...); 2 some log
-could not be read (unknown format, missing messages, damaged beyond reading,
-larger or longer than ``--max-seconds`` allows, messages that stop advancing
-time) or bad arguments. Whatever a reader raises ends in one of these codes.
+Exit code: 0 every log got a confident verdict; 3 some log got a verdict that
+is not confident (suspect or uncertain: no confident verdict); 1 some log got
+no verdict at all (the reason says why: outside the model's envelope, no
+airborne flight, ...); 2 some log could not be read (unknown format, missing
+messages, damaged beyond reading, larger or longer than ``--max-seconds``
+allows, messages that stop advancing time) or bad arguments. The highest
+applies: 2 > 1 > 3 > 0. Whatever a reader raises ends in one of these codes.
 With ``--json`` stdout holds only the JSON: anything a library prints while
 reading goes to stderr (at most a few lines, then a count).
 """
@@ -158,12 +173,23 @@ def format_text(d: Diagnosis) -> str:
     if d.verdict is None:
         lines.append(f"no verdict: {d.reason}")
     else:
-        lines.append(f"verdict: {describe_label(d.verdict['label'], names)}, from {d.windows} windows")
+        conf = d.verdict.get("confidence", "confident")
+        lines.append(
+            f"verdict: {describe_label(d.verdict['label'], names, conf)}, from {d.windows} windows: {conf} (label probability "
+            + f"{d.verdict.get('label_probability_of_verdict', float('nan')):.2f}, "
+            + f"{100 * d.verdict.get('agreeing_windows', float('nan')):.0f} % of windows agree; marked FAULTY from "
+            + f"{d.verdict.get('faulty_probability_required', float('nan')):.2f})"
+        )
         for p in d.propellers:
             lines.append(
                 f"  {rotor_name(p['name'], p['propeller'])}: P(faulty) = {p['fault_probability']:.3f}"
-                + ("  <- FAULTY" if p["faulty"] else "")
+                + ("  <- FAULTY" if p["faulty"] else "  <- suspect" if p.get("suspect") else "")
             )
+    if d.decision is not None:
+        alerts = d.decision["alerts"]
+        lines.append(
+            "  in-flight rule: " + ("; ".join(f"{a['text']} at {a['t_boot_s']:.1f} s" for a in alerts) if alerts else "no alert")
+        )
     if d.physics is not None:
         eff = ", ".join(
             f"{rotor_name(n, i + 1)} {m:.2f}±{s:.2f}"
@@ -184,6 +210,15 @@ def format_text(d: Diagnosis) -> str:
         lines.append(f"  airborne {s['start_boot_s']:.1f}-{s['stop_boot_s']:.1f} s boot time ({s['steps']} steps)")
     lines += [f"  warning: {w}" for w in d.warnings]
     return "\n".join(lines)
+
+
+EXIT_NOT_CONFIDENT = 3
+_EXIT_RANK = {0: 0, EXIT_NOT_CONFIDENT: 1, 1: 2, 2: 3}
+
+
+def worse(a: int, b: int) -> int:
+    """The exit code that says more is wrong: 2 > 1 > 3 > 0."""
+    return a if _EXIT_RANK[a] >= _EXIT_RANK[b] else b
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -221,7 +256,7 @@ def main(argv: list[str] | None = None) -> int:
         except PropwatchError as exc:
             results.append({"log": path, "error": str(exc)})
             print(f"propwatch diagnose: error: {exc}", file=sys.stderr)
-            code = 2
+            code = worse(code, 2)
             if progress is not None:
                 progress.update(size)
             continue
@@ -230,12 +265,14 @@ def main(argv: list[str] | None = None) -> int:
             msg = f"{path}: cannot read: {type(exc).__name__}: {exc}"
             results.append({"log": path, "error": msg})
             print(f"propwatch diagnose: error: {msg}", file=sys.stderr)
-            code = 2
+            code = worse(code, 2)
             continue
         finally:
             trap.report()
         if d.verdict is None:
-            code = max(code, 1)
+            code = worse(code, 1)
+        elif d.verdict.get("confidence") != "confident":
+            code = worse(code, EXIT_NOT_CONFIDENT)
         if args.report:
             from monitor.diagnose.report import write_report
 

@@ -10,6 +10,16 @@ envelope (its mean RPM against the RPM the model was trained on).
 Verdict: the label with the highest mean probability over the windows used;
 ``faulty_propellers`` are that label's propellers; ``fault_probability[i]``
 is the mean over windows of the model's P(propeller i faulty).
+
+Confidence, in words (``verdict.confidence``): ``confident`` when that label's
+mean probability reaches ``DecisionConfig.faulty_probability`` (0.9); else
+``suspect`` when at least half the windows agree on it, else ``uncertain``.
+Only a confident verdict marks propellers FAULTY (``propellers[].faulty``); a
+suspect one marks them ``suspect``. ``label_probability_of_verdict`` and
+``agreeing_windows`` (the share of windows whose most likely label is the
+verdict's) say how sure it is. The in-flight decision is the daemon's own rule
+(``monitor.decision``), replayed over the log step by step: ``decision`` holds
+its suspect / fault announcements and final state.
 """
 
 from __future__ import annotations
@@ -18,6 +28,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from monitor.decision import Decision, DecisionConfig, StepInputs, WindowEvidence, file_sha256
 from monitor.diagnose.physics import PhysicsEvidence, physics_evidence
 from monitor.errors import ModelError
 from monitor.esc import EscCurve
@@ -54,6 +65,7 @@ class Diagnosis:
     timeline: dict = field(default_factory=dict)
     hop_steps: int = 1
     envelope: dict = field(default_factory=dict)  # the figures behind the envelope checks
+    decision: dict | None = None  # the shared in-flight rule replayed: {"alerts": [...], "final": {...}}
     physics: PhysicsEvidence | None = None  # rotor effectiveness and the sets the moment balance allows
 
     def to_json(self) -> dict:
@@ -75,6 +87,7 @@ class Diagnosis:
             "timeline": self.timeline,
             "hop_steps": self.hop_steps,
             "envelope": self.envelope,
+            "decision": self.decision,
             "hypotheses": self.physics.hypotheses if self.physics else None,
             "rotor_effectiveness": self.physics.rotor_effectiveness if self.physics else None,
             "rotor_effectiveness_std": self.physics.rotor_effectiveness_std if self.physics else None,
@@ -86,16 +99,20 @@ def rotor_name(name: str, px4_rotor: int) -> str:
     return f"propeller {px4_rotor}" if name == str(px4_rotor) else f"{name} (PX4 rotor {px4_rotor})"
 
 
-def describe_label(label: int, names) -> str:
-    """``label 3: M3 (PX4 rotor 2) faulty``; labels are PX4 rotor sets (monitor.labels)."""
+def describe_label(label: int, names, confidence: str = "confident") -> str:
+    """``label 3: M3 (PX4 rotor 2) faulty``; labels are PX4 rotor sets (monitor.labels).
+
+    Only a ``confident`` verdict calls propellers faulty: a ``suspect`` or ``uncertain`` one says so
+    instead (``label 3: M3 (PX4 rotor 2) suspect``).
+    """
     faulty = LABEL_TABLE[label]
     if not faulty:
-        return f"label {label}: no faulty propeller"
+        return f"label {label}: no faulty propeller" + ("" if confidence == "confident" else f" ({confidence})")
     if all(names[i - 1] == str(i) for i in faulty):  # the vehicle numbers its rotors as PX4 does
         what = ("propeller " if len(faulty) == 1 else "propellers ") + ", ".join(map(str, faulty))
     else:
         what = ", ".join(rotor_name(names[i - 1], i) for i in faulty)
-    return f"label {label}: {what} faulty"
+    return f"label {label}: {what} {'faulty' if confidence == 'confident' else confidence}"
 
 
 def round_floats(obj, digits: int = 6):
@@ -252,6 +269,8 @@ def diagnose_table(
     label = int(np.argmax(mean_labels)) + 1
     p = faults.mean(axis=0)
     d.windows = len(ends)
+    cfg = DecisionConfig()
+    confidence, agree = verdict_confidence(labels, label, cfg)
     if vehicle is not None:
         d.physics, why_not = physics_evidence(table, vehicle, window=info.window)
         if why_not:
@@ -261,6 +280,10 @@ def diagnose_table(
         "faulty_propellers": list(LABEL_TABLE[label]),
         "faulty_names": [table.motor_names[i - 1] for i in LABEL_TABLE[label]],
         "fault_probability": [float(x) for x in p],
+        "confidence": confidence,
+        "label_probability_of_verdict": round(float(mean_labels[label - 1]), 4),
+        "agreeing_windows": round(agree, 4),
+        "faulty_probability_required": cfg.faulty_probability,
     }
     d.label_probability = [float(x) for x in mean_labels]
     d.propellers = [
@@ -269,16 +292,49 @@ def diagnose_table(
             "px4_rotor": i + 1,
             "name": table.motor_names[i],
             "fault_probability": float(p[i]),
-            "faulty": (i + 1) in LABEL_TABLE[label],
+            "faulty": (i + 1) in LABEL_TABLE[label] and confidence == "confident",
+            "suspect": (i + 1) in LABEL_TABLE[label] and confidence == "suspect",
         }
         for i in range(4)
     ]
+    d.decision = replay_decision(table, clf, cfg, ends, labels, faults)
     d.timeline = {
         "t_boot_s": [float(x) for x in _t_s(table, ends)],
         "fault_probability": np.round(faults, 5).tolist(),
         "label": (np.argmax(labels, axis=1) + 1).tolist(),
     }
     return d
+
+
+def verdict_confidence(labels: np.ndarray, label: int, cfg: DecisionConfig) -> tuple[str, float]:
+    """('confident' | 'suspect' | 'uncertain', share of windows whose most likely label is ``label``)."""
+    agree = float(np.mean(np.argmax(labels, axis=1) + 1 == label))
+    if labels[:, label - 1].mean() >= cfg.faulty_probability:
+        return "confident", agree
+    return ("suspect" if agree >= 0.5 else "uncertain"), agree
+
+
+def replay_decision(
+    table: FlightTable, clf: Classifier, cfg: DecisionConfig, ends: np.ndarray, labels: np.ndarray, faults: np.ndarray
+) -> dict:
+    """The daemon's decision rule over the log, step by step, with the windows classified at ``ends``."""
+    dec = Decision(cfg, table.rate_hz, clf.info.window, model_sha256=file_sha256(clf.path))
+    t_s = _t_s(table, np.arange(len(table.timestamp_us)))
+    rpm = np.asarray(table.motor_rpm, dtype=np.float64)
+    mean_rpm = rpm.mean(axis=1)
+    tilt = np.maximum(np.abs(table.roll_rad), np.abs(table.pitch_rad))
+    rates = np.abs(np.stack([table.roll_rate_rad_s, table.pitch_rate_rad_s, table.yaw_rate_rad_s], axis=1)).max(axis=1)
+    battery = np.asarray(table.battery_v, dtype=np.float64)
+    at = {int(e): k for k, e in enumerate(ends)}
+    alerts = []
+    for j in range(len(t_s)):
+        air = bool(table.airborne[j])
+        dec.step(float(t_s[j]), StepInputs(air, mean_rpm[j], tilt[j], rates[j], battery[j], rpm[j]))
+        k = at.get(j)
+        if k is not None:
+            for a in dec.window_evidence(float(t_s[j]), WindowEvidence(faults[k], labels[k])):
+                alerts.append({"t_boot_s": round(a.t_s, 2), "level": a.level, "propellers": list(a.propellers), "text": a.text})
+    return {"alerts": alerts, "final": dec.verdict()}
 
 
 def predict_at(clf: Classifier, feats: np.ndarray, ends: np.ndarray, window: int, batch: int):

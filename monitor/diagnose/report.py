@@ -85,7 +85,9 @@ def plot(d: Diagnosis, table: FlightTable, png: Path, threshold: float = ALERT_T
     labels.append("airborne")
     ax[0].legend(handles, labels, loc="upper left", fontsize=8, ncol=3)
     title = (
-        "no verdict: " + (d.reason or "") if d.verdict is None else describe_label(d.verdict["label"], list(table.motor_names))
+        "no verdict: " + (d.reason or "")
+        if d.verdict is None
+        else describe_label(d.verdict["label"], list(table.motor_names), d.verdict.get("confidence", "confident"))
     )
     ax[0].set_title(f"{Path(d.source).name}: {title}", fontsize=10)
     rpm_known = np.isfinite(table.motor_rpm).any()
@@ -133,14 +135,16 @@ def page(d: Diagnosis, png_name: str) -> str:
     e = html.escape
     rows = "".join(
         f"<tr><td>{e(p['name'])}</td><td>{p['propeller']}</td><td>{p['fault_probability']:.3f}</td>"
-        f"<td>{'FAULTY' if p['faulty'] else 'ok'}</td></tr>"
+        f"<td>{'FAULTY' if p['faulty'] else 'suspect' if p.get('suspect') else 'ok'}</td></tr>"
         for p in d.propellers
     )
+    conf = d.verdict.get("confidence", "confident") if d.verdict is not None else ""
     verdict = (
         f"<p><b>No verdict:</b> {e(d.reason or '')}</p>"
         if d.verdict is None
-        else f"<p><b>Verdict: {e(describe_label(d.verdict['label'], [p['name'] for p in d.propellers]))}</b>"
-        f" ({d.windows} windows)</p><table border=1 cellpadding=4><tr><th>propeller</th><th>PX4 rotor</th>"
+        else f"<p><b>Verdict: {e(describe_label(d.verdict['label'], [p['name'] for p in d.propellers], conf))}</b>"
+        f" ({d.windows} windows; {conf}: label probability {d.verdict.get('label_probability_of_verdict', float('nan')):.2f},"
+        f" {100 * d.verdict.get('agreeing_windows', float('nan')):.0f} % of windows agree)</p><table border=1 cellpadding=4><tr><th>propeller</th><th>PX4 rotor</th>"
         f"<th>P(faulty)</th><th>verdict</th></tr>{rows}</table>"
     )
     segs = "".join(

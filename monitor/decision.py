@@ -1,0 +1,718 @@
+"""The one decision rule shared by ``propwatch diagnose`` and the daemon: window outputs -> suspect / fault.
+
+Per propeller, three CUSUMs (Page 1954) over per-window log-likelihood ratios.
+With P the window's P(propeller faulty) from a network trained on a balanced
+set (each propeller faulty in 8 of 16 labels: prior odds 1), the window's
+log-likelihood ratio faulty : healthy is ``logit(P)``, clipped to
++-``LLR_CLIP`` (one over-confident window cannot decide) and weighted by the
+seconds it covers, so the statistics (nat-seconds) do not depend on how often
+windows are classified (the daemon: every 0.05 s; diagnose: every hop):
+
+    absolute  A_i <- max(0, A_i + clip(logit P_i) * dt)
+    change    C_i <- max(0, C_i + (clip(logit P_i) - B_i) * dt)
+    physics   F_i <- max(0, F_i + phys_i * dt)
+
+``B_i = max(0, median clip(logit P_i))`` over the first ``BASELINE_S`` of
+classified flight (after take-off, and again after a collective step): what
+the network already says about this airframe before anything changed. A
+network that is confidently wrong about a healthy airframe (a CG offset or a
+weak motor it never saw: issue 12) keeps ``A`` growing on every such flight;
+``C`` adds evidence only for a *change*. ``phys_i`` is physics evidence that
+needs no network: the rise of rotor i's share of omega^2 over its own
+baseline (``RotorShare``); kept in its own statistic, because a network that
+is confidently wrong would cancel it. A propeller's level is the highest of
+the three.
+
+Thresholds come from the configured false-alarm rates (each statistic gets
+a third of the budget), never hand-set:
+
+* **calibrated** (when ``models/decision-calibration.json`` belongs to the
+  model, by SHA-256): the rate of threshold crossings (any propeller,
+  restarting at each) per healthy flight-hour, measured on randomised healthy
+  flights of our simulator with exactly this code (``offline/alerts``), has an
+  exponential tail ``rate(h) = exp(a - b h)`` (the CUSUM renewal / ARL
+  relation, ARL0 ~ e^(b h)); so ``h = (a - ln rate) / b``. A statistic whose
+  crossings do not fall that way on healthy flights (the network is pinned at
+  P ~ 1 on some airframes) is *disabled* by the calibration: no threshold can
+  meet the rate, and the file says so.
+* **analytic** (fallback for an uncalibrated model): Wald's bound ARL0 >= e^h
+  in independent samples; windows overlapping by all but one step are not
+  independent, so one window length (5 s) counts as one sample, and with 4
+  propellers ``h = window_s * ln(4 * 3600 / window_s / rate)``. Conservative.
+
+Two levels: ``suspect`` at the threshold for ``suspect_false_alarms_per_hour``
+(STATUSTEXT NOTICE) and ``fault`` at ``false_alarms_per_hour`` (WARNING, or
+CRITICAL for two or more propellers). A lower rate gives a higher threshold.
+
+Regime changes reset or hold the evidence (``RegimeTracker``): landing and
+take-off end a flight's evidence; windows containing an aggressive manoeuvre
+(tilt or body rate beyond the training envelope), a collective step (payload
+drop or pick-up) or battery sag add nothing, and a collective step or a sag
+also halves what was gathered before it (it was evidence about another
+vehicle state; a collective step also re-learns the baselines). A stopped
+stream pauses the decision (evidence kept, nothing added, nothing announced)
+and says why; it is never frozen into an alert.
+
+VIBRATION (MAVLink #241; PX4 fills vibration_z with the accelerometer's
+high-frequency vibration metric) is imbalance evidence that names no
+propeller: its own CUSUM on the log-ratio to the flight's first 10 s raises
+at most ``suspect`` ("VIBE HIGH PROP ?"), with the analytic threshold (no
+simulator here makes VIBRATION to calibrate it on). Values that are NaN,
+negative, absurd (> ``VIBE_MAX_M_S2``) or frozen (the same value
+``FROZEN_REPEATS`` times running) are ignored and counted, never evidence.
+
+The wording: ``PROP 3 FAULT p=0.97`` only when one hypothesis remains; when
+the propellers at suspect level widen the set, or the evidence comes with
+several hypotheses, ``PROP 1 or 1+2?`` (<= 50 characters).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import statistics
+from collections import deque
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from monitor.errors import ConfigError
+from monitor.labels import N_PROPS
+from monitor.resources import shipped
+
+LEVELS = ("none", "suspect", "fault")
+LLR_CLIP = math.log(0.999 / 0.001)  # |logit P| beyond P = 0.999 is the network's over-confidence, not evidence
+STATUSTEXT_MAX_CHARS = 50
+MAV_SEVERITY_CRITICAL, MAV_SEVERITY_WARNING, MAV_SEVERITY_NOTICE = 2, 4, 5
+SECONDS_PER_HOUR = 3600.0
+VIBE_MAX_M_S2 = 100.0  # a vibration metric beyond this is a sensor fault, not a propeller
+FROZEN_REPEATS = 20  # identical float readings in a row: a stuck stream
+VIBE_BASELINE_S = 10.0  # airborne seconds that define the flight's own vibration level
+BASELINE_S = 10.0  # classified seconds that define the airframe's own baseline evidence
+VIBE_MIN_RATIO = 1.5  # CUSUM reference: the smallest rise over baseline worth calling (log-ratio drift)
+# The checkout's models/decision-calibration.json, or the installed package data (monitor/resources.py).
+DEFAULT_CALIBRATION = shipped("decision-calibration.json")
+
+
+def _check(cond: bool, key: str, msg: str) -> None:
+    if not cond:
+        raise ConfigError(f"{key}: {msg}")
+
+
+@dataclass(frozen=True)
+class DecisionConfig:
+    """The decision rule's settings (``alerts:`` in the monitor YAML; diagnose uses the defaults)."""
+
+    false_alarms_per_hour: float = 0.1  # fault level: the target rate on healthy flights
+    suspect_false_alarms_per_hour: float = 2.0  # suspect level (a NOTICE): may be wrong more often
+    faulty_probability: float = 0.9  # diagnose: FAULTY only when the chosen label's probability reaches this
+    aggressive_tilt_deg: float = 45.0  # beyond: outside the training envelope (diagnose warns at the same angle)
+    aggressive_rate_deg_s: float = 200.0
+    collective_step_fraction: float = 0.12  # change of the 5-s median mean RPM between windows: payload drop/pick-up
+    battery_sag_fraction: float = 0.04  # pack voltage lost within one window
+    min_thrust_loss: float = 0.05  # the smallest per-rotor thrust loss the omega^2-share evidence is tuned to
+    calibration_path: str = ""  # '' = models/decision-calibration.json
+
+    def __post_init__(self) -> None:
+        for key in ("false_alarms_per_hour", "suspect_false_alarms_per_hour"):
+            v = getattr(self, key)
+            _check(1e-4 <= v <= 1e3, f"alerts.{key}", f"must be in [0.0001, 1000] per flight-hour, got {v}")
+        _check(
+            self.suspect_false_alarms_per_hour >= self.false_alarms_per_hour,
+            "alerts.suspect_false_alarms_per_hour",
+            "must be >= alerts.false_alarms_per_hour (suspect comes before fault)",
+        )
+        _check(0.5 <= self.faulty_probability < 1.0, "alerts.faulty_probability", "must be in [0.5, 1)")
+        _check(0 < self.aggressive_tilt_deg <= 90, "alerts.aggressive_tilt_deg", "must be in (0, 90]")
+        _check(0 < self.aggressive_rate_deg_s <= 2000, "alerts.aggressive_rate_deg_s", "must be in (0, 2000]")
+        _check(0 < self.collective_step_fraction <= 1, "alerts.collective_step_fraction", "must be in (0, 1]")
+        _check(0 < self.battery_sag_fraction <= 1, "alerts.battery_sag_fraction", "must be in (0, 1]")
+        _check(0.01 <= self.min_thrust_loss <= 0.5, "alerts.min_thrust_loss", "must be in [0.01, 0.5]")
+
+
+# -- thresholds -----------------------------------------------------------------------------
+STATISTICS = ("absolute", "change", "physics")
+
+
+@dataclass(frozen=True)
+class Calibration:
+    """Per statistic, the exceedance-rate tail ``ln(rate per flight-hour) = a - b * h`` on healthy flights;
+    ``None`` for a statistic the calibration disabled (its crossings do not fall off exponentially)."""
+
+    fits: dict  # statistic -> (a, b) | None
+    model_sha256: str
+    provenance: dict = field(default_factory=dict)
+
+    def threshold(self, statistic: str, rate_per_hour: float) -> float:
+        fit = self.fits.get(statistic)
+        if fit is None:
+            return math.inf
+        a, b = fit
+        return max((a - math.log(rate_per_hour)) / b, 0.0)
+
+
+def analytic_threshold(rate_per_hour: float, window_s: float, n_props: int = N_PROPS) -> float:
+    """Wald's bound with one independent sample per window length (see the module doc)."""
+    samples_per_hour = SECONDS_PER_HOUR / window_s
+    return window_s * math.log(n_props * samples_per_hour / rate_per_hour)
+
+
+def load_calibration(path: str | Path | None = None) -> Calibration | None:
+    """The stored calibration, or None when there is none; a malformed file is an error naming it."""
+    path = Path(path) if path else DEFAULT_CALIBRATION
+    if not path.is_file():
+        return None
+    try:
+        d = json.loads(path.read_text(encoding="utf-8"))
+        fits = {}
+        for name in STATISTICS:
+            f = d["fits"][name]
+            fits[name] = None if f is None else (float(f["a"]), float(f["b"]))
+        cal = Calibration(fits, str(d["model_sha256"]), d.get("provenance", {}))
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise ConfigError(f"{path}: not a decision calibration: {exc}") from exc
+    for name, fit in cal.fits.items():
+        if fit is not None and not (math.isfinite(fit[0]) and math.isfinite(fit[1]) and fit[1] > 0):
+            raise ConfigError(f"{path}: fit '{name}' needs finite a and b > 0, got {fit}")
+    return cal
+
+
+@dataclass(frozen=True)
+class Thresholds:
+    suspect: dict  # statistic -> nat-seconds (inf = disabled)
+    fault: dict
+    source: str
+
+    def as_dict(self) -> dict:
+        r = lambda v: None if math.isinf(v) else round(v, 3)  # noqa: E731
+        return {
+            "suspect": {k: r(v) for k, v in self.suspect.items()},
+            "fault": {k: r(v) for k, v in self.fault.items()},
+            "source": self.source,
+        }
+
+
+def thresholds(
+    cfg: DecisionConfig, window_s: float, model_sha256: str | None = None, calibration: Calibration | None = None
+) -> Thresholds:
+    """Thresholds for the configured rates (shared equally by the statistics): calibrated when the file is this model's."""
+    n = len(STATISTICS)
+    rates = {"suspect": cfg.suspect_false_alarms_per_hour / n, "fault": cfg.false_alarms_per_hour / n}
+    if calibration is not None and (model_sha256 is None or calibration.model_sha256 == model_sha256):
+        hours = calibration.provenance.get("flight_hours")
+        th = {lvl: {st: calibration.threshold(st, r) for st in STATISTICS} for lvl, r in rates.items()}
+        return Thresholds(th["suspect"], th["fault"], f"calibrated on {hours} healthy flight-hours (exponential tail)")
+    th = {lvl: {st: analytic_threshold(r, window_s) for st in STATISTICS} for lvl, r in rates.items()}
+    return Thresholds(th["suspect"], th["fault"], "analytic (Wald bound, one sample per window)")
+
+
+def window_llr(fault_probability) -> np.ndarray:
+    """Clipped per-propeller log-likelihood ratio of one window (NaN -> 0: no evidence)."""
+    out = np.zeros(N_PROPS)
+    for i, p in enumerate(fault_probability):
+        p = float(p)
+        if p != p:  # NaN
+            continue
+        if p <= 0.0 or p >= 1.0:
+            out[i] = LLR_CLIP if p >= 1.0 else -LLR_CLIP
+            continue
+        out[i] = min(max(math.log(p / (1.0 - p)), -LLR_CLIP), LLR_CLIP)
+    return out
+
+
+# -- inputs -----------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class WindowEvidence:
+    """What one classified window says; every field but ``fault_probability`` is optional."""
+
+    fault_probability: np.ndarray  # (4,) P(propeller faulty), PX4 order
+    label_probability: np.ndarray | None = None  # (16,)
+    hypotheses: tuple[tuple[tuple[int, ...], float], ...] | None = None  # ((propellers 1..4), probability)
+    rotor_effectiveness: np.ndarray | None = None  # (4,) fraction of nominal thrust
+    rotor_effectiveness_std: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
+class StepInputs:
+    """One grid step's flight state, for the regime tracker (NaN where unknown)."""
+
+    airborne: bool
+    mean_rpm: float = math.nan
+    tilt_rad: float = math.nan
+    rate_rad_s: float = math.nan  # largest |body rate|
+    battery_v: float = math.nan
+    motor_rpm: np.ndarray | None = None  # (4,) per-rotor RPM, PX4 order (commanded, or ESC telemetry)
+
+
+@dataclass(frozen=True)
+class Announcement:
+    """A level change to tell the pilot about."""
+
+    t_s: float
+    level: str  # "suspect" | "fault"
+    propellers: tuple[int, ...]  # 1..4; () for unlocalised vibration evidence
+    text: str  # STATUSTEXT, <= 50 chars
+    severity: int
+    statistic: tuple[float, ...]  # S per propeller (nat-seconds)
+    evidence: str  # "classifier", "vibration"
+
+    def event(self) -> dict:
+        return {
+            "kind": "decision",
+            "t_s": round(self.t_s, 3),
+            "level": self.level,
+            "faulty_propellers": list(self.propellers),
+            "text": self.text,
+            "severity": {2: "CRITICAL", 4: "WARNING", 5: "NOTICE"}[self.severity],
+            "statistic": [round(s, 3) for s in self.statistic],
+            "evidence": self.evidence,
+        }
+
+
+# -- regimes ----------------------------------------------------------------------------------
+class RegimeTracker:
+    """Per-step state -> (hold the next windows, discount what was gathered), see the module doc."""
+
+    def __init__(self, cfg: DecisionConfig, rate_hz: float, window: int):
+        self.cfg = cfg
+        self.window = window
+        self.rate_hz = rate_hz
+        self._rpm: deque[float] = deque(maxlen=2 * window)  # the last two windows' mean RPM (collective step)
+        self._volts: deque[float] = deque(maxlen=window)
+        self._n = 0
+        self.hold_until_step = 0
+        self.step = 0
+        self.counts = {"aggressive": 0, "collective_step": 0, "battery_sag": 0, "landed": 0}
+        self.last_reason = ""
+        self._tilt_max = math.radians(cfg.aggressive_tilt_deg)
+        self._rate_max = math.radians(cfg.aggressive_rate_deg_s)
+        self._check_every = max(window // 5, 1)
+
+    def reset(self) -> None:
+        self._rpm.clear()
+        self._volts.clear()
+        self._n = 0
+        self.hold_until_step = self.step + self.window  # a window must lie wholly after take-off
+
+    def update(self, s: StepInputs) -> str:
+        """'' or the event of this step: 'landed', 'aggressive', 'collective_step', 'battery_sag'."""
+        self.step += 1
+        if not s.airborne:
+            was_flying = self._n > 0
+            if was_flying:
+                self.counts["landed"] += 1
+            self.reset()
+            return "landed" if was_flying else ""
+        self._n += 1
+        if math.isfinite(s.mean_rpm):
+            self._rpm.append(s.mean_rpm)
+        if math.isfinite(s.battery_v):
+            self._volts.append(s.battery_v)
+        event = ""
+        c = self.cfg
+        if s.tilt_rad > self._tilt_max or s.rate_rad_s > self._rate_max:
+            event = "aggressive"
+        elif len(self._rpm) == 2 * self.window and self._n % self._check_every == 0:
+            rpm = list(self._rpm)
+            old, new = statistics.median(rpm[: self.window]), statistics.median(rpm[self.window :])
+            if old > 0 and abs(new - old) / old > c.collective_step_fraction:
+                event = "collective_step"
+                self._rpm.clear()  # measure the next step from the new level
+        if not event and len(self._volts) == self.window:
+            v0, v1 = self._volts[0], self._volts[-1]
+            if v0 > 0 and (v0 - v1) / v0 > c.battery_sag_fraction:
+                event = "battery_sag"
+                self._volts.clear()
+        if event:
+            self.counts[event] += 1
+            self.last_reason = event
+            self.hold_until_step = self.step + self.window
+        return event
+
+    @property
+    def holding(self) -> bool:
+        return self.step < self.hold_until_step
+
+
+# Projection that removes the collective (1,1,1,1)/2 and yaw (1,1,-1,-1)/2 directions (PX4 order: 1, 2 CCW; 3, 4 CW).
+_C, _Y = np.full(4, 0.5), np.array([0.5, 0.5, -0.5, -0.5])
+_YAW_FREE = np.eye(4) - np.outer(_C, _C) - np.outer(_Y, _Y)
+
+
+# -- physics: each rotor's share of omega^2 ---------------------------------------------------------
+class RotorShare:
+    """Window-mean share of omega^2 per rotor against the flight's own baseline: thrust-loss evidence.
+
+    A rotor that lost a fraction f of its thrust must spin faster for the
+    controller to hold roll and pitch: its omega^2 rises by ~f. The yaw
+    balance moves the shares too, along (+1, +1, -1, -1) (CCW against CW
+    rotors), by an amount that depends on how the damaged blade's torque per
+    thrust changed, which nobody has measured (issue 12): that direction and
+    the collective one are projected out (``_YAW_FREE``). What is left of a
+    thrust loss on rotor i is +f/2 on i and -f/2 on its same-spin diagonal
+    partner, whatever the torque change. The share needs no fault model and
+    no training; against the airframe's own first ``BASELINE_S`` it is blind
+    to CG offsets and motor spread (issue 12's baseline names 24 of 24 that
+    way). Per window: the Gaussian mean-shift log-likelihood ratio
+    ``delta (x - b - delta/2) / sigma^2`` with ``delta = f_min / 2`` and
+    sigma the residual's own window-to-window spread in the baseline (floored).
+    """
+
+    SIGMA_FLOOR = 0.004
+
+    def __init__(self, window: int, rate_hz: float, min_thrust_loss: float):
+        self.window = window
+        self.rate_hz = rate_hz
+        self.delta = 0.5 * min_thrust_loss
+        self._ring = np.full((window, N_PROPS), np.nan)
+        self._i = 0
+        self._n = 0
+        self._base: list[np.ndarray] = []
+        self.baseline: np.ndarray | None = None
+        self.sigma: np.ndarray | None = None
+
+    def reset(self) -> None:
+        self._ring[:] = np.nan
+        self._n = 0
+        self._base, self.baseline, self.sigma = [], None, None
+
+    def push(self, rpm: np.ndarray | None) -> None:
+        if rpm is None:
+            return
+        w2 = np.asarray(rpm, dtype=np.float64) ** 2
+        m = w2.mean()
+        if not (np.isfinite(w2).all() and m > 0):
+            self._n = 0  # a gap: the window starts again
+            return
+        self._ring[self._i] = w2 / m
+        self._i = (self._i + 1) % self.window
+        self._n += 1
+
+    def llr(self) -> np.ndarray | None:
+        """Per-rotor evidence of the current window, or None (no full window, or baseline still being learnt)."""
+        if self._n < self.window:
+            return None
+        x = _YAW_FREE @ self._ring.mean(axis=0)
+        if self.baseline is None:
+            self._base.append(x)
+            if (self._n - self.window) / self.rate_hz >= BASELINE_S and len(self._base) >= 3:
+                b = np.stack(self._base)
+                self.baseline = b.mean(axis=0)
+                self.sigma = np.maximum(b.std(axis=0), self.SIGMA_FLOOR)
+                self._base = []
+            return None
+        llr = self.delta * (x - self.baseline - self.delta / 2) / self.sigma**2
+        return np.clip(llr, -LLR_CLIP, LLR_CLIP)
+
+
+# -- vibration --------------------------------------------------------------------------------
+class VibrationEvidence:
+    """VIBRATION samples -> validated log-ratio to the flight's baseline; bad values counted, never used."""
+
+    def __init__(self):
+        self.rejected = {"nan": 0, "negative": 0, "absurd": 0, "frozen": 0}
+        self.accepted = 0
+        self._last: tuple | None = None
+        self._repeats = 0
+        self._baseline: list[float] = []
+        self._baseline_t0: float | None = None
+        self.baseline: float | None = None
+        self.last_t_s: float | None = None
+
+    def reset(self) -> None:
+        self._baseline, self._baseline_t0, self.baseline = [], None, None
+
+    def validate(self, values: tuple[float, ...]) -> str:
+        """'' when usable, else the reason it is rejected (and counted)."""
+        if not all(math.isfinite(v) for v in values):
+            why = "nan"
+        elif any(v < 0 for v in values):
+            why = "negative"
+        elif any(v > VIBE_MAX_M_S2 for v in values):
+            why = "absurd"
+        else:
+            key = tuple(values)
+            self._repeats = self._repeats + 1 if key == self._last else 1
+            self._last = key
+            why = "frozen" if self._repeats >= FROZEN_REPEATS else ""
+        if why:
+            self.rejected[why] += 1
+        return why
+
+    def observe(self, t_s: float, accel_metric: float, airborne: bool) -> float | None:
+        """The log-ratio of the accel vibration metric to its baseline, or None (no baseline yet)."""
+        self.accepted += 1
+        self.last_t_s = t_s
+        if not airborne:
+            return None
+        if self.baseline is None:
+            if self._baseline_t0 is None:
+                self._baseline_t0 = t_s
+            self._baseline.append(accel_metric)
+            if t_s - self._baseline_t0 >= VIBE_BASELINE_S:
+                self.baseline = max(float(np.median(self._baseline)), 1e-6)
+            return None
+        return math.log(max(accel_metric, 1e-9) / self.baseline)
+
+
+class EscTelemetry:
+    """ESC_STATUS rpm validated like VIBRATION: NaN, negative, absurd or frozen readings are counted, never used."""
+
+    MAX_RPM = 100_000.0
+
+    def __init__(self):
+        self.rejected = {"nan": 0, "negative": 0, "absurd": 0, "frozen": 0}
+        self.accepted = 0
+        self._last: tuple | None = None
+        self._repeats = 0
+
+    def observe(self, rpm: tuple[float, ...]) -> str:
+        """'' when usable, else why not."""
+        vals = tuple(float(r) for r in rpm)
+        if not all(math.isfinite(v) for v in vals):
+            why = "nan"
+        elif any(v < 0 for v in vals):
+            why = "negative"
+        elif any(v > self.MAX_RPM for v in vals):
+            why = "absurd"
+        else:
+            self._repeats = self._repeats + 1 if vals == self._last and any(vals) else 1
+            self._last = vals
+            why = "frozen" if self._repeats >= FROZEN_REPEATS else ""
+        if why:
+            self.rejected[why] += 1
+        else:
+            self.accepted += 1
+        return why
+
+
+def file_sha256(path: str | Path) -> str:
+    """The model file's digest: a calibration belongs to exactly one model."""
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+
+
+# -- the decision -----------------------------------------------------------------------------
+def propeller_text(props: tuple[int, ...]) -> str:
+    return "+".join(map(str, props))
+
+
+def statustext(level: str, sets: list[tuple[int, ...]], probability: float | None = None) -> str:
+    """``PROP 3 FAULT p=0.97`` for one hypothesis; ``PROP 1 or 1+2?`` for several; <= 50 characters."""
+    if len(sets) == 1:
+        text = f"PROP {propeller_text(sets[0])} {'FAULT' if level == 'fault' else 'SUSPECT'}"
+        if probability is not None and math.isfinite(probability):
+            text += f" p={probability:.2f}"
+        return text[:STATUSTEXT_MAX_CHARS]
+    text = "PROP " + " or ".join(propeller_text(s) for s in sets) + "?"
+    if len(text) > STATUSTEXT_MAX_CHARS:  # keep the most likely hypotheses whole
+        keep: list[tuple[int, ...]] = []
+        for s in sets:
+            if len("PROP " + " or ".join(propeller_text(x) for x in [*keep, s]) + " or ...?") > STATUSTEXT_MAX_CHARS:
+                break
+            keep.append(s)
+        text = "PROP " + " or ".join(propeller_text(x) for x in keep) + " or ...?"
+    return text
+
+
+class Decision:
+    """The shared sequential rule. Feed every grid step (``step``) and every classified window (``window_evidence``)."""
+
+    def __init__(
+        self,
+        cfg: DecisionConfig,
+        rate_hz: float,
+        window: int,
+        model_sha256: str | None = None,
+        calibration: Calibration | None = None,
+        use_stored_calibration: bool = True,
+    ):
+        self.cfg = cfg
+        self.rate_hz = rate_hz
+        self.window = window
+        self.window_s = window / rate_hz
+        if calibration is None and use_stored_calibration:
+            calibration = load_calibration(cfg.calibration_path or None)
+        self.thresholds = thresholds(cfg, self.window_s, model_sha256, calibration)
+        self.vibe_threshold = analytic_threshold(cfg.suspect_false_alarms_per_hour, self.window_s, 1)
+        self.regime = RegimeTracker(cfg, rate_hz, window)
+        self.vibration = VibrationEvidence()
+        self.share = RotorShare(window, rate_hz, cfg.min_thrust_loss)
+        self.S = {k: np.zeros(N_PROPS) for k in STATISTICS}
+        self.peak = {k: np.zeros(N_PROPS) for k in STATISTICS}
+        self.baseline: np.ndarray | None = None  # B_i, once learnt
+        self._baseline_llr: list[np.ndarray] = []
+        self._baseline_s = 0.0
+        self.vibe_S = 0.0
+        self.level = ["none"] * N_PROPS
+        self.vibe_level = "none"
+        self._last_window_t: float | None = None
+        self._last_hypotheses: tuple | None = None
+        self._last_p = np.full(N_PROPS, np.nan)
+        self.paused_reason = ""
+        self.windows = 0
+        self.held_windows = 0
+        self.announcements: list[Announcement] = []
+        self.trace: list | None = None  # offline calibration: ("add", {stat: increments}) / ("scale", factor)
+
+    # -- inputs ------------------------------------------------------------------------------
+    def step(self, t_s: float, s: StepInputs) -> None:
+        event = self.regime.update(s)
+        if not s.airborne:
+            self._new_flight()
+            return
+        self.share.push(s.motor_rpm)
+        if event in ("collective_step", "battery_sag"):
+            for v in self.S.values():
+                v *= 0.5  # gathered about another vehicle state: keep half; the hold stops new evidence
+            self._last_window_t = None
+            if event == "collective_step":  # another mass: what the network says about it is learnt again
+                self._forget_baseline()
+                self.share.reset()
+            if self.trace is not None:
+                self.trace.append(("scale", 0.5))
+
+    def pause(self, reason: str) -> None:
+        """A stream stopped: keep the statistics, add nothing until evidence flows again (``resume``)."""
+        self.paused_reason = reason
+        self._last_window_t = None
+
+    def resume(self) -> None:
+        self.paused_reason = ""
+
+    def window_evidence(self, t_s: float, ev: WindowEvidence) -> list[Announcement]:
+        """One classified window ending at ``t_s``; returns the level changes it causes."""
+        self.windows += 1
+        dt = 1.0 / self.rate_hz if self._last_window_t is None else t_s - self._last_window_t
+        dt = min(max(dt, 0.0), self.window_s)
+        self._last_window_t = t_s
+        if self.regime.holding or self.paused_reason:
+            self.held_windows += 1
+            return []
+        llr = window_llr(ev.fault_probability)
+        self._last_p = np.asarray(ev.fault_probability, dtype=np.float64)
+        phys = self.share.llr()
+        inc = {"absolute": llr * dt}
+        if self.baseline is None:
+            self._baseline_llr.append(llr)
+            self._baseline_s += dt
+            if self._baseline_s >= BASELINE_S:
+                self.baseline = np.maximum(np.median(np.stack(self._baseline_llr), axis=0), 0.0)
+                self._baseline_llr = []
+        else:
+            inc["change"] = (llr - self.baseline) * dt
+        if phys is not None:
+            inc["physics"] = phys * dt
+        for k, v in inc.items():
+            self.S[k] = np.maximum(0.0, self.S[k] + v)
+            self.peak[k] = np.maximum(self.peak[k], self.S[k])
+        if self.trace is not None:
+            self.trace.append(("add", inc))
+        if ev.hypotheses:
+            self._last_hypotheses = ev.hypotheses
+        return self._levels(t_s)
+
+    def vibration_sample(self, t_s: float, values: tuple[float, float, float], airborne: bool) -> list[Announcement]:
+        """One VIBRATION message (vibration_x, _y, _z); z is PX4's accelerometer vibration metric."""
+        if self.vibration.validate(values):
+            return []
+        dt = 0.0 if self.vibration.last_t_s is None else min(max(t_s - self.vibration.last_t_s, 0.0), 1.0)
+        r = self.vibration.observe(t_s, values[2], airborne)
+        if r is None or self.regime.holding:  # its own stream: a stopped motor stream does not pause it
+            return []
+        self.vibe_S = max(0.0, self.vibe_S + (r - math.log(VIBE_MIN_RATIO)) * dt)
+        if self.vibe_level == "none" and self.vibe_S >= self.vibe_threshold:
+            self.vibe_level = "suspect"
+            a = Announcement(t_s, "suspect", (), "VIBE HIGH PROP ?", MAV_SEVERITY_NOTICE, (self.vibe_S,), "vibration")
+            self.announcements.append(a)
+            return [a]
+        return []
+
+    # -- levels ------------------------------------------------------------------------------
+    def _forget_baseline(self) -> None:
+        self.baseline, self._baseline_llr, self._baseline_s = None, [], 0.0
+
+    def _new_flight(self) -> None:
+        if self.trace is not None and any(v.any() for v in self.S.values()):
+            self.trace.append(("scale", 0.0))
+        for v in self.S.values():
+            v[:] = 0.0
+        self.vibe_S = 0.0
+        self._forget_baseline()
+        self.share.reset()
+        self.level = ["none"] * N_PROPS
+        self.vibe_level = "none"
+        self._last_window_t = None
+        self._last_hypotheses = None
+        self.vibration.reset()
+
+    def levels_now(self) -> list[str]:
+        """Each propeller's level from the statistics alone (the highest of the three)."""
+        th = self.thresholds
+        out = []
+        for i in range(N_PROPS):
+            if any(self.S[k][i] >= th.fault[k] for k in STATISTICS):
+                out.append("fault")
+            elif any(self.S[k][i] >= th.suspect[k] for k in STATISTICS):
+                out.append("suspect")
+            else:
+                out.append("none")
+        return out
+
+    def _levels(self, t_s: float) -> list[Announcement]:
+        new = self.levels_now()
+        out = []
+        for lvl in ("fault", "suspect"):
+            rank = LEVELS.index(lvl)
+            rising = [i for i in range(N_PROPS) if LEVELS.index(new[i]) >= rank > LEVELS.index(self.level[i])]
+            if not rising:
+                continue
+            for i in rising:
+                self.level[i] = lvl
+            at = tuple(i + 1 for i in range(N_PROPS) if LEVELS.index(self.level[i]) >= rank)
+            sets = self.hypothesis_sets(lvl, new)
+            sev = MAV_SEVERITY_NOTICE if lvl == "suspect" else (MAV_SEVERITY_CRITICAL if len(at) > 1 else MAV_SEVERITY_WARNING)
+            p = float(np.nanmax(self._last_p[[i - 1 for i in at]])) if len(sets) == 1 and lvl == "fault" else None
+            stat = tuple(float(max(self.S[k][i] / max(self.thresholds.fault[k], 1e-9) for k in STATISTICS)) for i in range(4))
+            out.append(Announcement(t_s, lvl, at, statustext(lvl, sets, p), sev, stat, "classifier"))
+            break  # one announcement per window: the highest level reached
+        self.announcements += out
+        return out
+
+    def hypothesis_sets(self, level: str = "fault", now: list[str] | None = None) -> list[tuple[int, ...]]:
+        """Candidate faulty sets, most likely first: the window's hypotheses when given, else from the levels.
+
+        Without hypotheses: the propellers at ``level``, widened by those at suspect level now (a same-spin
+        partner that is only suspected makes ``1`` into ``1 or 1+2``).
+        """
+        now = now or self.levels_now()
+        rank = LEVELS.index(level)
+        core = tuple(i + 1 for i in range(N_PROPS) if LEVELS.index(self.level[i]) >= rank)
+        if self._last_hypotheses:
+            sets = [tuple(sorted(h)) for h, _ in sorted(self._last_hypotheses, key=lambda x: -x[1]) if h]
+            sets = [s for s in sets if set(core) & set(s)] or sets
+            return sets[:4] or [core]
+        wide = tuple(i + 1 for i in range(N_PROPS) if self.level[i] != "none" or now[i] != "none")
+        return [core] if wide == core or not core else [core, wide]
+
+    # -- reporting ---------------------------------------------------------------------------
+    def verdict(self) -> dict:
+        """The current decision for reports and events."""
+        faulty = [i + 1 for i in range(N_PROPS) if self.level[i] == "fault"]
+        suspect = [i + 1 for i in range(N_PROPS) if self.level[i] == "suspect"]
+        r3 = lambda a: [round(float(x), 3) for x in a]  # noqa: E731
+        return {
+            "level": "fault" if faulty else "suspect" if suspect or self.vibe_level == "suspect" else "none",
+            "faulty_propellers": faulty,
+            "suspect_propellers": suspect,
+            "vibration": self.vibe_level,
+            "statistic": {k: r3(v) for k, v in self.S.items()},
+            "peak_statistic": {k: r3(v) for k, v in self.peak.items()},
+            "baseline_llr": None if self.baseline is None else r3(self.baseline),
+            "thresholds": self.thresholds.as_dict(),
+            "windows": self.windows,
+            "held_windows": self.held_windows,
+            "regime_events": dict(self.regime.counts),
+            "vibration_rejected": dict(self.vibration.rejected),
+        }

@@ -1,0 +1,105 @@
+"""Calibrate the decision's thresholds on healthy flights: the exceedance-rate tail of its CUSUM.
+
+Each healthy flight is replayed through ``monitor.decision.Decision`` itself
+(regime holds and discounts included) with its trace on; the traced updates
+are then re-run against a grid of thresholds, restarting the statistic at
+each crossing (a renewal: after an alarm the monitor starts again), which
+gives the crossing rate per healthy flight-hour for every threshold. A line
+through ln(rate) against h on the grid points with at least ``MIN_EVENTS``
+crossings gives ``rate(h) = exp(a - b h)``; the decision solves it for the
+configured rates. Points beyond the data are an extrapolation of that tail:
+the file says from how many hours and crossings it was drawn.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from monitor.decision import STATISTICS, Decision, DecisionConfig, Thresholds, file_sha256
+from offline.alerts.flights import AlertFlight
+from offline.alerts.rules import replay_decision
+from offline.manifest import make_manifest
+
+MIN_EVENTS = 3
+
+
+def crossing_counts(traces: list[list], h_grid: np.ndarray, statistic: str) -> np.ndarray:
+    """Crossings of each threshold (any propeller, renewal after each) over all traces."""
+    counts = np.zeros(len(h_grid), dtype=np.int64)
+    for trace in traces:
+        s = np.zeros((len(h_grid), 4))
+        for op, v in trace:
+            if op == "scale":
+                s *= v
+                continue
+            if statistic not in v:
+                continue
+            s = np.maximum(0.0, s + v[statistic][None, :])
+            hit = (s >= h_grid[:, None]).any(axis=1)
+            counts += hit
+            s[hit] = 0.0
+    return counts
+
+
+def fit_tail(h_grid: np.ndarray, counts: np.ndarray, hours: float) -> tuple[float, float, list]:
+    """Least squares ln(rate) = a - b h over the points with >= MIN_EVENTS crossings."""
+    ok = counts >= MIN_EVENTS
+    if ok.sum() < 3:
+        raise ValueError(f"too few threshold crossings to fit a tail ({int(ok.sum())} usable points): fly more hours")
+    x, y = h_grid[ok], np.log(counts[ok] / hours)
+    slope, intercept = np.polyfit(x, y, 1)
+    if slope >= 0:
+        raise ValueError("crossing rate does not fall with the threshold: no tail to fit")
+    points = [[round(float(h), 3), int(c), round(float(c / hours), 4)] for h, c in zip(h_grid, counts)]
+    return float(intercept), float(-slope), points
+
+
+def calibrate(healthy: list[AlertFlight], model_path: str | Path, cfg: DecisionConfig, provenance: dict) -> dict:
+    traces = []
+    never = {k: np.inf for k in STATISTICS}
+    for f in healthy:
+        d = Decision(cfg, f.rate_hz, f.window, use_stored_calibration=False)
+        d.thresholds = Thresholds(never, never, "calibration run")
+        d.trace = []
+        replay_decision(f, d)
+        d.trace.append(("scale", 0.0))
+        traces.append(d.trace)
+    hours = sum(f.hours for f in healthy)
+    h_grid = np.geomspace(0.05, 500.0, 100)
+    fits, points = {}, {}
+    for stat in STATISTICS:
+        counts = crossing_counts(traces, h_grid, stat)
+        points[stat] = [[round(float(h), 3), int(c)] for h, c in zip(h_grid, counts)]
+        try:
+            a, b, _ = fit_tail(h_grid, counts, hours)
+            # A tail that still crosses at the top of the grid more often than the rates we serve is no tail.
+            if counts[-1] / hours > cfg.false_alarms_per_hour:
+                raise ValueError(f"{counts[-1]} crossings of h={h_grid[-1]:.0f} in {hours:.2f} h: not an exponential tail")
+            fits[stat] = {"a": a, "b": b}
+        except ValueError as exc:
+            fits[stat] = None
+            points[stat + "_disabled_because"] = str(exc)
+    return {
+        "fits": fits,
+        "form": "crossings per healthy flight-hour = exp(a - b * h), h in nat-seconds; null = statistic disabled",
+        "model_sha256": file_sha256(model_path),
+        "provenance": {
+            **provenance,
+            "flights": len(healthy),
+            "flight_hours": round(hours, 3),
+            "min_events_per_point": MIN_EVENTS,
+            "points_h_crossings": points,
+        },
+    }
+
+
+def write_calibration(cal: dict, path: str | Path, config: dict, seed: int) -> Path:
+    path = Path(path)
+    cal = {**cal, "manifest": make_manifest("decision-calibration", config, seed)}
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(json.dumps(cal, indent=1) + "\n", encoding="utf-8")
+    tmp.replace(path)
+    return path

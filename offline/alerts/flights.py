@@ -1,0 +1,205 @@
+"""Flights for judging alert rules: healthy ones with randomised physics, and ones with an in-flight onset.
+
+Drawn from our simulator with the data set's shift options (random routes,
+payload, steady wind, per-motor efficiency spread, CG offset: one vehicle
+variant per chunk of flights) and classified at every step (hop 1, as the
+daemon does at 20 Hz). What a rule needs per flight is kept: the window
+outputs, the per-step flight state for the regime tracker, the accelerometer
+(for PX4's imbalance metric), the truth and the onset time.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from monitor.labels import LABEL_MASKS
+from monitor.model import Classifier
+from monitor.resample import US_PER_S
+from monitor.vehicle import VehicleConfig
+from offline.dataset.generate import DatasetSpec, routes, simulate_flights, vehicle_variant
+from offline.dataset.onset import SwitchedPropellers
+
+
+@dataclass(frozen=True)
+class FlightSet:
+    """How a set of flights is drawn."""
+
+    kind: str  # "healthy" | "single" | "pair" | "any"
+    n_flights: int = 16
+    duration_s: float = 80.0
+    payload_kg: tuple[float, float] = (0.0, 0.6)
+    wind_max_m_s: float = 6.0
+    motor_efficiency_spread: float = 0.06
+    cg_offset_max_m: float = 0.01
+    onset_s: tuple[float, float] = (25.0, 50.0)
+    chunk_flights: int = 8  # one vehicle variant (wind, motor spread, CG) per chunk
+    propellers: str = "quadratic"
+    seed: int = 0
+
+
+@dataclass
+class AlertFlight:
+    name: str
+    rate_hz: float
+    window: int
+    fault_probability: np.ndarray  # (N, 4): window k ends at step k + window - 1
+    motor_rpm: np.ndarray  # (T, 4) commanded RPM (ESC fit of PWM), PX4 order
+    mean_rpm: np.ndarray  # (T,)
+    tilt_rad: np.ndarray
+    rate_rad_s: np.ndarray
+    battery_v: np.ndarray
+    accel_frd_m_s2: np.ndarray  # (T, 3)
+    truth: tuple[int, ...]  # faulty propellers after onset (1..4)
+    onset_s: float  # inf for healthy; time of the first faulty sample (step index / rate)
+
+    @property
+    def hours(self) -> float:
+        return len(self.fault_probability) / self.rate_hz / 3600.0
+
+
+def _conditions(kind: str, n: int, rng: np.random.Generator) -> np.ndarray:
+    if kind == "healthy":
+        return np.zeros((n, 4), np.int8)
+    n_faulty = LABEL_MASKS.sum(axis=1)
+    pool = {"single": np.flatnonzero(n_faulty == 1), "pair": np.flatnonzero(n_faulty == 2), "any": np.arange(1, 16)}[kind]
+    masks = LABEL_MASKS[rng.choice(pool, n)] > 0
+    return (masks * rng.integers(1, 3, (n, 4))).astype(np.int8)  # each faulty propeller bent or cracked
+
+
+def simulate_set(vehicle: VehicleConfig, fs: FlightSet, clf: Classifier, log=print) -> list[AlertFlight]:
+    rng = np.random.default_rng([fs.seed, 13])
+    out: list[AlertFlight] = []
+    spec = DatasetSpec(
+        "alerts",
+        waypoints=("random",),
+        duration_s=fs.duration_s,
+        propellers=fs.propellers,
+        wind_max_m_s=fs.wind_max_m_s,
+        motor_efficiency_spread=fs.motor_efficiency_spread,
+        cg_offset_max_m=fs.cg_offset_max_m,
+        seed=fs.seed,
+    )
+    from offline.propellers import build_propellers
+
+    for c0 in range(0, fs.n_flights, fs.chunk_flights):
+        n = min(fs.chunk_flights, fs.n_flights - c0)
+        cond = _conditions(fs.kind, n, rng)
+        payload = rng.uniform(*fs.payload_kg, n)
+        onset = np.full(n, np.inf) if fs.kind == "healthy" else rng.uniform(*fs.onset_s, n)
+        veh = vehicle_variant(vehicle, spec, rng)
+        seed = int(rng.integers(2**31))
+        wps, _ = routes(spec, n, seed=seed)
+        props = None
+        if fs.kind != "healthy":
+            before = build_propellers(veh, np.zeros_like(cond), kind=fs.propellers, rng_seed=seed)
+            after = build_propellers(veh, cond, kind=fs.propellers, rng_seed=seed + 1)
+            props = SwitchedPropellers(before, after, onset)
+        flog = simulate_flights(veh, wps, cond, payload, dataclasses.replace(spec, seed=seed), seed, propellers=props)
+        out += _classify(flog, clf, cond, onset, f"{fs.kind}-s{fs.seed}-{c0}")
+        log(f"alerts: {fs.kind} seed {fs.seed}: {len(out)}/{fs.n_flights} flights")
+    return out
+
+
+def _classify(flog, clf: Classifier, cond: np.ndarray, onset: np.ndarray, prefix: str) -> list[AlertFlight]:
+    from monitor.features import compute_features
+
+    info = clf.info
+    w = info.window
+    sig = flog.signals()
+    flights = []
+    for b in range(len(cond)):
+        feats = compute_features({k: v[b] for k, v in sig.items()}, info.features).astype(np.float32)
+        idx = np.arange(len(feats) - w + 1)[:, None] + np.arange(w)[None, :]
+        probs = np.concatenate([clf.predict(feats[idx[i : i + 2048]])[1] for i in range(0, len(idx), 2048)])
+        rates = flog.rates_frd_rad_s[b]
+        # The onset switches at the first physics step at or after onset_s; its first logged sample is the next one.
+        onset_s = float(np.ceil(onset[b] * flog.log_rate_hz) / flog.log_rate_hz) if np.isfinite(onset[b]) else np.inf
+        flights.append(
+            AlertFlight(
+                f"{prefix}-{b}",
+                float(flog.log_rate_hz),
+                w,
+                probs.astype(np.float64),
+                flog.motor_rpm[b].astype(np.float64),
+                flog.motor_rpm[b].mean(axis=1),
+                np.maximum(np.abs(flog.roll_rad[b]), np.abs(flog.pitch_rad[b])),
+                np.abs(rates).max(axis=1),
+                flog.battery_v[b].astype(np.float64),
+                flog.accel_frd_m_s2[b].astype(np.float64),
+                tuple(int(i) + 1 for i in np.flatnonzero(cond[b])),
+                onset_s,
+            )
+        )
+    return flights
+
+
+# -- the evaluation-only simulator (offline/evalsim): never used to calibrate, only to score ---------------
+def evalsim_set(kind: str, n_flights: int, seed: int, clf: Classifier, duration_s: float = 80.0, log=print) -> list[AlertFlight]:
+    """``kind``: evalsim's ``healthy`` (one nuisance each: gusts, CG, weak motor, sag, payload pick-up, ...) or
+    ``onset`` (5-20 % thrust loss on singles and pairs). Each flight goes through its .tlog and the log reader,
+    as diagnose and the daemon would see it (telemetry jitter and drops included)."""
+    import tempfile
+    from pathlib import Path
+
+    from monitor.logs import read_log
+    from monitor.model import choose_esc
+    from offline.evalsim.flight import simulate_flights as evalsim_flights
+    from offline.evalsim.flight import truth
+    from offline.evalsim.sets import build_set
+    from offline.sim.io_tlog import write_tlog
+    from offline.sim.log import BOOT_OFFSET_US
+
+    specs = build_set(kind, flights=n_flights, seed=seed, duration_s=duration_s)
+    esc = choose_esc(clf, "")
+    out = []
+    with tempfile.TemporaryDirectory(prefix="propwatch-alerts-") as tmp:
+        for c0 in range(0, len(specs), 8):
+            chunk = specs[c0 : c0 + 8]
+            for spec, flog in zip(chunk, evalsim_flights(chunk)):
+                path = write_tlog(Path(tmp) / f"{spec.name}.tlog", flog, 0)
+                table = read_log(path, esc=esc, rate_hz=clf.info.sample_rate_hz, extras=True)
+                tr = truth(spec)
+                onset = tr["fault_onset_s"] if tr["faulty_propellers"] else math.inf
+                out.append(_from_table(table, clf, tuple(tr["faulty_propellers"]), onset, BOOT_OFFSET_US, f"evalsim-{spec.name}"))
+            log(f"alerts: evalsim {kind} seed {seed}: {len(out)}/{len(specs)} flights")
+    return out
+
+
+def _from_table(table, clf: Classifier, truth_props, onset_log_s: float, boot_offset_us: int, name: str) -> AlertFlight:
+    from monitor.features import compute_features, valid_windows
+
+    info = clf.info
+    w = info.window
+    feats = compute_features(table.signals(), info.features).astype(np.float32)
+    idx = np.arange(len(feats) - w + 1)[:, None] + np.arange(w)[None, :]
+    probs = np.full((len(idx), 4), np.nan)
+    ok = valid_windows(feats[idx]) & np.array([table.airborne[i].all() for i in idx])
+    good = np.flatnonzero(ok)
+    for i in range(0, len(good), 2048):
+        probs[good[i : i + 2048]] = clf.predict(feats[idx[good[i : i + 2048]]])[1]
+    ts = np.asarray(table.timestamp_us, dtype=np.int64)
+    rate = float(table.rate_hz)
+    # Step j is at (j + 1) / rate s of this flight; the onset is on the log's clock (boot offset + onset).
+    onset_s = (
+        (boot_offset_us + onset_log_s * US_PER_S - ts[0]) / US_PER_S + 1.0 / rate if math.isfinite(onset_log_s) else math.inf
+    )
+    rates = np.abs(np.stack([table.roll_rate_rad_s, table.pitch_rate_rad_s, table.yaw_rate_rad_s], axis=1))
+    acc = table.accel_frd_m_s2 if table.accel_frd_m_s2 is not None else np.full((len(ts), 3), np.nan)
+    return AlertFlight(
+        name,
+        rate,
+        w,
+        probs,
+        np.asarray(table.motor_rpm, dtype=np.float64),
+        np.asarray(table.motor_rpm, dtype=np.float64).mean(axis=1),
+        np.maximum(np.abs(table.roll_rad), np.abs(table.pitch_rad)),
+        np.nanmax(np.where(np.isfinite(rates), rates, -np.inf), axis=1),
+        np.asarray(table.battery_v, dtype=np.float64),
+        np.asarray(acc, dtype=np.float64),
+        truth_props,
+        float(onset_s),
+    )

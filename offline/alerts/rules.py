@@ -1,0 +1,141 @@
+"""Alert rules replayed over one flight's window outputs -> the alerts they would raise.
+
+Times: step j of a flight is at (j + 1) / rate s; window k (hop 1) ends at step
+k + window - 1. Every rule returns ``[(t_s, level, propellers)]``; an empty
+propeller tuple is an alert that names none (vibration metrics).
+
+* ``decision``: ``monitor.decision.Decision``, the shipped rule, fed step by step as the daemon feeds it.
+* ``consecutive``: the rule before it (``monitor.daemon.alerts.AlertRule``: P >= 0.9 in 20 windows in a row).
+* ``px4_imbalance``: PX4's imbalanced-propeller check (commander FailureDetector::updateImbalancedPropStatus):
+  metric = (std(acc_x) + std(acc_y)) / 2 - std(acc_z) from vehicle_imu_status.var_accel, low-passed with a
+  5 s time constant, flagged above FD_IMB_PROP_THR (default 30). Here the variances come from the 20 Hz
+  accelerometer samples over each second (PX4 uses the raw IMU rate; the 1P ripple folds into 20 Hz
+  samples with its variance intact, manoeuvre accelerations are in both).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from monitor.daemon.alerts import AlertRule
+from monitor.daemon.config import AlertConfig
+from monitor.decision import Decision, DecisionConfig, StepInputs, WindowEvidence
+from offline.alerts.flights import AlertFlight
+
+PX4_FD_IMB_PROP_THR = 30.0  # PX4 parameter FD_IMB_PROP_THR default
+PX4_IMB_LPF_TAU_S = 5.0  # FailureDetector _imbalanced_prop_lpf_time_constant
+
+
+def replay_decision(f: AlertFlight, decision: Decision) -> list[tuple[float, str, tuple[int, ...]]]:
+    out = []
+    w = f.window
+    for j in range(len(f.mean_rpm)):
+        t = (j + 1) / f.rate_hz
+        decision.step(t, StepInputs(True, f.mean_rpm[j], f.tilt_rad[j], f.rate_rad_s[j], f.battery_v[j], f.motor_rpm[j]))
+        k = j - w + 1
+        if k >= 0:
+            for a in decision.window_evidence(t, WindowEvidence(f.fault_probability[k])):
+                out.append((t, a.level, a.propellers))
+    return out
+
+
+def decision_rule(cfg: DecisionConfig, calibration=None, use_stored: bool = True):
+    def run(f: AlertFlight):
+        return replay_decision(f, Decision(cfg, f.rate_hz, f.window, calibration=calibration, use_stored_calibration=use_stored))
+
+    return run
+
+
+def consecutive_rule(cfg: AlertConfig):
+    def run(f: AlertFlight):
+        now = [0.0]
+        rule = AlertRule(cfg, clock=lambda: now[0])
+        out = []
+        for k, p in enumerate(f.fault_probability):
+            now[0] = (k + f.window) / f.rate_hz
+            a = rule.update(int(1000 * now[0]), p, np.zeros(16))
+            if a is not None:
+                out.append((now[0], "fault", a.faulty_propellers))
+        return out
+
+    return run
+
+
+def px4_imbalance_metric(f: AlertFlight) -> tuple[np.ndarray, np.ndarray]:
+    """(t_s, low-passed metric) once per second."""
+    n = int(f.rate_hz)
+    blocks = len(f.accel_frd_m_s2) // n
+    acc = f.accel_frd_m_s2[: blocks * n].reshape(blocks, n, 3)
+    std = np.sqrt(np.maximum(acc.var(axis=1), 0.0))
+    metric = (std[:, 0] + std[:, 1]) / 2.0 - std[:, 2]
+    alpha = 1.0 / (1.0 + PX4_IMB_LPF_TAU_S / 1.0)  # AlphaFilter with dt = 1 s
+    lpf, state = np.empty(blocks), 0.0
+    for i, m in enumerate(metric):
+        state += alpha * (m - state)
+        lpf[i] = state
+    return (np.arange(blocks) + 1.0) * n / f.rate_hz, lpf
+
+
+def px4_rule(threshold: float = PX4_FD_IMB_PROP_THR):
+    def run(f: AlertFlight):
+        t, m = px4_imbalance_metric(f)
+        over = np.flatnonzero(m > threshold)
+        return [(float(t[over[0]]), "fault", ())] if len(over) else []
+
+    return run
+
+
+def summarise(rule_alerts: dict[str, list], healthy: list[AlertFlight], onset: list[AlertFlight]) -> dict:
+    """One table row: false alarms per healthy hour (fault and suspect), detection, latency, wrong propellers."""
+    h_alerts, o_alerts = rule_alerts["healthy"], rule_alerts["onset"]
+    hours = sum(f.hours for f in healthy)
+    fa = sum(1 for al in h_alerts for _, lvl, _ in al if lvl == "fault")
+    fs = sum(1 for al in h_alerts for _, lvl, _ in al if lvl == "suspect")
+    lat, hit, wrong, pair_ok, n_single, n_pair, early = [], 0, 0, 0, 0, 0, 0
+    for f, al in zip(onset, o_alerts):
+        truth = set(f.truth)
+        faults = [(t, p) for t, lvl, p in al if lvl == "fault"]
+        early += sum(1 for t, _ in faults if t < f.onset_s)
+        wrong += sum(1 for _, p in faults if p and not set(p) <= truth)
+        after = [(t - f.onset_s, p) for t, p in faults if t >= f.onset_s]
+        if len(truth) == 1:
+            n_single += 1
+            ok = [dt for dt, p in after if truth <= set(p) or not p]
+            if ok:
+                hit += 1
+                lat.append(ok[0])
+        elif len(truth) == 2:
+            n_pair += 1
+            if any(set(p) & truth for _, p in after):
+                pair_ok += 1
+    lat_a = np.asarray(lat)
+    return {
+        "healthy_flights": len(healthy),
+        "healthy_hours": round(hours, 3),
+        "false_alarms": fa,
+        "false_alarms_per_hour": round(fa / hours, 3) if hours else None,
+        "false_alarms_per_hour_upper95": round(_poisson_upper95(fa) / hours, 3) if hours else None,
+        "suspect_false_alarms_per_hour": round(fs / hours, 3) if hours else None,
+        "single_onsets": n_single,
+        "single_detected": round(hit / n_single, 4) if n_single else None,
+        "latency_median_s": round(float(np.median(lat_a)), 2) if len(lat_a) else None,
+        "latency_p95_s": round(float(np.percentile(lat_a, 95)), 2) if len(lat_a) else None,
+        "wrong_propeller_alerts": wrong,
+        "alerts_before_onset": early,
+        "pair_onsets": n_pair,
+        "pair_alert_overlaps_truth": round(pair_ok / n_pair, 4) if n_pair else None,
+    }
+
+
+def _poisson_upper95(k: int) -> float:
+    """One-sided 95 % upper bound of a Poisson mean after k events (k = 0: 3.0, the 'rule of three')."""
+    if k == 0:
+        return -math.log(0.05)
+    lo, hi = float(k), 10.0 * k + 10.0
+    for _ in range(60):  # bisection on P(X <= k | mu) = 0.05
+        mu = (lo + hi) / 2
+        cdf = sum(math.exp(-mu + i * math.log(mu) - math.lgamma(i + 1)) for i in range(k + 1))
+        lo, hi = (mu, hi) if cdf > 0.05 else (lo, mu)
+    return (lo + hi) / 2
