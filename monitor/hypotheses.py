@@ -7,7 +7,8 @@ Split conformal prediction turns that score into a set: on flights of our own si
 physics that the classifier never saw, the threshold is the score the truth reached in all but
 ``1 - coverage`` of them (``offline.classifier.conformal`` fits it and writes ``<model>.sets.json`` beside
 the model). Every set scoring at least the threshold is a hypothesis; the most probable one is always in.
-One member: the verdict is that set. More: physics could not tell them apart, and the output says so.
+One member: the verdict is that set. More: physics could not tell them apart, and the output says so
+(the daemon words it as `monitor.decision.statustext` does: ``PROP 1 or 1+2?``).
 
 The coverage holds for flights like the calibration flights (whole flights of that simulator, the
 airframe as its file says); it is a statement about that population, not a promise on any one log.
@@ -25,7 +26,6 @@ from monitor.errors import ModelError
 from monitor.labels import LABEL_TABLE, N_LABELS
 
 SCORES = ("classifier", "classifier x moment balance", "moment balance")
-MAX_TEXT_CHARS = 50  # MAVLink STATUSTEXT text field
 
 
 @dataclass(frozen=True)
@@ -92,21 +92,3 @@ def hypothesis_set(scores: np.ndarray, threshold: float) -> list[dict]:
     order = np.argsort(-scores, kind="stable")
     keep = [int(k) for k in order if scores[k] >= threshold] or [int(order[0])]
     return [{"faulty_propellers": list(LABEL_TABLE[k + 1]), "probability": round(float(scores[k]), 4)} for k in keep]
-
-
-def _name(props: list[int]) -> str:
-    return "+".join(str(p) for p in props) if props else "none"
-
-
-def alert_text(hypotheses: list[dict]) -> str:
-    """STATUSTEXT for a hypothesis set: ``PROP 3 FAULT`` for one faulty set, ``PROP 1 or 1+2?`` when physics
-    could not tell them apart, ``PROP OK`` for healthy alone; at most 50 characters."""
-    sets = [h["faulty_propellers"] for h in hypotheses]
-    if len(sets) == 1:
-        return f"PROP {_name(sets[0])} FAULT" if sets[0] else "PROP OK"
-    text = "PROP " + " or ".join(_name(s) for s in sets) + "?"
-    if len(text) <= MAX_TEXT_CHARS:
-        return text
-    # Too many to list: the propellers any hypothesis names.
-    props = sorted({p for s in sets for p in s})
-    return f"PROP {_name(props)}? {len(sets)} sets possible"[:MAX_TEXT_CHARS]
