@@ -107,21 +107,30 @@ def result_from_dict(d: dict) -> Result:
     )
 
 
-def ablation_from(folder: Path) -> CardTable | None:
-    """The ablation card table from a folder of experiments JSON (rows in EXPERIMENTS order), None when empty."""
+def ablation_from(folder: Path, tracked: CardTable | None = None) -> CardTable | None:
+    """The ablation card table from a folder of experiments JSON, None when empty. Rows of ``tracked`` (the
+    card's table so far) that the folder does not hold are kept: a folder with one new row adds that row."""
     rows = []
     for name in EXPERIMENTS:
         f = folder / f"{name}.json"
         if f.is_file():
             rows.append(json.loads(f.read_text(encoding="utf-8")))
-    return ablation_card_table(rows, EVAL_SETS) if rows else None
+    if not rows:
+        return None
+    table = ablation_card_table(rows, EVAL_SETS)
+    if tracked is None or tracked.columns != table.columns:
+        return table
+    by_name = {r[0]: r for r in tracked.rows} | {r[0]: r for r in table.rows}
+    order = [n for n in EXPERIMENTS if n in by_name] + [n for n in by_name if n not in EXPERIMENTS]
+    return dataclasses.replace(table, rows=tuple(by_name[n] for n in order))
 
 
 def write_card_from(out: Path, manifest: dict, results: list[Result], ablation_dir: Path | None) -> Path:
     """Refresh the ablation table from ``ablation_dir`` (when given and not empty), then write the card from the
     manifest and the tracked tables file only."""
     tables_path = out / TABLES_FILE
-    table = ablation_from(ablation_dir) if ablation_dir is not None else None
+    tracked = next((t for t in load_tables(tables_path) if t.key == "ablation"), None) if tables_path.is_file() else None
+    table = ablation_from(ablation_dir, tracked) if ablation_dir is not None else None
     if table is not None:
         upsert_table(tables_path, table)
     return write_card(out / "classifier.card.md", manifest, results, load_tables(tables_path))
