@@ -69,6 +69,9 @@ PX4_DOCS = "PX4 v1.14 parameter reference (mc_rate_control / mc_att_control / mc
 # Damaged blades: no public load-cell data exists for bent or cracked propellers
 # (../shared/data/README.md); the fixed signatures of offline/propellers/faults.py are one guess inside these ranges.
 _NO_DATA = "no public load-cell measurement of damaged blades exists (../shared/data/README.md)"
+# A damaged blade's torque per unit thrust, relative to healthy: from a 10 % fall (lost lift, less induced
+# drag) to a 30 % rise (offline/propellers/faults.py's fixed signatures imply +5..+25 %, the old training data).
+TORQUE_PER_THRUST_CHANGE = (-0.10, 0.30)
 
 
 def _blade(kind: str, loss_lo, loss_hi, ripple, flutter, fixed: FaultSignature) -> list[Assumption]:
@@ -96,19 +99,18 @@ def _blade(kind: str, loss_lo, loss_hi, ripple, flutter, fixed: FaultSignature) 
         ),
         Assumption(
             f"{kind}_torque_per_thrust_change_low_frac",
-            -0.08,
-            0.10,
+            *TORQUE_PER_THRUST_CHANGE,
             fixed_c_lo,
             "change of drag torque per unit thrust at low speed, both signs: more profile drag raises it, lost lift "
-            "lowers induced drag and may lower it; nobody has measured which wins (issue 12). The fixed signature "
-            f"implies {100 * fixed_c_lo:+.0f} %, outside this range: it was one guess, always up.",
+            "lowers induced drag and may lower it; nobody has measured which wins (issue 12). The range runs from a "
+            f"10 % fall to the fixed signature's rise ({100 * fixed_c_lo:+.0f} % here, up to +25 % at full speed): "
+            "every guess made so far lies inside it, none is favoured.",
             (4,),
             group=g,
         ),
         Assumption(
             f"{kind}_torque_per_thrust_change_high_frac",
-            -0.08,
-            0.10,
+            *TORQUE_PER_THRUST_CHANGE,
             fixed_c_hi,
             f"as the low-speed entry, at full speed (fixed signature: {100 * fixed_c_hi:+.0f} %).",
             (4,),
