@@ -49,10 +49,13 @@ models: propellers classifier
 FLIGHTS ?= 60
 DURATION ?= 80
 AIRFRAME ?= nominal
+SEED ?= 7
+NAME ?= RN
+RANDOMISED_OUT ?= $(OUT)/data-randomised
 dataset-randomised: $(STAMP)
-	$(BIN)/propwatch dataset --name RN --waypoints random --payload 0,0.6 --fault varied --physics randomised \
-		--airframe $(AIRFRAME) --propellers quadratic --flights-per-label $(FLIGHTS) --duration $(DURATION) --seed 7 \
-		--out $(OUT)/data-randomised
+	$(BIN)/propwatch dataset --name $(NAME) --waypoints random --payload 0,0.6 --fault varied --physics randomised \
+		--airframe $(AIRFRAME) --propellers quadratic --flights-per-label $(FLIGHTS) --duration $(DURATION) --seed $(SEED) \
+		--out $(RANDOMISED_OUT)
 
 # Every figure of models/classifier.card.md from nothing: the paper sets, the ablation's training sets,
 # every ablation row, then the shipped model from the last row's checkpoint, its onboard figures and the
@@ -68,8 +71,15 @@ card: $(STAMP)
 	mkdir -p $(CARD)/data60 && cp $(CARD)/data30/[ABC]-*.npz $(CARD)/data30/[ABC]-*.manifest.json $(CARD)/data60/
 	$(BIN)/propwatch dataset $(RSET) --fault varied --flights-per-label 60 --out $(CARD)/data60
 	$(BIN)/python -m offline.classifier.experiments --data $(CARD)/data60 --out $(CARD)/experiments --only x60
-	$(BIN)/python -m offline.classifier.build_shipped --out models --data $(CARD)/data60 --reuse \
-		--ablation $(CARD)/experiments --checkpoint "$(CARD)/experiments/varied x60 flights +yaw robust dropout.pt"
+	$(MAKE) dataset-randomised RANDOMISED_OUT=$(CARD)/dataRN
+	cp $(CARD)/data30/[ABC]-*.npz $(CARD)/data30/[ABC]-*.manifest.json $(CARD)/dataRN/
+	$(BIN)/python -m offline.classifier.experiments --data $(CARD)/dataRN --out $(CARD)/experiments --only randomised
+	$(BIN)/python -m offline.classifier.build_shipped --out models --data $(CARD)/dataRN --reuse \
+		--ablation $(CARD)/experiments --checkpoint "$(CARD)/experiments/randomised physics x60 +yaw robust dropout.pt"
+	$(MAKE) dataset-randomised RANDOMISED_OUT=$(CARD)/dataRNcal FLIGHTS=10 SEED=8 NAME=RNcal
+	$(MAKE) dataset-randomised RANDOMISED_OUT=$(CARD)/dataRRcal FLIGHTS=10 SEED=8 NAME=RRcal AIRFRAME=drawn
+	$(BIN)/python -m offline.classifier.conformal --model models/classifier.onnx --data $(CARD)/dataRNcal/RNcal-varied.npz \
+		--check $(CARD)/dataRRcal/RRcal-varied.npz
 
 card-text: $(STAMP)
 	$(BIN)/python -m offline.classifier.build_shipped --card-only --out models

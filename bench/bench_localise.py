@@ -5,8 +5,9 @@ simulated (offline.dataset, LSTM propellers as the shipped classifier was traine
 gets three verdicts:
 - ``physics``: the most probable propeller set of the moment-balance hypothesis bank
   (monitor.effectiveness, nominal priors, no airframe baseline), its 95 % credible set and size;
-- each classifier given with ``--model NAME=PATH`` (default: the shipped one), the label with the highest mean
-  probability over its windows;
+- each classifier given with ``--model NAME=PATH`` (default: the shipped one) as ``propwatch diagnose`` runs it
+  (``monitor.diagnose.engine.diagnose_table`` after the first 5 s, with the vehicle for the moment balance): the
+  verdict's set, which is the conformal set's most probable member when the model has a rule beside it;
 - ``share``: the ω²-share baseline (the rotor with the largest flight-mean share of ω²; always one rotor).
 Run: ``python bench/bench_localise.py [--flights-per-label 1] [--duration-s 80] [--model NAME=PATH ...] [--json out.json]``.
 """
@@ -20,8 +21,10 @@ from pathlib import Path
 
 import numpy as np
 
+from monitor.diagnose.engine import diagnose_table
 from monitor.effectiveness import HYPOTHESES, Evidence, HypothesisBank, Priors, RotorGeometry, credible_set
 from monitor.features import compute_features, sliding_windows
+from monitor.flight import FlightTable
 from monitor.labels import LABEL_TABLE
 from monitor.model import Classifier
 from monitor.vehicle import DEFAULT_VEHICLE, REPO_ROOT, load_vehicle
@@ -43,6 +46,31 @@ def share_verdicts(ds):
     u = np.square(ds.signals["motor_rpm"][:, WARMUP_STEPS:, :].astype(np.float64))
     share = u.mean(axis=1) / u.mean(axis=(1, 2))[:, None]
     return [(int(np.argmax(s)) + 1,) for s in share]
+
+
+def flight_table(ds, f: int) -> FlightTable:
+    """Flight ``f`` of a data set as a log reader would give it, from the end of the first 5 s (airborne)."""
+    sig = {k: np.asarray(v[f, WARMUP_STEPS:], dtype=np.float64) for k, v in ds.signals.items()}
+    n = len(sig["roll_rad"])
+    step_us = round(1e6 / ds.sample_rate_hz)
+    return FlightTable(
+        timestamp_us=(np.arange(n, dtype=np.int64) + WARMUP_STEPS) * step_us,
+        motor_cmd=np.full((n, 4), np.nan),
+        battery_v=np.full(n, np.nan),
+        airborne=np.ones(n, dtype=bool),
+        rate_hz=ds.sample_rate_hz,
+        source=f"{ds.name}[{f}]",
+        **sig,
+    )
+
+
+def system_verdicts(ds, clf: Classifier, vehicle, hop: int = 10):
+    """The verdict ``propwatch diagnose`` gives each flight (its propeller set)."""
+    out = []
+    for f in range(ds.n_flights):
+        d = diagnose_table(flight_table(ds, f), clf, hop=hop, vehicle=vehicle)
+        out.append(tuple(d.verdict["faulty_propellers"]) if d.verdict else None)
+    return out
 
 
 def cnn_verdicts(ds, clf: Classifier, hop: int = 10):
@@ -104,7 +132,7 @@ def main(argv=None) -> int:
             truth = [tuple(i + 1 for i in range(4) if c[i]) for c in ds.conditions]
             phys = physics_verdicts(ds, bank, geometry, priors)
             row = {"set": spec.name, "flights": ds.n_flights, "physics": score(truth, [p[0] for p in phys])}
-            row["models"] = {label: score(truth, cnn_verdicts(ds, clf)) for label, clf in models.items()}
+            row["models"] = {label: score(truth, system_verdicts(ds, clf, vehicle)) for label, clf in models.items()}
             row["share"] = score(truth, share_verdicts(ds))
             row["physics_set_coverage"] = float(np.mean([t in p[1] for t, p in zip(truth, phys)]))
             row["physics_set_size"] = float(np.mean([len(p[1]) for p in phys]))

@@ -1,12 +1,14 @@
 """The verdict as a small set of propeller-set hypotheses with a stated coverage (issue 12, point 4).
 
 A flight's score over the 16 propeller sets is the classifier's mean label probability over its windows,
-optionally times the moment balance's likelihood of each set (``monitor.effectiveness``), renormalised.
+that times the moment balance's likelihood of each set (``monitor.effectiveness``), or that likelihood
+alone, renormalised: the calibration picks one of the three on our own data.
 Split conformal prediction turns that score into a set: on flights of our own simulator with randomised
 physics that the classifier never saw, the threshold is the score the truth reached in all but
 ``1 - coverage`` of them (``offline.classifier.conformal`` fits it and writes ``<model>.sets.json`` beside
 the model). Every set scoring at least the threshold is a hypothesis; the most probable one is always in.
-One member: the verdict is that set. More: physics could not tell them apart, and the output says so.
+One member: the verdict is that set. More: physics could not tell them apart, and the output says so
+(the daemon words it as `monitor.decision.statustext` does: ``PROP 1 or 1+2?``).
 
 The coverage holds for flights like the calibration flights (whole flights of that simulator, the
 airframe as its file says); it is a statement about that population, not a promise on any one log.
@@ -23,8 +25,7 @@ import numpy as np
 from monitor.errors import ModelError
 from monitor.labels import LABEL_TABLE, N_LABELS
 
-SCORES = ("classifier", "classifier x moment balance")
-MAX_TEXT_CHARS = 50  # MAVLink STATUSTEXT text field
+SCORES = ("classifier", "classifier x moment balance", "moment balance")
 
 
 @dataclass(frozen=True)
@@ -77,9 +78,11 @@ def flight_score(label_probability: np.ndarray, physics_log_likelihood: np.ndarr
     p = np.asarray(label_probability, dtype=np.float64)
     if p.shape != (N_LABELS,) or not np.all(np.isfinite(p)):
         raise ValueError(f"label_probability must be {N_LABELS} finite values")
-    if score == "classifier x moment balance" and physics_log_likelihood is not None:
+    if score != "classifier" and physics_log_likelihood is not None:
         ll = np.asarray(physics_log_likelihood, dtype=np.float64)
-        logp = np.log(np.maximum(p, 1e-12)) + (ll - ll.max())
+        logp = ll - ll.max()
+        if score == "classifier x moment balance":
+            logp = logp + np.log(np.maximum(p, 1e-12))
         p = np.exp(logp - logp.max())
     return p / p.sum()
 
@@ -89,21 +92,3 @@ def hypothesis_set(scores: np.ndarray, threshold: float) -> list[dict]:
     order = np.argsort(-scores, kind="stable")
     keep = [int(k) for k in order if scores[k] >= threshold] or [int(order[0])]
     return [{"faulty_propellers": list(LABEL_TABLE[k + 1]), "probability": round(float(scores[k]), 4)} for k in keep]
-
-
-def _name(props: list[int]) -> str:
-    return "+".join(str(p) for p in props) if props else "none"
-
-
-def alert_text(hypotheses: list[dict]) -> str:
-    """STATUSTEXT for a hypothesis set: ``PROP 3 FAULT`` for one faulty set, ``PROP 1 or 1+2?`` when physics
-    could not tell them apart, ``PROP OK`` for healthy alone; at most 50 characters."""
-    sets = [h["faulty_propellers"] for h in hypotheses]
-    if len(sets) == 1:
-        return f"PROP {_name(sets[0])} FAULT" if sets[0] else "PROP OK"
-    text = "PROP " + " or ".join(_name(s) for s in sets) + "?"
-    if len(text) <= MAX_TEXT_CHARS:
-        return text
-    # Too many to list: the propellers any hypothesis names.
-    props = sorted({p for s in sets for p in s})
-    return f"PROP {_name(props)}? {len(sets)} sets possible"[:MAX_TEXT_CHARS]

@@ -64,3 +64,20 @@ def test_a_malformed_table_is_refused_by_name(tmp_path):
     (tmp_path / TABLES_FILE).write_text('{"format_version": 1, "tables": [{"key": "k"}]}', encoding="utf-8")
     with pytest.raises(ModelError, match=TABLES_FILE):
         load_tables(tmp_path / TABLES_FILE)
+
+
+def test_an_experiments_folder_with_one_row_adds_it_and_keeps_the_tracked_rows(tmp_path):
+    from offline.classifier.experiments import EVAL_SETS, EXPERIMENTS
+
+    manifest, results = _copy_models(tmp_path)
+    before = next(t for t in load_tables(tmp_path / TABLES_FILE) if t.key == "ablation")
+    name = list(EXPERIMENTS)[-1]
+    row = {"name": name, "results": [{"name": f"{e} (x)", "accuracy": 0.5} for e in EVAL_SETS]}
+    folder = tmp_path / "experiments"
+    folder.mkdir()
+    (folder / f"{name}.json").write_text(json.dumps(row))
+    write_card_from(tmp_path, manifest, results, folder)
+    after = next(t for t in load_tables(tmp_path / TABLES_FILE) if t.key == "ablation")
+    kept = [r for r in before.rows if r[0] != name]
+    assert [r for r in after.rows if r[0] != name] == kept and len(kept) >= 5
+    assert after.rows[-1] == (name, *("50.00",) * len(EVAL_SETS))

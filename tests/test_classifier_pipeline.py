@@ -170,28 +170,11 @@ def test_shipped_build_reuses_what_the_dataset_cli_makes():
             ["--sets", "A,B,C", "--fault", "bent,cracked", "--flights-per-label", "5", "--propellers", "quadratic"]
         )
     )
+    # = `make dataset-randomised` (Makefile): the training set, physics drawn from the register
     cli += specs_from_args(
         build_parser().parse_args(
-            [
-                "--name",
-                "R",
-                "--waypoints",
-                "random",
-                "--payload",
-                "0,0.6",
-                "--wind",
-                "3",
-                "--variants",
-                "8",
-                "--fault",
-                "varied",
-                "--flights-per-label",
-                "60",
-                "--propellers",
-                "quadratic",
-                "--seed",
-                "7",
-            ]
+            "--name RN --waypoints random --payload 0,0.6 --fault varied --physics randomised --airframe nominal "
+            "--propellers quadratic --flights-per-label 60 --duration 80 --seed 7".split()
         )
     )
     shipped = data_specs("quadratic", 60, 5)
@@ -205,4 +188,5 @@ def test_shipped_configuration_is_the_ablations_last_row():
     from offline.classifier.experiments import EXPERIMENTS
 
     sets, changes = EXPERIMENTS[SHIPPED_ROW]
-    assert sets == ("R-varied",) and dataclasses.replace(TrainConfig(), **changes) == SHIPPED
+    assert sets == ("RN-varied",) and dataclasses.replace(TrainConfig(), **changes) == SHIPPED
+    assert list(EXPERIMENTS)[-1] == SHIPPED_ROW

@@ -187,3 +187,35 @@ def test_a_verdict_below_the_stated_probability_is_not_faulty_and_exits_3(capsys
     assert not any(p["faulty"] for p in res["propellers"])
     code, out = run(capsys, logs[2], "--model", model)
     assert code == 3 and "<- FAULTY" not in out and f"{v['confidence']} (label probability" in out
+
+
+def test_a_conformal_rule_beside_the_model_gives_the_hypothesis_set(capsys, model, logs, tmp_path):
+    import shutil
+
+    from monitor.hypotheses import rule_path
+
+    ruled = tmp_path / "ruled.onnx"
+    shutil.copy(model, ruled)
+
+    def with_threshold(thr):
+        rule = {"rule": {"score": "classifier x moment balance", "threshold": thr, "coverage": 0.95, "calibration_flights": 160}}
+        rule_path(ruled).write_text(json.dumps(rule))
+        return run(capsys, logs[2], "--model", ruled, "--json")
+
+    # A threshold only the best set reaches: one hypothesis, confident, FAULTY.
+    code, res = with_threshold(0.999999)
+    assert [h["faulty_propellers"] for h in res["hypotheses"]] == [res["verdict"]["faulty_propellers"]]
+    assert res["hypothesis_rule"]["threshold"] == 0.999999 and res["hypothesis_rule"]["calibration_flights"] == 160
+    assert code == 0 and res["verdict"]["confidence"] == "confident"
+    assert [p["px4_rotor"] for p in res["propellers"] if p["faulty"]] == res["verdict"]["faulty_propellers"]
+    # A threshold every set reaches: all 16 are possible, so nothing is called FAULTY and the exit code says so.
+    code, res = with_threshold(1e-300)
+    assert len(res["hypotheses"]) == 16 and res["verdict"]["confidence"] == "ambiguous" and code == 3
+    p = [h["probability"] for h in res["hypotheses"]]
+    assert p == sorted(p, reverse=True) and res["verdict"]["faulty_propellers"] == res["hypotheses"][0]["faulty_propellers"]
+    assert not any(x["faulty"] for x in res["propellers"])
+    code, out = run(capsys, logs[2], "--model", ruled)
+    assert code == 3 and "cannot tell apart" in out and "<- FAULTY" not in out
+    rule_path(ruled).write_text("{")  # a damaged rule is an error naming the file, not a silent fallback
+    assert diagnose([str(logs[2]), "--model", str(ruled), "--json"]) == 2
+    assert "ruled.sets.json" in capsys.readouterr().err

@@ -118,11 +118,11 @@ def hidden_loss_flights():
     )
     sig = log.signals()
     rates = np.stack([sig["roll_rate_rad_s"], sig["pitch_rate_rad_s"], sig["yaw_rate_rad_s"]], axis=-1)
-    return log.motor_rpm, rates, truth
+    return log.motor_rpm, rates, truth, log
 
 
 def test_hidden_thrust_loss_recovered_within_two_points_from_5_s(hidden_loss_flights):
-    rpm, rates, truth = hidden_loss_flights
+    rpm, rates, truth, _ = hidden_loss_flights
     bank = HypothesisBank(Priors(), GEOM, KNOWN_AIRFRAME)
     for i, (rotor, loss) in enumerate(truth):
         for start in (100, 300):  # 5 s windows after the first 5 s
@@ -137,6 +137,23 @@ def test_hidden_thrust_loss_recovered_within_two_points_from_5_s(hidden_loss_fli
             # effectiveness of the damaged rotor under its own hypothesis: within 2 points
             k = HYPOTHESES.index((rotor + 1,))
             assert v.thrust_fraction[k][rotor] == pytest.approx(1.0 - loss, abs=0.02), (i, start)
+
+
+def test_diagnose_reports_the_balance_reading_not_the_register_range(hidden_loss_flights):
+    # A 20 % loss lies beyond the register's damaged-blade range (3-12 % at hover): the hypotheses weigh it with
+    # the register's prior, but the effectiveness diagnose reports is the balance's own reading.
+    from monitor.diagnose.physics import physics_evidence
+
+    _, _, truth, log = hidden_loss_flights
+    for i, (rotor, loss) in enumerate(truth):
+        if rotor is None or loss < 0.2:
+            continue
+        ev, why_not = physics_evidence(log.to_flight_table(i), VEHICLE)
+        assert why_not is None and ev.hypotheses[0]["faulty_propellers"] == [rotor + 1]
+        assert ev.rotor_effectiveness[rotor] == pytest.approx(0.80, abs=0.01), (rotor, ev.rotor_effectiveness)
+        assert ev.rotor_effectiveness_std[rotor] < 0.02
+        others = [ev.rotor_effectiveness[r] for r in range(4) if r != rotor]
+        assert np.allclose(others, 1.0, atol=0.01)
 
 
 def test_same_spin_pair_without_yaw_signature_is_reported_ambiguous():

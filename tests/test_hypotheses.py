@@ -8,8 +8,7 @@ import numpy as np
 import pytest
 
 from monitor.errors import ModelError
-from monitor.hypotheses import MAX_TEXT_CHARS, alert_text, flight_score, hypothesis_set, load_rule, rule_path
-from monitor.labels import LABEL_TABLE
+from monitor.hypotheses import flight_score, hypothesis_set, load_rule, rule_path
 from offline.classifier.conformal import conformal_threshold, measure
 
 
@@ -54,20 +53,12 @@ def test_moment_balance_likelihood_moves_the_score():
     fused = flight_score(p, ll, "classifier x moment balance")
     assert np.argmax(fused) == 3 and fused.sum() == pytest.approx(1.0)
     assert np.allclose(flight_score(p, ll, "classifier"), p)  # the classifier alone ignores it
+    p2 = np.full(16, 0.5 / 15)
+    p2[0] = 0.5
+    assert np.argmax(flight_score(p2, ll, "moment balance")) == 3  # the balance alone ignores the classifier
     assert np.allclose(flight_score(p, None, "classifier x moment balance"), p)  # no balance: classifier alone
     with pytest.raises(ValueError):
         flight_score(np.full(16, np.nan), None, "classifier")
-
-
-def test_alert_text_says_what_physics_cannot_tell():
-    one = [{"faulty_propellers": [3], "probability": 0.97}]
-    assert alert_text(one) == "PROP 3 FAULT"
-    two = [{"faulty_propellers": [1], "probability": 0.6}, {"faulty_propellers": [1, 2], "probability": 0.3}]
-    assert alert_text(two) == "PROP 1 or 1+2?"
-    with_ok = [{"faulty_propellers": [1, 2], "probability": 0.5}, {"faulty_propellers": [], "probability": 0.4}]
-    assert alert_text(with_ok) == "PROP 1+2 or none?"
-    every = [{"faulty_propellers": list(v), "probability": 1 / 16} for v in LABEL_TABLE.values()]
-    assert len(alert_text(every)) <= MAX_TEXT_CHARS and "1+2+3+4" in alert_text(every)
 
 
 def test_rule_file_is_read_and_a_bad_one_is_named(tmp_path):

@@ -12,7 +12,8 @@ Output with ``--json`` (stdout), for one LOG (every key: docs/diagnose-json.md):
     {"log": PATH,
      "verdict": {"label": N, "faulty_propellers": [PX4 numbers], "faulty_names": [...],
                  "fault_probability": [p1, p2, p3, p4],
-                 "confidence": "confident" | "suspect" | "uncertain", "label_probability_of_verdict": p,
+                 "confidence": "confident" | "ambiguous" | "suspect" | "uncertain",
+                 "label_probability_of_verdict": p,
                  "agreeing_windows": share, "faulty_probability_required": 0.9} | null,
      "windows": n, "warnings": [...], "reason": null | "why there is no verdict",
      "propellers": [{"propeller": 1, "px4_rotor": 1, "name": "M1", "fault_probability": p, "faulty": bool,
@@ -24,13 +25,20 @@ Output with ``--json`` (stdout), for one LOG (every key: docs/diagnose-json.md):
      "envelope": {"airborne_mean_rpm", "trained_mean_rpm", "rpm_ratio", "rpm_z", "large_attitude_fraction"},
      "decision": {"alerts": [{"t_boot_s", "level": "suspect" | "fault", "propellers", "text"}, ...],
                   "final": {...}},
+     "hypotheses": [{"faulty_propellers": [...], "probability": p}, ...] | null,
+     "hypothesis_rule": {"score", "threshold", "coverage", "calibration_flights"} | null,
+     "rotor_effectiveness": [4 values] | null, "rotor_effectiveness_std": [4 values] | null,
      "baseline": {"basis", "shares", "deviation_spreads", "rotors_beyond_3_spreads", "verdict"}}  (--vehicle DIR only)
 
-Confidence: a propeller is FAULTY only when the verdict's label has mean
-probability >= 0.9 over the windows (``confident``); below that the verdict
-is ``suspect`` (at least half the windows agree on its label) or
-``uncertain``, and says the label probability and the share of windows that
-agree. ``decision`` is the onboard daemon's own rule (monitor.decision: a
+Confidence: a model shipped with a conformal rule (``classifier.sets.json``,
+monitor/hypotheses.py) gives a set of hypotheses: every propeller set whose
+score (the classifier's mean label probability times the moment balance's
+likelihood) reaches the threshold that held the truth in 95 % of randomised
+calibration flights. One set: ``confident``, its propellers FAULTY. More:
+``ambiguous`` (physics cannot tell them apart), the most probable set's
+propellers only ``suspect``. A model without a rule is ``confident`` when the
+label's mean probability is >= 0.9, else ``suspect`` (at least half the
+windows agree on its label) or ``uncertain``. ``decision`` is the onboard daemon's own rule (monitor.decision: a
 CUSUM whose thresholds follow alerts.false_alarms_per_hour) replayed over the
 log: when in the flight it would have said suspect / fault, on which propeller.
 
@@ -40,7 +48,7 @@ Times are seconds on the autopilot's boot clock; a timeline point is the end of
 its window. Floats are rounded to 6 decimals.
 
 Exit code: 0 every log got a confident verdict; 3 some log got a verdict that
-is not confident (suspect or uncertain: no confident verdict); 1 some log got
+is not confident (ambiguous, suspect or uncertain: no confident verdict); 1 some log got
 no verdict at all (the reason says why: outside the model's envelope, no
 airborne flight, ...); 2 some log could not be read (unknown format, missing
 messages, damaged beyond reading, larger or longer than ``--max-seconds``
@@ -167,6 +175,18 @@ class _PrintTrap(io.TextIOBase):
         self.lines = 0
 
 
+def _sets_text(hypotheses: list[dict], names: list[str]) -> str:
+    return " or ".join(
+        (
+            "{" + ", ".join(rotor_name(names[i - 1], i) for i in h["faulty_propellers"]) + "}"
+            if h["faulty_propellers"]
+            else "healthy"
+        )
+        + f" p={h['probability']:.2f}"
+        for h in hypotheses
+    )
+
+
 def format_text(d: Diagnosis) -> str:
     lines = [f"== {d.source}"]
     names = [p["name"] for p in d.propellers]
@@ -196,16 +216,14 @@ def format_text(d: Diagnosis) -> str:
             for i, (n, m, s) in enumerate(zip(names, d.physics.rotor_effectiveness, d.physics.rotor_effectiveness_std))
         )
         lines.append(f"  rotor effectiveness (fraction of nominal thrust, moment balance over {d.physics.windows} x 5 s): {eff}")
-        sets = " or ".join(
-            (
-                "{" + ", ".join(rotor_name(names[i - 1], i) for i in h["faulty_propellers"]) + "}"
-                if h["faulty_propellers"]
-                else "healthy"
-            )
-            + f" p={h['probability']:.2f}"
-            for h in d.physics.hypotheses
-        )
+        sets = _sets_text(d.physics.hypotheses, names)
         lines.append(("  physics cannot tell apart: " if d.physics.ambiguous else "  physics: ") + sets)
+    if d.hypotheses is not None:
+        r = d.hypothesis_rule
+        what = "cannot tell apart" if len(d.hypotheses) > 1 else "one set"
+        lines.append(
+            f"  verdict set ({100 * r['coverage']:.0f} % conformal, {r['score']}; {what}): {_sets_text(d.hypotheses, names)}"
+        )
     for s in d.segments:
         lines.append(f"  airborne {s['start_boot_s']:.1f}-{s['stop_boot_s']:.1f} s boot time ({s['steps']} steps)")
     lines += [f"  warning: {w}" for w in d.warnings]

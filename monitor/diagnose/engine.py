@@ -34,7 +34,8 @@ from monitor.errors import ModelError
 from monitor.esc import EscCurve
 from monitor.features import compute_features, signals_needed, sliding_windows, valid_windows
 from monitor.flight import FlightTable
-from monitor.labels import LABEL_TABLE
+from monitor.hypotheses import SetRule, flight_score, hypothesis_set, load_rule
+from monitor.labels import LABEL_TABLE, label_for
 from monitor.model import Classifier
 from monitor.resample import US_PER_S
 
@@ -67,6 +68,8 @@ class Diagnosis:
     envelope: dict = field(default_factory=dict)  # the figures behind the envelope checks
     decision: dict | None = None  # the shared in-flight rule replayed: {"alerts": [...], "final": {...}}
     physics: PhysicsEvidence | None = None  # rotor effectiveness and the sets the moment balance allows
+    hypotheses: list[dict] | None = None  # the model's conformal set (monitor.hypotheses), when it has a rule
+    hypothesis_rule: dict | None = None  # that rule: score, threshold, coverage, calibration flights
 
     def to_json(self) -> dict:
         """The ``--json`` object (every key documented in docs/diagnose-json.md).
@@ -88,7 +91,8 @@ class Diagnosis:
             "hop_steps": self.hop_steps,
             "envelope": self.envelope,
             "decision": self.decision,
-            "hypotheses": self.physics.hypotheses if self.physics else None,
+            "hypotheses": self.hypotheses if self.hypotheses is not None else (self.physics.hypotheses if self.physics else None),
+            "hypothesis_rule": self.hypothesis_rule,
             "rotor_effectiveness": self.physics.rotor_effectiveness if self.physics else None,
             "rotor_effectiveness_std": self.physics.rotor_effectiveness_std if self.physics else None,
         }
@@ -270,11 +274,17 @@ def diagnose_table(
     p = faults.mean(axis=0)
     d.windows = len(ends)
     cfg = DecisionConfig()
-    confidence, agree = verdict_confidence(labels, label, cfg)
     if vehicle is not None:
         d.physics, why_not = physics_evidence(table, vehicle, window=info.window)
         if why_not:
             d.warnings.append(why_not)
+    rule = load_rule(clf.path)
+    if rule is not None:
+        label = apply_rule(d, rule, mean_labels)
+        agree = float(np.mean(np.argmax(labels, axis=1) + 1 == label))
+        confidence = "confident" if len(d.hypotheses) == 1 else "ambiguous"
+    else:
+        confidence, agree = verdict_confidence(labels, label, cfg)
     d.verdict = {
         "label": label,
         "faulty_propellers": list(LABEL_TABLE[label]),
@@ -293,7 +303,7 @@ def diagnose_table(
             "name": table.motor_names[i],
             "fault_probability": float(p[i]),
             "faulty": (i + 1) in LABEL_TABLE[label] and confidence == "confident",
-            "suspect": (i + 1) in LABEL_TABLE[label] and confidence == "suspect",
+            "suspect": (i + 1) in LABEL_TABLE[label] and confidence in ("suspect", "ambiguous"),
         }
         for i in range(4)
     ]
@@ -304,6 +314,23 @@ def diagnose_table(
         "label": (np.argmax(labels, axis=1) + 1).tolist(),
     }
     return d
+
+
+def apply_rule(d: Diagnosis, rule: SetRule, mean_labels: np.ndarray) -> int:
+    """Set ``d.hypotheses`` from the model's conformal rule; the label of the most probable set.
+
+    The score fuses the moment balance only where the log gave one (``d.physics``); otherwise the classifier's
+    probabilities alone are scored against the same threshold, and ``hypothesis_rule.score`` says so."""
+    ll = np.asarray(d.physics.log_likelihood) if d.physics is not None and d.physics.log_likelihood else None
+    score = rule.score if ll is not None else "classifier"
+    d.hypotheses = hypothesis_set(flight_score(mean_labels, ll, rule.score), rule.threshold)
+    d.hypothesis_rule = {
+        "score": score,
+        "threshold": rule.threshold,
+        "coverage": rule.coverage,
+        "calibration_flights": rule.calibration_flights,
+    }
+    return label_for(d.hypotheses[0]["faulty_propellers"])
 
 
 def verdict_confidence(labels: np.ndarray, label: int, cfg: DecisionConfig) -> tuple[str, float]:

@@ -39,6 +39,7 @@ class PhysicsEvidence:
     rotor_effectiveness_std: list[float]
     windows: int
     fault_probability: list[float]  # P(rotor i in the faulty set), PX4 order
+    log_likelihood: tuple[float, ...] = ()  # marginal log-likelihood of each of the 16 sets (label order)
 
     @property
     def ambiguous(self) -> bool:
@@ -91,7 +92,10 @@ def physics_evidence(
         return None, f"no rotor-effectiveness evidence: no {window}-step airborne window with rates and RPM measured"
     v = HypothesisBank(priors, geometry, baseline).posterior(ev)
     best = v.best
-    eta = v.thrust_fraction[best]
+    # The effectiveness reported is the balance's own least-squares reading under the chosen set, not pulled
+    # toward the register's loss range (Priors.for_measurement); the sets keep the register's prior.
+    measured = HypothesisBank(priors.for_measurement(), geometry, baseline).posterior(ev)
+    eta = measured.thrust_fraction[best]
     lo, hi = PLAUSIBLE_EFFECTIVENESS
     if not np.all((eta >= lo) & (eta <= hi)):
         return None, (
@@ -105,10 +109,11 @@ def physics_evidence(
     ]
     return PhysicsEvidence(
         hypotheses=hyps,
-        rotor_effectiveness=[round(float(x), 4) for x in v.thrust_fraction[best]],
-        rotor_effectiveness_std=[round(float(x), 4) for x in v.thrust_fraction_std[best]],
+        rotor_effectiveness=[round(float(x), 4) for x in eta],
+        rotor_effectiveness_std=[round(float(x), 4) for x in measured.thrust_fraction_std[best]],
         windows=int(ev.windows),
         fault_probability=[round(float(x), 4) for x in v.fault_probability()],
+        log_likelihood=tuple(float(x) for x in v.log_likelihood),
     ), None
 
 

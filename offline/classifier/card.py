@@ -25,7 +25,9 @@ ABLATION_LEGEND = (
     "`+yaw` = the yaw-effectiveness block, `varied` = training set R-varied (a third of flights all bent, a "
     "third all cracked, a third mixed; 30 flights per label), `robust` = median/MAD-scaled, clipped yaw "
     "statistics, `x60 flights` = R-varied with 60 flights per label, `dropout` = dropout 0.3 before the "
-    "output layer."
+    "output layer, `randomised physics` = training set RN (`make dataset-randomised`: every flight's physics and "
+    "fault signature drawn from the register of unmeasured assumptions, damaged blades' torque per thrust of "
+    "both signs, the airframe as its file says; analytic propellers)."
 )
 ABLATION_COMMAND = "make card (python -m offline.classifier.experiments, every row of EXPERIMENTS)"
 
@@ -131,19 +133,13 @@ def write_card(path: str | Path, manifest: dict, results: list[Result], tables: 
         ),
         "",
         "## Training data",
-        f"- {16 * spec['flights_per_label']} simulated {spec['duration_s']:.0f} s flights ({spec['flights_per_label']} per label), "
-        f"random 5-waypoint routes, payload {spec['payload_kg'][0]}..{spec['payload_kg'][1]} kg on the 1.5 kg quad, "
-        f"steady wind up to {spec['wind_max_m_s']} m/s over {spec['vehicle_variants']} vehicle variants"
-        + (
-            " (which did not act on the flights: the vehicle has no drag term, `linear_drag_n_per_m_s` = 0, "
-            "and the simulator applies wind through drag only), "
-            if spec["wind_max_m_s"] > 0 and not _vehicle_has_drag(spec)
-            else ", "
-        )
-        + _FAULT_MODES.get(spec["fault"], f"faults `{spec['fault']}`."),
+        _training_data(spec),
         f"- Propeller models: `{cfg['propellers']}`"
         + (
-            " (analytic fault signatures of `offline/propellers/faults.py`: the LSTM weights were not built when this model was trained)."
+            " (analytic thrust and torque, fault signatures drawn from the register per damaged rotor; the LSTMs "
+            "learned one fixed signature each)."
+            if cfg["propellers"] == "quadratic" and spec.get("physics") == "randomised"
+            else " (analytic fault signatures of `offline/propellers/faults.py`: the LSTM weights were not built when this model was trained)."
             if cfg["propellers"] == "quadratic"
             else " (the paper's stacked LSTMs)."
         ),
@@ -217,6 +213,38 @@ def write_card(path: str | Path, manifest: dict, results: list[Result], tables: 
     path = Path(path)
     path.write_text("\n".join(lines), encoding="utf-8")
     return path
+
+
+def _training_data(spec: dict) -> str:
+    """The training set in a sentence: fixed physics (routes, payload, wind, variants) or drawn from the register."""
+    head = (
+        f"- {16 * spec['flights_per_label']} simulated {spec['duration_s']:.0f} s flights ({spec['flights_per_label']} per "
+        f"label), random 5-waypoint routes, payload {spec['payload_kg'][0]}..{spec['payload_kg'][1]} kg on the 1.5 kg quad, "
+    )
+    if spec.get("physics") == "randomised":
+        airframe = (
+            "the airframe's own terms (CG, motor spread, arm and ESC errors) at the vehicle file's values, as for an "
+            "airframe `propwatch adapt` calibrated"
+            if spec.get("airframe") == "nominal"
+            else "the airframe's own terms drawn too"
+        )
+        return head + (
+            "every flight's physics drawn from the register of unmeasured assumptions (`offline/sim/assumptions.py`: "
+            "damaged blades' thrust loss, torque per thrust of both signs, 1P, flutter; motor lag, ESC, rotor inertia; "
+            f"PX4 gains; IMU noise, bias, delay; telemetry; gusts; battery sag), {airframe}. "
+            + _FAULT_MODES.get(spec["fault"], f"faults `{spec['fault']}`.")
+        )
+    return (
+        head
+        + f"steady wind up to {spec['wind_max_m_s']} m/s over {spec['vehicle_variants']} vehicle variants"
+        + (
+            " (which did not act on the flights: the vehicle has no drag term, `linear_drag_n_per_m_s` = 0, "
+            "and the simulator applies wind through drag only), "
+            if spec["wind_max_m_s"] > 0 and not _vehicle_has_drag(spec)
+            else ", "
+        )
+        + _FAULT_MODES.get(spec["fault"], f"faults `{spec['fault']}`.")
+    )
 
 
 def _vehicle_has_drag(spec: dict) -> bool:

@@ -4,8 +4,8 @@
         --data out/data-rncal/RNcal-varied.npz [--check out/data-rrcal/RRcal-varied.npz] [--coverage 0.95]
 
 For every calibration flight (flights the classifier never trained on, every physics term drawn from the
-assumption register) the two candidate scores of ``monitor.hypotheses`` are computed: the classifier's mean
-label probability, and that times the moment balance's likelihood. For each, the conformal threshold is
+assumption register) the three candidate scores of ``monitor.hypotheses`` are computed: the classifier's mean
+label probability, that times the moment balance's likelihood, and the balance's likelihood alone. For each, the conformal threshold is
 the score the truth reaches in all but ``1 - coverage`` of the flights (the ceil((n+1)·coverage)-th
 smallest nonconformity 1 - score(truth)). The candidate with the smaller mean set size on the calibration
 flights is written as the rule (``<model>.sets.json`` beside the model, with a manifest). ``--check``

@@ -109,14 +109,17 @@ def score(tables: list[tuple[dict, FlightTable]], predictor: Predictor, name: st
 
 
 def classifier_predictor(model_path: str | Path | None = None) -> Predictor:
-    """The shipped classifier through ``monitor.diagnose`` (verdict's propellers and P(faulty))."""
+    """The classifier through ``monitor.diagnose`` as the CLI runs it (with the paper vehicle's geometry for the
+    moment balance): the verdict's propellers, P(faulty) and hypotheses."""
     from monitor.diagnose.engine import diagnose_table
     from monitor.model import Classifier
+    from monitor.vehicle import DEFAULT_VEHICLE, load_vehicle
 
     clf = Classifier(model_path or Path(__file__).resolve().parents[2] / "models" / "classifier.onnx")
+    vehicle = load_vehicle(DEFAULT_VEHICLE)
 
     def predict(table: FlightTable) -> dict:
-        d = diagnose_table(table, clf, hop=1, esc=PAPER_ESC)
+        d = diagnose_table(table, clf, hop=1, esc=PAPER_ESC, vehicle=vehicle)
         if d.verdict is None:
             raise ValueError(d.reason or "no verdict")
         return dict(d.verdict)
