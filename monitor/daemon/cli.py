@@ -36,7 +36,10 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         help="pymavlink URL: udpin:0.0.0.0:14540, udpout:H:P, tcp:H:P, /dev/ttyAMA0,921600, or a .tlog",
     )
     p.add_argument("--config", help="monitor YAML (see deploy/monitor.yaml); defaults for every key")
-    p.add_argument("--events", help="append one JSON line per alert here (overrides events_path)")
+    p.add_argument(
+        "--events",
+        help="append one JSON line per alert, decision pause/resume and blind/recovered spell here (overrides events_path)",
+    )
     p.add_argument("--model", help="classifier ONNX (overrides model_path)")
     p.add_argument(
         "--vehicle", help="vehicle YAML whose ESC curve overrides the model's, or a `propwatch adapt` folder (its model too)"
