@@ -257,6 +257,7 @@ class Announcement:
     severity: int
     statistic: tuple[float, ...]  # S per propeller (nat-seconds)
     evidence: str  # "classifier", "vibration"
+    hypotheses: tuple[tuple[tuple[int, ...], float], ...] = ()  # the flight's set when the model has a rule
 
     def event(self) -> dict:
         return {
@@ -268,6 +269,11 @@ class Announcement:
             "severity": {2: "CRITICAL", 4: "WARNING", 5: "NOTICE"}[self.severity],
             "statistic": [round(s, 3) for s in self.statistic],
             "evidence": self.evidence,
+            **(
+                {"hypotheses": [{"faulty_propellers": list(h), "probability": round(p, 4)} for h, p in self.hypotheses]}
+                if self.hypotheses
+                else {}
+            ),
         }
 
 
@@ -675,7 +681,8 @@ class Decision:
             sev = MAV_SEVERITY_NOTICE if lvl == "suspect" else (MAV_SEVERITY_CRITICAL if len(at) > 1 else MAV_SEVERITY_WARNING)
             p = float(np.nanmax(self._last_p[[i - 1 for i in at]])) if len(sets) == 1 and lvl == "fault" else None
             stat = tuple(float(max(self.S[k][i] / max(self.thresholds.fault[k], 1e-9) for k in STATISTICS)) for i in range(4))
-            out.append(Announcement(t_s, lvl, at, statustext(lvl, sets, p), sev, stat, "classifier"))
+            hyps = tuple(self._last_hypotheses or ())
+            out.append(Announcement(t_s, lvl, at, statustext(lvl, sets, p), sev, stat, "classifier", hyps))
             break  # one announcement per window: the highest level reached
         self.announcements += out
         return out

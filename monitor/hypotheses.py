@@ -35,6 +35,15 @@ class SetRule:
     coverage: float  # target fraction of calibration flights whose truth is in the set
     calibration_flights: int
     source: str = ""
+    # Every candidate score's own calibrated threshold (the JSON's "candidates"), e.g. the classifier alone,
+    # which the daemon scores in flight where the moment balance of whole flights is not at hand.
+    thresholds: tuple[tuple[str, float], ...] = ()
+
+    def threshold_for(self, score: str) -> float | None:
+        """The calibrated threshold of ``score``; None when the calibration did not measure it."""
+        if score == self.score:
+            return self.threshold
+        return dict(self.thresholds).get(score)
 
     def __post_init__(self) -> None:
         if self.score not in SCORES:
@@ -63,6 +72,7 @@ def load_rule(model_path: str | Path) -> SetRule | None:
             coverage=float(r["coverage"]),
             calibration_flights=int(r["calibration_flights"]),
             source=str(path),
+            thresholds=tuple((str(k), float(v["threshold"])) for k, v in (d.get("candidates") or {}).items()),
         )
     except (OSError, ValueError, KeyError, TypeError) as exc:
         raise ModelError(f"{path}: not a set rule ({exc})") from exc
@@ -92,3 +102,26 @@ def hypothesis_set(scores: np.ndarray, threshold: float) -> list[dict]:
     order = np.argsort(-scores, kind="stable")
     keep = [int(k) for k in order if scores[k] >= threshold] or [int(order[0])]
     return [{"faulty_propellers": list(LABEL_TABLE[k + 1]), "probability": round(float(scores[k]), 4)} for k in keep]
+
+
+class FlightSets:
+    """The daemon's running set for one flight: the classifier's mean label probability over the windows since
+    take-off, against the classifier-alone threshold. Calibrated on whole 75 s flights, so early in a flight
+    (fewer windows, noisier mean) its coverage is only approximate; it words alerts, it does not raise them."""
+
+    def __init__(self, rule: SetRule):
+        self.threshold = rule.threshold_for("classifier")
+        self.reset()
+
+    def reset(self) -> None:
+        self._sum, self._n = np.zeros(N_LABELS), 0
+
+    def add(self, label_probability: np.ndarray) -> tuple[tuple[tuple[int, ...], float], ...] | None:
+        """Add one window; the set so far as ((propellers), probability) pairs, None without a threshold."""
+        p = np.asarray(label_probability, dtype=np.float64)
+        if self.threshold is None or p.shape != (N_LABELS,) or not np.all(np.isfinite(p)):
+            return None
+        self._sum += p
+        self._n += 1
+        hyps = hypothesis_set(flight_score(self._sum / self._n, None, "classifier"), self.threshold)
+        return tuple((tuple(h["faulty_propellers"]), h["probability"]) for h in hyps)

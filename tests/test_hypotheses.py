@@ -75,3 +75,35 @@ def test_rule_file_is_read_and_a_bad_one_is_named(tmp_path):
     rule_path(model).write_text("{not json")
     with pytest.raises(ModelError, match="classifier.sets.json"):
         load_rule(model)
+
+
+def test_flight_sets_word_the_daemons_alerts_as_the_flights_hypotheses():
+    from monitor.decision import Decision, DecisionConfig, StepInputs, WindowEvidence
+    from monitor.hypotheses import FlightSets, SetRule
+
+    rule = SetRule("classifier x moment balance", 0.3, 0.95, 160, thresholds=(("classifier", 0.2),))
+    sets = FlightSets(rule)
+    assert sets.threshold == 0.2  # the daemon scores the classifier alone, at its own calibrated threshold
+    p = np.full(16, 0.01)
+    p[1], p[5] = 0.5, 0.35  # {1} or {1, 2}: the network cannot tell whether the same-spin partner is hit too
+    p /= p.sum()
+    hyps = sets.add(p)
+    assert [h for h, _ in hyps] == [(1,), (1, 2)]
+    d = Decision(DecisionConfig(), 20.0, 100, use_stored_calibration=False)
+    ann = []
+    for j in range(1400):
+        t = (j + 1) / 20.0
+        d.step(t, StepInputs(True, 6500.0, 0.02, 0.05, 15.5, np.full(4, 6500.0)))
+        if j >= 99:
+            fp = np.array([0.999 if t > 42.5 else 0.01, 0.01, 0.01, 0.01])
+            ann += d.window_evidence(t, WindowEvidence(fp, p, hypotheses=hyps if t > 42.5 else None))
+    fault = [a for a in ann if a.level == "fault"]
+    assert fault and fault[0].text == "PROP 1 or 1+2?"
+    ev = fault[0].event()
+    assert [h["faulty_propellers"] for h in ev["hypotheses"]] == [[1], [1, 2]]
+    # a model without a classifier threshold gives no set; a new flight starts from nothing
+    assert FlightSets(SetRule("classifier x moment balance", 0.3, 0.95, 160)).add(p) is None
+    sets.reset()
+    q = np.full(16, 0.001)
+    q[0] = 1.0
+    assert [h for h, _ in sets.add(q / q.sum())] == [()]

@@ -30,6 +30,7 @@ from monitor.daemon.link import MAV_CMD_SET_MESSAGE_INTERVAL, Link
 from monitor.daemon.pipeline import Pipeline
 from monitor.daemon.sdnotify import Notifier
 from monitor.decision import Announcement, Decision, EscTelemetry, StepInputs, WindowEvidence, file_sha256
+from monitor.hypotheses import FlightSets, load_rule
 from monitor.resample import US_PER_S
 
 log = logging.getLogger("propwatch.monitor")
@@ -77,6 +78,8 @@ class Daemon:
             pipeline.window,
             model_sha256=file_sha256(pipeline.classifier.path),
         )
+        rule = load_rule(pipeline.classifier.path)  # the model's conformal rule words alerts as hypothesis sets
+        self.flight_sets = FlightSets(rule) if rule is not None else None
         self.esc_telemetry = EscTelemetry()
         self._evidence_t: dict[str, float] = {}  # evidence -> boot time (s) it was last usable
         self._paused = ""  # why the classifier's evidence stopped while airborne ('' = flowing)
@@ -225,6 +228,8 @@ class Daemon:
         """The shared decision rule on one grid step (pause when a stream stopped, never freeze it)."""
         t = step.timestamp_us / US_PER_S
         self._airborne = step.airborne
+        if not step.airborne and self.flight_sets:
+            self.flight_sets.reset()  # a new flight gets a new set
         self.decision.step(t, step.inputs or StepInputs(step.airborne))
         if step.valid:
             self._evidence_t["classifier"] = t
@@ -247,7 +252,8 @@ class Daemon:
         if step.latency_s is not None:
             self.counters.latency.add(step.latency_s)
         self._send_named_values(step)
-        ev = WindowEvidence(step.fault_probability, step.label_probability)
+        hyps = self.flight_sets.add(step.label_probability) if self.flight_sets and step.label_probability is not None else None
+        ev = WindowEvidence(step.fault_probability, step.label_probability, hypotheses=hyps)
         for a in self.decision.window_evidence(t, ev):
             self._announce(a, step.time_boot_ms, step)
 
