@@ -202,3 +202,39 @@ def test_priors_follow_the_assumption_register():
     assert wide.healthy_spread_std == pytest.approx(
         2 * uniform_std(-(spread.low + spread.high) / 2, (spread.low + spread.high) / 2), rel=0.05
     )
+
+
+def test_diagonal_thrusts_balance_whatever_the_damaged_blades_torque_does():
+    # Hand calculation (quad-X, steady flight): roll balance (1,4 right vs 2,3 left) and pitch balance (1,3 front vs
+    # 2,4 rear) force the thrusts of each same-spin diagonal pair equal, T1 = T2 and T3 = T4, so a rotor losing a
+    # fraction L of its thrust must spin at omega^2 ratio 1/(1-L) against its diagonal partner, however its torque
+    # per thrust changes. Yaw balance, (1+c) k (T1+T2) = k (T3+T4), sets the split between the pairs: that is where
+    # the unmeasured torque change c shows, and why the pair split alone cannot locate a fault.
+    from offline.sim.mission import random_waypoints
+    from offline.sim.propeller import QuadraticPropeller
+    from offline.sim.simulator import SimConfig, simulate
+
+    loss = 0.10
+    cs = (-0.10, 0.30)
+    thrust = np.ones((2, 4))
+    thrust[:, 0] = 1.0 - loss  # rotor 1 (front-right, CCW) damaged in both flights
+    torque = thrust.copy()
+    torque[:, 0] *= 1.0 + np.array(cs)
+    log = simulate(
+        VEHICLE,
+        random_waypoints(2, 4, seed=3),
+        QuadraticPropeller.for_vehicle(VEHICLE, thrust, torque),
+        SimConfig(duration_s=30.0),
+        seed=2,
+    )
+    u = np.square(log.motor_omega_rad_s[:, 100:, :]).mean(axis=1)  # actual rotor speeds, after the first 5 s
+    for k, c in enumerate(cs):
+        assert u[k, 0] / u[k, 1] == pytest.approx(1.0 / (1.0 - loss), rel=0.005), c  # the diagonal ratio: c-free
+        assert u[k, 2] / u[k, 3] == pytest.approx(1.0, rel=0.005), c
+        thrust_split = ((1 - loss) * u[k, 0] + u[k, 1]) / (u[k, 2] + u[k, 3])  # CCW pair's thrust over CW pair's
+        # within 2 %: flight-mean squares of a manoeuvring flight, against a split that moves 18 % over the c range
+        assert thrust_split == pytest.approx(2.0 / (2.0 + c), rel=0.02), c
+        omega2_split = (u[k, 0] + u[k, 1]) / (u[k, 2] + u[k, 3])
+        assert omega2_split == pytest.approx((1.0 / (1.0 - loss) + 1.0) / (2.0 + c), rel=0.02), c
+    # so the same damage makes the damaged pair spin faster (torque falling) or slower (rising) than the other pair
+    assert (u[0, 0] + u[0, 1]) / (u[0, 2] + u[0, 3]) > 1.0 > (u[1, 0] + u[1, 1]) / (u[1, 2] + u[1, 3])
