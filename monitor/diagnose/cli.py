@@ -152,17 +152,22 @@ class _PrintTrap(io.TextIOBase):
         self.lines = 0
 
 
-def format_text(d: Diagnosis) -> str:
+def format_text(d: Diagnosis, baseline=None) -> str:
     lines = [f"== {d.source}"]
     names = [p["name"] for p in d.propellers]
     if d.verdict is None:
         lines.append(f"no verdict: {d.reason}")
     else:
-        lines.append(f"verdict: {describe_label(d.verdict['label'], names)}, from {d.windows} windows")
+        what, mark = describe_label(d.verdict["label"], names), "  <- FAULTY"
+        one = d.verdict["faulty_propellers"]
+        if baseline is not None and len(one) == 1:  # CG offset and damage measured alike on this airframe
+            imbalance = baseline.imbalance_wording(rotor_name(names[one[0] - 1], one[0]))
+            what, mark = (f"label {d.verdict['label']}: {imbalance}", "  <- IMBALANCE") if imbalance else (what, mark)
+        lines.append(f"verdict: {what}, from {d.windows} windows")
         for p in d.propellers:
             lines.append(
                 f"  {rotor_name(p['name'], p['propeller'])}: P(faulty) = {p['fault_probability']:.3f}"
-                + ("  <- FAULTY" if p["faulty"] else "")
+                + (mark if p["faulty"] else "")
             )
     if d.physics is not None:
         eff = ", ".join(
@@ -248,7 +253,7 @@ def main(argv: list[str] | None = None) -> int:
         if progress is not None:
             progress.update(size)
         if not args.json:
-            print(format_text(d))
+            print(format_text(d, baseline))
             if baseline is not None and "deviation_spreads" in res["baseline"]:
                 b = res["baseline"]
                 print(
