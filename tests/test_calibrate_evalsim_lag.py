@@ -59,6 +59,7 @@ def test_a_slow_rotor_is_named_with_its_lag(tables):
     assert int(np.argmax(taus)) + 1 == SLOW_ROTOR, taus
     assert abs(taus[SLOW_ROTOR - 1] - SLOW_TAU_S) <= 0.25 * SLOW_TAU_S, taus
     assert r.calibrated.rotor_time_constants_s[SLOW_ROTOR - 1] == pytest.approx(r.calibrated.rotor_time_constants_s.max())
+    assert not [n for n in r.notes if n.startswith("no motor lag named")]
 
 
 @pytest.mark.slow
@@ -67,6 +68,9 @@ def test_no_hidden_lag_names_no_lag(tables):
     named = [f["effect"] for f in r.findings]
     assert not {"rotor_time_constant", "motor_time_constant"} & set(named), named
     assert r.calibrated.motor_time_constant_ratio == (1.0, 1.0, 1.0, 1.0)
+    # The report says how large a lag could hide at this rate, and what the lag terms alone would fit.
+    (note,) = [n for n in r.notes if n.startswith("no motor lag named")]
+    assert "from about 60 ms" in note and "rotor_time_constant alone fits" in note, note
 
 
 def test_per_rotor_lag_filters_each_column_like_the_scalar_lag():
