@@ -257,7 +257,9 @@ def main(argv: list[str] | None = None) -> int:
             if baseline is not None and "deviation_spreads" in res["baseline"]:
                 b = res["baseline"]
                 print(
-                    "  vs this airframe's healthy baseline (spreads): " + ", ".join(f"{x:+.1f}" for x in b["deviation_spreads"])
+                    "  vs this airframe's healthy baseline (spreads): "
+                    + ", ".join(f"{x:+.1f}" for x in b["deviation_spreads"])
+                    + f" -> {b['verdict']}"
                 )
     if progress is not None:
         progress.close()
