@@ -74,6 +74,11 @@ class HealthyBaseline:
     n_flights: int
     files: tuple[str, ...]
     motor_names: tuple[str, str, str, str]
+    # Whether evidence on flights of this kind of airframe tells a CG offset near a rotor (a mass there) from a
+    # damaged propeller on it: False where it was measured not to (CrazyPAD: offline/crazypad/README.md), None
+    # where nobody measured it. False makes `diagnose --vehicle DIR` word a one-rotor verdict as an imbalance.
+    cg_damage_separable: bool | None = None
+    cg_damage_evidence: str = ""  # where that was measured
 
     def spread(self) -> np.ndarray:
         return np.maximum(np.asarray(self.shares_std), SPREAD_FLOOR)
@@ -89,13 +94,24 @@ class HealthyBaseline:
             return {"basis": basis, "note": f"baseline measured on {self.basis} shares, this log gives {basis}: not compared"}
         dev = self.deviation(shares)
         out = [int(i) + 1 for i in np.flatnonzero(np.abs(dev) > OUTLIER_SPREADS)]
-        return {
+        res = {
             "basis": basis,
             "shares": [round(float(s), 4) for s in shares],
             "deviation_spreads": [round(float(d), 2) for d in dev],
             "rotors_beyond_3_spreads": out,
             "verdict": self.verdict(dev),
         }
+        if self.cg_damage_separable is not None:
+            res["cg_damage_separable"] = self.cg_damage_separable
+        return res
+
+    def imbalance_wording(self, rotor: str) -> str | None:
+        """How a one-rotor fault verdict on this airframe is worded (``rotor`` as displayed, e.g. "M3 (PX4 rotor
+        2)"): "imbalance near M3 (PX4 rotor 2): CG offset or damage" where a CG offset and damage were measured
+        not to separate; None (name the fault as the model does) otherwise."""
+        if self.cg_damage_separable is not False:
+            return None
+        return f"imbalance near {rotor}: CG offset or damage"
 
     def verdict(self, dev: np.ndarray) -> str:
         """What the shares alone can say. A rotor that works harder than this airframe's healthy
@@ -124,6 +140,9 @@ class HealthyBaseline:
                 n_flights=int(d["n_flights"]),
                 files=tuple(map(str, d["files"])),
                 motor_names=tuple(map(str, d["motor_names"])),
+                # Absent in baselines written before it existed: not measured.
+                cg_damage_separable=None if d.get("cg_damage_separable") is None else bool(d["cg_damage_separable"]),
+                cg_damage_evidence=str(d.get("cg_damage_evidence", "")),
             )
         except (KeyError, TypeError, ValueError) as exc:
             raise ConfigError(f"{origin or 'baseline'}: malformed healthy baseline: {exc!r}") from exc
@@ -144,7 +163,13 @@ class HealthyBaseline:
             raise ConfigError(f"{path}: cannot read the healthy baseline: {exc}") from exc
 
 
-def baseline_from_tables(tables: list[FlightTable], files: list[str], activity: np.ndarray | None = None) -> HealthyBaseline:
+def baseline_from_tables(
+    tables: list[FlightTable],
+    files: list[str],
+    activity: np.ndarray | None = None,
+    cg_damage_separable: bool | None = None,
+    cg_damage_evidence: str = "",
+) -> HealthyBaseline:
     """The baseline of flights already checked as healthy (``offline.adapt.checks``)."""
     per = [flight_shares(t) for t in tables]
     bases = {b for _, b in per}
@@ -164,4 +189,6 @@ def baseline_from_tables(tables: list[FlightTable], files: list[str], activity: 
         n_flights=len(tables),
         files=tuple(files),
         motor_names=tuple(tables[0].motor_names),
+        cg_damage_separable=cg_damage_separable,
+        cg_damage_evidence=cg_damage_evidence,
     )

@@ -61,6 +61,8 @@ class VehicleConfig:
     # Calibration terms: neutral by default.
     cg_offset_frd_m: Vec3 = (0.0, 0.0, 0.0)
     motor_efficiency: Vec4 = (1.0, 1.0, 1.0, 1.0)  # rotor-speed scale per motor (thrust ~ square)
+    # Per-motor multiple of motor_time_constant_s: one slow motor or ESC (rotor i lags by tau * ratio[i]).
+    motor_time_constant_ratio: Vec4 = (1.0, 1.0, 1.0, 1.0)
     linear_drag_n_per_m_s: Vec3 = (0.0, 0.0, 0.0)
     wind_ned_m_s: Vec3 = (0.0, 0.0, 0.0)
     gyro_bias_frd_rad_s: Vec3 = (0.0, 0.0, 0.0)
@@ -92,6 +94,9 @@ class VehicleConfig:
         for i, e in enumerate(self.motor_efficiency):
             if not 0 < e <= 2:
                 raise ConfigError(f"motor_efficiency[{i}]: must be in (0, 2], got {e}")
+        for i, r in enumerate(self.motor_time_constant_ratio):
+            if not 0 < r <= 20:
+                raise ConfigError(f"motor_time_constant_ratio[{i}]: must be in (0, 20], got {r}")
         if any(d < 0 for d in self.linear_drag_n_per_m_s):
             raise ConfigError("linear_drag_n_per_m_s: must be >= 0")
 
@@ -109,6 +114,11 @@ class VehicleConfig:
         yaw moment of rotor i is ``spin_sign[i] * torque_i``.
         """
         return np.array([1.0 if s == "ccw" else -1.0 for s in self.rotor_spin])
+
+    @property
+    def rotor_time_constants_s(self) -> np.ndarray:
+        """(4,) each rotor's first-order lag, PX4 order."""
+        return self.motor_time_constant_s * np.asarray(self.motor_time_constant_ratio, dtype=np.float64)
 
     @property
     def hover_omega_rad_s(self) -> float:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import contextlib
+import io
 import json
 import struct
 
@@ -85,6 +87,9 @@ def test_adapt_end_to_end_tiny(tmp_path):
     assert res["scores"]["adapted"]["scored"] == 3  # 2 held-out healthy + 1 labelled
     base = HealthyBaseline.load(tmp_path / "baseline.json")
     assert base.n_flights == 4 and base.motor_names == ("M1", "M3", "M4", "M2") and base.activity is not None
+    # Measured on the shared CrazyPAD flights: masses near M3 and a damaged M3 look alike (offline/crazypad/README.md).
+    assert base.cg_damage_separable is False and "crazypad_separation" in base.cg_damage_evidence
+    assert "**CG offset or damage**: not separable" in (tmp_path / "card.md").read_text()
     # The baseline sees the cut M3 (PX4 rotor 2) far outside this airframe's healthy spread.
     from monitor.logs import read_log
     from monitor.vehicle import load_vehicle
@@ -101,8 +106,17 @@ def test_adapt_end_to_end_tiny(tmp_path):
     # diagnose --vehicle DIR uses the folder's model and baseline.
     from monitor.diagnose.cli import main
 
+    out, text = io.StringIO(), io.StringIO()
     # A verdict (3: not a confident one, which a tiny adapt run may well give) or a stated refusal; never unreadable.
-    assert main([cut.rsplit("=", 1)[0], "--format", "crazypad", "--vehicle", str(tmp_path), "--json"]) in (0, 1, 3)
+    with contextlib.redirect_stdout(out):
+        assert main([cut.rsplit("=", 1)[0], "--format", "crazypad", "--vehicle", str(tmp_path), "--json"]) in (0, 1, 3)
+    with contextlib.redirect_stdout(text):
+        main([cut.rsplit("=", 1)[0], "--format", "crazypad", "--vehicle", str(tmp_path)])
+    res = json.loads(out.getvalue())
+    assert res["baseline"]["cg_damage_separable"] is False
+    # Whatever the tiny model says: a one-rotor verdict is worded as an imbalance, never as a named fault.
+    if res["verdict"] and len(res["verdict"]["faulty_propellers"]) == 1:
+        assert ": CG offset or damage, from" in text.getvalue() and " faulty, from" not in text.getvalue(), text.getvalue()
 
 
 def test_baseline_deviation_by_hand():

@@ -31,7 +31,15 @@ def test_paper_vehicle_loads_with_every_value_cited():
     assert len(lv.sources) == n_leaves - sum(
         1
         for k in flat
-        if k in ("cg_offset_frd_m", "motor_efficiency", "linear_drag_n_per_m_s", "wind_ned_m_s", "gyro_bias_frd_rad_s")
+        if k
+        in (
+            "cg_offset_frd_m",
+            "motor_efficiency",
+            "motor_time_constant_ratio",
+            "linear_drag_n_per_m_s",
+            "wind_ned_m_s",
+            "gyro_bias_frd_rad_s",
+        )
     )
 
 

@@ -187,15 +187,20 @@ def _sets_text(hypotheses: list[dict], names: list[str]) -> str:
     )
 
 
-def format_text(d: Diagnosis) -> str:
+def format_text(d: Diagnosis, baseline=None) -> str:
     lines = [f"== {d.source}"]
     names = [p["name"] for p in d.propellers]
     if d.verdict is None:
         lines.append(f"no verdict: {d.reason}")
     else:
         conf = d.verdict.get("confidence", "confident")
+        what, mark = describe_label(d.verdict["label"], names, conf), "  <- FAULTY"
+        one = d.verdict["faulty_propellers"]
+        if baseline is not None and len(one) == 1:  # CG offset and damage measured alike on this airframe
+            imbalance = baseline.imbalance_wording(rotor_name(names[one[0] - 1], one[0]))
+            what, mark = (f"label {d.verdict['label']}: {imbalance}", "  <- IMBALANCE") if imbalance else (what, mark)
         lines.append(
-            f"verdict: {describe_label(d.verdict['label'], names, conf)}, from {d.windows} windows: {conf} (label probability "
+            f"verdict: {what}, from {d.windows} windows: {conf} (label probability "
             + f"{d.verdict.get('label_probability_of_verdict', float('nan')):.2f}, "
             + f"{100 * d.verdict.get('agreeing_windows', float('nan')):.0f} % of windows agree; marked FAULTY from "
             + f"{d.verdict.get('faulty_probability_required', float('nan')):.2f})"
@@ -203,7 +208,7 @@ def format_text(d: Diagnosis) -> str:
         for p in d.propellers:
             lines.append(
                 f"  {rotor_name(p['name'], p['propeller'])}: P(faulty) = {p['fault_probability']:.3f}"
-                + ("  <- FAULTY" if p["faulty"] else "  <- suspect" if p.get("suspect") else "")
+                + (mark if p["faulty"] else "  <- suspect" if p.get("suspect") else "")
             )
     if d.decision is not None:
         alerts = d.decision["alerts"]
@@ -303,11 +308,13 @@ def main(argv: list[str] | None = None) -> int:
         if progress is not None:
             progress.update(size)
         if not args.json:
-            print(format_text(d))
+            print(format_text(d, baseline))
             if baseline is not None and "deviation_spreads" in res["baseline"]:
                 b = res["baseline"]
                 print(
-                    "  vs this airframe's healthy baseline (spreads): " + ", ".join(f"{x:+.1f}" for x in b["deviation_spreads"])
+                    "  vs this airframe's healthy baseline (spreads): "
+                    + ", ".join(f"{x:+.1f}" for x in b["deviation_spreads"])
+                    + f" -> {b['verdict']}"
                 )
     if progress is not None:
         progress.close()

@@ -36,6 +36,15 @@ def card_markdown(m: dict) -> str:
         + ", ".join(f"{x:.4f}" for x in base["noise_std"])
         + ("; native-rate command activity " + ", ".join(f"{x:.4f}" for x in base["activity"]) if base.get("activity") else "")
         + ".",
+        *(
+            [
+                "",
+                f"**CG offset or damage**: not separable on this airframe's kind of flights ({base['cg_damage_evidence']});"
+                ' a one-rotor verdict reads "imbalance near ROTOR: CG offset or damage".',
+            ]
+            if base.get("cg_damage_separable") is False
+            else []
+        ),
         "",
         f"**Training** (simulation only; {m['assumptions']}): mission `{cfg['mission']}`, {cfg['flights_per_label']} "
         f"flights per label, features {', '.join(cfg['features'])}, window {cfg['window']}, {cfg['epochs']} epochs, "

@@ -256,7 +256,12 @@ def adapt(
     activity = None
     if all(h.activity is not None for h in logs):
         activity = np.mean([h.activity for h in logs], axis=0)
-    baseline = baseline_from_tables([h.table for h in logs], [h.path for h in logs], activity)
+    separable = {}
+    if cfg.mission == "crazypad":  # measured on the shared CrazyPAD flights: CG offset and damage look alike
+        from offline.crazypad.evidence import CG_DAMAGE_EVIDENCE, CG_DAMAGE_SEPARABLE
+
+        separable = {"cg_damage_separable": CG_DAMAGE_SEPARABLE, "cg_damage_evidence": CG_DAMAGE_EVIDENCE}
+    baseline = baseline_from_tables([h.table for h in logs], [h.path for h in logs], activity, **separable)
     spread = float(np.mean(baseline.spread()))
     features = features_for(logs)
     tcfg = TrainConfig(

@@ -25,6 +25,15 @@ from offline.calibrate.terms import TERMS, Term
 from offline.calibrate.unbalance import unbalance_ratio
 
 PHASES = ("hover", "cruise", "climb", "manoeuvre")
+LAG_TERMS = ("motor_time_constant", "rotor_time_constant")
+# Measured with bench/evalsim_lag.py (offline/evalsim/README.md, "Motor lag at 20 Hz"): the resolution of the
+# lag terms on 20 Hz telemetry, so a report that names no lag says how large a lag could still hide.
+LAG_RESOLUTION_NOTE = (
+    "no motor lag named. Resolution measured at 20 Hz (bench/evalsim_lag.py: evaluation simulator, 2 x 40 s "
+    "flights, 4 ms telemetry jitter, nominal lag 20 ms): one slow rotor is named from about {one} ms, all four "
+    "rotors slower from about {common} ms; a smaller lag can be present unnamed"
+)
+LAG_RESOLUTION_MS = {"one": 60, "common": 45}
 
 
 @dataclass
@@ -180,6 +189,18 @@ def calibrate(tables: list[FlightTable], nominal: VehicleConfig, candidates: lis
     gain["heldout_residual_reduction_pct"] = round(
         100.0 * (1.0 - gain["heldout_residual_rms_after"] / gain["heldout_residual_rms_before"]), 3
     )
+    notes = []
+    if not {f["effect"] for f in findings} & set(LAG_TERMS) and set(LAG_TERMS) & set(candidates_out):
+        note = LAG_RESOLUTION_NOTE.format(**LAG_RESOLUTION_MS)
+        rate_hz = 1.0 / segments[0].dt_s
+        if abs(rate_hz - 20.0) > 0.5:
+            note += f" (these logs are {rate_hz:.0f} Hz: not measured at that rate)"
+        for name in LAG_TERMS:
+            c = candidates_out.get(name)
+            if c and c["identifiable"]:
+                fitted = ", ".join(f"{1000 * v:.0f}" for v in c["params"].values())
+                note += f"; {name} alone fits {fitted} ms, held-out BIC gain {c['score']:.1f}"
+        notes.append(note)
     return CalibrationResult(
         sources=[t.source or f"flight {i}" for i, t in enumerate(tables)],
         nominal=nominal,
@@ -195,4 +216,5 @@ def calibrate(tables: list[FlightTable], nominal: VehicleConfig, candidates: lis
         steady={"nominal": steady_nom, "calibrated": steady_cal},
         unbalance=unbalance,
         gain=gain,
+        notes=notes,
     )

@@ -54,6 +54,7 @@ def summary(r) -> str:
     bad = [n for n, c in r.candidates.items() if not c["identifiable"]]
     if bad:
         lines.append("not identifiable from these logs: " + ", ".join(bad))
+    lines += [f"note: {n}" for n in r.notes]
     g = r.gain
     lines.append(
         f"gain: held-out residual RMS {g['heldout_residual_rms_before']:.4g} -> {g['heldout_residual_rms_after']:.4g} "

@@ -3,7 +3,7 @@
 Model (body FRD, world NED, PX4 quad-X rotor order; see ``monitor.vehicle``):
 
 - rotor speed follows the ESC's target speed through a first-order lag
-  (``motor_time_constant_s``); the target comes from the logged command through
+  (``motor_time_constant_s``, times ``motor_time_constant_ratio[i]`` for rotor i); the target comes from the logged command through
   the vehicle's ESC curve (``monitor.esc``), or from the logged RPM when the
   log has no command;
 - ``motor_efficiency[i]`` scales the speed rotor i settles at for its
@@ -54,12 +54,17 @@ def target_omega_rad_s(seg: Segment, vehicle: VehicleConfig, fine: bool = False)
     return vehicle.esc.cmd_to_omega_rad_s(seg.motor_cmd_fine if fine else seg.motor_cmd)
 
 
-def first_order_lag(u: np.ndarray, tau_s: float, dt_s: float) -> np.ndarray:
+def first_order_lag(u: np.ndarray, tau_s, dt_s: float) -> np.ndarray:
     """Exact response of ``tau*y' = u - y`` to ``u`` linear between samples, starting at rest on u[0].
 
     Linear (not held) input between grid instants because the logged command is
     a snapshot of a signal that moves continuously at the controller's rate.
+    ``tau_s`` is one time constant, or one per column of ``u``.
     """
+    tau = np.asarray(tau_s, dtype=np.float64)
+    if tau.ndim and not np.all(tau == tau.flat[0]):
+        return np.column_stack([first_order_lag(u[:, [i]], float(t), dt_s)[:, 0] for i, t in enumerate(tau)])
+    tau_s = float(tau.flat[0])
     a = np.exp(-dt_s / tau_s)
     beta = tau_s * (1.0 - a) / dt_s
     b = np.array([1.0 - beta, beta - a])
@@ -73,7 +78,7 @@ def rotor_forces(seg: Segment, vehicle: VehicleConfig, speed_scale: SpeedScale =
     """Per-rotor thrust (N) and drag torque magnitude (N m) on the fine grid, each (T_fine, 4)."""
     w_cmd = target_omega_rad_s(seg, vehicle, fine=True)
     e = np.asarray(vehicle.motor_efficiency) if speed_scale is None else speed_scale(w_cmd)
-    w = first_order_lag(e * w_cmd, vehicle.motor_time_constant_s, seg.dt_fine_s)
+    w = first_order_lag(e * w_cmd, vehicle.rotor_time_constants_s, seg.dt_fine_s)
     w2 = np.maximum(w, 0.0) ** 2
     return vehicle.kf_n_per_rad_s2 * w2, vehicle.ktau_nm_per_rad_s2 * w2
 

@@ -137,6 +137,7 @@ def markdown(r: CalibrationResult) -> str:
             + [f"- {e}" for e in f["evidence"]]
             + [""]
         )
+    lines += [f"Note: {n}" for n in r.notes] + ([""] if r.notes else [])
     lines += [
         "## Candidates (each alone on the nominal model)",
         "",

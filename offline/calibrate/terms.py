@@ -39,6 +39,12 @@ def _set_cg(v: VehicleConfig, x: np.ndarray) -> VehicleConfig:
     return dataclasses.replace(v, cg_offset_frd_m=(float(x[0]), float(x[1]), v.cg_offset_frd_m[2]))
 
 
+def _set_rotor_taus(v: VehicleConfig, x: np.ndarray) -> VehicleConfig:
+    """Per-rotor time constants (s) written as their mean and each rotor's ratio to it."""
+    tau = float(np.mean(x))
+    return dataclasses.replace(v, motor_time_constant_s=tau, motor_time_constant_ratio=tuple(float(t) / tau for t in x))
+
+
 def _set_esc(v: VehicleConfig, x: np.ndarray) -> VehicleConfig:
     """RPM_true = gain * RPM_curve(cmd) + offset: rewritten as the same quadratic's coefficients."""
     e = v.esc
@@ -107,6 +113,17 @@ TERMS: dict[str, Term] = {
             _const(0.3),
             ("motor_time_constant_s",),
             "rotors lag the ESC command: moments trail the commands",
+        ),
+        Term(
+            "rotor_time_constant",
+            ("tau_1_s", "tau_2_s", "tau_3_s", "tau_4_s"),
+            lambda v: v.rotor_time_constants_s,
+            _set_rotor_taus,
+            _const(0.01, 0.01, 0.01, 0.01),
+            _const(0.003, 0.003, 0.003, 0.003),
+            _const(0.3, 0.3, 0.3, 0.3),
+            ("motor_time_constant_s", "motor_time_constant_ratio"),
+            "one rotor lags its ESC command more than the others (a slow motor or ESC): its moments trail",
         ),
         Term(
             "drag",

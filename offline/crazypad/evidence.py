@@ -38,6 +38,13 @@ M3 = 2  # index of Bitcraze M3 in M1..M4 order
 # Conditions by what they are physically: a CG offset (propellers intact) or propeller damage.
 CG_OFFSET_KINDS = ("added_mass_near_motor", "hanging_mass_on_string")
 DAMAGE_KINDS = ("propeller_cut", "tape_on_propeller")
+# What bench/crazypad_separation.py measured on the shared flights (README, "CG offset or damage?"); a Crazyflie
+# adapted on CrazyPAD logs carries it in its healthy baseline, so its one-rotor verdicts name both causes.
+CG_DAMAGE_SEPARABLE = False
+CG_DAMAGE_EVIDENCE = (
+    "offline/crazypad/README.md, bench/crazypad_separation.py: on the shared CrazyPAD flights no activity, vibration "
+    "or moment-pattern evidence separates masses near M3 from a damaged M3 propeller"
+)
 
 
 @dataclass(frozen=True)

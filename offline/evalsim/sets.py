@@ -264,6 +264,33 @@ def _effectiveness(v, seed, i, duration_s) -> FlightSpec:
     return _spec("effectiveness", seed, i, af, rng, duration_s, nuisance=f"loss {loss_v:.2f}, torque/thrust {dq:+.2f}")
 
 
+def motor_lag_specs(
+    taus_s, flights: int = 2, seed: int = 0, duration_s: float = DEFAULT_DURATION_S, jitter_s: float | None = None
+) -> list[FlightSpec]:
+    """Healthy flights of one paper-quad airframe whose rotors lag by ``taus_s`` (4, s, PX4 order): the calibrator's
+    lag sweep (bench/evalsim_lag.py) and its test. ``jitter_s`` overrides the telemetry jitter (None: the default
+    4 ms with drops; 0: exact 20 Hz, no drops). Flight i depends only on (taus_s, seed, i, duration_s, jitter_s)."""
+    v = load_vehicle(DEFAULT_VEHICLE)
+    af = _base(v, np.random.default_rng([seed, 901])).with_(motor_time_constant_s=tuple(float(t) for t in taus_s))
+    tel = Telemetry() if jitter_s is None else Telemetry(jitter_std_s=jitter_s, drop_probability=0.003 if jitter_s > 0 else 0.0)
+    specs = []
+    for i in range(flights):
+        rng = np.random.default_rng([seed, 902, i])
+        specs.append(
+            FlightSpec(
+                name=f"lag_{seed}_{i}",
+                airframe=af,
+                waypoints_ned_m=_route(rng),
+                duration_s=float(duration_s),
+                seed=int(rng.integers(2**31)),
+                wind=_light_wind(rng),
+                telemetry=tel,
+                nuisance="motor_lag",
+            )
+        )
+    return specs
+
+
 _BUILDERS: dict[str, tuple[Callable, int]] = {
     # name -> (builder, default flight count: one cycle)
     "paper": (_paper, 16),
@@ -354,4 +381,4 @@ def load_truth(path: str | Path) -> dict:
     return json.loads(Path(path).read_text(encoding="utf-8"))
 
 
-__all__ = ["SET_NAMES", "Telemetry", "build_set", "flight_seed", "load_truth", "write_set"]
+__all__ = ["SET_NAMES", "Telemetry", "build_set", "flight_seed", "load_truth", "motor_lag_specs", "write_set"]

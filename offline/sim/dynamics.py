@@ -7,7 +7,8 @@ hovering vehicle's energy from drifting; the attitude advances with the rates
 at the start of the step and is renormalised every step.
 
 Every calibration term of ``VehicleConfig`` acts here:
-- ``motor_time_constant_s``: first-order lag of rotor speed towards its target,
+- ``motor_time_constant_s``: first-order lag of rotor speed towards its target
+  (rotor i: times ``motor_time_constant_ratio[i]``),
   discretised exactly (zero-order hold) so any physics rate is stable;
 - ``motor_efficiency``: scales the speed a rotor reaches for its command (the
   ESC/motor gives less speed than the fit says, as a worn motor or sagging ESC);
@@ -107,7 +108,11 @@ class Dynamics:
             self.step_map = np.stack(
                 [_step_map(dt, per_flight.inertia_diag_kg_m2[b], arms[b], vehicle.spin_sign) for b in range(n)]
             )  # (B, 57, 11): one map per flight, applied as a batched matmul
+        # One slow motor (a calibrated motor_time_constant_ratio) gets its own lag; else one scalar.
+        ratio = np.asarray(vehicle.motor_time_constant_ratio, dtype=np.float64)
         self.motor_alpha = 1.0 - math.exp(-dt / vehicle.motor_time_constant_s)
+        if np.any(ratio != 1.0):
+            self.motor_alpha = 1.0 - np.exp(-dt / (vehicle.motor_time_constant_s * ratio))
         self.efficiency = np.array(vehicle.motor_efficiency, dtype=np.float64)
         self.drag = np.array(vehicle.linear_drag_n_per_m_s, dtype=np.float64)
         self.wind_ned_m_s = np.array(vehicle.wind_ned_m_s, dtype=np.float64)
@@ -140,7 +145,7 @@ class Dynamics:
         self.spin_up = None  # rotor inertia / dt, (B, 1): the spin-up yaw reaction J dω/dt
         if per_flight is not None:
             pf = per_flight
-            self.motor_alpha = 1.0 - np.exp(-dt / pf.motor_time_constant_s)[:, None]
+            self.motor_alpha = 1.0 - np.exp(-dt / (pf.motor_time_constant_s[:, None] * (ratio if np.any(ratio != 1.0) else 1.0)))
             self._alpha0 = self.motor_alpha
             self.efficiency = pf.motor_efficiency.copy()
             self.esc_offset_rad_s = pf.esc_offset_rad_s.copy()

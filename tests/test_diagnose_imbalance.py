@@ -1,0 +1,79 @@
+"""``diagnose --vehicle DIR``: where the airframe's baseline says a CG offset and a damaged propeller look alike,
+a one-rotor verdict is worded "imbalance near ...: CG offset or damage" in text; the JSON keeps
+``faulty_propellers`` and says why in ``baseline.cg_damage_separable``."""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import json
+import re
+import shutil
+
+import pytest
+from test_diagnose_fixtures import build_model, write_tlog
+
+from monitor.baseline import BASELINE_FILE, HealthyBaseline
+from monitor.diagnose.cli import main as diagnose
+from monitor.vehicle import DEFAULT_VEHICLE
+
+
+def _folder(tmp_path, separable):
+    """A `propwatch adapt`-shaped folder: vehicle.yaml, classifier.onnx (the fixture model), baseline.json."""
+    d = tmp_path / f"adapted-{separable}"
+    d.mkdir()
+    shutil.copy(DEFAULT_VEHICLE, d / "vehicle.yaml")
+    build_model(d / "classifier.onnx")
+    HealthyBaseline(
+        "omega2", (1.0,) * 4, (0.01,) * 4, (0.05,) * 4, None, 20.0, 2, ("a", "b"), ("1", "2", "3", "4"), separable, "a test"
+    ).save(d / BASELINE_FILE)
+    return d
+
+
+def _run(argv):
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(io.StringIO()):
+        code = diagnose([str(a) for a in argv])
+    return code, out.getvalue()
+
+
+@pytest.fixture(scope="module")
+def faulty3(tmp_path_factory):
+    return write_tlog(tmp_path_factory.mktemp("imb") / "f3.tlog", duration_s=12.0, faulty=3, seed=3)
+
+
+def test_not_separable_words_a_one_rotor_verdict_as_an_imbalance(tmp_path, faulty3):
+    d = _folder(tmp_path, False)
+    code, text = _run([faulty3, "--vehicle", d])
+    assert code == 0
+    assert "verdict: label 4: imbalance near propeller 3: CG offset or damage, from" in text, text
+    assert re.search(r"propeller 3: P\(faulty\) = [\d.]+  <- IMBALANCE", text) and "FAULTY" not in text, text
+    # The baseline's own words follow its deviations (shares alone never tell a CG offset from damage).
+    assert re.search(r"healthy baseline \(spreads\): [-+\d., ]+ -> imbalance near 3: CG offset or damage", text), text
+    code, out = _run([faulty3, "--vehicle", d, "--json"])
+    res = json.loads(out)
+    assert res["verdict"]["faulty_propellers"] == [3]  # the JSON verdict is unchanged
+    assert res["baseline"]["cg_damage_separable"] is False
+
+
+@pytest.mark.parametrize("separable", [None, True])
+def test_unmeasured_or_separable_names_the_fault(tmp_path, faulty3, separable):
+    d = _folder(tmp_path, separable)
+    code, text = _run([faulty3, "--vehicle", d])
+    assert code == 0 and "verdict: label 4: propeller 3 faulty, from" in text and "<- FAULTY" in text, text
+    verdict_line = next(line for line in text.splitlines() if line.startswith("verdict:"))
+    assert "imbalance" not in verdict_line and "IMBALANCE" not in text, text
+    res = json.loads(_run([faulty3, "--vehicle", d, "--json"])[1])
+    assert res["verdict"]["faulty_propellers"] == [3]
+    assert ("cg_damage_separable" in res["baseline"]) == (separable is not None)
+
+
+def test_old_baselines_without_the_key_still_load(tmp_path):
+    d = _folder(tmp_path, False)
+    raw = json.loads((d / BASELINE_FILE).read_text())
+    del raw["cg_damage_separable"], raw["cg_damage_evidence"]
+    b = HealthyBaseline.from_dict(raw)
+    assert b.cg_damage_separable is None and b.imbalance_wording("M3") is None
+    assert HealthyBaseline.load(d / BASELINE_FILE).imbalance_wording("M3 (PX4 rotor 2)") == (
+        "imbalance near M3 (PX4 rotor 2): CG offset or damage"
+    )
