@@ -47,7 +47,7 @@ def test_not_separable_words_a_one_rotor_verdict_as_an_imbalance(tmp_path, fault
     code, text = _run([faulty3, "--vehicle", d])
     assert code == 0
     assert "verdict: label 4: imbalance near propeller 3: CG offset or damage, from" in text, text
-    assert re.search(r"propeller 3: P\(faulty\) = [\d.]+  <- IMBALANCE", text) and "FAULTY" not in text, text
+    assert re.search(r"propeller 3: P\(faulty\) = [\d.]+  <- IMBALANCE", text) and "<- FAULTY" not in text, text
     # The baseline's own words follow its deviations (shares alone never tell a CG offset from damage).
     assert re.search(r"healthy baseline \(spreads\): [-+\d., ]+ -> imbalance near 3: CG offset or damage", text), text
     code, out = _run([faulty3, "--vehicle", d, "--json"])
