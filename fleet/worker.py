@@ -179,8 +179,11 @@ def _diagnose_into(row: dict, path: Path, settings: IngestSettings) -> None:
         )
     # Physics evidence (rotor effectiveness, hypotheses) in PX4 rotor order, as p_faulty: from the Diagnosis
     # itself (the JSON may be renumbered to the vehicle's own numbers); NULL when diagnose gives none.
+    # The hypotheses are the verdict's own set (the model's conformal set when it has a rule, else the balance's).
     ev = getattr(d, "physics", None)
-    hyp = getattr(ev, "hypotheses", None) if ev is not None else out.get("hypotheses")
+    hyp = getattr(d, "hypotheses", None)
+    if hyp is None:
+        hyp = getattr(ev, "hypotheses", None) if ev is not None else out.get("hypotheses")
     row["hypotheses"] = json.dumps(hyp) if hyp is not None else None
     for key in ("rotor_effectiveness", "rotor_effectiveness_std"):
         v = getattr(ev, key, None) if ev is not None else out.get(key)

@@ -110,7 +110,8 @@ def score(tables: list[tuple[dict, FlightTable]], predictor: Predictor, name: st
 
 def classifier_predictor(model_path: str | Path | None = None) -> Predictor:
     """The classifier through ``monitor.diagnose`` as the CLI runs it (with the paper vehicle's geometry for the
-    moment balance): the verdict's propellers, P(faulty) and hypotheses."""
+    moment balance): the verdict's propellers, P(faulty) and its hypothesis set (the conformal set when the
+    model has a rule, else the moment balance's credible set, as ``diagnose --json`` gives them)."""
     from monitor.diagnose.engine import diagnose_table
     from monitor.model import Classifier
     from monitor.vehicle import DEFAULT_VEHICLE, load_vehicle
@@ -122,7 +123,7 @@ def classifier_predictor(model_path: str | Path | None = None) -> Predictor:
         d = diagnose_table(table, clf, hop=1, esc=PAPER_ESC, vehicle=vehicle)
         if d.verdict is None:
             raise ValueError(d.reason or "no verdict")
-        return dict(d.verdict)
+        return {**d.verdict, "hypotheses": d.to_json()["hypotheses"]}
 
     return predict
 
