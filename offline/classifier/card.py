@@ -188,8 +188,16 @@ def write_card(path: str | Path, manifest: dict, results: list[Result], tables: 
         "- One vehicle (`paper-quad-1.5kg`); a data set or log from another vehicle is refused by name.",
         "- Needs 100 consecutive valid 20 Hz samples (5 s) before the first decision, so detection takes seconds, not milliseconds.",
         "- Calibration terms (motor efficiency, CG offset) were not randomised here: a real airframe's imbalance can look like a fault;"
-        " calibrate the vehicle first (issue 7).",
+        " calibrate the vehicle first (`propwatch adapt`).",
     ]
+    if spec.get("physics") == "randomised":
+        lines.append(
+            "- A damaged blade's torque per unit thrust was drawn from -10..+30 % (nobody has measured it). Roll and pitch "
+            "balance locate a single damaged rotor whatever that torque does (a same-spin diagonal pair's thrusts stay "
+            "equal); a same-spin pair, all four and healthy differ only through it, so they come out as one ambiguous "
+            "hypothesis set (`classifier.sets.json`), and window accuracy on the paper's fixed-physics sets is far "
+            "below the previous model's, which had learned that one guess."
+        )
     if spec.get("physics", "fixed") == "fixed":
         lines.append(
             "- Every damaged blade in training had one guessed signature per type (`offline/propellers/faults.py`): "
@@ -197,7 +205,7 @@ def write_card(path: str | Path, manifest: dict, results: list[Result], tables: 
             "assumptions (`offline/sim/assumptions.py`) gives -8..+10 %, both signs, and `physics=randomised` data "
             "sets draw from it."
         )
-    if train.get("yaw_effectiveness"):
+    if train.get("yaw_effectiveness") and spec.get("physics", "fixed") == "fixed":
         lines += [
             "- What tells all four propellers damaged (label 16) from a heavier healthy vehicle (label 1) is the yaw "
             "statistic, and it rests on the simulated blades' drag-torque rise (bent +5..10 %, cracked +2..6 %, "
@@ -231,7 +239,7 @@ def _training_data(spec: dict) -> str:
         return head + (
             "every flight's physics drawn from the register of unmeasured assumptions (`offline/sim/assumptions.py`: "
             "damaged blades' thrust loss, torque per thrust of both signs, 1P, flutter; motor lag, ESC, rotor inertia; "
-            f"PX4 gains; IMU noise, bias, delay; telemetry; gusts; battery sag), {airframe}. "
+            f"PX4 gains; IMU noise, bias, delay; telemetry; gusts; battery sag), {airframe}; "
             + _FAULT_MODES.get(spec["fault"], f"faults `{spec['fault']}`.")
         )
     return (
