@@ -46,7 +46,16 @@ def _verdict_line(res: dict) -> str:
         return f"no verdict: {res.get('reason')}"
     probs = " ".join(f"{p['name']}={p['fault_probability']:.2f}" for p in res["propellers"])
     faulty = ", ".join(rotor_name(n, i) for n, i in zip(v["faulty_names"], v["faulty_propellers"])) or "none"
-    return f"label {v['label']}, faulty {faulty}, P(faulty) {probs}, {res['windows']} windows"
+    line = (
+        f"label {v['label']}, faulty {faulty} ({v.get('confidence', 'confident')}), P(faulty) {probs}, {res['windows']} windows"
+    )
+    hyps = res.get("hypotheses") or []
+    if len(hyps) > 1:  # what physics could not tell apart, as diagnose's set gives it
+        sets = " or ".join(
+            "{" + ",".join(map(str, h["faulty_propellers"])) + "}" if h["faulty_propellers"] else "healthy" for h in hyps[:4]
+        )
+        line += f"; possible: {sets}" + (f" (+{len(hyps) - 4} more)" if len(hyps) > 4 else "")
+    return line
 
 
 def _diagnose(log: Path, reports: Path, *extra: str) -> dict:
