@@ -31,7 +31,7 @@ from offline.evalsim.score import classifier_predictor, read_tables, score, shar
 from offline.evalsim.sets import write_set
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_localise import model_paths  # noqa: E402
+from bench_localise import add_model_option, model_paths  # noqa: E402
 
 SETS = {"paper": 32, "shift": 32, "healthy": 22}  # flights: two per label (bent-like, cracked-like); 2 x 11 nuisances
 
@@ -93,7 +93,7 @@ def main(argv=None) -> int:
     ap.add_argument("--ours", help="bench_localise.py --json output (our simulator's rows)")
     ap.add_argument("--seed", type=int, default=0, help="evalsim set seed (default 0)")
     ap.add_argument("--card", action="store_true", help="upsert the table into models/classifier.card-tables.json")
-    ap.add_argument("--model", action="append", help="NAME=PATH of a classifier to score (repeatable; default the shipped one)")
+    add_model_option(ap)
     args = ap.parse_args(argv)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)

@@ -23,9 +23,7 @@ import numpy as np
 
 from monitor.diagnose.engine import diagnose_table
 from monitor.effectiveness import HYPOTHESES, Evidence, HypothesisBank, Priors, RotorGeometry, credible_set
-from monitor.features import compute_features, sliding_windows
 from monitor.flight import FlightTable
-from monitor.labels import LABEL_TABLE
 from monitor.model import Classifier
 from monitor.vehicle import DEFAULT_VEHICLE, REPO_ROOT, load_vehicle
 from offline.dataset.generate import PRESETS, DatasetSpec, generate
@@ -73,14 +71,9 @@ def system_verdicts(ds, clf: Classifier, vehicle, hop: int = 10):
     return out
 
 
-def cnn_verdicts(ds, clf: Classifier, hop: int = 10):
-    feats = compute_features(ds.signals, clf.info.features)
-    out = []
-    for f in range(ds.n_flights):
-        w = sliding_windows(feats[f, WARMUP_STEPS:], clf.info.window, hop)
-        labels, _ = clf.predict(np.ascontiguousarray(w))
-        out.append(tuple(LABEL_TABLE[int(np.argmax(labels.mean(axis=0))) + 1]))
-    return out
+def add_model_option(ap: argparse.ArgumentParser) -> None:
+    """``--model NAME=PATH``, repeatable, read by ``model_paths``."""
+    ap.add_argument("--model", action="append", help="NAME=PATH of a classifier to score (repeatable; default the shipped one)")
 
 
 def model_paths(specs: list[str] | None) -> dict[str, Path]:
@@ -110,7 +103,7 @@ def main(argv=None) -> int:
     ap.add_argument("--duration-s", type=float, default=80.0, help="flight length (paper: 80 s)")
     ap.add_argument("--json", help="write the table as JSON here")
     ap.add_argument("--seed", type=int, default=101, help="data set seed (not the training seeds)")
-    ap.add_argument("--model", action="append", help="NAME=PATH of a classifier to score (repeatable; default the shipped one)")
+    add_model_option(ap)
     args = ap.parse_args(argv)
     vehicle = load_vehicle(DEFAULT_VEHICLE)
     geometry, priors = RotorGeometry.from_vehicle(vehicle), Priors()

@@ -4,7 +4,8 @@ Two randomised data sets of our simulator, identical but for the register's torq
 of damaged blades: +2..+10 % (what the shipped classifier's training assumed, always up) and
 -10..-2 %. The airframe is nominal (CG, motor spread and arm errors at their nominal values) so the
 only change is the sign. Single-propeller accuracy must move by <= 2 points between the two; printed
-for the moment balance, each ``--model NAME=PATH`` (default the shipped CNN) and the omega^2-share baseline.
+for the moment balance, each ``--model NAME=PATH`` (default the shipped one) as ``propwatch diagnose`` runs it
+(its verdict, the conformal set's best member where the model has a rule) and the omega^2-share baseline.
 
 Run: ``python bench/bench_torque_sign.py [--flights-per-label 2] [--duration-s 60]``.
 """
@@ -18,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_localise import cnn_verdicts, model_paths, physics_verdicts, share_verdicts  # noqa: E402
+from bench_localise import add_model_option, model_paths, physics_verdicts, share_verdicts, system_verdicts  # noqa: E402
 
 from monitor.effectiveness import HypothesisBank, Priors, RotorGeometry  # noqa: E402
 from monitor.model import Classifier  # noqa: E402
@@ -34,7 +35,7 @@ def main(argv=None) -> int:
     ap.add_argument("--flights-per-label", type=int, default=2, help="flights per label and sign (default 2)")
     ap.add_argument("--duration-s", type=float, default=60.0, help="flight length (default 60 s)")
     ap.add_argument("--seed", type=int, default=23, help="data set seed, the same for both signs")
-    ap.add_argument("--model", action="append", help="NAME=PATH of a classifier to score (repeatable; default the shipped one)")
+    add_model_option(ap)
     args = ap.parse_args(argv)
     vehicle = load_vehicle(DEFAULT_VEHICLE)
     geometry, priors = RotorGeometry.from_vehicle(vehicle), Priors()
@@ -60,7 +61,7 @@ def main(argv=None) -> int:
         idx = [i for i, t in enumerate(truth) if len(t) == 1]
         preds = {
             "physics": [p[0] for p in physics_verdicts(ds, bank, geometry, priors)],
-            **{name: cnn_verdicts(ds, clf) for name, clf in models.items()},
+            **{name: system_verdicts(ds, clf, vehicle) for name, clf in models.items()},
             "share": share_verdicts(ds),
         }
         single[sign] = {k: float(np.mean([p[i] == truth[i] for i in idx])) for k, p in preds.items()}

@@ -16,6 +16,7 @@ airframe as its file says); it is a statement about that population, not a promi
 
 from __future__ import annotations
 
+import functools
 import json
 from dataclasses import dataclass
 from pathlib import Path
@@ -59,12 +60,23 @@ def rule_path(model_path: str | Path) -> Path:
 
 
 def load_rule(model_path: str | Path) -> SetRule | None:
-    """The set rule beside ``model_path``, None when the model has none (an older or adapted model)."""
+    """The set rule beside ``model_path``, None when the model has none (an older or adapted model).
+
+    Parsed once per file content (diagnose calls this for every log of a fleet ingest)."""
     path = rule_path(model_path)
     if not path.is_file():
         return None
     try:
-        d = json.loads(path.read_text(encoding="utf-8"))
+        data = path.read_bytes()
+    except OSError as exc:
+        raise ModelError(f"{path}: not a set rule ({exc})") from exc
+    return _parse_rule(path, data)
+
+
+@functools.lru_cache(maxsize=8)
+def _parse_rule(path: Path, data: bytes) -> SetRule:
+    try:
+        d = json.loads(data.decode("utf-8"))
         r = d["rule"]
         return SetRule(
             score=str(r["score"]),
@@ -74,7 +86,7 @@ def load_rule(model_path: str | Path) -> SetRule | None:
             source=str(path),
             thresholds=tuple((str(k), float(v["threshold"])) for k, v in (d.get("candidates") or {}).items()),
         )
-    except (OSError, ValueError, KeyError, TypeError) as exc:
+    except (ValueError, KeyError, TypeError) as exc:
         raise ModelError(f"{path}: not a set rule ({exc})") from exc
 
 

@@ -234,18 +234,6 @@ class BlindConfig:
         _within(self.events_retry_s, 0.1, 3600.0, "blind.events_retry_s")
         _within(self.events_backlog, 1, 100_000, "blind.events_backlog")
 
-    def decision(self) -> DecisionConfig:
-        return DecisionConfig(
-            false_alarms_per_hour=self.false_alarms_per_hour,
-            suspect_false_alarms_per_hour=self.suspect_false_alarms_per_hour,
-            aggressive_tilt_deg=self.aggressive_tilt_deg,
-            aggressive_rate_deg_s=self.aggressive_rate_deg_s,
-            collective_step_fraction=self.collective_step_fraction,
-            battery_sag_fraction=self.battery_sag_fraction,
-            min_thrust_loss=self.min_thrust_loss,
-            calibration_path=self.calibration_path,
-        )
-
 
 @dataclass(frozen=True)
 class MonitorConfig:

@@ -227,9 +227,9 @@ class Daemon:
     def _decide(self, step) -> None:
         """The shared decision rule on one grid step (pause when a stream stopped, never freeze it)."""
         t = step.timestamp_us / US_PER_S
+        if self._airborne and not step.airborne and self.flight_sets:
+            self.flight_sets.reset()  # landed: the next flight gets a new set
         self._airborne = step.airborne
-        if not step.airborne and self.flight_sets:
-            self.flight_sets.reset()  # a new flight gets a new set
         self.decision.step(t, step.inputs or StepInputs(step.airborne))
         if step.valid:
             self._evidence_t["classifier"] = t
