@@ -7,6 +7,11 @@ Split conformal prediction turns that score into a set: on flights of our own si
 physics that the classifier never saw, the threshold is the score the truth reached in all but
 ``1 - coverage`` of them (``offline.classifier.conformal`` fits it and writes ``<model>.sets.json`` beside
 the model). Every set scoring at least the threshold is a hypothesis; the most probable one is always in.
+A sparsity prior ``rho`` multiplies a set of k damaged propellers by ``rho**k`` (k = 0 for healthy): where
+physics cannot split two sets (a single rotor and that rotor with the opposite same-spin pair differ only
+through the unmeasured torque change), the sparser one is named, and both stay in the set. ``rho`` is chosen
+on our own stress sets by ``offline.classifier.conformal`` (the weakest prior whose singles never fall below
+the ω²-share baseline on any torque region); 1 is no prior (older rule files).
 One member: the verdict is that set. More: physics could not tell them apart, and the output says so
 (the daemon words it as `monitor.decision.statustext` does: ``PROP 1 or 1+2?``).
 
@@ -39,6 +44,7 @@ class SetRule:
     # Every candidate score's own calibrated threshold (the JSON's "candidates"), e.g. the classifier alone,
     # which the daemon scores in flight where the moment balance of whole flights is not at hand.
     thresholds: tuple[tuple[str, float], ...] = ()
+    sparsity_prior: float = 1.0  # rho: a set of k damaged propellers is weighted rho**k before normalising
 
     def threshold_for(self, score: str) -> float | None:
         """The calibrated threshold of ``score``; None when the calibration did not measure it."""
@@ -51,6 +57,8 @@ class SetRule:
             raise ModelError(f"{self.source}: score must be one of {SCORES}, got {self.score!r}")
         if not (0.0 < self.threshold <= 1.0 and 0.0 < self.coverage < 1.0):
             raise ModelError(f"{self.source}: threshold must be in (0, 1] and coverage in (0, 1)")
+        if not (0.0 < self.sparsity_prior <= 1.0):
+            raise ModelError(f"{self.source}: sparsity_prior must be in (0, 1], got {self.sparsity_prior}")
 
 
 def rule_path(model_path: str | Path) -> Path:
@@ -85,17 +93,24 @@ def _parse_rule(path: Path, data: bytes) -> SetRule:
             calibration_flights=int(r["calibration_flights"]),
             source=str(path),
             thresholds=tuple((str(k), float(v["threshold"])) for k, v in (d.get("candidates") or {}).items()),
+            sparsity_prior=float(r.get("sparsity_prior", 1.0)),
         )
     except (ValueError, KeyError, TypeError) as exc:
         raise ModelError(f"{path}: not a set rule ({exc})") from exc
 
 
-def flight_score(label_probability: np.ndarray, physics_log_likelihood: np.ndarray | None, score: str) -> np.ndarray:
+_SET_SIZE = np.array([len(LABEL_TABLE[k]) for k in range(1, N_LABELS + 1)], dtype=np.float64)
+
+
+def flight_score(
+    label_probability: np.ndarray, physics_log_likelihood: np.ndarray | None, score: str, sparsity_prior: float = 1.0
+) -> np.ndarray:
     """(16,) score of each propeller set (label order), summing to 1.
 
     ``label_probability``: the classifier's mean probability per label over the flight's windows.
     ``physics_log_likelihood``: the moment balance's marginal log-likelihood per set, or None when the log
     gave no usable balance (then the classifier's probability alone is the score, whatever ``score`` says).
+    ``sparsity_prior``: rho, each set weighted rho**(its number of damaged propellers).
     """
     p = np.asarray(label_probability, dtype=np.float64)
     if p.shape != (N_LABELS,) or not np.all(np.isfinite(p)):
@@ -106,6 +121,8 @@ def flight_score(label_probability: np.ndarray, physics_log_likelihood: np.ndarr
         if score == "classifier x moment balance":
             logp = logp + np.log(np.maximum(p, 1e-12))
         p = np.exp(logp - logp.max())
+    if sparsity_prior != 1.0:
+        p = p * np.power(float(sparsity_prior), _SET_SIZE)
     return p / p.sum()
 
 
@@ -123,6 +140,7 @@ class FlightSets:
 
     def __init__(self, rule: SetRule):
         self.threshold = rule.threshold_for("classifier")
+        self.sparsity_prior = rule.sparsity_prior
         self.reset()
 
     def reset(self) -> None:
@@ -135,5 +153,5 @@ class FlightSets:
             return None
         self._sum += p
         self._n += 1
-        hyps = hypothesis_set(flight_score(self._sum / self._n, None, "classifier"), self.threshold)
+        hyps = hypothesis_set(flight_score(self._sum / self._n, None, "classifier", self.sparsity_prior), self.threshold)
         return tuple((tuple(h["faulty_propellers"]), h["probability"]) for h in hyps)

@@ -193,3 +193,28 @@ def test_nominal_airframe_fixes_the_airframe_terms_and_draws_everything_else():
         DatasetSpec("R", airframe="nominal")  # only randomised physics draws an airframe
     with pytest.raises(ConfigError, match="airframe"):
         DatasetSpec("R", physics="randomised", propellers="quadratic", airframe="guessed")
+
+
+def test_dataset_cli_moves_a_register_range_by_glob_and_the_manifest_says_so(tmp_path):
+    import json
+
+    from offline.dataset import cli
+
+    argv = ["--name", "S", "--fault", "varied", "--physics", "randomised", "--propellers", "quadratic"]
+    argv += ["--flights-per-label", "1", "--duration", "3", "--waypoints", "random", "--out", str(tmp_path)]
+    assert cli.main([*argv, "--assumption", "*torque_per_thrust_change*=-0.10,0"]) == 0
+    m = json.loads((tmp_path / "S-varied.manifest.json").read_text())["assumptions"]
+    moved = [n for n in m if "torque_per_thrust_change" in n]
+    assert len(moved) == 4  # bent and cracked, low and high speed
+    assert all((m[n]["low"], m[n]["high"]) == (-0.10, 0.0) for n in moved)
+    assert m["motor_time_constant_s"]["low"] == REGISTER["motor_time_constant_s"].low  # the rest untouched
+    for bad, why in [
+        ("*torque*", "NAME=LOW,HIGH"),
+        ("nothing_like_this=0,1", "no register entry"),
+        ("*torque_per_thrust*=0.3,-0.1", "LOW <= HIGH"),
+        ("*torque_per_thrust*=nan,1", "finite"),
+    ]:
+        with pytest.raises(ConfigError, match=why):
+            cli.main([*argv, "--assumption", bad])
+    with pytest.raises(ConfigError, match="randomised"):
+        cli.main(["--name", "S", "--assumption", "*torque*=0,0", "--out", str(tmp_path)])

@@ -9,6 +9,7 @@ import pytest
 
 from monitor.errors import ModelError
 from monitor.hypotheses import flight_score, hypothesis_set, load_rule, rule_path
+from monitor.labels import LABEL_TABLE
 from offline.classifier.conformal import conformal_threshold, measure
 
 
@@ -107,3 +108,74 @@ def test_flight_sets_word_the_daemons_alerts_as_the_flights_hypotheses():
     q = np.full(16, 0.001)
     q[0] = 1.0
     assert [h for h, _ in sets.add(q / q.sum())] == [()]
+
+
+def test_sparsity_prior_names_the_single_rotor_where_physics_cannot_split_it_from_a_triple():
+    # {1} (label 2) and {1, 3, 4} (label 14) differ only through the unmeasured torque change: equal evidence.
+    p = np.full(16, 0.01)
+    p[1], p[13] = 0.3, 0.4  # the classifier leans to the triple, as one trained on rising torque does
+    p /= p.sum()
+    assert np.argmax(flight_score(p, None, "classifier")) == 13
+    s = flight_score(p, None, "classifier", sparsity_prior=0.1)
+    assert np.argmax(s) == 1 and s.sum() == pytest.approx(1.0)
+    # the weights are rho**k: healthy x1, the single x0.1, the triple x0.001, exactly
+    assert s[1] / s[13] == pytest.approx((0.3 / 0.4) * 100.0)
+    assert s[0] / s[1] == pytest.approx((0.01 / 0.3) * 10.0)
+    # evidence that separates them still wins: a triple the data clearly says stays the verdict
+    q = np.full(16, 1e-5)
+    q[13], q[1] = 0.99, 1e-4
+    assert np.argmax(flight_score(q / q.sum(), None, "classifier", sparsity_prior=0.1)) == 13
+
+
+def test_rule_file_carries_its_sparsity_prior_and_refuses_an_impossible_one(tmp_path):
+    model = tmp_path / "classifier.onnx"
+    rule = {"rule": {"score": "classifier", "threshold": 0.2, "coverage": 0.95, "calibration_flights": 160}}
+    rule_path(model).write_text(json.dumps(rule))
+    assert load_rule(model).sparsity_prior == 1.0  # an older file: no prior
+    rule["rule"]["sparsity_prior"] = 0.1
+    rule_path(model).write_text(json.dumps(rule))
+    assert load_rule(model).sparsity_prior == 0.1
+    rule["rule"]["sparsity_prior"] = 0.0
+    rule_path(model).write_text(json.dumps(rule))
+    with pytest.raises(ModelError, match="sparsity_prior"):
+        load_rule(model)
+
+
+def _region(name, rng, n, sharp, share_right):
+    from offline.classifier.conformal import Region
+
+    p, truth = _flights(rng, n, sharp)
+    singles = np.array([len(LABEL_TABLE[t + 1]) == 1 for t in truth])
+    share = np.where(
+        singles & (rng.random(n) < share_right), [LABEL_TABLE[t + 1][0] if s else 1 for t, s in zip(truth, singles)], 0
+    )
+    return Region(name, truth, p, np.zeros((n, 16)), share)
+
+
+def test_region_threshold_covers_every_region_not_only_their_mean():
+    from offline.classifier.conformal import candidate
+
+    rng = np.random.default_rng(5)
+    easy, hard = _region("easy", rng, 400, 6.0, 0.5), _region("hard", rng, 400, 1.0, 0.5)
+    c = candidate([easy, hard], "classifier", 1.0, 0.9)
+    assert c["threshold"] == min(c["regions"][r]["threshold_alone"] for r in ("easy", "hard"))
+    assert c["regions"]["hard"]["truth_in_set"] >= 0.9 and c["regions"]["easy"]["truth_in_set"] >= 0.9
+    # pooled, the easy region's flights would carry a threshold that leaves the hard one under-covered
+    pooled = np.concatenate([easy.label_probability, hard.label_probability])
+    truth = np.concatenate([easy.truth, hard.truth])
+    thr = conformal_threshold(pooled[np.arange(800), truth], 0.9)
+    assert measure(hard.label_probability, hard.truth, thr)["truth_in_set"] < 0.9
+
+
+def test_choose_takes_the_weakest_prior_whose_singles_match_the_share_baseline():
+    from offline.classifier.conformal import choose
+
+    def c(score, rho, size, ok):
+        return {"score": score, "sparsity_prior": rho, "worst_set_size": size, "singles_never_below_share": ok}
+
+    cands = [c("classifier", 1.0, 2.0, False), c("classifier", 0.3, 2.5, True), c("moment balance", 0.3, 2.2, True)]
+    cands.append(c("classifier", 0.1, 1.5, True))
+    best = choose(cands)
+    assert (best["score"], best["sparsity_prior"]) == ("moment balance", 0.3)
+    none_ok = [c("classifier", 1.0, 2.0, False), c("classifier", 0.1, 3.0, False)]
+    assert choose(none_ok)["sparsity_prior"] == 0.1  # nothing qualifies: the strongest prior tried

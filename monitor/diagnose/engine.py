@@ -323,10 +323,14 @@ def apply_rule(d: Diagnosis, rule: SetRule, mean_labels: np.ndarray) -> int:
     probabilities alone are scored against the same threshold, and ``hypothesis_rule.score`` says so."""
     ll = np.asarray(d.physics.log_likelihood) if d.physics is not None and d.physics.log_likelihood else None
     score = rule.score if ll is not None else "classifier"
-    d.hypotheses = hypothesis_set(flight_score(mean_labels, ll, rule.score), rule.threshold)
+    threshold = rule.threshold_for(score)
+    if threshold is None:  # an older rule file without the classifier's own threshold
+        score, threshold = rule.score, rule.threshold
+    d.hypotheses = hypothesis_set(flight_score(mean_labels, ll, score, rule.sparsity_prior), threshold)
     d.hypothesis_rule = {
         "score": score,
-        "threshold": rule.threshold,
+        "threshold": threshold,
+        "sparsity_prior": rule.sparsity_prior,
         "coverage": rule.coverage,
         "calibration_flights": rule.calibration_flights,
     }

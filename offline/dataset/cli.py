@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import fnmatch
+import math
 from pathlib import Path
 
 from monitor.errors import ConfigError
@@ -79,7 +81,43 @@ def build_parser() -> argparse.ArgumentParser:
         help="simulate chunks as Ray tasks: local Ray without ADDRESS, else join the cluster at HOST:PORT (same arrays as without)",
     )
     p.add_argument("--workers", type=int, default=None, help="with --ray: worker processes (local) or tasks in flight")
+    p.add_argument(
+        "--assumption",
+        action="append",
+        default=[],
+        metavar="NAME=LOW,HIGH",
+        help="with --physics randomised: narrow or move one register range (NAME may be a glob, e.g. "
+        "'*torque_per_thrust*=-0.10,0'); a stress set for selection on our own simulator. Repeatable; the "
+        "manifest records the ranges used",
+    )
     return p
+
+
+def register_from_args(a: argparse.Namespace):
+    """The assumption register with every ``--assumption`` override applied (None: the default register)."""
+    if not a.assumption:
+        return None
+    if a.physics != "randomised":
+        raise ConfigError("--assumption: only with --physics randomised")
+    from offline.sim.assumptions import REGISTER
+
+    register = REGISTER
+    for item in a.assumption:
+        name, sep, rng = item.partition("=")
+        if not sep:
+            raise ConfigError(f"--assumption: expected NAME=LOW,HIGH, got {item!r}")
+        try:
+            low, high = _range(rng)
+        except (argparse.ArgumentTypeError, ValueError) as exc:
+            raise ConfigError(f"--assumption {item!r}: {exc}") from None
+        if not (math.isfinite(low) and math.isfinite(high)) or low > high:
+            raise ConfigError(f"--assumption {item!r}: need finite LOW <= HIGH")
+        names = fnmatch.filter(register.names, name.strip())
+        if not names:
+            raise ConfigError(f"--assumption {item!r}: no register entry matches {name.strip()!r}")
+        for n in names:
+            register = register.with_range(n, low, high)
+    return register
 
 
 def specs_from_args(a: argparse.Namespace) -> list[DatasetSpec]:
@@ -128,6 +166,7 @@ def main(argv: list[str] | None = None) -> int:
     if a.chunk_flights < 1:
         raise ConfigError(f"--chunk-flights: must be >= 1, got {a.chunk_flights}")
     specs = specs_from_args(a)
+    register = register_from_args(a)
     run_chunks, session = None, contextlib.nullcontext()
     if a.ray:
         from fleet.raycluster import ray_session
@@ -136,7 +175,7 @@ def main(argv: list[str] | None = None) -> int:
         run_chunks, session = ray_chunks(a.ray, a.workers), ray_session(a.ray, a.workers)  # one Ray for every set
     with session:
         for spec in specs:
-            ds = generate(spec, vehicle, run_chunks=run_chunks)
+            ds = generate(spec, vehicle, run_chunks=run_chunks, register=register)
             path = save_dataset(a.out / f"{spec.name}.npz", ds)
             write_manifest(a.out / f"{spec.name}.manifest.json", ds.manifest)
             print(f"wrote {path}: {ds.n_flights} flights x {ds.n_steps} steps ({ds.n_steps / ds.sample_rate_hz:.0f} s)")
