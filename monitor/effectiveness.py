@@ -133,6 +133,19 @@ class Priors:
         uniform in ±4-8 % (thrust ±8-16 %: std 0.07) and CG uniform in ±1 cm (std 5.8 mm)."""
         return cls(healthy_spread_std=0.07, cg_offset_std_m=0.0058)
 
+    def with_unmeasured_airframe(self) -> Priors:
+        """These priors (noise model, damage ranges) with the airframe widened to ``unmeasured_airframe``'s."""
+        u = Priors.unmeasured_airframe()
+        return dataclasses.replace(self, healthy_spread_std=u.healthy_spread_std, cg_offset_std_m=u.cg_offset_std_m)
+
+    def for_airframe_check(self) -> Priors:
+        """These priors with damage of any size worth locating (loss 0.10 ± 0.06: 0-22 % within 2 std).
+
+        The airframe check (monitor.diagnose.physics) asks whether ANY damage on the nominal airframe explains a
+        flight; under the register's training range (3-12 %) a real 20 % crack would be read as an airframe
+        that is not as its file says."""
+        return dataclasses.replace(self, loss_mean=0.10, loss_std=0.06)
+
     def disturbance_std(self, geometry: RotorGeometry) -> np.ndarray:
         rp = 4.0 * self.cg_offset_std_m / geometry.arm_m
         return np.array([rp, rp, self.yaw_trim_std])

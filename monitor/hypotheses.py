@@ -45,6 +45,12 @@ class SetRule:
     # which the daemon scores in flight where the moment balance of whole flights is not at hand.
     thresholds: tuple[tuple[str, float], ...] = ()
     sparsity_prior: float = 1.0  # rho: a set of k damaged propellers is weighted rho**k before normalising
+    # The airframe check: a flight whose moment balance favours an unmeasured airframe over the vehicle file's
+    # by more than this log Bayes factor (monitor.diagnose.physics) is scored with the balance under an
+    # unmeasured airframe, at the threshold calibrated on such airframes. None: no check (older files).
+    airframe_log_bayes_factor_max: float | None = None
+    unmeasured_threshold: float | None = None
+    unmeasured_calibration_flights: int = 0
 
     def threshold_for(self, score: str) -> float | None:
         """The calibrated threshold of ``score``; None when the calibration did not measure it."""
@@ -57,6 +63,10 @@ class SetRule:
             raise ModelError(f"{self.source}: score must be one of {SCORES}, got {self.score!r}")
         if not (0.0 < self.threshold <= 1.0 and 0.0 < self.coverage < 1.0):
             raise ModelError(f"{self.source}: threshold must be in (0, 1] and coverage in (0, 1)")
+        if self.unmeasured_threshold is not None and not (0.0 < self.unmeasured_threshold <= 1.0):
+            raise ModelError(f"{self.source}: airframe_check.unmeasured_threshold must be in (0, 1]")
+        if self.airframe_log_bayes_factor_max is not None and not np.isfinite(self.airframe_log_bayes_factor_max):
+            raise ModelError(f"{self.source}: airframe_check.log_bayes_factor_max must be finite")
         if not (0.0 < self.sparsity_prior <= 1.0):
             raise ModelError(f"{self.source}: sparsity_prior must be in (0, 1], got {self.sparsity_prior}")
 
@@ -94,12 +104,23 @@ def _parse_rule(path: Path, data: bytes) -> SetRule:
             source=str(path),
             thresholds=tuple((str(k), float(v["threshold"])) for k, v in (d.get("candidates") or {}).items()),
             sparsity_prior=float(r.get("sparsity_prior", 1.0)),
+            **_airframe_check(d.get("airframe_check")),
         )
     except (ValueError, KeyError, TypeError) as exc:
         raise ModelError(f"{path}: not a set rule ({exc})") from exc
 
 
 _SET_SIZE = np.array([len(LABEL_TABLE[k]) for k in range(1, N_LABELS + 1)], dtype=np.float64)
+
+
+def _airframe_check(block: dict | None) -> dict:
+    if not block:
+        return {}
+    return {
+        "airframe_log_bayes_factor_max": float(block["log_bayes_factor_max"]),
+        "unmeasured_threshold": float(block["unmeasured_threshold"]),
+        "unmeasured_calibration_flights": int(block["unmeasured_calibration_flights"]),
+    }
 
 
 def flight_score(

@@ -326,11 +326,32 @@ def apply_rule(d: Diagnosis, rule: SetRule, mean_labels: np.ndarray) -> int:
     threshold = rule.threshold_for(score)
     if threshold is None:  # an older rule file without the classifier's own threshold
         score, threshold = rule.score, rule.threshold
+    bf = d.physics.airframe_log_bayes_factor if d.physics is not None else None
+    airframe = "as its file says"
+    if (
+        ll is not None
+        and bf is not None
+        and rule.airframe_log_bayes_factor_max is not None
+        and rule.unmeasured_threshold is not None
+        and bf > rule.airframe_log_bayes_factor_max
+    ):
+        # The balance says the airframe is not the vehicle file's: score it as an unmeasured one, where a motor
+        # spread or CG offset looks like damage, and say so.
+        airframe, ll, threshold = "unmeasured", np.asarray(d.physics.log_likelihood_unmeasured), rule.unmeasured_threshold
+        d.warnings.append(
+            f"airframe check: the moment balance favours an unmeasured airframe over the vehicle file's by log Bayes "
+            f"factor {bf:.1f} (> {rule.airframe_log_bayes_factor_max:.1f}): a CG offset or motor spread beyond "
+            "nominal looks like damage here, so the hypotheses are those of an unmeasured airframe; calibrate this "
+            "vehicle with `propwatch adapt` on its healthy flights"
+        )
     d.hypotheses = hypothesis_set(flight_score(mean_labels, ll, score, rule.sparsity_prior), threshold)
     d.hypothesis_rule = {
         "score": score,
         "threshold": threshold,
         "sparsity_prior": rule.sparsity_prior,
+        "airframe": airframe,
+        "airframe_log_bayes_factor": bf,
+        "airframe_log_bayes_factor_max": rule.airframe_log_bayes_factor_max,
         "coverage": rule.coverage,
         "calibration_flights": rule.calibration_flights,
     }

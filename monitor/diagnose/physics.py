@@ -16,6 +16,7 @@ import numpy as np
 
 from monitor.effectiveness import (
     HYPOTHESES,
+    SET_PRIOR,
     Baseline,
     Evidence,
     HypothesisBank,
@@ -40,6 +41,12 @@ class PhysicsEvidence:
     windows: int
     fault_probability: list[float]  # P(rotor i in the faulty set), PX4 order
     log_likelihood: tuple[float, ...] = ()  # marginal log-likelihood of each of the 16 sets (label order)
+    # The same balances with the airframe widened to an unmeasured one (motor spread ±4-8 %, CG ±1 cm), and
+    # the log Bayes factor unmeasured : as-its-file-says over all 16 sets (prior SET_PRIOR, damage of any size
+    # worth locating: Priors.for_airframe_check): large when no damage on the nominal airframe explains this
+    # flight, i.e. the airframe is not as its file says.
+    log_likelihood_unmeasured: tuple[float, ...] = ()
+    airframe_log_bayes_factor: float | None = None
 
     @property
     def ambiguous(self) -> bool:
@@ -107,6 +114,12 @@ def physics_evidence(
         {"faulty_propellers": list(HYPOTHESES[k]), "probability": round(float(v.probability[k]), 4)}
         for k in credible_set(v, CREDIBLE_MASS)
     ]
+    ll_u = HypothesisBank(priors.with_unmeasured_airframe(), geometry, baseline).posterior(ev).log_likelihood
+    check = priors.for_airframe_check()
+    bf = airframe_log_bayes_factor(
+        HypothesisBank(check, geometry, baseline).posterior(ev).log_likelihood,
+        HypothesisBank(check.with_unmeasured_airframe(), geometry, baseline).posterior(ev).log_likelihood,
+    )
     return PhysicsEvidence(
         hypotheses=hyps,
         rotor_effectiveness=[round(float(x), 4) for x in eta],
@@ -114,7 +127,22 @@ def physics_evidence(
         windows=int(ev.windows),
         fault_probability=[round(float(x), 4) for x in v.fault_probability()],
         log_likelihood=tuple(float(x) for x in v.log_likelihood),
+        log_likelihood_unmeasured=tuple(float(x) for x in ll_u),
+        airframe_log_bayes_factor=bf,
     ), None
+
+
+def airframe_log_bayes_factor(log_likelihood: np.ndarray, log_likelihood_unmeasured: np.ndarray) -> float:
+    """log p(flight | unmeasured airframe) - log p(flight | airframe as its file says), each summed over the
+    16 sets with the balance's own set prior."""
+    lp = np.log(SET_PRIOR)
+
+    def lse(x):
+        x = np.asarray(x, dtype=np.float64) + lp
+        m = float(np.max(x))
+        return m + float(np.log(np.sum(np.exp(x - m))))
+
+    return round(lse(log_likelihood_unmeasured) - lse(log_likelihood), 4)
 
 
 def predict_table(table: FlightTable, vehicle, priors: Priors | None = None, baseline: Baseline | None = None) -> dict:

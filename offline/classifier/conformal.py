@@ -27,6 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
+from monitor.diagnose.physics import airframe_log_bayes_factor
 from monitor.effectiveness import Evidence, HypothesisBank, Priors, RotorGeometry
 from monitor.features import compute_features, sliding_windows
 from monitor.hypotheses import SCORES, flight_score, hypothesis_set, rule_path
@@ -108,6 +109,30 @@ class Region:
     label_probability: np.ndarray  # (F, 16) the classifier's flight-mean
     log_likelihood: np.ndarray  # (F, 16) the moment balance's
     share_rotor: np.ndarray  # (F,) the ω²-share baseline's rotor 1..4
+    log_likelihood_unmeasured: np.ndarray | None = None  # (F, 16) the balance with an unmeasured airframe
+    airframe_log_bayes_factor: np.ndarray | None = None  # (F,) the airframe check's statistic
+
+    def log_bayes_factors(self) -> np.ndarray:
+        return self.airframe_log_bayes_factor
+
+    def unmeasured(self, flagged_above: float) -> Region:
+        """The flights of this region the airframe check flags, scored as an unmeasured airframe."""
+        keep = self.log_bayes_factors() > flagged_above
+        return Region(
+            name=self.name,
+            truth=self.truth[keep],
+            label_probability=self.label_probability[keep],
+            log_likelihood=self.log_likelihood_unmeasured[keep],
+            share_rotor=self.share_rotor[keep],
+        )
+
+
+def airframe_check_statistic(ds: FaultDataset, vehicle) -> np.ndarray:
+    """(F,) per flight, as monitor.diagnose.physics computes it for a log."""
+    check = Priors().for_airframe_check()
+    a = physics_log_likelihoods(ds, vehicle, check)
+    b = physics_log_likelihoods(ds, vehicle, check.with_unmeasured_airframe())
+    return np.array([airframe_log_bayes_factor(x, y) for x, y in zip(a, b, strict=True)])
 
 
 def region_of(path: Path, clf: Classifier, vehicle) -> Region:
@@ -119,6 +144,8 @@ def region_of(path: Path, clf: Classifier, vehicle) -> Region:
         label_probability=classifier_probabilities(ds, clf),
         log_likelihood=physics_log_likelihoods(ds, vehicle),
         share_rotor=share_rotors(ds),
+        log_likelihood_unmeasured=physics_log_likelihoods(ds, vehicle, Priors().with_unmeasured_airframe()),
+        airframe_log_bayes_factor=airframe_check_statistic(ds, vehicle),
     )
 
 
@@ -169,7 +196,57 @@ def choose(cands: list[dict]) -> dict:
     return min(ok, key=lambda c: (-c["sparsity_prior"], c["worst_set_size"], SCORES.index(c["score"])))
 
 
-def calibrate(model: Path, data: list[Path], checks: list[Path], coverage: float, log=print) -> dict:
+AIRFRAME_CHECK_QUANTILE = 0.98  # flights of an airframe as its file says flagged at most this rarely, per region
+
+
+def airframe_check(nominal: list[Region], unmeasured: list[Region], score: str, rho: float, coverage: float, log) -> dict:
+    """The airframe check's threshold (the log Bayes factor that at most 2 % of each nominal region's flights
+    exceed) and the conformal threshold of ``score`` under an unmeasured airframe, covering the flights the
+    check flags in each of ``unmeasured``'s regions (drawn airframes, scored with the widened balance)."""
+    bf_max = max(float(np.quantile(r.log_bayes_factors(), AIRFRAME_CHECK_QUANTILE)) for r in nominal)
+    flagged_regions = [r.unmeasured(bf_max) for r in unmeasured]
+    c = candidate(flagged_regions, score, rho, coverage)
+    flagged = {r.name: float(np.mean(r.log_bayes_factors() > bf_max)) for r in [*nominal, *unmeasured]}
+    for name, f in flagged.items():
+        log(f"airframe check: {name} flagged {100 * f:.1f} % (log Bayes factor > {bf_max:.2f})")
+    for name, m in c["regions"].items():
+        log(f"unmeasured airframe on {name}: " + fmt(m))
+    return {
+        "log_bayes_factor_max": bf_max,
+        "quantile": AIRFRAME_CHECK_QUANTILE,
+        "unmeasured_threshold": c["threshold"],
+        "unmeasured_calibration_flights": int(sum(len(r.truth) for r in flagged_regions)),
+        "flagged": flagged,
+        "unmeasured_regions": c["regions"],
+    }
+
+
+def measure_with_check(r: Region, score: str, rho: float, threshold: float, check: dict) -> dict:
+    """``measure`` as diagnose answers: flights the check flags get the unmeasured airframe's scores and threshold."""
+    flag = r.log_bayes_factors() > check["log_bayes_factor_max"]
+    nominal = region_scores(r, score, rho)
+    wide = np.array(
+        [flight_score(p, ll, score, rho) for p, ll in zip(r.label_probability, r.log_likelihood_unmeasured, strict=True)]
+    )
+    sets = [
+        hypothesis_set(wide[i], check["unmeasured_threshold"]) if flag[i] else hypothesis_set(nominal[i], threshold)
+        for i in range(len(r.truth))
+    ]
+    members = [[_LABEL_OF[frozenset(h["faulty_propellers"])] - 1 for h in hs] for hs in sets]
+    single = [i for i, t in enumerate(r.truth) if len(LABEL_TABLE[t + 1]) == 1]
+    return {
+        "flights": len(r.truth),
+        "flagged": float(np.mean(flag)),
+        "truth_in_set": float(np.mean([t in m for t, m in zip(r.truth, members)])),
+        "mean_set_size": float(np.mean([len(m) for m in members])),
+        "exact": float(np.mean([m[0] == t for t, m in zip(r.truth, members)])),
+        "single_exact": float(np.mean([members[i][0] == r.truth[i] for i in single])) if single else None,
+        "sure_and_right": float(np.mean([m == [t] for t, m in zip(r.truth, members)])),
+        "sure_and_wrong": float(np.mean([len(m) == 1 and m[0] != t for t, m in zip(r.truth, members)])),
+    }
+
+
+def calibrate(model: Path, data: list[Path], checks: list[Path], coverage: float, log=print, unmeasured: list[Path] = ()) -> dict:
     clf = Classifier(model)
     vehicle = load_vehicle(DEFAULT_VEHICLE)
     regions = [region_of(p, clf, vehicle) for p in data]
@@ -193,7 +270,17 @@ def calibrate(model: Path, data: list[Path], checks: list[Path], coverage: float
         m = measure(region_scores(other, best["score"], rho), other.truth, best["threshold"])
         checked[path.name] = {"manifest": load_dataset(path).manifest.get("config"), **m}
         log(f"check {path.name}  {best['score']:30s} threshold {best['threshold']:.5f}  " + fmt(m))
+    check = None
+    if unmeasured:
+        drawn = [region_of(p, clf, vehicle) for p in unmeasured]
+        check = airframe_check(regions, drawn, best["score"], rho, coverage, log)
+        check["as_diagnose_runs_it"] = {}
+        for r in [*regions, *drawn]:
+            m = measure_with_check(r, best["score"], rho, best["threshold"], check)
+            check["as_diagnose_runs_it"][r.name] = m
+            log(f"with the airframe check on {r.name}: " + fmt(m))
     return {
+        "airframe_check": check,
         "rule": {
             "score": best["score"],
             "threshold": best["threshold"],
@@ -234,10 +321,18 @@ def main(argv: list[str] | None = None) -> int:
         "(e.g. torque falling / rising): the rule must cover each",
     )
     p.add_argument("--check", type=Path, action="append", default=[], help="data sets only measured (repeatable)")
+    p.add_argument(
+        "--unmeasured",
+        type=Path,
+        action="append",
+        default=[],
+        help="regions of drawn airframes (propwatch dataset --airframe drawn): calibrate the airframe check and "
+        "the sets of a flight it flags (repeatable)",
+    )
     p.add_argument("--coverage", type=float, default=0.95, help="target coverage (default 0.95)")
     p.add_argument("--dry-run", action="store_true", help="print the figures, write nothing")
     a = p.parse_args(argv)
-    res = calibrate(a.model, a.data, a.check, a.coverage)
+    res = calibrate(a.model, a.data, a.check, a.coverage, unmeasured=a.unmeasured)
     if a.dry_run:
         return 0
     manifest = make_manifest("hypothesis-set-rule", {"model": str(a.model), "coverage": a.coverage}, None, **res)
