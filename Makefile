@@ -82,9 +82,12 @@ card: $(STAMP)
 	$(MAKE) dataset-randomised RANDOMISED_OUT=$(CARD)/dataRRcal FLIGHTS=10 SEED=8 NAME=RRcal AIRFRAME=drawn
 	$(MAKE) dataset-randomised RANDOMISED_OUT=$(CARD)/dataRNfall FLIGHTS=10 SEED=9 NAME=RNfall ASSUME='*torque_per_thrust*=-0.10,0'
 	$(MAKE) dataset-randomised RANDOMISED_OUT=$(CARD)/dataRNrise FLIGHTS=10 SEED=9 NAME=RNrise ASSUME='*torque_per_thrust*=0.15,0.30'
+	$(MAKE) dataset-randomised RANDOMISED_OUT=$(CARD)/dataRRfall FLIGHTS=10 SEED=9 NAME=RRfall AIRFRAME=drawn ASSUME='*torque_per_thrust*=-0.10,0'
+	$(MAKE) dataset-randomised RANDOMISED_OUT=$(CARD)/dataRRrise FLIGHTS=10 SEED=9 NAME=RRrise AIRFRAME=drawn ASSUME='*torque_per_thrust*=0.15,0.30'
 	$(BIN)/python -m offline.classifier.conformal --model models/classifier.onnx --data $(CARD)/dataRNcal/RNcal-varied.npz \
 		--data $(CARD)/dataRNfall/RNfall-varied.npz --data $(CARD)/dataRNrise/RNrise-varied.npz \
-		--check $(CARD)/dataRRcal/RRcal-varied.npz
+		--check $(CARD)/dataRRcal/RRcal-varied.npz --unmeasured $(CARD)/dataRRcal/RRcal-varied.npz \
+		--unmeasured $(CARD)/dataRRfall/RRfall-varied.npz --unmeasured $(CARD)/dataRRrise/RRrise-varied.npz
 
 card-text: $(STAMP)
 	$(BIN)/python -m offline.classifier.build_shipped --card-only --out models
