@@ -155,24 +155,34 @@ def hypothesis_set(scores: np.ndarray, threshold: float) -> list[dict]:
 
 
 class FlightSets:
-    """The daemon's running set for one flight: the classifier's mean label probability over the windows since
-    take-off, against the classifier-alone threshold. Calibrated on whole 75 s flights, so early in a flight
-    (fewer windows, noisier mean) its coverage is only approximate; it words alerts, it does not raise them."""
+    """The daemon's running set: the classifier's mean label probability over the last ``horizon`` windows (the
+    daemon: the last second, each window itself spanning 5 s), against the classifier-alone threshold. Recent,
+    not since take-off: a fault that begins mid-flight must word its alert from the windows that see it, not
+    from the healthy minutes before (measured: since take-off, a propeller-2 onset 7 s old was worded
+    ``PROP 1+2 or 1+2+3+4?``). Calibrated on whole-flight means, so over one second its coverage is only
+    approximate; it words alerts, it does not raise them."""
 
-    def __init__(self, rule: SetRule):
+    def __init__(self, rule: SetRule, horizon: int = 20):
+        if horizon < 1:
+            raise ValueError("horizon must be >= 1 window")
         self.threshold = rule.threshold_for("classifier")
         self.sparsity_prior = rule.sparsity_prior
+        self._ring = np.zeros((int(horizon), N_LABELS))
         self.reset()
 
     def reset(self) -> None:
-        self._sum, self._n = np.zeros(N_LABELS), 0
+        self._ring[:] = 0.0
+        self._head, self._n = 0, 0
 
     def add(self, label_probability: np.ndarray) -> tuple[tuple[tuple[int, ...], float], ...] | None:
-        """Add one window; the set so far as ((propellers), probability) pairs, None without a threshold."""
+        """Add one window; the set over the recent windows as ((propellers), probability) pairs, None without a
+        threshold."""
         p = np.asarray(label_probability, dtype=np.float64)
         if self.threshold is None or p.shape != (N_LABELS,) or not np.all(np.isfinite(p)):
             return None
-        self._sum += p
-        self._n += 1
-        hyps = hypothesis_set(flight_score(self._sum / self._n, None, "classifier", self.sparsity_prior), self.threshold)
+        self._ring[self._head] = p
+        self._head = (self._head + 1) % len(self._ring)
+        self._n = min(self._n + 1, len(self._ring))
+        mean = self._ring.sum(axis=0) / self._n  # empty rows are zeros
+        hyps = hypothesis_set(flight_score(mean, None, "classifier", self.sparsity_prior), self.threshold)
         return tuple((tuple(h["faulty_propellers"]), h["probability"]) for h in hyps)

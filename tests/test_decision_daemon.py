@@ -18,6 +18,7 @@ from monitor.daemon.link import Link
 from monitor.daemon.pipeline import Pipeline
 from monitor.daemon.service import Daemon
 from monitor.model import Classifier, choose_esc
+from monitor.vehicle import DEFAULT_VEHICLE, load_vehicle
 
 BOOT0_S = 100.0  # synth_flight's boot time at flight time 0
 REPO = Path(__file__).resolve().parent.parent
@@ -144,7 +145,8 @@ def replay_shipped(tmp_path, tlog):
     clf = Classifier(SHIPPED)
     pipeline = Pipeline(clf, cfg, choose_esc(clf, ""))
     events_path = tmp_path / "events.jsonl"
-    d = Daemon(cfg, Link(str(tlog), 191, 0.0), pipeline, EventWriter(events_path), StatusLog())
+    vehicle = load_vehicle(DEFAULT_VEHICLE)
+    d = Daemon(cfg, Link(str(tlog), 191, 0.0), pipeline, EventWriter(events_path), StatusLog(), vehicle=vehicle)
     d.run()
     events = [json.loads(x) for x in events_path.read_text().splitlines()] if events_path.exists() else []
     return d, [e for e in events if e.get("kind") == "decision"]
@@ -171,3 +173,9 @@ def test_replayed_onset_flight_raises_suspect_then_fault_on_the_right_propeller(
     t0 = d.pipeline.decoder.clock_us  # boot time at the end; the flight started duration earlier
     first_fault = next(a for a in alerts if a["level"] == "fault")
     assert first_fault["t_s"] - (t0 / 1e6 - 75.0) > onset_s  # never before the onset
+    # The event carries the moment balance's reading of the 5 s before it: propeller 2 delivers the least.
+    eff = first_fault["rotor_effectiveness"]
+    assert eff is not None and len(first_fault["rotor_effectiveness_std"]) == 4
+    assert int(np.argmin(eff)) == 1, eff
+    # and the alert is worded from the windows that see the fault, not from the healthy half minute before it
+    assert first_fault["text"].startswith("PROP 2 "), first_fault["text"]

@@ -1,5 +1,7 @@
 """Rotor effectiveness from moment balance (monitor.effectiveness): hand calculations and hidden losses."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -238,3 +240,30 @@ def test_diagonal_thrusts_balance_whatever_the_damaged_blades_torque_does():
         assert omega2_split == pytest.approx((1.0 / (1.0 - loss) + 1.0) / (2.0 + c), rel=0.02), c
     # so the same damage makes the damaged pair spin faster (torque falling) or slower (rising) than the other pair
     assert (u[0, 0] + u[0, 1]) / (u[0, 2] + u[0, 3]) > 1.0 > (u[1, 0] + u[1, 1]) / (u[1, 2] + u[1, 3])
+
+
+def test_the_daemon_reads_the_5_s_before_an_alert_as_diagnose_reads_them(hidden_loss_flights):
+    # The daemon's in-flight reading (monitor/daemon/rotor_evidence.py) of a rotor losing 20 %: the last 100
+    # consecutive valid steps, within 2 points of the hidden loss and equal to diagnose's reading of the same
+    # 100 steps; an invalid step starts the run again (no reading until 100 more).
+    from monitor.daemon.rotor_evidence import RecentEffectiveness
+    from monitor.diagnose.physics import physics_evidence
+
+    rpm, rates, truth, log = hidden_loss_flights
+    i = next(k for k, (rotor, loss) in enumerate(truth) if rotor == 2 and loss == 0.20)
+    r = RecentEffectiveness(VEHICLE, 100, RATE_HZ)
+    for j in range(200, 399):
+        r.push(rpm[i, j], rates[i, j], True)
+    eta, sd = r.reading()
+    assert eta[2] == pytest.approx(0.80, abs=0.02) and np.allclose(np.delete(eta, 2), 1.0, atol=0.02), eta
+    table = log.to_flight_table(i)
+    per_step = ["timestamp_us", "motor_cmd", "motor_rpm", "roll_rad", "pitch_rad", "yaw_rad", "roll_rate_rad_s"]
+    per_step += ["pitch_rate_rad_s", "yaw_rate_rad_s", "battery_v", "airborne"]
+    cut = dataclasses.replace(
+        table, accel_frd_m_s2=None, vel_ned_m_s=None, pos_ned_m=None, **{k: getattr(table, k)[299:399].copy() for k in per_step}
+    )
+    cut.airborne[:] = True
+    ev, why_not = physics_evidence(cut, VEHICLE)
+    assert why_not is None and np.allclose(eta, ev.rotor_effectiveness, atol=1e-4)
+    r.push(rpm[i, 399], np.array([np.nan, 0.0, 0.0]), True)  # an implausible sample: the run restarts
+    assert r.reading() is None and r.event_fields() == {"rotor_effectiveness": None, "rotor_effectiveness_std": None}

@@ -179,3 +179,19 @@ def test_choose_takes_the_weakest_prior_whose_singles_match_the_share_baseline()
     assert (best["score"], best["sparsity_prior"]) == ("moment balance", 0.3)
     none_ok = [c("classifier", 1.0, 2.0, False), c("classifier", 0.1, 3.0, False)]
     assert choose(none_ok)["sparsity_prior"] == 0.1  # nothing qualifies: the strongest prior tried
+
+
+def test_flight_sets_word_an_onset_from_the_recent_windows_not_the_healthy_minutes_before():
+    from monitor.hypotheses import FlightSets, SetRule
+
+    rule = SetRule("classifier", 0.05, 0.95, 160, thresholds=(("classifier", 0.05),))
+    healthy, prop2 = np.full(16, 0.001), np.full(16, 0.001)
+    healthy[0], prop2[2] = 1.0, 1.0  # label 1 = healthy, label 3 = {2}
+    healthy, prop2 = healthy / healthy.sum(), prop2 / prop2.sum()
+    recent, since_takeoff = FlightSets(rule, horizon=20), FlightSets(rule, horizon=10_000)
+    for p in [healthy] * 600 + [prop2] * 20:  # 30 s healthy, then one second of windows that see propeller 2
+        r, s = recent.add(p), since_takeoff.add(p)
+    assert r[0][0] == (2,)
+    assert s[0][0] == ()  # what the daemon said before: the onset drowned in the flight's healthy half minute
+    with pytest.raises(ValueError):
+        FlightSets(rule, horizon=0)

@@ -24,6 +24,7 @@ from monitor.daemon.pipeline import Pipeline
 from monitor.daemon.sdnotify import Notifier
 from monitor.daemon.service import Daemon
 from monitor.model import Classifier, choose_esc
+from monitor.vehicle import DEFAULT_VEHICLE, load_vehicle
 
 log = logging.getLogger("propwatch.monitor")
 
@@ -79,7 +80,8 @@ def main(argv: list[str] | None = None) -> int:
     tlog_speed = cfg.link.tlog_speed if args.tlog_speed is None else args.tlog_speed
     link = Link(args.connect, cfg.link.component_id, tlog_speed, cfg.link.system_id or None, guard(cfg))
     events = EventWriter(args.events or cfg.events_path or None, cfg.blind.events_retry_s, cfg.blind.events_backlog)
-    daemon = Daemon(cfg, link, pipeline, events, Notifier())
+    # The geometry for the moment balance's rotor effectiveness: as diagnose, --vehicle else the default vehicle.
+    daemon = Daemon(cfg, link, pipeline, events, Notifier(), vehicle=load_vehicle(vehicle or DEFAULT_VEHICLE))
 
     def on_signal(signum, _frame):
         log.info("signal %d: stopping", signum)

@@ -52,6 +52,7 @@ class StepResult:
     reason: str = ""  # why an invalid step is invalid
     data_ok: bool = True  # attitude and motor data present and plausible (airborne or not)
     inputs: StepInputs | None = None  # flight state for the decision's regime tracker
+    rates_rad_s: np.ndarray | None = None  # (3,) body rates FRD of this step (valid steps), for the moment balance
 
     @property
     def time_boot_ms(self) -> int:
@@ -283,11 +284,12 @@ class Pipeline:
         self._ring[self._head + w] = feats
         self._head = (self._head + 1) % w
         self._count = min(self._count + 1, w)
+        rates = att[3:6]
         if self._count < w:
-            return StepResult(g.timestamp_us, True, True, self._count, battery_v, inputs=inputs)
+            return StepResult(g.timestamp_us, True, True, self._count, battery_v, inputs=inputs, rates_rad_s=rates)
         self._since_inference -= 1
         if self._since_inference > 0:
-            return StepResult(g.timestamp_us, True, True, w, battery_v, inputs=inputs)
+            return StepResult(g.timestamp_us, True, True, w, battery_v, inputs=inputs, rates_rad_s=rates)
         self._since_inference = self.config.inference.every_k_steps
         window = self._ring[self._head : self._head + w]  # oldest first
         labels, faults = self.classifier.predict(window[None])
@@ -302,4 +304,5 @@ class Pipeline:
             labels[0].astype(np.float64),
             time.perf_counter() - received_s,
             inputs=inputs,
+            rates_rad_s=rates,
         )

@@ -28,6 +28,7 @@ from monitor.daemon.events import EventWriter
 from monitor.daemon.latency import LatencyHistogram
 from monitor.daemon.link import MAV_CMD_SET_MESSAGE_INTERVAL, Link
 from monitor.daemon.pipeline import Pipeline
+from monitor.daemon.rotor_evidence import RecentEffectiveness
 from monitor.daemon.sdnotify import Notifier
 from monitor.decision import Announcement, Decision, EscTelemetry, StepInputs, WindowEvidence, file_sha256
 from monitor.hypotheses import FlightSets, load_rule
@@ -63,7 +64,13 @@ class Counters:
 
 class Daemon:
     def __init__(
-        self, config: MonitorConfig, link: Link, pipeline: Pipeline, events: EventWriter, notifier: Notifier | None = None
+        self,
+        config: MonitorConfig,
+        link: Link,
+        pipeline: Pipeline,
+        events: EventWriter,
+        notifier: Notifier | None = None,
+        vehicle=None,
     ):
         self.cfg = config
         self.link = link
@@ -79,8 +86,12 @@ class Daemon:
             model_sha256=file_sha256(pipeline.classifier.path),
         )
         rule = load_rule(pipeline.classifier.path)  # the model's conformal rule words alerts as hypothesis sets
-        self.flight_sets = FlightSets(rule) if rule is not None else None
+        # The set over the windows of the last second (each already spans 5 s; every_k_steps apart) words an alert.
+        horizon = max(1, round(config.resample.rate_hz / config.inference.every_k_steps))
+        self.flight_sets = FlightSets(rule, horizon) if rule is not None else None
         self.esc_telemetry = EscTelemetry()
+        # Rotor effectiveness from the moment balance of the 5 s before an alert (in its event); needs the geometry.
+        self.rotors = RecentEffectiveness(vehicle, pipeline.window, config.resample.rate_hz) if vehicle is not None else None
         self._evidence_t: dict[str, float] = {}  # evidence -> boot time (s) it was last usable
         self._paused = ""  # why the classifier's evidence stopped while airborne ('' = flowing)
         self._pause_recorded = ""  # the pause last written to the journal and events file
@@ -301,6 +312,8 @@ class Daemon:
         if step is not None and step.fault_probability is not None:
             event["probabilities"] = [round(float(p), 4) for p in step.fault_probability]
             event["battery_v"] = None if math.isnan(step.battery_v) else round(step.battery_v, 2)
+        if self.rotors is not None:
+            event.update(self.rotors.event_fields())
         log.warning("%s t=%d ms: %s (%s evidence)", a.level.upper(), time_boot_ms, a.text, a.evidence)
         # The ground station first: a failing disk must never delay or lose the alert itself.
         self.statustexts.add_text(a.text, a.severity)
@@ -321,7 +334,13 @@ class Daemon:
         elif step.airborne:
             self._transition(self.blind.data(False, *_blind_reason(step.reason)))
 
+    def _rotor_step(self, step) -> None:
+        if self.rotors is not None:
+            inputs = step.inputs
+            self.rotors.push(inputs.motor_rpm if inputs is not None else None, step.rates_rad_s, step.valid)
+
     def _on_step(self, step) -> None:
+        self._rotor_step(step)
         if self.sequential:
             self._decide(step)
             return
