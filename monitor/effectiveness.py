@@ -375,7 +375,7 @@ class HypothesisBank:
         """``posterior(ev)`` of ``ev = Evidence(); ev.add(z, h, std, self.priors)``: a few windows, no running sum.
 
         Computed in data space (Woodbury's identity and the matrix determinant lemma): with 3 rows per window,
-        each set needs one 3n x 3n solve instead of an 11 x 11 inverse and determinant. The numbers are the same
+        each set needs a 3n x 3n inverse instead of an 11 x 11 inverse and determinant. The numbers are the same
         to rounding (tests/test_effectiveness_fast.py); this is the per-window path the daemon can afford.
         """
         z, g, var = balance_rows(z, h, std, self.priors)
@@ -386,26 +386,12 @@ class HypothesisBank:
         gc = g @ self.cov  # (16, N, 11): G C
         s = gc @ g.T + np.diag(var)  # (16, N, N): covariance of the balances under each set
         r = z - self.mean @ g.T  # (16, N): what each set's prior mean leaves unexplained
-        if len(z) == 3:
-            s_inv, logdet_s = _inv_sym3(s)
-        else:
-            s_inv, logdet_s = np.linalg.inv(s), np.linalg.slogdet(s)[1]
+        s_inv, logdet_s = np.linalg.inv(s), np.linalg.slogdet(s)[1]
         x = np.einsum("kmn,kn->km", s_inv, r)  # S^-1 r
         ll = -0.5 * (np.einsum("kn,kn->k", r, x) + logdet_s + len(z) * np.log(2 * np.pi))
         mu = self.mean + np.einsum("kni,kn->ki", gc, x)
         var_post = self.cov_diag - np.einsum("kni,kni->ki", gc, s_inv @ gc)
         return _verdict(ll, mu, var_post, set_prior, windows)
-
-
-def _inv_sym3(s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Inverse and log-determinant of stacked symmetric positive-definite 3 x 3 matrices, by their cofactors
-    (numpy's batched LAPACK calls cost more than this arithmetic)."""
-    a, b, c, d, e, f = s[:, 0, 0], s[:, 0, 1], s[:, 0, 2], s[:, 1, 1], s[:, 1, 2], s[:, 2, 2]
-    ca, cb, cc = d * f - e * e, c * e - b * f, b * e - c * d
-    cd, ce, cf = a * f - c * c, b * c - a * e, a * d - b * b
-    det = a * ca + b * cb + c * cc
-    adj = np.stack([ca, cb, cc, cb, cd, ce, cc, ce, cf], axis=-1).reshape(-1, 3, 3)
-    return adj / det[:, None, None], np.log(det)
 
 
 def _verdict(ll: np.ndarray, mu: np.ndarray, var_post: np.ndarray, set_prior: np.ndarray | None, windows: float) -> Verdict:

@@ -103,7 +103,7 @@ def test_window_posterior_equals_the_evidence_path(priors, baseline):
     bank = HypothesisBank(priors, GEOM, baseline)
     rng = np.random.default_rng(7)
     for trial in range(12):
-        windows = 1 + trial % 3  # one window (the closed-form 3 x 3 path) and several (a general solve)
+        windows = 1 + trial % 3  # one window (3 x 3 per set) and several
         z, h, std = window_balance(*flight_like(rng, (windows,)), GEOM, RATE_HZ)
         ev = Evidence()
         ev.add(z, h, std, priors)
