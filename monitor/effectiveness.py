@@ -160,70 +160,64 @@ def window_balance(
     """
     rpm = np.asarray(motor_rpm, dtype=np.float64)
     w = np.asarray(rates_rad_s, dtype=np.float64)
-    seg, c = _segments(rpm.shape[-2]), _constants(geometry)
-    z, share = _balances(rpm, w, c, rate_hz, seg)
-    h = (share[..., 0, :] @ c.h_table).reshape(share.shape[:-2] + (3, 2 * N_ROTORS))
-    k = len(seg.starts) - 1
+    plan = _plan(rpm.shape[-2], float(rate_hz), geometry)
+    z, share = _balances(rpm, w, plan)
+    h = (share[..., 0, :] @ plan.h_table).reshape(share.shape[:-2] + (3, 2 * N_ROTORS))
+    k = plan.blocks
     if k > 1:
         zb = z[..., 1:, :]
         dev = zb - np.add.reduce(zb, axis=-2, keepdims=True) / k
-        std = np.sqrt(np.einsum("...ki,...ki->...i", dev, dev) / (k - 1) / k)
+        std = np.sqrt(np.einsum("...ki,...ki->...i", dev, dev) / ((k - 1) * k))
     else:
         std = np.zeros_like(z[..., 0, :])
     return z[..., 0, :], h, std
 
 
 @dataclass(frozen=True)
-class _Segments:
-    """Segments [start, end) of a window balanced alone: the whole window, then the sub-blocks if any."""
+class _Plan:
+    """What the balance of a W-step window needs besides its data; it depends only on W, the rate and the vehicle.
 
-    starts: np.ndarray
-    ends: np.ndarray
-    pairs: np.ndarray  # (S,) float: end - start - 1 command/rate-difference pairs
-    edges: np.ndarray  # (2S,) start, end-1 of each: np.add.reduceat over them sums the pairs (every other result)
+    The window is balanced whole, then (``blocks`` > 1) sub-block by sub-block: segments [start, end). A segment
+    pairs its commands u[start..end-2] with its end-1-start rate differences and gyroscopic midpoints."""
 
-
-@functools.lru_cache(maxsize=64)
-def _segments(n: int) -> _Segments:
-    k = SUB_BLOCKS if n >= 4 * SUB_BLOCKS else 1
-    m = n // k  # k equal sub-blocks (a remainder at the end is left out of the noise estimate)
-    starts = np.array([0] + ([j * m for j in range(k)] if k > 1 else []))
-    ends = np.array([n] + ([(j + 1) * m for j in range(k)] if k > 1 else []))
-    return _Segments(starts, ends, (ends - starts - 1).astype(np.float64), np.stack([starts, ends - 1], -1).ravel())
-
-
-@dataclass(frozen=True)
-class _Constants:
-    inertia: np.ndarray  # (3,)
-    gyro: np.ndarray  # (3,) jz-jy, jx-jz, jy-jx: (ω × Iω) = gyro * (q r, r p, p q) for a diagonal inertia
-    scale: np.ndarray  # (3,) missing moment units per unit of mean command: kF·L (roll, pitch), kτ (yaw)
+    blocks: int
+    edges: np.ndarray  # (2S,) start, end-1 of each segment: np.add.reduceat over them sums its pairs (even results)
+    weight: np.ndarray  # (S, 7) per pair sum: 1/pairs for ω² (4), (jz-jy, jx-jz, jy-jx)/(pairs·scale) for q r, r p, p q
+    rate_weight: np.ndarray  # (S, 3) per rate change across the segment: inertia·rate/(pairs·scale)
     levers: np.ndarray  # (4, 3) rotor i's roll lever, pitch lever, spin sign
     h_table: np.ndarray  # (4, 24) rotor i's share times this row, reshaped (3, 8), is its column of H
 
 
-@functools.lru_cache(maxsize=16)
-def _constants(g: RotorGeometry) -> _Constants:
+@functools.lru_cache(maxsize=64)
+def _plan(n: int, rate_hz: float, g: RotorGeometry) -> _Plan:
+    k = SUB_BLOCKS if n >= 4 * SUB_BLOCKS else 1
+    m = n // k  # k equal sub-blocks (a remainder at the end is left out of the noise estimate)
+    starts = np.array([0] + ([j * m for j in range(k)] if k > 1 else []))
+    ends = np.array([n] + ([(j + 1) * m for j in range(k)] if k > 1 else []))
+    pairs = (ends - starts - 1).astype(np.float64)[:, None]
     jx, jy, jz = g.inertia_diag_kg_m2
+    kf_l = g.kf_n_per_rad_s2 * g.arm_m
+    scale = np.array([kf_l, kf_l, g.ktau_nm_per_rad_s2])  # missing moment per unit of mean command (ω²)
     t = np.zeros((N_ROTORS, 3, 2 * N_ROTORS))
     for i in range(N_ROTORS):
         t[i, 0, i], t[i, 1, i], t[i, 2, N_ROTORS + i] = g.lever_roll[i], g.lever_pitch[i], g.spin_sign[i]
-    kf_l = g.kf_n_per_rad_s2 * g.arm_m
-    return _Constants(
-        inertia=np.array(g.inertia_diag_kg_m2, dtype=np.float64),
-        gyro=np.array([jz - jy, jx - jz, jy - jx]),
-        scale=np.array([kf_l, kf_l, g.ktau_nm_per_rad_s2]),
+    return _Plan(
+        blocks=k,
+        edges=np.stack([starts, ends - 1], -1).ravel(),
+        weight=np.concatenate(
+            [np.broadcast_to(1.0 / pairs, (len(pairs), N_ROTORS)), np.array([jz - jy, jx - jz, jy - jx]) / (pairs * scale)], 1
+        ),
+        rate_weight=np.array(g.inertia_diag_kg_m2) * rate_hz / (pairs * scale),
         levers=np.array([g.lever_roll, g.lever_pitch, g.spin_sign], dtype=np.float64).T.copy(),
         h_table=t.reshape(N_ROTORS, -1),
     )
 
 
-def _balances(rpm: np.ndarray, w: np.ndarray, c: _Constants, rate_hz: float, seg: _Segments) -> tuple[np.ndarray, np.ndarray]:
-    """Missing moment z (..., S, 3) and command shares (..., S, 4) of each segment [a, b) of a window.
-
-    A segment pairs its commands u[a..b-2] with its rate differences; the gyroscopic term is averaged over
-    the same b-a-1 midpoints. All segments' sums come from one np.add.reduceat."""
+def _balances(rpm: np.ndarray, w: np.ndarray, plan: _Plan) -> tuple[np.ndarray, np.ndarray]:
+    """Missing moment z (..., S, 3) and command shares (..., S, 4) of each segment of a window; all segments'
+    sums come from one np.add.reduceat."""
     n = rpm.shape[-2]
-    # pair i: u[i] beside the gyroscopic term at the midpoint of w[i], w[i+1]; a zero row closes the last pair
+    # pair i: u[i] beside the gyroscopic products at the midpoint of w[i], w[i+1]; a zero row closes the last pair
     paired = np.empty(rpm.shape[:-2] + (n, N_ROTORS + 3))
     u = paired[..., : n - 1, :N_ROTORS]
     np.multiply(rpm[..., :-1, :], RPM_TO_RAD_S, out=u)
@@ -232,14 +226,14 @@ def _balances(rpm: np.ndarray, w: np.ndarray, c: _Constants, rate_hz: float, seg
     w_mid = 0.5 * (w[..., 1:, :] + w[..., :-1, :])
     w_mid = np.concatenate([w_mid, w_mid[..., :2]], axis=-1)  # p q r p q: (q r, r p, p q) by plain slices
     np.multiply(w_mid[..., 1:4], w_mid[..., 2:5], out=paired[..., : n - 1, N_ROTORS:])
-    sums = np.add.reduceat(paired, seg.edges, axis=-2)[..., ::2, :]
-    means = sums / seg.pairs[:, None]
+    # ω × Iω for a diagonal inertia is (jz-jy) q r, (jx-jz) r p, (jy-jx) p q: the weights hold the inertia terms
+    means = np.add.reduceat(paired, plan.edges, axis=-2)[..., ::2, :] * plan.weight
     u_bar = means[..., :N_ROTORS]
     u_ref = np.add.reduce(u_bar, axis=-1, keepdims=True) / N_ROTORS
     share = u_bar / np.where(u_ref > 0, u_ref, np.nan)
-    rate_change = (w[..., seg.ends - 1, :] - w[..., seg.starts, :]) / (seg.pairs / rate_hz)[:, None]
-    required = c.inertia * rate_change + c.gyro * means[..., N_ROTORS:]
-    return share @ c.levers - required / (c.scale * u_ref), share
+    ends = w[..., plan.edges, :]  # rates at each segment's start and end
+    required = (ends[..., 1::2, :] - ends[..., ::2, :]) * plan.rate_weight + means[..., N_ROTORS:]
+    return share @ plan.levers - required / u_ref, share
 
 
 def hypothesis_prior(
