@@ -378,14 +378,18 @@ class HypothesisBank:
         windows = float(len(z))
         z, g, var = z.reshape(-1), g.reshape(-1, N_STATE), var.reshape(-1)
         gc = g @ self.cov  # (16, N, 11): G C
-        s = gc @ g.T + np.diag(var)  # (16, N, N): covariance of the balances under each set
+        s = gc @ g.T  # (16, N, N): covariance of the balances under each set ...
+        diag = np.arange(len(z))
+        s[:, diag, diag] += var  # ... with their noise
         r = z - self.mean @ g.T  # (16, N): what each set's prior mean leaves unexplained
-        s_inv, logdet_s = np.linalg.inv(s), np.linalg.slogdet(s)[1]
-        x = np.einsum("kmn,kn->km", s_inv, r)  # S^-1 r
-        ll = -0.5 * (np.einsum("kn,kn->k", r, x) + logdet_s + len(z) * np.log(2 * np.pi))
-        mu = self.mean + np.einsum("kni,kn->ki", gc, x)
-        var_post = self.cov_diag - np.einsum("kni,kni->ki", gc, s_inv @ gc)
+        y = np.linalg.inv(s) @ np.concatenate([r[..., None], gc], axis=-1)  # S^-1 [r | G C]
+        ll = -0.5 * (np.einsum("kn,kn->k", r, y[..., 0]) + np.linalg.slogdet(s)[1] + len(z) * _LOG_2PI)
+        mu = self.mean + np.einsum("kni,kn->ki", gc, y[..., 0])
+        var_post = self.cov_diag - np.einsum("kni,kni->ki", gc, y[..., 1:])
         return _verdict(ll, mu, var_post, set_prior, windows)
+
+
+_LOG_2PI = float(np.log(2 * np.pi))
 
 
 def _verdict(ll: np.ndarray, mu: np.ndarray, var_post: np.ndarray, set_prior: np.ndarray | None, windows: float) -> Verdict:
@@ -393,13 +397,13 @@ def _verdict(ll: np.ndarray, mu: np.ndarray, var_post: np.ndarray, set_prior: np
     logp = ll + log_prior
     prob = np.exp(logp - logp.max())
     prob /= prob.sum()
-    std = np.sqrt(var_post)
+    fraction = 1.0 - mu[:, : 2 * N_ROTORS]
     return Verdict(
         log_likelihood=ll,
         probability=prob,
-        thrust_fraction=1.0 - mu[:, :N_ROTORS],
-        thrust_fraction_std=std[:, :N_ROTORS],
-        torque_fraction=1.0 - mu[:, N_ROTORS : 2 * N_ROTORS],
+        thrust_fraction=fraction[:, :N_ROTORS],
+        thrust_fraction_std=np.sqrt(var_post[:, :N_ROTORS]),
+        torque_fraction=fraction[:, N_ROTORS:],
         windows=windows,
     )
 
