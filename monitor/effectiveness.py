@@ -43,6 +43,7 @@ keeps between windows and diagnose sums over a flight.
 from __future__ import annotations
 
 import dataclasses
+import functools
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -59,6 +60,7 @@ HYPOTHESES: tuple[tuple[int, ...], ...] = tuple(tuple(LABEL_TABLE[k]) for k in r
 # "healthy" unless evidence says otherwise), the 15 damage patterns alike.
 HEALTHY_PRIOR = 0.5
 SET_PRIOR = np.array([HEALTHY_PRIOR] + [(1.0 - HEALTHY_PRIOR) / 15.0] * 15)
+_LOG_SET_PRIOR = np.log(SET_PRIOR)
 
 
 @dataclass(frozen=True)
@@ -166,47 +168,85 @@ def window_balance(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Per window: (z (..., 3), H (..., 3, 8), noise std (..., 3)).
 
-    ``motor_rpm`` (..., W, 4) commanded RPM; ``rates_rad_s`` (..., W, 3) body rates FRD.
+    ``motor_rpm`` (..., W, 4) commanded RPM; ``rates_rad_s`` (..., W, 3) body rates FRD. The noise is the
+    spread of the balances of ``SUB_BLOCKS`` equal sub-blocks (a remainder at the end is left out of it).
     """
     rpm = np.asarray(motor_rpm, dtype=np.float64)
     w = np.asarray(rates_rad_s, dtype=np.float64)
-    z, h = _balance(rpm, w, geometry, rate_hz)
-    n = rpm.shape[-2]
-    k = SUB_BLOCKS if n >= 4 * SUB_BLOCKS else 1
+    plan = _plan(rpm.shape[-2], float(rate_hz), geometry)
+    z, share = _balances(rpm, w, plan)
+    h = (share[..., 0, :] @ plan.h_table).reshape(share.shape[:-2] + (3, 2 * N_ROTORS))
+    k = plan.blocks
     if k > 1:
-        m = n // k  # k equal sub-blocks (a remainder at the end is left out of the noise estimate)
-        rb = rpm[..., : m * k, :].reshape(rpm.shape[:-2] + (k, m, 4))
-        wb = w[..., : m * k, :].reshape(w.shape[:-2] + (k, m, 3))
-        zb = _balance(rb, wb, geometry, rate_hz)[0]  # (..., k, 3)
-        std = zb.std(axis=-2, ddof=1) / np.sqrt(k)
+        zb = z[..., 1:, :]
+        dev = zb - np.add.reduce(zb, axis=-2, keepdims=True) / k
+        std = np.sqrt(np.einsum("...ki,...ki->...i", dev, dev) / ((k - 1) * k))
     else:
-        std = np.zeros_like(z)
-    return z, h, std
+        std = np.zeros_like(z[..., 0, :])
+    return z[..., 0, :], h, std
 
 
-def _balance(rpm: np.ndarray, w: np.ndarray, g: RotorGeometry, rate_hz: float) -> tuple[np.ndarray, np.ndarray]:
-    dt = 1.0 / rate_hz
-    u = np.square(rpm * RPM_TO_RAD_S)
-    u_bar = u[..., :-1, :].mean(axis=-2)  # paired with the rate differences
-    u_ref = u_bar.mean(axis=-1, keepdims=True)
-    share = u_bar / np.where(u_ref > 0, u_ref, np.nan)
-    inertia = np.asarray(g.inertia_diag_kg_m2)
-    span_s = (w.shape[-2] - 1) * dt
+@dataclass(frozen=True)
+class _Plan:
+    """What the balance of a W-step window needs besides its data; it depends only on W, the rate and the vehicle.
+
+    The window is balanced whole, then (``blocks`` > 1) sub-block by sub-block: segments [start, end). A segment
+    pairs its commands u[start..end-2] with its end-1-start rate differences and gyroscopic midpoints."""
+
+    blocks: int
+    edges: np.ndarray  # (2S,) start, end-1 of each segment: np.add.reduceat over them sums its pairs (even results)
+    weight: np.ndarray  # (S, 7) per pair sum: 1/pairs for ω² (4), (jz-jy, jx-jz, jy-jx)/(pairs·scale) for q r, r p, p q
+    rate_weight: np.ndarray  # (S, 3) per rate change across the segment: inertia·rate/(pairs·scale)
+    levers: np.ndarray  # (4, 3) rotor i's roll lever, pitch lever, spin sign
+    h_table: np.ndarray  # (4, 24) rotor i's share times this row, reshaped (3, 8), is its column of H
+
+
+@functools.lru_cache(maxsize=64)
+def _plan(n: int, rate_hz: float, g: RotorGeometry) -> _Plan:
+    k = SUB_BLOCKS if n >= 4 * SUB_BLOCKS else 1
+    m = n // k  # k equal sub-blocks (a remainder at the end is left out of the noise estimate)
+    starts = np.array([0] + ([j * m for j in range(k)] if k > 1 else []))
+    ends = np.array([n] + ([(j + 1) * m for j in range(k)] if k > 1 else []))
+    pairs = (ends - starts - 1).astype(np.float64)[:, None]
+    jx, jy, jz = g.inertia_diag_kg_m2
+    kf_l = g.kf_n_per_rad_s2 * g.arm_m
+    scale = np.array([kf_l, kf_l, g.ktau_nm_per_rad_s2])  # missing moment per unit of mean command (ω²)
+    t = np.zeros((N_ROTORS, 3, 2 * N_ROTORS))
+    for i in range(N_ROTORS):
+        t[i, 0, i], t[i, 1, i], t[i, 2, N_ROTORS + i] = g.lever_roll[i], g.lever_pitch[i], g.spin_sign[i]
+    return _Plan(
+        blocks=k,
+        edges=np.stack([starts, ends - 1], -1).ravel(),
+        weight=np.concatenate(
+            [np.broadcast_to(1.0 / pairs, (len(pairs), N_ROTORS)), np.array([jz - jy, jx - jz, jy - jx]) / (pairs * scale)], 1
+        ),
+        rate_weight=np.array(g.inertia_diag_kg_m2) * rate_hz / (pairs * scale),
+        levers=np.array([g.lever_roll, g.lever_pitch, g.spin_sign], dtype=np.float64).T.copy(),
+        h_table=t.reshape(N_ROTORS, -1),
+    )
+
+
+def _balances(rpm: np.ndarray, w: np.ndarray, plan: _Plan) -> tuple[np.ndarray, np.ndarray]:
+    """Missing moment z (..., S, 3) and command shares (..., S, 4) of each segment of a window; all segments'
+    sums come from one np.add.reduceat."""
+    n = rpm.shape[-2]
+    # pair i: u[i] beside the gyroscopic products at the midpoint of w[i], w[i+1]; a zero row closes the last pair
+    paired = np.empty(rpm.shape[:-2] + (n, N_ROTORS + 3))
+    u = paired[..., : n - 1, :N_ROTORS]
+    np.multiply(rpm[..., :-1, :], RPM_TO_RAD_S, out=u)
+    np.square(u, out=u)
+    paired[..., n - 1, :] = 0.0
     w_mid = 0.5 * (w[..., 1:, :] + w[..., :-1, :])
-    p_, q_, r_ = w_mid[..., 0], w_mid[..., 1], w_mid[..., 2]
-    jx, jy, jz = inertia
-    # ω × Iω for a diagonal inertia, written out (np.cross costs more than the rest of the balance)
-    gyro = np.stack([((jz - jy) * q_ * r_).mean(-1), ((jx - jz) * r_ * p_).mean(-1), ((jy - jx) * p_ * q_).mean(-1)], -1)
-    required = inertia * (w[..., -1, :] - w[..., 0, :]) / span_s + gyro
-    scale_rp = g.kf_n_per_rad_s2 * g.arm_m * u_ref[..., 0]
-    scale_y = g.ktau_nm_per_rad_s2 * u_ref[..., 0]
-    b = np.stack([required[..., 0] / scale_rp, required[..., 1] / scale_rp, required[..., 2] / scale_y], axis=-1)
-    h = np.zeros(share.shape[:-1] + (3, 2 * N_ROTORS))
-    h[..., 0, :N_ROTORS] = share * np.asarray(g.lever_roll)
-    h[..., 1, :N_ROTORS] = share * np.asarray(g.lever_pitch)
-    h[..., 2, N_ROTORS:] = share * np.asarray(g.spin_sign)
-    z = h.sum(axis=-1) - b
-    return z, h
+    w_mid = np.concatenate([w_mid, w_mid[..., :2]], axis=-1)  # p q r p q: (q r, r p, p q) by plain slices
+    np.multiply(w_mid[..., 1:4], w_mid[..., 2:5], out=paired[..., : n - 1, N_ROTORS:])
+    # ω × Iω for a diagonal inertia is (jz-jy) q r, (jx-jz) r p, (jy-jx) p q: the weights hold the inertia terms
+    means = np.add.reduceat(paired, plan.edges, axis=-2)[..., ::2, :] * plan.weight
+    u_bar = means[..., :N_ROTORS]
+    u_ref = np.add.reduce(u_bar, axis=-1, keepdims=True) / N_ROTORS
+    share = u_bar / np.where(u_ref > 0, u_ref, np.nan)
+    ends = w[..., plan.edges, :]  # rates at each segment's start and end
+    required = (ends[..., 1::2, :] - ends[..., ::2, :]) * plan.rate_weight + means[..., N_ROTORS:]
+    return share @ plan.levers - required / u_ref, share
 
 
 def hypothesis_prior(
@@ -253,15 +293,9 @@ class Evidence:
     windows: float = 0.0
 
     def add(self, z: np.ndarray, h: np.ndarray, std: np.ndarray, priors: Priors) -> None:
-        z = np.asarray(z, dtype=np.float64).reshape(-1, 3)
-        h = np.asarray(h, dtype=np.float64).reshape(-1, 3, 2 * N_ROTORS)
-        s = np.asarray(std, dtype=np.float64).reshape(-1, 3)
-        keep = np.isfinite(z).all(axis=1) & np.isfinite(h).all(axis=(1, 2)) & np.isfinite(s).all(axis=1)
-        z, h, s = z[keep], h[keep], s[keep]
+        z, g, var = balance_rows(z, h, std, priors)
         if len(z) == 0:
             return
-        var = np.square(np.maximum(s, priors.noise_floor) * priors.noise_inflation)
-        g = np.concatenate([h, np.broadcast_to(np.eye(3), (len(z), 3, 3))], axis=2)  # z = G x + n
         gw = g / var[:, :, None]
         self.info += np.einsum("nri,nrj->ij", gw, g)
         self.vec += np.einsum("nri,nr->i", gw, z)
@@ -269,6 +303,26 @@ class Evidence:
         self.logdet_noise += float(np.sum(np.log(var)))
         self.rows += 3.0 * len(z)
         self.windows += float(len(z))
+
+
+def balance_rows(z: np.ndarray, h: np.ndarray, std: np.ndarray, priors: Priors) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The finite windows among (z, H, std) as the linear model ``z = G x + n``: z (n, 3), G (n, 3, 11) and the
+    noise variance (n, 3) (std floored at ``priors.noise_floor``, times ``noise_inflation``); an unmeasured window
+    is not evidence."""
+    z = np.asarray(z, dtype=np.float64).reshape(-1, 3)
+    h = np.asarray(h, dtype=np.float64).reshape(-1, 3, 2 * N_ROTORS)
+    s = np.asarray(std, dtype=np.float64).reshape(-1, 3)
+    if not np.isfinite(z.sum() + h.sum() + s.sum()):  # one check for the common case: all finite
+        keep = np.isfinite(z).all(axis=1) & np.isfinite(h).all(axis=(1, 2)) & np.isfinite(s).all(axis=1)
+        z, h, s = z[keep], h[keep], s[keep]
+    var = np.square(np.maximum(s, priors.noise_floor) * priors.noise_inflation)
+    g = np.empty((len(z), 3, N_STATE))
+    g[..., : 2 * N_ROTORS] = h
+    g[..., 2 * N_ROTORS :] = _EYE3
+    return z, g, var
+
+
+_EYE3 = np.eye(3)
 
 
 @dataclass(frozen=True)
@@ -299,14 +353,15 @@ class HypothesisBank:
         self.priors, self.geometry, self.baseline = priors, geometry, baseline
         means, covs = zip(*(hypothesis_prior(s, priors, geometry, baseline) for s in HYPOTHESES))
         self.mean = np.stack(means)  # (16, 11)
-        self.prec = np.linalg.inv(np.stack(covs))  # (16, 11, 11)
+        self.cov = np.stack(covs)  # (16, 11, 11)
+        self.cov_diag = np.diagonal(self.cov, axis1=1, axis2=2).copy()
+        self.prec = np.linalg.inv(self.cov)  # (16, 11, 11)
         self.prec_mean = np.einsum("kij,kj->ki", self.prec, self.mean)
         self.mean_prec_mean = np.einsum("ki,ki->k", self.mean, self.prec_mean)
-        self.logdet_prior = np.linalg.slogdet(np.stack(covs))[1]
+        self.logdet_prior = np.linalg.slogdet(self.cov)[1]
 
     def posterior(self, evidence: Evidence, set_prior: np.ndarray | None = None) -> Verdict:
         """Each set's marginal likelihood of the accumulated balances, and its posterior effectiveness."""
-        prior_p = SET_PRIOR if set_prior is None else np.asarray(set_prior, dtype=np.float64)
         lam = self.prec + evidence.info  # (16, 11, 11) posterior precision
         rhs = self.prec_mean + evidence.vec
         cov = np.linalg.inv(lam)
@@ -321,18 +376,49 @@ class HypothesisBank:
             + evidence.logdet_noise
             + evidence.rows * np.log(2 * np.pi)
         )
-        logp = ll + np.log(np.maximum(prior_p, 1e-300))
-        prob = np.exp(logp - logp.max())
-        prob /= prob.sum()
-        std = np.sqrt(np.diagonal(cov, axis1=1, axis2=2))
-        return Verdict(
-            log_likelihood=ll,
-            probability=prob,
-            thrust_fraction=1.0 - mu[:, :N_ROTORS],
-            thrust_fraction_std=std[:, :N_ROTORS],
-            torque_fraction=1.0 - mu[:, N_ROTORS : 2 * N_ROTORS],
-            windows=evidence.windows,
-        )
+        return _verdict(ll, mu, np.diagonal(cov, axis1=1, axis2=2), set_prior, evidence.windows)
+
+    def window_posterior(self, z: np.ndarray, h: np.ndarray, std: np.ndarray, set_prior: np.ndarray | None = None) -> Verdict:
+        """``posterior(ev)`` of ``ev = Evidence(); ev.add(z, h, std, self.priors)``: a few windows, no running sum.
+
+        Computed in data space (Woodbury's identity and the matrix determinant lemma): with 3 rows per window,
+        each set needs a 3n x 3n inverse instead of an 11 x 11 inverse and determinant. The numbers are the same
+        to rounding (tests/test_effectiveness_fast.py); this is the per-window path the daemon can afford.
+        """
+        z, g, var = balance_rows(z, h, std, self.priors)
+        if len(z) == 0:
+            return self.posterior(Evidence(), set_prior)
+        windows = float(len(z))
+        z, g, var = z.reshape(-1), g.reshape(-1, N_STATE), var.reshape(-1)
+        gc = g @ self.cov  # (16, N, 11): G C
+        s = gc @ g.T  # (16, N, N): covariance of the balances under each set ...
+        diag = np.arange(len(z))
+        s[:, diag, diag] += var  # ... with their noise
+        r = z - self.mean @ g.T  # (16, N): what each set's prior mean leaves unexplained
+        y = np.linalg.inv(s) @ np.concatenate([r[..., None], gc], axis=-1)  # S^-1 [r | G C]
+        ll = -0.5 * (np.einsum("kn,kn->k", r, y[..., 0]) + np.linalg.slogdet(s)[1] + len(z) * _LOG_2PI)
+        mu = self.mean + np.einsum("kni,kn->ki", gc, y[..., 0])
+        var_post = self.cov_diag - np.einsum("kni,kni->ki", gc, y[..., 1:])
+        return _verdict(ll, mu, var_post, set_prior, windows)
+
+
+_LOG_2PI = float(np.log(2 * np.pi))
+
+
+def _verdict(ll: np.ndarray, mu: np.ndarray, var_post: np.ndarray, set_prior: np.ndarray | None, windows: float) -> Verdict:
+    log_prior = _LOG_SET_PRIOR if set_prior is None else np.log(np.maximum(np.asarray(set_prior, dtype=np.float64), 1e-300))
+    logp = ll + log_prior
+    prob = np.exp(logp - logp.max())
+    prob /= prob.sum()
+    fraction = 1.0 - mu[:, : 2 * N_ROTORS]
+    return Verdict(
+        log_likelihood=ll,
+        probability=prob,
+        thrust_fraction=fraction[:, :N_ROTORS],
+        thrust_fraction_std=np.sqrt(var_post[:, :N_ROTORS]),
+        torque_fraction=fraction[:, N_ROTORS:],
+        windows=windows,
+    )
 
 
 def credible_set(verdict: Verdict, mass: float = 0.95) -> list[int]:

@@ -123,8 +123,19 @@ def compute_features(signals: Signals, names: Sequence[str] = PAPER_FEATURES) ->
     missing = [s for s in SIGNALS if s not in signals and any(_needs(n, s) for n in names)]
     if missing:
         raise ModelError(f"signals missing for features: {missing}")
-    cols = [np.asarray(FEATURES[n](signals), dtype=np.float64) for n in names]
-    return np.stack(cols, axis=-1).astype(np.float32)
+    return feature_function(names)(signals)
+
+
+def feature_function(names: Sequence[str]) -> Callable[[Signals], np.ndarray]:
+    """``compute_features`` for these names, checked once: for a caller that computes them step by step
+    (the daemon, 20 times a second) and always passes every signal. Same functions, same numbers."""
+    check_feature_names(names)
+    fns = [FEATURES[n] for n in names]
+
+    def compute(signals: Signals) -> np.ndarray:
+        return np.stack([np.asarray(f(signals), dtype=np.float64) for f in fns], axis=-1).astype(np.float32)
+
+    return compute
 
 
 def signals_needed(feature: str) -> tuple[str, ...]:

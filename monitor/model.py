@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import json
 import logging
+import os
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -27,6 +28,11 @@ from monitor.esc import PAPER_ESC, EscCurve
 from monitor.features import check_feature_names
 
 log = logging.getLogger("propwatch.model")
+
+# onnxruntime 1.32 starts a telemetry thread when it loads that looks up mobile.events.data.microsoft.com
+# every few seconds (seen with strace in the daemon): an onboard monitor must not. Read when the library
+# loads, so it is set before the lazy import below.
+os.environ.setdefault("ORT_DISABLE_TELEMETRY", "1")
 
 META_PREFIX = "propwatch."
 REQUIRED_META = ("format_version", "features", "sample_rate_hz", "window", "normalization", "label_table")
@@ -55,6 +61,9 @@ class Classifier:
         opts = ort.SessionOptions()
         opts.intra_op_num_threads = threads
         opts.inter_op_num_threads = 1
+        # With more than one thread, idle pool threads would spin-wait between the 20 Hz inferences.
+        opts.add_session_config_entry("session.intra_op.allow_spinning", "0")
+        opts.add_session_config_entry("session.inter_op.allow_spinning", "0")
         opts.log_severity_level = 3
         try:
             self.session = ort.InferenceSession(str(self.path), opts, providers=["CPUExecutionProvider"])

@@ -34,7 +34,7 @@ from monitor.daemon.plausible import Plausibility
 from monitor.daemon.resampler import GridStep, StreamingHold, StreamSpec
 from monitor.decision import StepInputs
 from monitor.esc import EscCurve
-from monitor.features import compute_features
+from monitor.features import feature_function
 from monitor.model import Classifier
 from monitor.resample import US_PER_S, period_us
 
@@ -79,6 +79,7 @@ class Pipeline:
         r, inf = config.resample, config.inference
         classifier.check_compatible(classifier.info.features, r.rate_hz, inf.window)
         self.features = classifier.info.features
+        self._compute_features = feature_function(self.features)  # every signal is always passed (_step)
         self.window = inf.window
         self.decoder = md.MavlinkDecoder(
             system_id=config.link.system_id or None,
@@ -250,7 +251,7 @@ class Pipeline:
             "pitch_rate_rad_s": att[4:5],
             "yaw_rate_rad_s": att[5:6],
         }
-        feats = compute_features(signals, self.features)[0]
+        feats = self._compute_features(signals)[0]
         bad = self._bad_times
         while bad and bad[0] <= g.timestamp_us - self._period_us:
             bad.popleft()

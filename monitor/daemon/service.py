@@ -37,6 +37,9 @@ from monitor.resample import US_PER_S
 log = logging.getLogger("propwatch.monitor")
 
 READ_TIMEOUT_S = 0.1  # select() returns at once when data comes; this only paces idle housekeeping
+# Housekeeping (heartbeat, stream requests, blindness, held-back STATUSTEXT) at most this often, not after
+# each of the ~100 datagrams a second: its deadlines are 0.5 s and longer, and alerts are sent as they are made.
+TICK_PERIOD_S = 0.05
 BAD_DATA_LOG_PERIOD_S = 5.0
 MOTOR_STREAM = {"servo": "SERVO_OUTPUT_RAW", "actuator": "ACTUATOR_OUTPUT_STATUS", "esc": "ESC_STATUS"}
 LANDED_RATE_HZ = 2.0  # EXTENDED_SYS_STATE: a state, not a signal
@@ -142,6 +145,7 @@ class Daemon:
             self.cfg.resample.rate_hz,
             self.link.url,
         )
+        next_tick = 0.0
         while not self.stop.is_set():
             try:
                 batch = self.link.read(READ_TIMEOUT_S)
@@ -151,12 +155,10 @@ class Daemon:
                 continue
             for msg, received in batch:
                 self.handle(msg, received)
-            try:
-                self.tick(time.monotonic())
-            except Exception:  # noqa: BLE001 - housekeeping must not stop the monitor in flight either
-                self.counters.internal_errors += 1
-                if self._error_log_limit.allow():
-                    log.exception("error in the loop's periodic work (%d so far); continuing", self.counters.internal_errors)
+            now = time.monotonic()
+            if now >= next_tick:
+                next_tick = now + TICK_PERIOD_S
+                self._tick_guarded(now)
             if self.link.is_log and self.link.eof:
                 for step in self.pipeline.flush():
                     self._on_step(step)
@@ -166,6 +168,14 @@ class Daemon:
         self.events.close()
         self.summary()
         return 0
+
+    def _tick_guarded(self, now: float) -> None:
+        try:
+            self.tick(now)
+        except Exception:  # noqa: BLE001 - housekeeping must not stop the monitor in flight either
+            self.counters.internal_errors += 1
+            if self._error_log_limit.allow():
+                log.exception("error in the loop's periodic work (%d so far); continuing", self.counters.internal_errors)
 
     def handle(self, msg, received_s: float) -> None:
         kind = msg.get_type()
