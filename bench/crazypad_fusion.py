@@ -4,7 +4,9 @@
 
 Per airframe (E8, E9) the healthy baseline (``monitor.baseline``) is built from its healthy logs with an
 even number (the CrazyPAD split, ``offline/crazypad/data.py``), exactly as ``propwatch adapt`` stores it;
-every other motor log is scored four ways, per condition:
+every other log is scored four ways, per condition. Motor logs (logged commands) and controller logs
+(commands rebuilt by the firmware mixer, ``monitor/logs/mixers.py``) each get their own baseline per
+airframe, from their own even-numbered healthy logs:
 
 - nominal: the classifier trained on the nominal simulation, figures stored in the shipped manifest
   (``models/crazyflie-classifier.manifest.json``, ``shipped.table.nominal``; no model file ships, so not re-run);
@@ -18,7 +20,7 @@ Exact = the paper's label (cuts and tape are faults of their rotors; masses and 
 ``monitor.baseline.fuse``), so every condition is scored as if left out. The constant k = 3 spreads is
 checked here on the healthy calibration flights only: each against the baseline of the other calibration
 flights of its airframe. ``--write-card`` stores the table in the shipped manifest and rewrites the card
-from it. About a minute.
+from it (the motor-log table). About two minutes.
 """
 
 from __future__ import annotations
@@ -56,11 +58,20 @@ def baseline_label(dev: np.ndarray) -> int:
     return label_from_mask([i == k for i in range(4)])
 
 
+KINDS = ("motor", "controller")
+
+
+def kind(f) -> str:
+    """Motor logs (logged commands) and controller logs (commands rebuilt by the firmware mixer) differ per
+    airframe by their own static offsets: each kind gets its own baseline, as two `propwatch adapt` runs would."""
+    return "motor" if f.has_motor_commands else "controller"
+
+
 def healthy_leave_one_out(flights, tables) -> dict:
     """Each healthy calibration flight against the baseline of the other calibration flights of its airframe."""
     out = {}
-    for af in AIRFRAMES:
-        cal = [f for f in flights if f.airframe == af and f.role == "calibration"]
+    for af, k in [(af, k) for af in AIRFRAMES for k in KINDS]:
+        cal = [f for f in flights if f.airframe == af and kind(f) == k and f.role == "calibration"]
         for f in cal:
             rest = [g for g in cal if g is not f]
             base = baseline_from_tables([tables[g.file] for g in rest], [g.file for g in rest])
@@ -71,19 +82,26 @@ def healthy_leave_one_out(flights, tables) -> dict:
 def score(args) -> dict:
     vehicle = load_vehicle(REPO / "models" / "crazyflie.yaml")
     clf = Classifier(MODEL)
-    flights = select(load_manifest(args.root))
+    flights = [f for f in select(load_manifest(args.root), motor_only=False) if kind(f) in args.logs]
     tables = {f.file: read_flight(f, vehicle, args.root) for f in flights}
     loo = healthy_leave_one_out(flights, tables)
     rows = []
-    for af in AIRFRAMES:
-        cal = [f for f in flights if f.airframe == af and f.role == "calibration"]
+    for af, k in [(af, k) for af in AIRFRAMES for k in args.logs]:
+        cal = [f for f in flights if f.airframe == af and kind(f) == k and f.role == "calibration"]
         base = baseline_from_tables([tables[f.file] for f in cal], [f.file for f in cal])
         for f in flights:
-            if f.airframe != af or f.role == "calibration":
+            if f.airframe != af or kind(f) != k or f.role == "calibration":
                 continue
             d = diagnose_table(tables[f.file], clf, hop=HOP, esc=vehicle.esc)
             dev = np.asarray(base.compare(tables[f.file])["deviation_spreads"])
-            row = {"file": f.file, "airframe": af, "group": f.group, "truth": truth_label(f), "deviation_spreads": dev.tolist()}
+            row = {
+                "file": f.file,
+                "airframe": af,
+                "logs": k,
+                "group": f.group,
+                "truth": truth_label(f),
+                "deviation_spreads": dev.tolist(),
+            }
             row["baseline"] = baseline_label(dev)
             if d.verdict is None:
                 row.update(classifier=None, fused=None, reason=d.reason)
@@ -151,32 +169,35 @@ def main(argv=None) -> int:
     ap.add_argument("--root", type=Path, default=DEFAULT_ROOT)
     ap.add_argument("--json", type=Path, default=None)
     ap.add_argument("--write-card", action="store_true", help="store the table in the shipped manifest, rewrite the card")
+    ap.add_argument("--logs", nargs="+", choices=KINDS, default=list(KINDS), help="which CrazyPAD log kinds to score")
     args = ap.parse_args(argv)
     res = score(args)
-    t = table(res["rows"])
-    md = markdown(t, nominal_stored())
+    tables = {k: table([r for r in res["rows"] if r["logs"] == k]) for k in args.logs}
     worst = max(max(abs(x) for x in v) for v in res["healthy_leave_one_out"].values())
-    print(md)
+    for k, tk in tables.items():
+        what = "logged motor commands" if k == "motor" else "commands rebuilt by the firmware mixer; nominal column: motor logs"
+        print(f"\n{k} logs ({what}):\n" + markdown(tk, nominal_stored()))
     print(
         f"\nk = {OUTLIER_SPREADS:g} spreads; healthy calibration flights, each against the others of its airframe: "
         f"largest |deviation| {worst:.2f} spreads over {len(res['healthy_leave_one_out'])} flights"
     )
     if args.json:
-        args.json.write_text(json.dumps({"table": t, **res}, indent=1))
+        args.json.write_text(json.dumps({"tables": tables, **res}, indent=1))
     if args.write_card:
         from offline.crazypad.card import write_card
-        from offline.manifest import git_revision
+        from offline.manifest import git_revision, write_manifest
 
         man = json.loads(MANIFEST.read_text())
         man["shipped"]["fusion"] = {
-            "table": t,
+            # Lists of rows: the manifest's keys are sorted on writing, the rows keep the report's order.
+            "tables_by_log_kind": {k: [{"condition": g, **row} for g, row in tk.items()] for k, tk in tables.items()},
             "outlier_spreads": OUTLIER_SPREADS,
             "healthy_calibration_max_deviation_spreads": worst,
             "hop_steps": HOP,
             "git_revision": git_revision(),
             "bench": "bench/crazypad_fusion.py",
         }
-        MANIFEST.write_text(json.dumps(man, indent=1, allow_nan=False) + "\n")
+        write_manifest(MANIFEST, man)
         print(f"card: {write_card(MANIFEST)}")
     return 0
 
