@@ -105,7 +105,7 @@ def fusion_lines(fusion: dict | None) -> list[str]:
         f"{fusion['healthy_calibration_max_deviation_spreads']:.2f} spreads. Cells: exact / called a propeller fault.",
     ]
     methods = (("classifier", "adapted classifier"), ("baseline", "baseline only"), ("fused", "fused"))
-    for kind, table in fusion["tables_by_log_kind"].items():
+    for kind, table in sorted(fusion["tables_by_log_kind"].items(), key=lambda kv: kv[0] != "motor"):  # motor logs first
         what = "logged motor commands" if kind == "motor" else "commands rebuilt by the firmware mixer"
         lines += [
             "",
