@@ -187,8 +187,10 @@ def fuse(deviation_spreads, label_probability, classifier_label: int, classifier
     Constants, none fitted on a fault flight: ``OUTLIER_SPREADS`` = 3, the Gaussian 3-sigma of the healthy
     flight-to-flight spread, fixed before any scoring (``propwatch adapt``'s own outlier rule). Checked on the
     CrazyPAD healthy calibration flights only, each against the baseline of the other 2-3 of its airframe
-    (``bench/crazypad_fusion.py`` prints it): their largest deviation is 3.7 spreads, so no lower k is
-    supported by healthy data. ``CLASSIFIER_CONFIDENT`` is the classifier's own bar.
+    (``bench/crazypad_fusion.py`` prints it): their largest deviation is 3.7 spreads on motor logs (5.2 on
+    controller logs, baselines of 1-2 flights), so no lower k is supported by healthy data. On simulated flights
+    only (``bench/crazypad_fusion_sim.py``, 4-flight baselines) k = 3 flags 6.5 % of healthy flights and names
+    one-rotor cuts alike on all four rotors. ``CLASSIFIER_CONFIDENT`` is the classifier's own bar.
     Returns {"label", "faulty_propellers", "confidence", "rule"}.
     """
     dev = np.asarray(deviation_spreads, dtype=np.float64)
