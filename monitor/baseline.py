@@ -22,6 +22,7 @@ import numpy as np
 
 from monitor.errors import ConfigError
 from monitor.flight import FlightTable
+from monitor.labels import LABEL_TABLE
 
 BASELINE_FILE = "baseline.json"
 # Floor of the flight-to-flight std of a share. One airframe's shares drift between sessions by more than
@@ -161,6 +162,65 @@ class HealthyBaseline:
             return cls.from_dict(json.loads(path.read_text(encoding="utf-8")), str(path))
         except (OSError, json.JSONDecodeError) as exc:
             raise ConfigError(f"{path}: cannot read the healthy baseline: {exc}") from exc
+
+
+# The classifier's own bar for a confident label (DecisionConfig.faulty_probability, docs/diagnose-json.md): the
+# fusion adds no constant of its own beyond OUTLIER_SPREADS.
+CLASSIFIER_CONFIDENT = 0.9
+
+
+def fuse(deviation_spreads, label_probability, classifier_label: int, classifier_confident: bool) -> dict:
+    """The verdict of an adapted airframe from its healthy baseline and the classifier together.
+
+    ``deviation_spreads`` (4,) is ``HealthyBaseline.deviation`` of the flight; ``label_probability`` the
+    classifier's 16 mean label probabilities. The baseline is a likelihood that is (nearly) zero or flat:
+    a damaged propeller (or a CG offset toward it) makes its rotor work harder, so
+
+    - rotors more than ``OUTLIER_SPREADS`` above this airframe's healthy share form the set B; when B is
+      not empty the verdict is the non-empty subset of B the classifier finds most probable (for one rotor
+      in B: that rotor, whatever the classifier said). ``confident`` when that subset holds at least
+      ``CLASSIFIER_CONFIDENT`` of the probability of all subsets of B, else ``ambiguous``;
+    - when no rotor is beyond it (a rotor far *below* its share is no single damaged propeller's signature
+      on its own), the flight looks like this airframe's healthy flights: healthy, unless the classifier
+      alone is confident (its label probability >= ``CLASSIFIER_CONFIDENT``), whose verdict then stands.
+
+    Constants, none fitted on a fault flight: ``OUTLIER_SPREADS`` = 3, the Gaussian 3-sigma of the healthy
+    flight-to-flight spread, fixed before any scoring (``propwatch adapt``'s own outlier rule). Checked on the
+    CrazyPAD healthy calibration flights only, each against the baseline of the other 2-3 of its airframe
+    (``bench/crazypad_fusion.py`` prints it): their largest deviation is 3.7 spreads on motor logs (5.2 on
+    controller logs, baselines of 1-2 flights), so no lower k is supported by healthy data. On simulated flights
+    only (``bench/crazypad_fusion_sim.py``, 4-flight baselines) k = 3 flags 6.5 % of healthy flights and names
+    one-rotor cuts alike on all four rotors. ``CLASSIFIER_CONFIDENT`` is the classifier's own bar.
+    Returns {"label", "faulty_propellers", "confidence", "rule"}.
+    """
+    dev = np.asarray(deviation_spreads, dtype=np.float64)
+    p = np.asarray(label_probability, dtype=np.float64)
+    if dev.shape != (4,) or p.shape != (16,):
+        raise ValueError(f"fuse: need 4 deviations and 16 label probabilities, got {dev.shape} and {p.shape}")
+    above = {int(i) + 1 for i in np.flatnonzero(dev > OUTLIER_SPREADS)}
+    if above:
+        cands = [lab for lab, rotors in LABEL_TABLE.items() if rotors and set(rotors) <= above]
+        best = max(cands, key=lambda lab: p[lab - 1])
+        mass = float(sum(p[lab - 1] for lab in cands))
+        share = p[best - 1] / mass if mass > 0 else 1.0 / len(cands)
+        conf = "confident" if len(cands) == 1 or share >= CLASSIFIER_CONFIDENT else "ambiguous"
+        rule = f"baseline: PX4 rotor(s) {sorted(above)} beyond {OUTLIER_SPREADS:g} spreads" + (
+            "" if len(cands) == 1 else f"; the classifier's most probable of their {len(cands)} sets"
+        )
+        return {"label": int(best), "faulty_propellers": list(LABEL_TABLE[best]), "confidence": conf, "rule": rule}
+    if classifier_confident and classifier_label != 1:
+        return {
+            "label": int(classifier_label),
+            "faulty_propellers": list(LABEL_TABLE[classifier_label]),
+            "confidence": "confident",
+            "rule": f"no rotor beyond {OUTLIER_SPREADS:g} spreads; the classifier is confident",
+        }
+    return {
+        "label": 1,
+        "faulty_propellers": [],
+        "confidence": "confident",
+        "rule": f"no rotor beyond {OUTLIER_SPREADS:g} spreads and the classifier is not confident of a fault: healthy",
+    }
 
 
 def baseline_from_tables(

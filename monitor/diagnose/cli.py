@@ -28,7 +28,11 @@ Output with ``--json`` (stdout), for one LOG (every key: docs/diagnose-json.md):
      "hypotheses": [{"faulty_propellers": [...], "probability": p}, ...] | null,
      "hypothesis_rule": {"score", "threshold", "coverage", "calibration_flights"} | null,
      "rotor_effectiveness": [4 values] | null, "rotor_effectiveness_std": [4 values] | null,
-     "baseline": {"basis", "shares", "deviation_spreads", "rotors_beyond_3_spreads", "verdict"}}  (--vehicle DIR only)
+     "baseline": {"basis", "shares", "deviation_spreads", "rotors_beyond_3_spreads", "verdict",
+                  "fusion": {"rule", "classifier_label", "classifier_confidence", "spreads_required"}}}
+                  (--vehicle DIR only; there ``verdict`` is the classifier fused with the airframe's baseline,
+                  monitor.baseline.fuse: a rotor beyond 3 healthy spreads is named, none is healthy unless
+                  the classifier alone is confident)
 
 Confidence: a model shipped with a conformal rule (``classifier.sets.json``,
 monitor/hypotheses.py) gives a set of hypotheses: every propeller set whose
@@ -235,6 +239,41 @@ def format_text(d: Diagnosis, baseline=None) -> str:
     return "\n".join(lines)
 
 
+def fuse_verdict(d: Diagnosis, comparison: dict, motor_names) -> None:
+    """Replace the classifier's verdict by the fusion with the airframe's healthy baseline (``monitor.baseline.fuse``).
+
+    Adds ``comparison["fusion"]`` (the rule that decided and what the classifier alone said). Nothing changes
+    where there is no verdict or the baseline was not compared (another basis).
+    """
+    from monitor.baseline import OUTLIER_SPREADS, fuse
+    from monitor.labels import LABEL_TABLE
+
+    if d.verdict is None or d.label_probability is None or "deviation_spreads" not in comparison:
+        return
+    v = d.verdict
+    f = fuse(comparison["deviation_spreads"], d.label_probability, v["label"], v.get("confidence") == "confident")
+    comparison["fusion"] = {
+        "rule": f["rule"],
+        "classifier_label": v["label"],
+        "classifier_confidence": v.get("confidence"),
+        "spreads_required": OUTLIER_SPREADS,
+    }
+    label, conf = f["label"], f["confidence"]
+    window_labels = d.timeline.get("label") or []
+    v.update(
+        label=label,
+        faulty_propellers=list(LABEL_TABLE[label]),
+        faulty_names=[motor_names[i - 1] for i in LABEL_TABLE[label]],
+        confidence=conf,
+        label_probability_of_verdict=round(float(d.label_probability[label - 1]), 4),
+    )
+    if window_labels:
+        v["agreeing_windows"] = round(sum(int(x) == label for x in window_labels) / len(window_labels), 4)
+    for p in d.propellers:
+        bad = p["propeller"] in LABEL_TABLE[label]
+        p["faulty"], p["suspect"] = bad and conf == "confident", bad and conf != "confident"
+
+
 EXIT_NOT_CONFIDENT = 3
 _EXIT_RANK = {0: 0, EXIT_NOT_CONFIDENT: 1, 1: 2, 2: 3}
 
@@ -292,6 +331,10 @@ def main(argv: list[str] | None = None) -> int:
             continue
         finally:
             trap.report()
+        res_baseline = None
+        if baseline is not None:
+            res_baseline = baseline.compare(table)
+            fuse_verdict(d, res_baseline, table.motor_names)
         if d.verdict is None:
             code = worse(code, 1)
         elif d.verdict.get("confidence") != "confident":
@@ -302,8 +345,8 @@ def main(argv: list[str] | None = None) -> int:
             page = write_report(d, table, Path(args.report))
             print(f"report: {page} and {page.with_suffix('.png')}", file=sys.stderr)
         res = d.to_json()
-        if baseline is not None:
-            res["baseline"] = baseline.compare(table)
+        if res_baseline is not None:
+            res["baseline"] = res_baseline
         results.append(res)
         if progress is not None:
             progress.update(size)
@@ -316,6 +359,9 @@ def main(argv: list[str] | None = None) -> int:
                     + ", ".join(f"{x:+.1f}" for x in b["deviation_spreads"])
                     + f" -> {b['verdict']}"
                 )
+            if baseline is not None and "fusion" in res["baseline"]:
+                f = res["baseline"]["fusion"]
+                print(f"  verdict from the baseline and the classifier (label {f['classifier_label']} alone): {f['rule']}")
     if progress is not None:
         progress.close()
     if args.json:

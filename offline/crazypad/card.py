@@ -79,12 +79,46 @@ def card_markdown(manifest: dict, model_name: str = "crazyflie-classifier.onnx")
         row = table[shipped][group]
         cells = [_pct(table[v].get(group, {}).get("accuracy")) for v in variants]
         lines.append(f"| {group} | {row['flights']} | " + " | ".join(cells) + f" | {_pct(row.get('called_faulty'))} |")
+    lines += fusion_lines(s.get("fusion"))
     lines += [
         "",
         f"The paper's real-flight figure ({100 * PAPER_REAL_ACCURACY:.2f} %, Tong et al.) is on labels 1-5 of its own",
         "quadrotor; it is not like-for-like with any row above.",
     ]
     return "\n".join(lines) + "\n"
+
+
+def fusion_lines(fusion: dict | None) -> list[str]:
+    """The verdict of an adapted airframe (``diagnose --vehicle DIR``): classifier, baseline and both fused, as
+    ``bench/crazypad_fusion.py --write-card`` stored them (absent in manifests written before it)."""
+    if not fusion:
+        return []
+    k = fusion["outlier_spreads"]
+    lines = [
+        "",
+        f"**With the airframe's healthy baseline** (`propwatch diagnose LOG --vehicle DIR`; `{fusion['bench']}`, git "
+        f"revision {fusion['git_revision']}): per airframe and log kind, the baseline of its even-numbered healthy logs; "
+        f"baseline only = the rotor furthest above its healthy share when beyond {k:g} spreads, else healthy; fused = "
+        f"`monitor.baseline.fuse` (rotors beyond {k:g} spreads, the classifier choosing among several; none: healthy "
+        "unless the classifier alone is confident). No constant is fitted on a fault flight; the healthy calibration "
+        "flights, each against the others of its airframe, reach "
+        f"{fusion['healthy_calibration_max_deviation_spreads']:.2f} spreads. Cells: exact / called a propeller fault.",
+    ]
+    methods = (("classifier", "adapted classifier"), ("baseline", "baseline only"), ("fused", "fused"))
+    for kind, table in sorted(fusion["tables_by_log_kind"].items(), key=lambda kv: kv[0] != "motor"):  # motor logs first
+        what = "logged motor commands" if kind == "motor" else "commands rebuilt by the firmware mixer"
+        lines += [
+            "",
+            f"{kind} logs ({what}):",
+            "",
+            "| condition | flights | " + " | ".join(t for _, t in methods) + " |",
+            "|---|---|" + "---|" * len(methods),
+        ]
+        for row in table:
+            n = row["flights"]
+            cells = [f"{row[m]['exact']}/{n} / {row[m]['called_fault']}/{n}" for m, _ in methods]
+            lines.append(f"| {row['condition']} | {n} | " + " | ".join(cells) + " |")
+    return lines
 
 
 def write_card(manifest_path: str | Path, card_path: str | Path | None = None) -> Path:

@@ -1,0 +1,126 @@
+"""``diagnose LOG --vehicle DIR``: the verdict fuses the classifier with the airframe's healthy baseline (issue 14)."""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import json
+import shutil
+
+import numpy as np
+import pytest
+from test_diagnose_fixtures import build_model, write_tlog
+from test_diagnose_json_schema import documented, key_paths
+
+from monitor.baseline import BASELINE_FILE, HealthyBaseline, baseline_from_tables, fuse
+from monitor.diagnose.cli import main as diagnose
+from monitor.labels import LABEL_TABLE, label_from_mask
+from monitor.vehicle import DEFAULT_VEHICLE, REPO_ROOT
+
+
+def _probs(**by_label) -> np.ndarray:
+    p = np.full(16, 0.0)
+    for k, v in by_label.items():
+        p[int(k[1:]) - 1] = v
+    return p
+
+
+def label_of(*rotors) -> int:
+    return label_from_mask([i + 1 in rotors for i in range(4)])
+
+
+def test_fuse_rule_by_hand():
+    healthy_says = _probs(l1=0.7, l3=0.3)
+    # One rotor beyond 3 spreads: that rotor, whatever the classifier said.
+    f = fuse([0.5, 5.0, -1.0, -2.0], healthy_says, 1, True)
+    assert (f["label"], f["faulty_propellers"], f["confidence"]) == (label_of(2), [2], "confident")
+    # Exactly 3 spreads is not beyond; far *below* the share is not a damaged propeller's signature alone.
+    f = fuse([3.0, -4.0, 0.0, 0.0], _probs(l2=0.6, l1=0.4), 2, False)
+    assert (f["label"], f["confidence"]) == (1, "confident") and "healthy" in f["rule"]
+    # No rotor beyond: a confident classifier still stands.
+    assert fuse([0.0, 0.0, 0.0, 0.0], _probs(l5=0.95), 5, True)["faulty_propellers"] == [4]
+    # Two rotors beyond: the classifier picks among {2}, {4}, {2, 4}; confident only with >= 0.9 of their mass.
+    pair = label_of(2, 4)
+    f = fuse([0.0, 4.0, 0.0, 6.0], _probs(l1=0.5, **{f"l{pair}": 0.475, f"l{label_of(4)}": 0.025}), 1, False)
+    assert (f["label"], f["confidence"]) == (pair, "confident")  # 0.475 / 0.5 = 0.95
+    f = fuse([0.0, 4.0, 0.0, 6.0], _probs(**{f"l{pair}": 0.3, f"l{label_of(4)}": 0.5, f"l{label_of(2)}": 0.2}), 1, False)
+    assert (f["label"], f["confidence"]) == (label_of(4), "ambiguous")
+    assert set(LABEL_TABLE[f["label"]]) <= {2, 4}
+    with pytest.raises(ValueError, match="4 deviations and 16"):
+        fuse([0.0] * 3, healthy_says, 1, True)
+
+
+def _run(argv):
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(io.StringIO()):
+        code = diagnose([str(a) for a in argv])
+    return code, out.getvalue()
+
+
+@pytest.fixture(scope="module")
+def healthy_log(tmp_path_factory):
+    return write_tlog(tmp_path_factory.mktemp("fuse") / "healthy.tlog", duration_s=12.0, faulty=None, seed=5)
+
+
+def test_baseline_names_a_rotor_the_classifier_calls_healthy(tmp_path, healthy_log):
+    """An airframe whose healthy flights load rotor 1 lightly: this flight's equal shares put rotor 1 far above
+    its healthy share, and the fused verdict names it where the classifier alone says healthy."""
+    d = tmp_path / "adapted"
+    d.mkdir()
+    shutil.copy(DEFAULT_VEHICLE, d / "vehicle.yaml")
+    build_model(d / "classifier.onnx")
+    code, out = _run([healthy_log, "--model", d / "classifier.onnx", "--json"])
+    alone = json.loads(out)["verdict"]
+    assert alone["label"] == 1  # the classifier alone: healthy
+    # This flight's own shares, measured through the same code the CLI uses.
+    light = HealthyBaseline("omega2", (1.0,) * 4, (0.0,) * 4, (0.05,) * 4, None, 20.0, 3, ("a",), ("1", "2", "3", "4"))
+    light.save(d / BASELINE_FILE)
+    seen = json.loads(_run([healthy_log, "--vehicle", d, "--json"])[1])["baseline"]["shares"]
+    # Healthy shares 0.1 lower on rotor 1 (the others raised to keep the mean at 1): rotor 1 now sits
+    # (s1 - (s1 - 0.1)) / 0.02 = 5 spreads above it, the others (0.1/3)/0.02 = 1.7 below.
+    mean = np.asarray(seen) + np.array([-0.1, 0.1 / 3, 0.1 / 3, 0.1 / 3])
+    HealthyBaseline(
+        "omega2", tuple(mean), (0.0,) * 4, (0.05,) * 4, None, 20.0, 3, ("a",), ("1", "2", "3", "4"), False, "test"
+    ).save(d / BASELINE_FILE)
+    code, out = _run([healthy_log, "--vehicle", d, "--json"])
+    res = json.loads(out)
+    assert res["baseline"]["deviation_spreads"] == pytest.approx([5.0, -5 / 3, -5 / 3, -5 / 3], abs=0.01)
+    assert res["verdict"]["faulty_propellers"] == [1] and res["verdict"]["confidence"] == "confident" and code == 0
+    assert [p["faulty"] for p in res["propellers"]] == [True, False, False, False]
+    assert res["baseline"]["fusion"]["classifier_label"] == 1 and res["baseline"]["fusion"]["spreads_required"] == 3.0
+    undocumented = key_paths(res) - set(documented())
+    assert not undocumented, f"undocumented keys: {sorted(undocumented)}"
+    text = _run([healthy_log, "--vehicle", d])[1]
+    assert "verdict: label 2: imbalance near propeller 1: CG offset or damage" in text, text
+    assert "verdict from the baseline and the classifier (label 1 alone): baseline: PX4 rotor(s) [1]" in text, text
+
+
+CRAZYPAD = REPO_ROOT.parent / "shared" / "data" / "crazypad"
+E8 = CRAZYPAD / "motor" / "normal_flight"
+
+
+@pytest.mark.realdata
+@pytest.mark.skipif(not E8.is_dir(), reason=f"CrazyPAD data not found at {CRAZYPAD}")
+def test_real_crazypad_flights_baseline_corrects_the_classifier(tmp_path):
+    """E8's baseline from its even-numbered healthy logs, the shipped Crazyflie classifier: a 3 mm cut on M3 that the
+    classifier alone calls a pair, and a held-out healthy flight it calls faulty, both set right by the baseline."""
+    from monitor.logs import read_log
+    from monitor.vehicle import load_vehicle
+
+    crazyflie = REPO_ROOT / "models" / "crazyflie.yaml"
+    esc = load_vehicle(crazyflie).esc
+    cal = [E8 / f"E8_log0{i}.csv.gz" for i in (0, 2, 4, 6)]
+    base = baseline_from_tables([read_log(p, fmt="crazypad", esc=esc) for p in cal], [p.name for p in cal])
+    d = tmp_path / "E8"
+    d.mkdir()
+    shutil.copy(crazyflie, d / "vehicle.yaml")
+    shutil.copy(REPO_ROOT / "models" / "crazyflie-classifier.onnx", d / "classifier.onnx")
+    base.save(d / BASELINE_FILE)
+    cut = CRAZYPAD / "motor" / "cut_propeller_M3_3mm" / "E8_log02.csv.gz"
+    res = json.loads(_run([cut, "--format", "crazypad", "--vehicle", d, "--json"])[1])
+    assert res["baseline"]["fusion"]["classifier_label"] != label_of(2)  # the classifier alone: not M3 alone
+    assert res["verdict"]["faulty_propellers"] == [2] and res["verdict"]["faulty_names"] == ["M3"]
+    healthy = E8 / "E8_log05.csv.gz"
+    res = json.loads(_run([healthy, "--format", "crazypad", "--vehicle", d, "--json"])[1])
+    assert res["baseline"]["fusion"]["classifier_label"] != 1  # the classifier alone: a false alarm
+    assert res["verdict"]["label"] == 1 and res["verdict"]["faulty_propellers"] == []
