@@ -15,14 +15,16 @@ size in the table.
 from __future__ import annotations
 
 import argparse
+import hashlib
 import json
 import math
+import pickle
 import sys
 import time
 from pathlib import Path
 
 from monitor.daemon.config import AlertConfig
-from monitor.decision import DEFAULT_CALIBRATION, DecisionConfig, load_calibration, thresholds
+from monitor.decision import DEFAULT_CALIBRATION, DecisionConfig, file_sha256, load_calibration, thresholds
 from monitor.model import Classifier
 from monitor.vehicle import REPO_ROOT, load_vehicle
 from offline.alerts.calibrate import calibrate, write_calibration
@@ -46,11 +48,31 @@ def parse_args(argv):
     p.add_argument("--calibration-seed", type=int, default=100)
     p.add_argument("--seed", type=int, default=200, help="first seed of the evaluation flights (never the calibration's)")
     p.add_argument("--no-evalsim", action="store_true", help="score on our simulator only")
+    p.add_argument("--physics", default="randomised", choices=("randomised", "fixed"), help="how our flights draw physics")
+    p.add_argument("--pickup-fraction", type=float, default=0.25, help="our healthy flights with a mid-flight payload step")
+    p.add_argument("--cache", default="", help="keep classified flight sets here (pickles keyed by set and model)")
+    p.add_argument("--list-alerts", action="store_true", help="also list every alert per flight in alerts.json")
     return p.parse_args(argv)
 
 
 def _n(hours: float) -> int:
     return max(1, math.ceil(hours * 3600.0 / FLIGHT_S))
+
+
+def cached(cache: str, key: dict, make):
+    """``make()``, or its pickle from ``cache`` when the same key (set, model digest) was made before."""
+    if not cache:
+        return make()
+    digest = hashlib.sha256(json.dumps(key, sort_keys=True, default=str).encode()).hexdigest()[:16]
+    path = Path(cache) / f"{key.get('kind', 'set')}-{digest}.pkl"
+    if path.is_file():
+        return pickle.loads(path.read_bytes())
+    out = make()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_suffix(".tmp")
+    tmp.write_bytes(pickle.dumps(out))
+    tmp.replace(path)
+    return out
 
 
 def main(argv=None) -> int:
@@ -59,9 +81,26 @@ def main(argv=None) -> int:
     clf = Classifier(args.model)
     vehicle = load_vehicle(args.vehicle)
     cfg = DecisionConfig()
+    sha = file_sha256(args.model)
+    log = lambda m: print(m, file=sys.stderr)  # noqa: E731
+
+    def ours(fs: FlightSet):
+        return cached(args.cache, {**fs.__dict__, "model": sha}, lambda: simulate_set(vehicle, fs, clf, log=log))
+
+    def theirs(kind: str, n: int):
+        key = {"kind": f"evalsim-{kind}", "n": n, "seed": args.seed, "duration_s": FLIGHT_S, "model": sha}
+        return cached(args.cache, key, lambda: evalsim_set(kind, n, args.seed, clf, FLIGHT_S, log=log))
+
+    ours_kw = dict(physics=args.physics)
     if args.calibrate:
-        fs = FlightSet("healthy", n_flights=_n(args.calibration_hours), seed=args.calibration_seed)
-        healthy = simulate_set(vehicle, fs, clf, log=lambda m: print(m, file=sys.stderr))
+        fs = FlightSet(
+            "healthy",
+            n_flights=_n(args.calibration_hours),
+            seed=args.calibration_seed,
+            pickup_fraction=args.pickup_fraction if args.physics == "randomised" else 0.0,
+            **ours_kw,
+        )
+        healthy = ours(fs)
         cal = calibrate(healthy, args.model, cfg, {"flight_set": fs.__dict__, "simulator": "offline.sim (ours)"})
         path = write_calibration(cal, args.calibration_out, {"flight_set": fs.__dict__}, args.calibration_seed)
         print(f"calibration: {path} {cal['fits']}", file=sys.stderr)
@@ -70,19 +109,24 @@ def main(argv=None) -> int:
         return 2
     calibration = load_calibration(args.calibration_out)
     th = thresholds(cfg, clf.info.window / clf.info.sample_rate_hz, None, calibration)
-    log = lambda m: print(m, file=sys.stderr)  # noqa: E731
     n_single = max(1, round(0.75 * args.onset_flights))
     sets = {
-        "healthy": FlightSet("healthy", n_flights=_n(args.healthy_hours), seed=args.seed),
-        "single": FlightSet("single", n_flights=n_single, seed=args.seed + 1),
-        "pair": FlightSet("pair", n_flights=max(1, args.onset_flights - n_single), seed=args.seed + 2),
+        "healthy": FlightSet(
+            "healthy",
+            n_flights=_n(args.healthy_hours),
+            seed=args.seed,
+            pickup_fraction=args.pickup_fraction if args.physics == "randomised" else 0.0,
+            **ours_kw,
+        ),
+        "single": FlightSet("single", n_flights=n_single, seed=args.seed + 1, **ours_kw),
+        "pair": FlightSet("pair", n_flights=max(1, args.onset_flights - n_single), seed=args.seed + 2, **ours_kw),
     }
-    flights = {"ours": {k: simulate_set(vehicle, fs, clf, log=log) for k, fs in sets.items()}}
+    flights = {"ours": {k: ours(fs) for k, fs in sets.items()}}
     flights["ours"]["onset"] = flights["ours"].pop("single") + flights["ours"].pop("pair")
     if not args.no_evalsim:
         flights["evalsim"] = {
-            "healthy": evalsim_set("healthy", _n(args.healthy_hours), args.seed, clf, FLIGHT_S, log=log),
-            "onset": evalsim_set("onset", args.onset_flights, args.seed, clf, FLIGHT_S, log=log),
+            "healthy": theirs("healthy", _n(args.healthy_hours)),
+            "onset": theirs("onset", args.onset_flights),
         }
     rules = {
         f"decision (CUSUM, {cfg.false_alarms_per_hour}/h target)": decision_rule(cfg, calibration, use_stored=False),
