@@ -10,7 +10,7 @@ windows are classified (the daemon: every 0.05 s; diagnose: every hop):
 
     absolute  A_i <- max(0, A_i + clip(logit P_i) * dt)
     change    C_i <- max(0, C_i + (clip(logit P_i) - B_i) * dt)
-    physics   F_i <- max(0, F_i + phys_i * dt)
+    physics   F_i <- max(0, F_i + phys_i * dt / window_s)
 
 ``B_i = max(0, median clip(logit P_i))`` over the first ``BASELINE_S`` of
 classified flight (after take-off, and again after a collective step): what
@@ -19,9 +19,13 @@ network that is confidently wrong about a healthy airframe (a CG offset or a
 weak motor it never saw: issue 12) keeps ``A`` growing on every such flight;
 ``C`` adds evidence only for a *change*. ``phys_i`` is physics evidence that
 needs no network: the rise of rotor i's share of omega^2 over its own
-baseline (``RotorShare``); kept in its own statistic, because a network that
-is confidently wrong would cancel it. A propeller's level is the highest of
-the three.
+baseline (``RotorShare``), as a log-likelihood ratio per independent sample
+(one window length: overlapping windows are not independent), so ``F`` is in
+nats; its CUSUM reference is half the share shift of the smallest thrust loss
+worth an alert (``alerts.min_thrust_loss``, 8 %), so manoeuvres and gusts
+that move the shares by less add nothing. Kept in its own statistic, because
+a network that is confidently wrong would cancel it. A propeller's level is
+the highest of the three.
 
 Thresholds come from the configured false-alarm rates (each statistic gets
 a third of the budget), never hand-set:
@@ -141,18 +145,28 @@ STATISTICS = ("absolute", "change", "physics")
 @dataclass(frozen=True)
 class Calibration:
     """Per statistic, the exceedance-rate tail ``ln(rate per flight-hour) = a - b * h`` on healthy flights;
-    ``None`` for a statistic the calibration disabled (its crossings do not fall off exponentially)."""
+    ``None`` for a statistic the calibration disabled (its crossings do not fall off exponentially).
+
+    ``peaks``: per statistic, the highest value any calibration flight reached. A rate rarer than one per
+    calibrated flight-time cannot be shown by those flights, so its threshold is at least above all of them.
+    """
 
     fits: dict  # statistic -> (a, b) | None
     model_sha256: str
     provenance: dict = field(default_factory=dict)
+    peaks: dict = field(default_factory=dict)  # statistic -> highest healthy value (nat-s or nats)
 
     def threshold(self, statistic: str, rate_per_hour: float) -> float:
         fit = self.fits.get(statistic)
         if fit is None:
             return math.inf
         a, b = fit
-        return max((a - math.log(rate_per_hour)) / b, 0.0)
+        h = max((a - math.log(rate_per_hour)) / b, 0.0)
+        hours = float(self.provenance.get("flight_hours") or 0.0)
+        peak = self.peaks.get(statistic)
+        if peak is not None and rate_per_hour * hours < 1.0:
+            h = max(h, peak * (1.0 + 1e-6))
+        return h
 
 
 def analytic_threshold(rate_per_hour: float, window_s: float, n_props: int = N_PROPS) -> float:
@@ -168,12 +182,14 @@ def load_calibration(path: str | Path | None = None) -> Calibration | None:
         return None
     try:
         d = json.loads(path.read_text(encoding="utf-8"))
-        fits = {}
+        fits, peaks = {}, {}
         for name in STATISTICS:
             f = d["fits"][name]
             fits[name] = None if f is None else (float(f["a"]), float(f["b"]))
-        cal = Calibration(fits, str(d["model_sha256"]), d.get("provenance", {}))
-    except (OSError, ValueError, KeyError, TypeError) as exc:
+            if f is not None and f.get("h_max_healthy") is not None:
+                peaks[name] = float(f["h_max_healthy"])
+        cal = Calibration(fits, str(d["model_sha256"]), d.get("provenance", {}), peaks)
+    except (OSError, ValueError, KeyError, TypeError, AttributeError) as exc:
         raise ConfigError(f"{path}: not a decision calibration: {exc}") from exc
     for name, fit in cal.fits.items():
         if fit is not None and not (math.isfinite(fit[0]) and math.isfinite(fit[1]) and fit[1] > 0):
@@ -202,14 +218,24 @@ def thresholds(
     """Thresholds for the configured rates (shared equally by the statistics): calibrated when the file is this model's."""
     n = len(STATISTICS)
     rates = {"suspect": cfg.suspect_false_alarms_per_hour / n, "fault": cfg.false_alarms_per_hour / n}
+    # The physics statistic counts nats per independent sample (one window length), the others nat-seconds.
+    per = {st: (1.0 / window_s if st == "physics" else 1.0) for st in STATISTICS}
+    analytic = {lvl: {st: analytic_threshold(r, window_s) * per[st] for st in STATISTICS} for lvl, r in rates.items()}
     if calibration is not None and (model_sha256 is None or calibration.model_sha256 == model_sha256):
         hours = calibration.provenance.get("flight_hours")
         th = {lvl: {st: calibration.threshold(st, r) for st in STATISTICS} for lvl, r in rates.items()}
-        return Thresholds(th["suspect"], th["fault"], f"calibrated on {hours} healthy flight-hours (exponential tail)")
-    # The physics statistic counts nats per independent sample (one window length), the others nat-seconds.
-    per = {st: (1.0 / window_s if st == "physics" else 1.0) for st in STATISTICS}
-    th = {lvl: {st: analytic_threshold(r, window_s) * per[st] for st in STATISTICS} for lvl, r in rates.items()}
-    return Thresholds(th["suspect"], th["fault"], "analytic (Wald bound, one sample per window)")
+        source = f"calibrated on {hours} healthy flight-hours (exponential tail)"
+        if calibration.provenance.get("physics_statistic") != physics_statistic(cfg):
+            for lvl in th:  # calibrated for another share statistic (reference, noise model): Wald's bound instead
+                th[lvl]["physics"] = analytic[lvl]["physics"]
+            source += "; physics: analytic (calibrated for another min_thrust_loss or share statistic)"
+        return Thresholds(th["suspect"], th["fault"], source)
+    return Thresholds(analytic["suspect"], analytic["fault"], "analytic (Wald bound, one sample per window)")
+
+
+def physics_statistic(cfg: DecisionConfig) -> dict:
+    """What a physics-statistic calibration holds for: its thresholds mean nothing for another reference or noise model."""
+    return {"form": "share-cusum-v2", "min_thrust_loss": cfg.min_thrust_loss, "share_sigma": SHARE_SIGMA}
 
 
 def window_llr(fault_probability) -> np.ndarray:
@@ -358,7 +384,8 @@ _YAW_FREE = np.eye(4) - np.outer(_C, _C) - np.outer(_Y, _Y)
 # model takes the tails' scale, so a manoeuvre's excursion is not read as decisive evidence; the calibrated
 # thresholds absorb what the model gets wrong.
 SHARE_SIGMA = 0.01
-SHARE_BASELINE_TAU_S = 60.0  # slow drifts (battery sag, motor warm-up) enter the baseline over a minute
+SHARE_BASELINE_TAU_S = 60.0
+SHARE_AVERAGE_S: float | None = None  # seconds of shares averaged per sample; None = the classifier's window  # slow drifts (battery sag, motor warm-up) enter the baseline over a minute
 
 
 class RotorShare:
@@ -388,12 +415,15 @@ class RotorShare:
     weighs each by ``dt / window_s`` (one independent sample per window length).
     """
 
-    def __init__(self, window: int, rate_hz: float, min_thrust_loss: float, sigma: float = SHARE_SIGMA):
-        self.window = window
+    def __init__(
+        self, window: int, rate_hz: float, min_thrust_loss: float, sigma: float = SHARE_SIGMA, average_s: float | None = None
+    ):
+        self.window = window if average_s is None else max(int(round(average_s * rate_hz)), 1)  # steps averaged
+        self.average_s = self.window / rate_hz
         self.rate_hz = rate_hz
         self.delta = 0.5 * min_thrust_loss
         self.sigma = sigma
-        self._ring = np.full((window, N_PROPS), np.nan)
+        self._ring = np.full((self.window, N_PROPS), np.nan)
         self._i = 0
         self._n = 0
         self._base: list[np.ndarray] = []
@@ -568,7 +598,7 @@ class Decision:
         self.vibe_threshold = analytic_threshold(cfg.suspect_false_alarms_per_hour, self.window_s, 1)
         self.regime = RegimeTracker(cfg, rate_hz, window)
         self.vibration = VibrationEvidence()
-        self.share = RotorShare(window, rate_hz, cfg.min_thrust_loss)
+        self.share = RotorShare(window, rate_hz, cfg.min_thrust_loss, average_s=SHARE_AVERAGE_S)
         self.S = {k: np.zeros(N_PROPS) for k in STATISTICS}
         self.peak = {k: np.zeros(N_PROPS) for k in STATISTICS}
         self.baseline: np.ndarray | None = None  # B_i, once learnt
@@ -634,7 +664,7 @@ class Decision:
         else:
             inc["change"] = (llr - self.baseline) * dt
         if phys is not None:
-            inc["physics"] = phys * (dt / self.window_s)
+            inc["physics"] = phys * (dt / self.share.average_s)
         for k, v in inc.items():
             self.S[k] = np.maximum(0.0, self.S[k] + v)
             self.peak[k] = np.maximum(self.peak[k], self.S[k])

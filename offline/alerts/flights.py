@@ -31,6 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from monitor.esc import RPM_PER_RAD_S
 from monitor.labels import LABEL_MASKS
 from monitor.model import Classifier
 from monitor.resample import US_PER_S
@@ -73,6 +74,7 @@ class AlertFlight:
     accel_frd_m_s2: np.ndarray  # (T, 3)
     truth: tuple[int, ...]  # faulty propellers after onset (1..4)
     onset_s: float  # inf for healthy; time of the first faulty sample (step index / rate)
+    thrust_loss: tuple[float, ...] = ()  # per faulty propeller (truth order), fraction of thrust lost at hover; () unknown
 
     @property
     def hours(self) -> float:
@@ -201,7 +203,12 @@ def _simulate_randomised(vehicle: VehicleConfig, fs: FlightSet, clf: Classifier,
             for k, v in one.items():
                 degraded[k][b] = v
         names = [f"{fs.kind}-r{fs.seed}-{i}" + (f"-pickup{step[i]:+.2f}@{pickup_s[i]:.0f}s" if pickup[i] else "") for i in idx]
-        out += _classify(flog, clf, cond[idx], onset[idx], "", signals=degraded, names=names)
+        part = _classify(flog, clf, cond[idx], onset[idx], "", signals=degraded, names=names)
+        for b, f in enumerate(part):  # each damaged rotor's loss at its own hover speed (median before the onset)
+            n0 = max(int(min(onset[idx[b]], fs.duration_s) * f.rate_hz), 1)
+            s_hover = np.median(f.motor_rpm[:n0], axis=0) / (vehicle.omega_max_rad_s * RPM_PER_RAD_S)
+            f.thrust_loss = tuple(round(float(1.0 - after[b, p - 1].thrust_factor(s_hover[p - 1])), 4) for p in f.truth)
+        out += part
         log(f"alerts: {fs.kind} seed {fs.seed} (randomised): {len(out)}/{n} flights")
     return out
 
@@ -269,7 +276,9 @@ def evalsim_set(kind: str, n_flights: int, seed: int, clf: Classifier, duration_
                 table = read_log(path, esc=esc, rate_hz=clf.info.sample_rate_hz, extras=True)
                 tr = truth(spec)
                 onset = tr["fault_onset_s"] if tr["faulty_propellers"] else math.inf
-                out.append(_from_table(table, clf, tuple(tr["faulty_propellers"]), onset, BOOT_OFFSET_US, f"evalsim-{spec.name}"))
+                fl = _from_table(table, clf, tuple(tr["faulty_propellers"]), onset, BOOT_OFFSET_US, f"evalsim-{spec.name}")
+                fl.thrust_loss = tuple(round(1.0 - tr["thrust_factor_at_hover"][p - 1], 4) for p in fl.truth)
+                out.append(fl)
             log(f"alerts: evalsim {kind} seed {seed}: {len(out)}/{len(specs)} flights")
     return out
 
