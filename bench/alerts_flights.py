@@ -71,15 +71,16 @@ def replay_listing(f, d: Decision) -> list[dict]:
 
 
 def share_spread(flights) -> dict:
-    """Window-mean yaw-free omega^2 share minus the flight's first 10 s: pooled std and tail quantiles."""
-    from monitor.decision import _YAW_FREE, BASELINE_S
+    """Yaw-free omega^2 share (mean over SHARE_AVERAGE_S) minus the flight's first 10 s: pooled std and tails."""
+    from monitor.decision import _YAW_FREE, BASELINE_S, SHARE_AVERAGE_S
 
     devs = []
     for f in flights:
         w2 = f.motor_rpm**2
         sh = w2 / w2.mean(axis=1, keepdims=True)
         c = np.cumsum(np.vstack([np.zeros((1, 4)), sh]), axis=0)
-        x = ((c[f.window :] - c[: -f.window]) / f.window) @ _YAW_FREE.T
+        n = int(round(SHARE_AVERAGE_S * f.rate_hz))
+        x = ((c[n:] - c[:-n]) / n) @ _YAW_FREE.T
         n0 = int(BASELINE_S * f.rate_hz)
         devs.append(x[n0:] - x[:n0].mean(axis=0))
     d = np.abs(np.concatenate(devs))
