@@ -52,6 +52,11 @@ def parse_args(argv):
     p.add_argument("--pickup-fraction", type=float, default=0.25, help="our healthy flights with a mid-flight payload step")
     p.add_argument("--cache", default="", help="keep classified flight sets here (pickles keyed by set and model)")
     p.add_argument("--list-alerts", action="store_true", help="also list every alert per flight in alerts.json")
+    p.add_argument(
+        "--compare-with",
+        default="",
+        help="a checkout (e.g. ../main) whose monitor/decision.py and models/decision-calibration.json give one more row",
+    )
     return p.parse_args(argv)
 
 
@@ -102,7 +107,12 @@ def main(argv=None) -> int:
         )
         healthy = ours(fs)
         cal = calibrate(healthy, args.model, cfg, {"flight_set": fs.__dict__, "simulator": "offline.sim (ours)"})
-        path = write_calibration(cal, args.calibration_out, {"flight_set": fs.__dict__}, args.calibration_seed)
+        config = {"flight_set": fs.__dict__}
+        if args.physics == "randomised":
+            from offline.sim.assumptions import REGISTER
+
+            config["assumptions"] = REGISTER.to_mapping()
+        path = write_calibration(cal, args.calibration_out, config, args.calibration_seed)
         print(f"calibration: {path} {cal['fits']}", file=sys.stderr)
     if args.seed == args.calibration_seed:
         print("--seed must differ from --calibration-seed (evaluate on flights the calibration never saw)", file=sys.stderr)
@@ -133,6 +143,8 @@ def main(argv=None) -> int:
         "today: P >= 0.9 for 20 windows": consecutive_rule(AlertConfig(threshold=0.9, consecutive=20)),
         "PX4 imbalanced-prop metric (FD_IMB_PROP_THR 30)": px4_rule(),
     }
+    if args.compare_with:
+        rules[f"previous decision ({_revision(args.compare_with)})"] = previous_rule(args.compare_with, cfg)
     rows: dict = {}
     listed: dict = {}
     for sim, fl in flights.items():
@@ -150,7 +162,15 @@ def main(argv=None) -> int:
             log(f"{sim} / {name}: {rows[sim][name]}")
     result = {
         "simulators": {
-            "ours": "offline.sim: random routes, payload 0-0.6 kg, wind <= 6 m/s, motor spread 6 %, CG 1 cm (per 8 flights)",
+            "ours": (
+                "offline.sim, physics drawn per flight from the assumption register (airframe drawn: motor spread, CG, "
+                "arm and ESC errors, motor lag, inertia, drag; gusty wind; battery sag; controller gains; gyro noise; "
+                "telemetry delay, jitter and drops), random routes, payload 0-0.6 kg; "
+                f"{100 * args.pickup_fraction:.0f} % of healthy flights pick up (3 in 4) or drop a payload of 10-40 % "
+                "of the mass mid-flight"
+                if args.physics == "randomised"
+                else "offline.sim: random routes, payload 0-0.6 kg, wind <= 6 m/s, motor spread 6 %, CG 1 cm (per 8 flights)"
+            ),
             "evalsim": "offline.evalsim: its 'healthy' set (one nuisance each) and 'onset' set (5-20 % thrust loss)",
         },
         "thresholds": th.as_dict(),
@@ -169,6 +189,37 @@ def main(argv=None) -> int:
     return 0
 
 
+def _revision(checkout: str) -> str:
+    import subprocess
+
+    try:
+        rev = subprocess.run(["git", "-C", checkout, "rev-parse", "--short", "HEAD"], capture_output=True, text=True, check=True)
+        return f"{Path(checkout).name} {rev.stdout.strip()}"
+    except (OSError, subprocess.CalledProcessError):
+        return Path(checkout).name
+
+
+def previous_rule(checkout: str, cfg: DecisionConfig):
+    """Another checkout's decision module with its own calibration file, replayed like the shipped one."""
+    import importlib.util
+
+    from offline.alerts.rules import replay_decision
+
+    spec = importlib.util.spec_from_file_location("previous_decision", Path(checkout) / "monitor" / "decision.py")
+    mod = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = mod  # dataclasses look their module up
+    spec.loader.exec_module(mod)
+    old_cfg = mod.DecisionConfig(
+        **{k: v for k, v in vars(cfg).items() if k in mod.DecisionConfig.__dataclass_fields__ and k != "min_thrust_loss"}
+    )
+    cal = mod.load_calibration(Path(checkout) / "models" / "decision-calibration.json")
+
+    def run(f):
+        return replay_decision(f, mod.Decision(old_cfg, f.rate_hz, f.window, calibration=cal, use_stored_calibration=False))
+
+    return run
+
+
 def _f(v, unit: str = "") -> str:
     return "-" if v is None else f"{v}{unit}"
 
@@ -179,7 +230,7 @@ def markdown(r: dict) -> str:
         f"{r['thresholds']['fault']} ({r['thresholds']['source']}). CPU {r['cpu_s']} s.",
         "",
         "| simulator | rule | healthy flights (h) | false alarms / h (95 % upper) | suspect / h | single onsets >= 8 % | "
-        "single >= 8 % detected | median / p95 latency | all singles detected | wrong-propeller alerts | alerts before onset "
+        "single >= 8 % detected | median / p95 latency | all singles detected | wrong-propeller alerts (suspect) | alerts before onset "
         "| pairs: alert overlaps truth |",
         "|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
@@ -199,7 +250,7 @@ def markdown(r: dict) -> str:
             lines.append(
                 f"| {sim} | {name} | {v['healthy_flights']} ({v['healthy_hours']}) | {v['false_alarms_per_hour']} "
                 f"({v['false_alarms_per_hour_upper95']}) | {v['suspect_false_alarms_per_hour']} | {v['single_onsets']} | {det} | "
-                f"{_f(v['latency_median_s'], ' s')} / {_f(v['latency_p95_s'], ' s')} | {all_det} | {v['wrong_propeller_alerts']} | "
+                f"{_f(v['latency_median_s'], ' s')} / {_f(v['latency_p95_s'], ' s')} | {all_det} | {v['wrong_propeller_alerts']} ({v.get('wrong_propeller_suspects', '-')}) | "
                 f"{v['alerts_before_onset']} | {pair} |"
             )
     lines += ["", "Simulators: " + "; ".join(f"{k}: {v}" for k, v in r["simulators"].items() if k in r["rows"])]

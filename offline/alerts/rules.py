@@ -101,12 +101,13 @@ def summarise(rule_alerts: dict[str, list], healthy: list[AlertFlight], onset: l
     fa = sum(1 for al in h_alerts for _, lvl, _ in al if lvl == "fault")
     fs = sum(1 for al in h_alerts for _, lvl, _ in al if lvl == "suspect")
     lat, hit, wrong, pair_ok, n_single, n_pair, early = [], 0, 0, 0, 0, 0, 0
-    n_all, hit_all = 0, 0
+    n_all, hit_all, wrong_suspect = 0, 0, 0
     for f, al in zip(onset, o_alerts):
         truth = set(f.truth)
         faults = [(t, p) for t, lvl, p in al if lvl == "fault"]
         early += sum(1 for t, _ in faults if t < f.onset_s)
         wrong += sum(1 for _, p in faults if p and not set(p) <= truth)
+        wrong_suspect += sum(1 for _, lvl, p in al if lvl == "suspect" and p and not set(p) <= truth)
         after = [(t - f.onset_s, p) for t, p in faults if t >= f.onset_s]
         if len(truth) == 1:
             ok = [dt for dt, p in after if truth <= set(p) or not p]
@@ -137,6 +138,7 @@ def summarise(rule_alerts: dict[str, list], healthy: list[AlertFlight], onset: l
         "latency_median_s": round(float(np.median(lat_a)), 2) if len(lat_a) else None,
         "latency_p95_s": round(float(np.percentile(lat_a, 95)), 2) if len(lat_a) else None,
         "wrong_propeller_alerts": wrong,
+        "wrong_propeller_suspects": wrong_suspect,
         "alerts_before_onset": early,
         "pair_onsets": n_pair,
         "pair_alert_overlaps_truth": round(pair_ok / n_pair, 4) if n_pair else None,
