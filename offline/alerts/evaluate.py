@@ -24,7 +24,7 @@ import time
 from pathlib import Path
 
 from monitor.daemon.config import AlertConfig
-from monitor.decision import DEFAULT_CALIBRATION, DecisionConfig, file_sha256, load_calibration, thresholds
+from monitor.decision import DEFAULT_CALIBRATION, Calibration, DecisionConfig, file_sha256, load_calibration, thresholds
 from monitor.model import Classifier
 from monitor.vehicle import REPO_ROOT, load_vehicle
 from offline.alerts.calibrate import calibrate, write_calibration
@@ -143,6 +143,9 @@ def main(argv=None) -> int:
         "today: P >= 0.9 for 20 windows": consecutive_rule(AlertConfig(threshold=0.9, consecutive=20)),
         "PX4 imbalanced-prop metric (FD_IMB_PROP_THR 30)": px4_rule(),
     }
+    if calibration is not None:  # ablation: the same rule with the network's statistics off (omega^2 shares alone)
+        share_only = Calibration({**calibration.fits, "absolute": None, "change": None}, *_rest(calibration))
+        rules["ablation: decision on omega^2 shares alone (network off)"] = decision_rule(cfg, share_only, use_stored=False)
     if args.compare_with:
         rules[f"previous decision ({_revision(args.compare_with)})"] = previous_rule(args.compare_with, cfg)
     rows: dict = {}
@@ -187,6 +190,10 @@ def main(argv=None) -> int:
     (out / "alerts.md").write_text(markdown(result) + "\n", encoding="utf-8")
     print(markdown(result))
     return 0
+
+
+def _rest(cal: Calibration) -> tuple:
+    return cal.model_sha256, cal.provenance, cal.peaks
 
 
 def _revision(checkout: str) -> str:
