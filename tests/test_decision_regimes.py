@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -110,3 +111,40 @@ def test_a_calibration_for_another_share_statistic_is_not_used_for_it(tmp_path):
     assert other.fault["change"] == th.fault["change"]  # the network's statistics keep their calibration
     assert Calibration({"physics": None}, "x").threshold("physics", 0.1) == math.inf
     assert SHARE_SIGMA > 0
+
+
+# -- replayed flights of our simulator (randomised physics from the assumption register) through the shipped
+# classifier and calibration: what the daemon would see, step by step.
+SHIPPED = Path(__file__).resolve().parents[1] / "models" / "classifier.onnx"
+
+
+def _flight(kind: str, seed: int, **kw):
+    from monitor.model import Classifier
+    from monitor.vehicle import load_vehicle
+    from offline.alerts.flights import FlightSet, simulate_set
+
+    vehicle = load_vehicle(SHIPPED.parent / "vehicle.yaml")
+    fs = FlightSet(kind, 1, chunk_flights=1, physics="randomised", seed=seed, **kw)
+    return simulate_set(vehicle, fs, Classifier(SHIPPED), log=lambda m: None)[0]
+
+
+@pytest.mark.skipif(not SHIPPED.is_file(), reason="models/classifier.onnx not built")
+def test_replayed_healthy_flight_with_a_mid_flight_payload_pick_up_raises_nothing():
+    from offline.alerts.rules import replay_decision
+
+    f = _flight("healthy", 2, duration_s=60.0, pickup_fraction=1.0)
+    assert "pickup+0.30@30s" in f.name  # 30 % more mass at 30 s, on a drawn airframe
+    d = Decision(DecisionConfig(), f.rate_hz, f.window)
+    assert replay_decision(f, d) == []
+    assert d.regime.counts["collective_step"] >= 1 and d.windows > 1000
+
+
+@pytest.mark.skipif(not SHIPPED.is_file(), reason="models/classifier.onnx not built")
+def test_replayed_onset_raises_suspect_then_fault_on_the_right_propeller():
+    from offline.alerts.rules import replay_decision
+
+    f = _flight("single", 2, duration_s=50.0, onset_s=(20.0, 25.0))
+    assert f.truth == (4,) and f.thrust_loss[0] >= 0.08  # 8.2 % thrust lost at hover, drawn from the register
+    alerts = replay_decision(f, Decision(DecisionConfig(), f.rate_hz, f.window))
+    assert [lvl for _, lvl, _ in alerts] == ["suspect", "fault"] and all(p == (4,) for _, _, p in alerts), alerts
+    assert f.onset_s < alerts[0][0] and alerts[1][0] - f.onset_s <= 10.0
