@@ -42,6 +42,8 @@ def parse_args(argv):
     p.add_argument("--out", default="out/alerts", help="where alerts.json and alerts.md go")
     p.add_argument("--healthy-hours", type=float, default=10.0, help="healthy flight-hours to evaluate on")
     p.add_argument("--onset-flights", type=int, default=200, help="onset flights (3/4 single propeller, 1/4 pairs)")
+    p.add_argument("--evalsim-healthy-hours", type=float, default=None, help="evalsim's (default: --healthy-hours)")
+    p.add_argument("--evalsim-onset-flights", type=int, default=None, help="evalsim's (default: --onset-flights)")
     p.add_argument("--calibrate", action="store_true", help="(re)write the calibration first")
     p.add_argument("--calibration-hours", type=float, default=2.0)
     p.add_argument("--calibration-out", default=str(DEFAULT_CALIBRATION))
@@ -135,8 +137,8 @@ def main(argv=None) -> int:
     flights["ours"]["onset"] = flights["ours"].pop("single") + flights["ours"].pop("pair")
     if not args.no_evalsim:
         flights["evalsim"] = {
-            "healthy": theirs("healthy", _n(args.healthy_hours)),
-            "onset": theirs("onset", args.onset_flights),
+            "healthy": theirs("healthy", _n(args.evalsim_healthy_hours or args.healthy_hours)),
+            "onset": theirs("onset", args.evalsim_onset_flights or args.onset_flights),
         }
     rules = {
         f"decision (CUSUM, {cfg.false_alarms_per_hour}/h target)": decision_rule(cfg, calibration, use_stored=False),
