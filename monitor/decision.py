@@ -10,7 +10,7 @@ windows are classified (the daemon: every 0.05 s; diagnose: every hop):
 
     absolute  A_i <- max(0, A_i + clip(logit P_i) * dt)
     change    C_i <- max(0, C_i + (clip(logit P_i) - B_i) * dt)
-    physics   F_i <- max(0, F_i + phys_i * dt / window_s)
+    physics   F_i <- max(0, F_i + phys_i * dt / SHARE_AVERAGE_S)
 
 ``B_i = max(0, median clip(logit P_i))`` over the first ``BASELINE_S`` of
 classified flight (after take-off, and again after a collective step): what
@@ -20,7 +20,8 @@ weak motor it never saw: issue 12) keeps ``A`` growing on every such flight;
 ``C`` adds evidence only for a *change*. ``phys_i`` is physics evidence that
 needs no network: the rise of rotor i's share of omega^2 over its own
 baseline (``RotorShare``), as a log-likelihood ratio per independent sample
-(one window length: overlapping windows are not independent), so ``F`` is in
+(one ``SHARE_AVERAGE_S`` = 2 s mean of shares: means overlapping by all but one
+step are not independent), so ``F`` is in
 nats; its CUSUM reference is half the share shift of the smallest thrust loss
 worth an alert (``alerts.min_thrust_loss``, 8 %), so manoeuvres and gusts
 that move the shares by less add nothing. Kept in its own statistic, because
@@ -426,12 +427,12 @@ class RotorShare:
     no evidence is gathering (``quiet``), so slow drifts (battery sag) are
     absorbed and a step is not.
 
-    Per window: the Gaussian mean-shift log-likelihood ratio
+    Per window: the Gaussian mean-shift log-likelihood ratio of the mean share over the last ``average_s``
     ``delta (x - b - delta/2) / sigma^2`` with ``delta = f_min / 2`` (the
     smallest thrust loss worth an alert, ``alerts.min_thrust_loss``: the CUSUM
     reference is half of it) and ``sigma = SHARE_SIGMA``, the healthy spread.
     Windows that overlap by all but one step are not independent: the caller
-    weighs each by ``dt / window_s`` (one independent sample per window length).
+    weighs each by ``dt / average_s`` (one independent sample per averaging span).
     """
 
     def __init__(
@@ -671,7 +672,7 @@ class Decision:
             return []
         llr = window_llr(ev.fault_probability)
         self._last_p = np.asarray(ev.fault_probability, dtype=np.float64)
-        # Evidence per independent sample (one window length), spread over the seconds this window covers.
+        # Evidence per independent sample (one share-averaging span), spread over the seconds this window covers.
         phys = self.share.llr(dt, quiet=not self.S["physics"].any())
         inc = {"absolute": llr * dt}
         if self.baseline is None:
