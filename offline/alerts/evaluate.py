@@ -201,6 +201,8 @@ def _rest(cal: Calibration) -> tuple:
 def _revision(checkout: str) -> str:
     import subprocess
 
+    if not (Path(checkout) / ".git").exists():  # an exported tree: its folder names it
+        return Path(checkout).name
     try:
         rev = subprocess.run(["git", "-C", checkout, "rev-parse", "--short", "HEAD"], capture_output=True, text=True, check=True)
         return f"{Path(checkout).name} {rev.stdout.strip()}"
