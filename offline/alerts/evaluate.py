@@ -149,7 +149,7 @@ def main(argv=None) -> int:
         share_only = Calibration({**calibration.fits, "absolute": None, "change": None}, *_rest(calibration))
         rules["ablation: decision on omega^2 shares alone (network off)"] = decision_rule(cfg, share_only, use_stored=False)
     if args.compare_with:
-        rules[f"previous decision ({_revision(args.compare_with)})"] = previous_rule(args.compare_with, cfg)
+        rules[f"previous decision ({_revision(args.compare_with)})"] = previous_rule(args.compare_with)
     rows: dict = {}
     listed: dict = {}
     for sim, fl in flights.items():
@@ -210,7 +210,7 @@ def _revision(checkout: str) -> str:
         return Path(checkout).name
 
 
-def previous_rule(checkout: str, cfg: DecisionConfig):
+def previous_rule(checkout: str):
     """Another checkout's decision module with its own calibration file, replayed like the shipped one."""
     import importlib.util
 
@@ -220,7 +220,7 @@ def previous_rule(checkout: str, cfg: DecisionConfig):
     mod = importlib.util.module_from_spec(spec)
     sys.modules[spec.name] = mod  # dataclasses look their module up
     spec.loader.exec_module(mod)
-    old_cfg = mod.DecisionConfig(
+    old_cfg = mod.DecisionConfig()  # its own defaults: the rule as that checkout shipped it
         **{k: v for k, v in vars(cfg).items() if k in mod.DecisionConfig.__dataclass_fields__ and k != "min_thrust_loss"}
     )
     cal = mod.load_calibration(Path(checkout) / "models" / "decision-calibration.json")
