@@ -221,8 +221,6 @@ def previous_rule(checkout: str):
     sys.modules[spec.name] = mod  # dataclasses look their module up
     spec.loader.exec_module(mod)
     old_cfg = mod.DecisionConfig()  # its own defaults: the rule as that checkout shipped it
-        **{k: v for k, v in vars(cfg).items() if k in mod.DecisionConfig.__dataclass_fields__ and k != "min_thrust_loss"}
-    )
     cal = mod.load_calibration(Path(checkout) / "models" / "decision-calibration.json")
 
     def run(f):
