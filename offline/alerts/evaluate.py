@@ -235,7 +235,7 @@ def _f(v, unit: str = "") -> str:
 
 def markdown(r: dict) -> str:
     lines = [
-        f"Decision thresholds (nat-s; null = disabled): suspect {r['thresholds']['suspect']}, fault "
+        f"Decision thresholds (absolute, change: nat-s; physics: nats; null = disabled): suspect {r['thresholds']['suspect']}, fault "
         f"{r['thresholds']['fault']} ({r['thresholds']['source']}). CPU {r['cpu_s']} s.",
         "",
         "| simulator | rule | healthy flights (h) | false alarms / h (95 % upper) | suspect / h | single onsets >= 8 % | "
