@@ -48,7 +48,7 @@ class FlightSet:
     n_flights: int = 16
     duration_s: float = 80.0
     payload_kg: tuple[float, float] = (0.0, 0.6)
-    wind_max_m_s: float = 6.0
+    wind_max_m_s: float = 6.0  # physics "fixed" only (these three are drawn from the register under "randomised")
     motor_efficiency_spread: float = 0.06
     cg_offset_max_m: float = 0.01
     onset_s: tuple[float, float] = (25.0, 50.0)
