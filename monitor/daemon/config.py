@@ -154,9 +154,9 @@ class AlertConfig:
     suspect_false_alarms_per_hour: float = 2.0  # suspect level (NOTICE)
     aggressive_tilt_deg: float = 45.0  # windows holding a manoeuvre beyond this add no evidence
     aggressive_rate_deg_s: float = 200.0
-    collective_step_fraction: float = 0.12  # payload drop / pick-up: 5-s median RPM change that discounts evidence
+    collective_step_fraction: float = 0.07  # payload drop / pick-up: 10-s median RPM change that re-learns baselines
     battery_sag_fraction: float = 0.04  # voltage lost within one window that discounts evidence
-    min_thrust_loss: float = 0.05  # the omega^2-share evidence is tuned to this per-rotor thrust loss
+    min_thrust_loss: float = 0.08  # the smallest per-rotor thrust loss the omega^2-share evidence calls (CUSUM reference)
     calibration_path: str = ""  # '' = models/decision-calibration.json (threshold calibration of the model)
     # Consecutive rule. Threshold and run length chosen on the shipped classifier (bc948c1) over simulated flights on random
     # routes: 8 healthy x 80 s (0.165 flight-hours) and 8 single-propeller faults (bent/cracked, each rotor).

@@ -7,8 +7,16 @@ each crossing (a renewal: after an alarm the monitor starts again), which
 gives the crossing rate per healthy flight-hour for every threshold. A line
 through ln(rate) against h on the grid points with at least ``MIN_EVENTS``
 crossings gives ``rate(h) = exp(a - b h)``; the decision solves it for the
-configured rates. Points beyond the data are an extrapolation of that tail:
-the file says from how many hours and crossings it was drawn.
+configured rates. Only the tail is fitted: grid points crossed at most
+``TAIL_MAX_RATE_PER_H`` times per hour (the body of the distribution, where
+every manoeuvre crosses, says nothing about the rare excursions that make
+false alarms). Points beyond the data are an extrapolation of that tail, and
+healthy flights show rarer, larger excursions than an exponential tail
+predicts (a 5-s gust bump, a network flipping mid-flight): so the file also
+keeps each statistic's highest renewal value over all calibration flights
+(``h_max_healthy``), and a rate below what the calibration hours can resolve
+(< 1 per calibration flight-time) never gets a threshold that one of those
+flights crossed. The file says from how many hours and crossings it was drawn.
 """
 
 from __future__ import annotations
@@ -18,12 +26,27 @@ from pathlib import Path
 
 import numpy as np
 
-from monitor.decision import STATISTICS, Decision, DecisionConfig, Thresholds, file_sha256
+from monitor.decision import STATISTICS, Decision, DecisionConfig, Thresholds, file_sha256, physics_statistic
 from offline.alerts.flights import AlertFlight
 from offline.alerts.rules import replay_decision
 from offline.manifest import make_manifest
 
 MIN_EVENTS = 3
+TAIL_MAX_RATE_PER_H = 10.0  # fit the tail: grid points crossed at most this often (100x the fault target)
+
+
+def peak_value(traces: list[list], statistic: str) -> float:
+    """The highest value the statistic reaches (any propeller) over all traces."""
+    peak = 0.0
+    for trace in traces:
+        s = np.zeros(4)
+        for op, v in trace:
+            if op == "scale":
+                s *= v
+            elif statistic in v:
+                s = np.maximum(0.0, s + v[statistic])
+                peak = max(peak, float(s.max()))
+    return peak
 
 
 def crossing_counts(traces: list[list], h_grid: np.ndarray, statistic: str) -> np.ndarray:
@@ -45,8 +68,8 @@ def crossing_counts(traces: list[list], h_grid: np.ndarray, statistic: str) -> n
 
 
 def fit_tail(h_grid: np.ndarray, counts: np.ndarray, hours: float) -> tuple[float, float, list]:
-    """Least squares ln(rate) = a - b h over the points with >= MIN_EVENTS crossings."""
-    ok = counts >= MIN_EVENTS
+    """Least squares ln(rate) = a - b h over the tail: points with >= MIN_EVENTS crossings and a rate <= the tail's."""
+    ok = (counts >= MIN_EVENTS) & (counts / hours <= TAIL_MAX_RATE_PER_H)
     if ok.sum() < 3:
         raise ValueError(f"too few threshold crossings to fit a tail ({int(ok.sum())} usable points): fly more hours")
     x, y = h_grid[ok], np.log(counts[ok] / hours)
@@ -78,7 +101,7 @@ def calibrate(healthy: list[AlertFlight], model_path: str | Path, cfg: DecisionC
             # A tail that still crosses at the top of the grid more often than the rates we serve is no tail.
             if counts[-1] / hours > cfg.false_alarms_per_hour:
                 raise ValueError(f"{counts[-1]} crossings of h={h_grid[-1]:.0f} in {hours:.2f} h: not an exponential tail")
-            fits[stat] = {"a": a, "b": b}
+            fits[stat] = {"a": a, "b": b, "h_max_healthy": round(peak_value(traces, stat), 4)}
         except ValueError as exc:
             fits[stat] = None
             points[stat + "_disabled_because"] = str(exc)
@@ -91,6 +114,8 @@ def calibrate(healthy: list[AlertFlight], model_path: str | Path, cfg: DecisionC
             "flights": len(healthy),
             "flight_hours": round(hours, 3),
             "min_events_per_point": MIN_EVENTS,
+            "tail_max_rate_per_h": TAIL_MAX_RATE_PER_H,
+            "physics_statistic": physics_statistic(cfg),
             "points_h_crossings": points,
         },
     }

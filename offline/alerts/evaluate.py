@@ -15,14 +15,16 @@ size in the table.
 from __future__ import annotations
 
 import argparse
+import hashlib
 import json
 import math
+import pickle
 import sys
 import time
 from pathlib import Path
 
 from monitor.daemon.config import AlertConfig
-from monitor.decision import DEFAULT_CALIBRATION, DecisionConfig, load_calibration, thresholds
+from monitor.decision import DEFAULT_CALIBRATION, Calibration, DecisionConfig, file_sha256, load_calibration, thresholds
 from monitor.model import Classifier
 from monitor.vehicle import REPO_ROOT, load_vehicle
 from offline.alerts.calibrate import calibrate, write_calibration
@@ -40,17 +42,44 @@ def parse_args(argv):
     p.add_argument("--out", default="out/alerts", help="where alerts.json and alerts.md go")
     p.add_argument("--healthy-hours", type=float, default=10.0, help="healthy flight-hours to evaluate on")
     p.add_argument("--onset-flights", type=int, default=200, help="onset flights (3/4 single propeller, 1/4 pairs)")
+    p.add_argument("--evalsim-healthy-hours", type=float, default=None, help="evalsim's (default: --healthy-hours)")
+    p.add_argument("--evalsim-onset-flights", type=int, default=None, help="evalsim's (default: --onset-flights)")
     p.add_argument("--calibrate", action="store_true", help="(re)write the calibration first")
     p.add_argument("--calibration-hours", type=float, default=2.0)
     p.add_argument("--calibration-out", default=str(DEFAULT_CALIBRATION))
     p.add_argument("--calibration-seed", type=int, default=100)
     p.add_argument("--seed", type=int, default=200, help="first seed of the evaluation flights (never the calibration's)")
     p.add_argument("--no-evalsim", action="store_true", help="score on our simulator only")
+    p.add_argument("--physics", default="randomised", choices=("randomised", "fixed"), help="how our flights draw physics")
+    p.add_argument("--pickup-fraction", type=float, default=0.25, help="our healthy flights with a mid-flight payload step")
+    p.add_argument("--cache", default="", help="keep classified flight sets here (pickles keyed by set and model)")
+    p.add_argument("--list-alerts", action="store_true", help="also list every alert per flight in alerts.json")
+    p.add_argument(
+        "--compare-with",
+        default="",
+        help="a checkout (e.g. ../main) whose monitor/decision.py and models/decision-calibration.json give one more row",
+    )
     return p.parse_args(argv)
 
 
 def _n(hours: float) -> int:
     return max(1, math.ceil(hours * 3600.0 / FLIGHT_S))
+
+
+def cached(cache: str, key: dict, make):
+    """``make()``, or its pickle from ``cache`` when the same key (set, model digest) was made before."""
+    if not cache:
+        return make()
+    digest = hashlib.sha256(json.dumps(key, sort_keys=True, default=str).encode()).hexdigest()[:16]
+    path = Path(cache) / f"{key.get('kind', 'set')}-{digest}.pkl"
+    if path.is_file():
+        return pickle.loads(path.read_bytes())
+    out = make()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_suffix(".tmp")
+    tmp.write_bytes(pickle.dumps(out))
+    tmp.replace(path)
+    return out
 
 
 def main(argv=None) -> int:
@@ -59,51 +88,100 @@ def main(argv=None) -> int:
     clf = Classifier(args.model)
     vehicle = load_vehicle(args.vehicle)
     cfg = DecisionConfig()
+    sha = file_sha256(args.model)
+    log = lambda m: print(m, file=sys.stderr)  # noqa: E731
+
+    def ours(fs: FlightSet):
+        return cached(args.cache, {**fs.__dict__, "model": sha}, lambda: simulate_set(vehicle, fs, clf, log=log))
+
+    def theirs(kind: str, n: int):
+        key = {"kind": f"evalsim-{kind}", "n": n, "seed": args.seed, "duration_s": FLIGHT_S, "model": sha}
+        return cached(args.cache, key, lambda: evalsim_set(kind, n, args.seed, clf, FLIGHT_S, log=log))
+
+    ours_kw = dict(physics=args.physics)
     if args.calibrate:
-        fs = FlightSet("healthy", n_flights=_n(args.calibration_hours), seed=args.calibration_seed)
-        healthy = simulate_set(vehicle, fs, clf, log=lambda m: print(m, file=sys.stderr))
+        fs = FlightSet(
+            "healthy",
+            n_flights=_n(args.calibration_hours),
+            seed=args.calibration_seed,
+            pickup_fraction=args.pickup_fraction if args.physics == "randomised" else 0.0,
+            **ours_kw,
+        )
+        healthy = ours(fs)
         cal = calibrate(healthy, args.model, cfg, {"flight_set": fs.__dict__, "simulator": "offline.sim (ours)"})
-        path = write_calibration(cal, args.calibration_out, {"flight_set": fs.__dict__}, args.calibration_seed)
+        config = {"flight_set": fs.__dict__}
+        if args.physics == "randomised":
+            from offline.sim.assumptions import REGISTER
+
+            config["assumptions"] = REGISTER.to_mapping()
+        path = write_calibration(cal, args.calibration_out, config, args.calibration_seed)
         print(f"calibration: {path} {cal['fits']}", file=sys.stderr)
     if args.seed == args.calibration_seed:
         print("--seed must differ from --calibration-seed (evaluate on flights the calibration never saw)", file=sys.stderr)
         return 2
     calibration = load_calibration(args.calibration_out)
     th = thresholds(cfg, clf.info.window / clf.info.sample_rate_hz, None, calibration)
-    log = lambda m: print(m, file=sys.stderr)  # noqa: E731
     n_single = max(1, round(0.75 * args.onset_flights))
     sets = {
-        "healthy": FlightSet("healthy", n_flights=_n(args.healthy_hours), seed=args.seed),
-        "single": FlightSet("single", n_flights=n_single, seed=args.seed + 1),
-        "pair": FlightSet("pair", n_flights=max(1, args.onset_flights - n_single), seed=args.seed + 2),
+        "healthy": FlightSet(
+            "healthy",
+            n_flights=_n(args.healthy_hours),
+            seed=args.seed,
+            pickup_fraction=args.pickup_fraction if args.physics == "randomised" else 0.0,
+            **ours_kw,
+        ),
+        "single": FlightSet("single", n_flights=n_single, seed=args.seed + 1, **ours_kw),
+        "pair": FlightSet("pair", n_flights=max(1, args.onset_flights - n_single), seed=args.seed + 2, **ours_kw),
     }
-    flights = {"ours": {k: simulate_set(vehicle, fs, clf, log=log) for k, fs in sets.items()}}
+    flights = {"ours": {k: ours(fs) for k, fs in sets.items()}}
     flights["ours"]["onset"] = flights["ours"].pop("single") + flights["ours"].pop("pair")
     if not args.no_evalsim:
         flights["evalsim"] = {
-            "healthy": evalsim_set("healthy", _n(args.healthy_hours), args.seed, clf, FLIGHT_S, log=log),
-            "onset": evalsim_set("onset", args.onset_flights, args.seed, clf, FLIGHT_S, log=log),
+            "healthy": theirs("healthy", _n(args.evalsim_healthy_hours or args.healthy_hours)),
+            "onset": theirs("onset", args.evalsim_onset_flights or args.onset_flights),
         }
     rules = {
         f"decision (CUSUM, {cfg.false_alarms_per_hour}/h target)": decision_rule(cfg, calibration, use_stored=False),
         "today: P >= 0.9 for 20 windows": consecutive_rule(AlertConfig(threshold=0.9, consecutive=20)),
         "PX4 imbalanced-prop metric (FD_IMB_PROP_THR 30)": px4_rule(),
     }
+    if calibration is not None:  # ablation: the same rule with the network's statistics off (omega^2 shares alone)
+        share_only = Calibration({**calibration.fits, "absolute": None, "change": None}, *_rest(calibration))
+        rules["ablation: decision on omega^2 shares alone (network off)"] = decision_rule(cfg, share_only, use_stored=False)
+    if args.compare_with:
+        rules[f"previous decision ({_revision(args.compare_with)})"] = previous_rule(args.compare_with)
     rows: dict = {}
+    listed: dict = {}
     for sim, fl in flights.items():
         rows[sim] = {}
-        for name, run in rules.items():
+        for r, (name, run) in enumerate(rules.items()):
             alerts = {"healthy": [run(f) for f in fl["healthy"]], "onset": [run(f) for f in fl["onset"]]}
             rows[sim][name] = summarise(alerts, fl["healthy"], fl["onset"])
+            if args.list_alerts and r == 0:  # the decision rule's alerts, flight by flight
+                listed[sim] = {
+                    f.name: {"truth": f.truth, "onset_s": f.onset_s, "thrust_loss": f.thrust_loss, "alerts": al}
+                    for k in ("healthy", "onset")
+                    for f, al in zip(fl[k], alerts[k])
+                    if al
+                }
             log(f"{sim} / {name}: {rows[sim][name]}")
     result = {
         "simulators": {
-            "ours": "offline.sim: random routes, payload 0-0.6 kg, wind <= 6 m/s, motor spread 6 %, CG 1 cm (per 8 flights)",
+            "ours": (
+                "offline.sim, physics drawn per flight from the assumption register (airframe drawn: motor spread, CG, "
+                "arm and ESC errors, motor lag, inertia, drag; gusty wind; battery sag; controller gains; gyro noise; "
+                "telemetry delay, jitter and drops), random routes, payload 0-0.6 kg; "
+                f"{100 * args.pickup_fraction:.0f} % of healthy flights pick up (3 in 4) or drop a payload of 10-40 % "
+                "of the mass mid-flight"
+                if args.physics == "randomised"
+                else "offline.sim: random routes, payload 0-0.6 kg, wind <= 6 m/s, motor spread 6 %, CG 1 cm (per 8 flights)"
+            ),
             "evalsim": "offline.evalsim: its 'healthy' set (one nuisance each) and 'onset' set (5-20 % thrust loss)",
         },
         "thresholds": th.as_dict(),
         "rows": rows,
         "sets": {k: fs.__dict__ for k, fs in sets.items()},
+        **({"decision_alerts": listed} if args.list_alerts else {}),
         "cpu_s": round(time.process_time(), 1),
         "wall_s": round(time.monotonic() - started, 1),
         "manifest": make_manifest("alert-evaluation", vars(args), args.seed),
@@ -116,22 +194,63 @@ def main(argv=None) -> int:
     return 0
 
 
+def _rest(cal: Calibration) -> tuple:
+    return cal.model_sha256, cal.provenance, cal.peaks
+
+
+def _revision(checkout: str) -> str:
+    import subprocess
+
+    if not (Path(checkout) / ".git").exists():  # an exported tree: its folder names it
+        return Path(checkout).name
+    try:
+        rev = subprocess.run(["git", "-C", checkout, "rev-parse", "--short", "HEAD"], capture_output=True, text=True, check=True)
+        return f"{Path(checkout).name} {rev.stdout.strip()}"
+    except (OSError, subprocess.CalledProcessError):
+        return Path(checkout).name
+
+
+def previous_rule(checkout: str):
+    """Another checkout's decision module with its own calibration file, replayed like the shipped one."""
+    import importlib.util
+
+    from offline.alerts.rules import replay_decision
+
+    spec = importlib.util.spec_from_file_location("previous_decision", Path(checkout) / "monitor" / "decision.py")
+    mod = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = mod  # dataclasses look their module up
+    spec.loader.exec_module(mod)
+    old_cfg = mod.DecisionConfig()  # its own defaults: the rule as that checkout shipped it
+    cal = mod.load_calibration(Path(checkout) / "models" / "decision-calibration.json")
+
+    def run(f):
+        return replay_decision(f, mod.Decision(old_cfg, f.rate_hz, f.window, calibration=cal, use_stored_calibration=False))
+
+    return run
+
+
 def _f(v, unit: str = "") -> str:
     return "-" if v is None else f"{v}{unit}"
 
 
 def markdown(r: dict) -> str:
     lines = [
-        f"Decision thresholds (nat-s; null = disabled): suspect {r['thresholds']['suspect']}, fault "
+        f"Decision thresholds (absolute, change: nat-s; physics: nats; null = disabled): suspect {r['thresholds']['suspect']}, fault "
         f"{r['thresholds']['fault']} ({r['thresholds']['source']}). CPU {r['cpu_s']} s.",
         "",
-        "| simulator | rule | healthy flights (h) | false alarms / h (95 % upper) | suspect / h | single onsets | "
-        "single detected | median / p95 latency | wrong-propeller alerts | alerts before onset | pairs: alert overlaps truth |",
-        "|---|---|---|---|---|---|---|---|---|---|---|",
+        "| simulator | rule | healthy flights (h) | false alarms / h (95 % upper) | suspect / h | single onsets >= 8 % | "
+        "single >= 8 % detected | median / p95 latency | all singles detected | wrong-propeller alerts (suspect) | alerts before onset "
+        "| pairs: alert overlaps truth |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for sim, rows in r["rows"].items():
         for name, v in rows.items():
             det = "-" if v["single_detected"] is None else f"{100 * v['single_detected']:.1f} %"
+            all_det = (
+                "-"
+                if v.get("single_detected_all") is None
+                else f"{100 * v['single_detected_all']:.1f} % of {v['single_onsets_all']}"
+            )
             pair = (
                 "-"
                 if v["pair_alert_overlaps_truth"] is None
@@ -140,7 +259,7 @@ def markdown(r: dict) -> str:
             lines.append(
                 f"| {sim} | {name} | {v['healthy_flights']} ({v['healthy_hours']}) | {v['false_alarms_per_hour']} "
                 f"({v['false_alarms_per_hour_upper95']}) | {v['suspect_false_alarms_per_hour']} | {v['single_onsets']} | {det} | "
-                f"{_f(v['latency_median_s'], ' s')} / {_f(v['latency_p95_s'], ' s')} | {v['wrong_propeller_alerts']} | "
+                f"{_f(v['latency_median_s'], ' s')} / {_f(v['latency_p95_s'], ' s')} | {all_det} | {v['wrong_propeller_alerts']} ({v.get('wrong_propeller_suspects', '-')}) | "
                 f"{v['alerts_before_onset']} | {pair} |"
             )
     lines += ["", "Simulators: " + "; ".join(f"{k}: {v}" for k, v in r["simulators"].items() if k in r["rows"])]

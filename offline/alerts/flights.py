@@ -1,11 +1,26 @@
 """Flights for judging alert rules: healthy ones with randomised physics, and ones with an in-flight onset.
 
-Drawn from our simulator with the data set's shift options (random routes,
-payload, steady wind, per-motor efficiency spread, CG offset: one vehicle
-variant per chunk of flights) and classified at every step (hop 1, as the
-daemon does at 20 Hz). What a rule needs per flight is kept: the window
-outputs, the per-step flight state for the regime tracker, the accelerometer
-(for PX4's imbalance metric), the truth and the onset time.
+Drawn from our simulator and classified at every step (hop 1, as the daemon
+does at 20 Hz). Two ways to draw the physics:
+
+* ``physics="randomised"`` (the default for calibration and evaluation): every
+  flight's physics from the assumption register (``offline/sim/assumptions.py``;
+  flight i gets ``draw_flight(register, SeedSequence([seed, i]))``), airframe
+  terms included (motor efficiency spread, CG offset, arm errors, ESC offsets,
+  motor lag, inertia, drag, gusty wind, battery internal resistance and sag,
+  controller gains, gyro noise), the damaged blades' own drawn signatures, and
+  the register's telemetry delay, jitter and drops applied to the logged
+  signals. On top, a ``pickup_fraction`` of flights picks up or drops a payload
+  mid-flight: all four rotors' thrust and torque scale by the same factor at a
+  drawn time, which is to the controller exactly a mass step of
+  ``1 / factor`` (the regime a collective step must re-learn from).
+* ``physics="fixed"``: the data set's shift options (random routes, payload,
+  steady wind, per-motor efficiency spread, CG offset: one vehicle variant per
+  chunk of flights), as before.
+
+What a rule needs per flight is kept: the window outputs, the per-step flight
+state for the regime tracker, the accelerometer (for PX4's imbalance metric),
+the truth and the onset time.
 """
 
 from __future__ import annotations
@@ -16,6 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from monitor.esc import RPM_PER_RAD_S
 from monitor.labels import LABEL_MASKS
 from monitor.model import Classifier
 from monitor.resample import US_PER_S
@@ -32,13 +48,16 @@ class FlightSet:
     n_flights: int = 16
     duration_s: float = 80.0
     payload_kg: tuple[float, float] = (0.0, 0.6)
-    wind_max_m_s: float = 6.0
+    wind_max_m_s: float = 6.0  # physics "fixed" only (these three are drawn from the register under "randomised")
     motor_efficiency_spread: float = 0.06
     cg_offset_max_m: float = 0.01
     onset_s: tuple[float, float] = (25.0, 50.0)
     chunk_flights: int = 8  # one vehicle variant (wind, motor spread, CG) per chunk
     propellers: str = "quadratic"
     seed: int = 0
+    physics: str = "fixed"  # "randomised": each flight's physics from the assumption register (airframe drawn)
+    pickup_fraction: float = 0.0  # randomised only: flights with a mid-flight payload pick-up or drop
+    pickup_mass_step: tuple[float, float] = (0.1, 0.4)  # the mass step, fraction of the flight's mass (+ pick-up)
 
 
 @dataclass
@@ -55,6 +74,7 @@ class AlertFlight:
     accel_frd_m_s2: np.ndarray  # (T, 3)
     truth: tuple[int, ...]  # faulty propellers after onset (1..4)
     onset_s: float  # inf for healthy; time of the first faulty sample (step index / rate)
+    thrust_loss: tuple[float, ...] = ()  # per faulty propeller (truth order), fraction of thrust lost at hover; () unknown
 
     @property
     def hours(self) -> float:
@@ -71,6 +91,10 @@ def _conditions(kind: str, n: int, rng: np.random.Generator) -> np.ndarray:
 
 
 def simulate_set(vehicle: VehicleConfig, fs: FlightSet, clf: Classifier, log=print) -> list[AlertFlight]:
+    if fs.physics == "randomised":
+        return _simulate_randomised(vehicle, fs, clf, log)
+    if fs.physics != "fixed":
+        raise ValueError(f"physics: 'fixed' or 'randomised', got {fs.physics!r}")
     rng = np.random.default_rng([fs.seed, 13])
     out: list[AlertFlight] = []
     spec = DatasetSpec(
@@ -104,29 +128,117 @@ def simulate_set(vehicle: VehicleConfig, fs: FlightSet, clf: Classifier, log=pri
     return out
 
 
-def _classify(flog, clf: Classifier, cond: np.ndarray, onset: np.ndarray, prefix: str) -> list[AlertFlight]:
+def _simulate_randomised(vehicle: VehicleConfig, fs: FlightSet, clf: Classifier, log) -> list[AlertFlight]:
+    """Flights with physics from the assumption register (see the module doc); flight i depends on (seed, i) only."""
+    from offline.dataset.generate import flight_sim_seed, sim_config
+    from offline.propellers import build_propellers
+    from offline.sim.assumptions import REGISTER, draw_flights
+    from offline.sim.perflight import PerFlightTerms
+    from offline.sim.simulator import simulate
+    from offline.sim.telemetry import degrade_flight
+
+    spec = DatasetSpec(
+        "alerts", waypoints=("random",), duration_s=fs.duration_s, propellers="quadratic", physics="randomised", seed=fs.seed
+    )
+    rng = np.random.default_rng([fs.seed, 13])
+    n = fs.n_flights
+    cond = _conditions(fs.kind, n, rng)
+    payload = rng.uniform(*fs.payload_kg, n)
+    onset = np.full(n, np.inf) if fs.kind == "healthy" else rng.uniform(*fs.onset_s, n)
+    pickup = rng.random(n) < fs.pickup_fraction
+    pickup_s = rng.uniform(0.3 * fs.duration_s, 0.7 * fs.duration_s, n)
+    step = rng.uniform(*fs.pickup_mass_step, n) * np.where(rng.random(n) < 0.75, 1.0, -1.0)  # 3 in 4 pick up
+    wps, _ = routes(spec, n, seed=fs.seed)
+    out: list[AlertFlight] = []
+    for c0 in range(0, n, fs.chunk_flights):
+        idx = np.arange(c0, min(n, c0 + fs.chunk_flights))
+        phys = draw_flights(REGISTER, fs.seed, idx)
+        seeds = np.array([flight_sim_seed(fs.seed, i) for i in idx])
+        before = np.empty((len(idx), 4), dtype=object)
+        after = np.empty((len(idx), 4), dtype=object)
+        switch_s = np.full(len(idx), np.inf)
+        for b, (i, f) in enumerate(zip(idx, phys)):
+            for r in range(4):
+                c = cond[i, r]
+                healthy = f.healthy_signature(r)
+                before[b, r] = healthy
+                after[b, r] = healthy if c == 0 else f.signature(r, "bent" if c == 1 else "cracked")
+                if pickup[i]:  # the payload step scales every rotor: thrust / (1 + step) is mass * (1 + step)
+                    k = 1.0 / (1.0 + step[i])
+                    after[b, r] = dataclasses.replace(
+                        after[b, r],
+                        thrust_loss_low=1 - k * (1 - after[b, r].thrust_loss_low),
+                        thrust_loss_high=1 - k * (1 - after[b, r].thrust_loss_high),
+                        torque_gain_low=k * (1 + after[b, r].torque_gain_low) - 1,
+                        torque_gain_high=k * (1 + after[b, r].torque_gain_high) - 1,
+                    )
+            switch_s[b] = pickup_s[i] if pickup[i] else onset[i]
+            if pickup[i] and np.isfinite(onset[i]):
+                raise ValueError("pickup_fraction: only for healthy flights (one switch per flight)")
+        props = SwitchedPropellers(
+            build_propellers(vehicle, np.zeros_like(cond[idx]), kind="quadratic", rng_seed=seeds, rotor_signatures=before),
+            build_propellers(vehicle, cond[idx], kind="quadratic", rng_seed=seeds + 1, rotor_signatures=after),
+            switch_s,
+        )
+        flog = simulate(
+            vehicle,
+            wps[idx],
+            props,
+            sim_config(spec),
+            payload_kg=payload[idx],
+            seed=seeds,
+            per_flight=PerFlightTerms.from_flights(phys, vehicle),
+        )
+        sig = flog.signals()
+        degraded = {k: np.empty(np.shape(v), np.float64) for k, v in sig.items()}
+        for b, f in enumerate(phys):
+            one = degrade_flight(
+                {k: v[b] for k, v in sig.items()},
+                float(flog.log_rate_hz),
+                f["attitude_log_delay_s"],
+                f["telemetry_jitter_std_s"],
+                f["telemetry_drop_prob"],
+                np.random.default_rng([int(f["noise_seed"]) % 2**63, 1]),
+            )
+            for k, v in one.items():
+                degraded[k][b] = v
+        names = [f"{fs.kind}-r{fs.seed}-{i}" + (f"-pickup{step[i]:+.2f}@{pickup_s[i]:.0f}s" if pickup[i] else "") for i in idx]
+        part = _classify(flog, clf, cond[idx], onset[idx], "", signals=degraded, names=names)
+        for b, f in enumerate(part):  # each damaged rotor's loss at its own hover speed (median before the onset)
+            n0 = max(int(min(onset[idx[b]], fs.duration_s) * f.rate_hz), 1)
+            s_hover = np.median(f.motor_rpm[:n0], axis=0) / (vehicle.omega_max_rad_s * RPM_PER_RAD_S)
+            f.thrust_loss = tuple(round(float(1.0 - after[b, p - 1].thrust_factor(s_hover[p - 1])), 4) for p in f.truth)
+        out += part
+        log(f"alerts: {fs.kind} seed {fs.seed} (randomised): {len(out)}/{n} flights")
+    return out
+
+
+def _classify(
+    flog, clf: Classifier, cond: np.ndarray, onset: np.ndarray, prefix: str, signals: dict | None = None, names=None
+) -> list[AlertFlight]:
+    """``signals``: the logged signals as the monitor sees them (telemetry degraded), default the simulator's."""
     from monitor.features import compute_features
 
     info = clf.info
     w = info.window
-    sig = flog.signals()
+    sig = flog.signals() if signals is None else signals
     flights = []
     for b in range(len(cond)):
         feats = compute_features({k: v[b] for k, v in sig.items()}, info.features).astype(np.float32)
         idx = np.arange(len(feats) - w + 1)[:, None] + np.arange(w)[None, :]
         probs = np.concatenate([clf.predict(feats[idx[i : i + 2048]])[1] for i in range(0, len(idx), 2048)])
-        rates = flog.rates_frd_rad_s[b]
+        rates = np.stack([sig[k][b] for k in ("roll_rate_rad_s", "pitch_rate_rad_s", "yaw_rate_rad_s")], axis=1)
         # The onset switches at the first physics step at or after onset_s; its first logged sample is the next one.
         onset_s = float(np.ceil(onset[b] * flog.log_rate_hz) / flog.log_rate_hz) if np.isfinite(onset[b]) else np.inf
         flights.append(
             AlertFlight(
-                f"{prefix}-{b}",
+                f"{prefix}-{b}" if names is None else names[b],
                 float(flog.log_rate_hz),
                 w,
                 probs.astype(np.float64),
-                flog.motor_rpm[b].astype(np.float64),
-                flog.motor_rpm[b].mean(axis=1),
-                np.maximum(np.abs(flog.roll_rad[b]), np.abs(flog.pitch_rad[b])),
+                np.asarray(sig["motor_rpm"][b], np.float64),
+                np.asarray(sig["motor_rpm"][b], np.float64).mean(axis=1),
+                np.maximum(np.abs(sig["roll_rad"][b]), np.abs(sig["pitch_rad"][b])),
                 np.abs(rates).max(axis=1),
                 flog.battery_v[b].astype(np.float64),
                 flog.accel_frd_m_s2[b].astype(np.float64),
@@ -164,7 +276,9 @@ def evalsim_set(kind: str, n_flights: int, seed: int, clf: Classifier, duration_
                 table = read_log(path, esc=esc, rate_hz=clf.info.sample_rate_hz, extras=True)
                 tr = truth(spec)
                 onset = tr["fault_onset_s"] if tr["faulty_propellers"] else math.inf
-                out.append(_from_table(table, clf, tuple(tr["faulty_propellers"]), onset, BOOT_OFFSET_US, f"evalsim-{spec.name}"))
+                fl = _from_table(table, clf, tuple(tr["faulty_propellers"]), onset, BOOT_OFFSET_US, f"evalsim-{spec.name}")
+                fl.thrust_loss = tuple(round(1.0 - tr["thrust_factor_at_hover"][p - 1], 4) for p in fl.truth)
+                out.append(fl)
             log(f"alerts: evalsim {kind} seed {seed}: {len(out)}/{len(specs)} flights")
     return out
 
