@@ -124,6 +124,11 @@ class DecisionConfig:
     # The smallest per-rotor thrust loss the omega^2-share evidence must call (issue 13: >= 8 % alerted): the
     # CUSUM's reference is half of its share shift, so smaller excursions (manoeuvres, gusts) add nothing.
     min_thrust_loss: float = 0.08
+    # Which statistics may raise FAULT: "physics" (the omega^2 shares alone; the network's statistics raise at most
+    # suspect) or "all". Default physics: on our own randomised flights the network adds one pair in 25 at fault
+    # level, while on airframes it never saw (drawn motor spread and CG) it flips to P ~ 1 mid-flight and is
+    # confidently wrong (docs/ALERTS.md).
+    fault_evidence: str = "physics"
     calibration_path: str = ""  # '' = models/decision-calibration.json
 
     def __post_init__(self) -> None:
@@ -141,6 +146,7 @@ class DecisionConfig:
         _check(0 < self.collective_step_fraction <= 1, "alerts.collective_step_fraction", "must be in (0, 1]")
         _check(0 < self.battery_sag_fraction <= 1, "alerts.battery_sag_fraction", "must be in (0, 1]")
         _check(0.01 <= self.min_thrust_loss <= 0.5, "alerts.min_thrust_loss", "must be in [0.01, 0.5]")
+        _check(self.fault_evidence in ("physics", "all"), "alerts.fault_evidence", "must be 'physics' or 'all'")
 
 
 # -- thresholds -----------------------------------------------------------------------------
@@ -615,6 +621,7 @@ class Decision:
         if calibration is None and use_stored_calibration:
             calibration = load_calibration(cfg.calibration_path or None)
         self.thresholds = thresholds(cfg, self.window_s, model_sha256, calibration)
+        self._fault_statistics = STATISTICS if cfg.fault_evidence == "all" else ("physics",)
         self.vibe_threshold = analytic_threshold(cfg.suspect_false_alarms_per_hour, self.window_s, 1)
         self.regime = RegimeTracker(cfg, rate_hz, window)
         self.vibration = VibrationEvidence()
@@ -733,7 +740,7 @@ class Decision:
         th = self.thresholds
         out = []
         for i in range(N_PROPS):
-            if any(self.S[k][i] >= th.fault[k] for k in STATISTICS):
+            if any(self.S[k][i] >= th.fault[k] for k in self._fault_statistics):
                 out.append("fault")
             elif any(self.S[k][i] >= th.suspect[k] for k in STATISTICS):
                 out.append("suspect")

@@ -92,7 +92,7 @@ def test_onset_raises_suspect_then_fault_on_the_right_propeller():
     def p(t):
         return np.array([0.01, 0.02, 0.999 if t >= onset_s + 2.5 else 0.01, 0.01])
 
-    d = analytic()
+    d = analytic(DecisionConfig(fault_evidence="all"))  # the network's evidence alone, allowed to raise FAULT
     ann = fly(d, p, 70.0)
     assert [a.level for a in ann] == ["suspect", "fault"], ann
     assert all(a.propellers == (3,) for a in ann) and all(a.t_s > onset_s for a in ann)
@@ -104,7 +104,7 @@ def test_a_network_pinned_wrong_from_take_off_is_not_an_alarm_but_a_change_is():
     # A CG offset the network never saw: P(1) ~ 1 from the first window (issue 12). The absolute statistic is
     # disabled by a calibration that saw this; the change statistic alerts only on what changes later.
     cal = Calibration({"absolute": None, "change": (8.0, 0.4), "physics": (8.0, 0.4)}, "sha")
-    d = Decision(DecisionConfig(), RATE_HZ, WINDOW, model_sha256="sha", calibration=cal)
+    d = Decision(DecisionConfig(fault_evidence="all"), RATE_HZ, WINDOW, model_sha256="sha", calibration=cal)
 
     def p(t):
         return np.array([0.999, 0.01, 0.999 if t >= 50.0 else 0.01, 0.01])
@@ -112,6 +112,18 @@ def test_a_network_pinned_wrong_from_take_off_is_not_an_alarm_but_a_change_is():
     ann = fly(d, p, 90.0)
     assert ann and all(a.propellers == (3,) for a in ann), ann
     assert ann[-1].level == "fault"
+
+
+def test_by_default_the_network_alone_raises_suspect_never_fault():
+    # fault_evidence "physics" (the default): a network at P ~ 1 on propeller 3 with the omega^2 shares flat
+    # is a NOTICE, not a FAULT; the same windows with "all" raise FAULT (the test above).
+    def p(t):
+        return np.array([0.01, 0.02, 0.999 if t >= 42.5 else 0.01, 0.01])
+
+    ann = fly(analytic(), p, 70.0)
+    assert [a.level for a in ann] == ["suspect"] and ann[0].propellers == (3,), ann
+    with pytest.raises(ConfigError, match="fault_evidence"):
+        DecisionConfig(fault_evidence="network")
 
 
 def test_omega2_share_rise_alerts_without_the_network():

@@ -46,7 +46,8 @@ RULES = {"consecutive": 112.0, "sequential": 125.0}
 @pytest.mark.parametrize("rule", sorted(RULES))
 @pytest.mark.parametrize("path", ["/dev/full", "/dev/null/not-a-dir/events.jsonl"])
 def test_an_unwritable_events_file_never_stops_or_delays_an_alert(toy, path, rule):
-    daemon, link = make_daemon(toy, path, {"alerts": {**QUICK["alerts"], "rule": rule}})
+    # the toy network is the only evidence here: let it raise FAULT (the default lets only the shares)
+    daemon, link = make_daemon(toy, path, {"alerts": {**QUICK["alerts"], "rule": rule, "fault_evidence": "all"}})
     feed(daemon, px4_stream(100.0, RULES[rule], faulty=(3,)))
     texts = link.statustexts()
     alerts = [t for t in texts if t[0].startswith("PROP 3 FAULT")]

@@ -90,7 +90,8 @@ def test_flight_sets_word_the_daemons_alerts_as_the_flights_hypotheses():
     p /= p.sum()
     hyps = sets.add(p)
     assert [h for h, _ in hyps] == [(1,), (1, 2)]
-    d = Decision(DecisionConfig(), 20.0, 100, use_stored_calibration=False)
+    # the network's evidence alone: it may raise FAULT only when the configuration lets it (fault_evidence "all")
+    d = Decision(DecisionConfig(fault_evidence="all"), 20.0, 100, use_stored_calibration=False)
     ann = []
     for j in range(1400):
         t = (j + 1) / 20.0
