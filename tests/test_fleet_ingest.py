@@ -240,3 +240,16 @@ def test_real_logs_give_their_vehicle_ids(tmp_path):
     assert (r3["vehicle_id"], r3["vehicle_id_source"], r3["status"]) == ("px4_ulog", "dir:1", "no_verdict")
     with pytest.raises(FleetError, match="no such file"):
         ingest([str(tmp_path / "nowhere")], tmp_path / "x.duckdb", ray_address="off")
+
+
+def test_ray_calls_hold_every_log_once_largest_first():
+    from fleet.ingest import ray_batches
+
+    todo = [(f"/logs/{i:02d}.tlog", f"h{i}", size) for i, size in enumerate([5, 90, 5, 40, 7, 90, 1])]
+    calls = ray_batches(todo, 3)
+    assert [len(c) for c in calls] == [3, 3, 1]
+    flat = [job for call in calls for job in call]
+    assert sorted(flat) == sorted(todo)  # each log exactly once
+    assert [size for _, _, size in flat] == [90, 90, 40, 7, 5, 5, 1]  # the long logs start first
+    assert flat[:2] == [todo[1], todo[5]]  # ties in path order: the same calls on every run
+    assert ray_batches(todo, 0) == [[job] for job in flat]
