@@ -105,10 +105,11 @@ def _process_name(pid: int) -> str:
 
 
 def _busy_cpu_s() -> float:
-    """CPU seconds the whole machine has been busy since boot (/proc/stat: all but idle and iowait)."""
+    """CPU seconds the whole machine has been busy since boot (/proc/stat: user, nice, system, irq, softirq;
+    guest time is inside user, steal is the hypervisor's)."""
     with open("/proc/stat") as f:
-        ticks = [int(x) for x in f.readline().split()[1:]]
-    return (sum(ticks) - ticks[3] - ticks[4]) / os.sysconf("SC_CLK_TCK")
+        user, nice, system, _idle, _iowait, irq, softirq = (int(x) for x in f.readline().split()[1:8])
+    return (user + nice + system + irq + softirq) / os.sysconf("SC_CLK_TCK")
 
 
 class CpuShare:

@@ -189,14 +189,10 @@ def ray_batches(todo: list[tuple[str, str, int]], logs_per_call: int) -> list[li
     return [ordered[i : i + size] for i in range(0, len(ordered), size)]
 
 
-def _failed_row(job: tuple[str, str, int], exc: Exception) -> dict:
+def _failed_row(job: tuple[str, str, int], reason: str) -> dict:
     path, h, size = job
     row = empty_row(Path(path), h, size)
-    row.update(
-        status="error",
-        error=f"{path}: failed after {TASK_MAX_RETRIES} retries: {type(exc).__name__}",
-        ingested_at=utc_naive(time.time() * 1e6),
-    )
+    row.update(status="error", error=f"{path}: {reason}", ingested_at=utc_naive(time.time() * 1e6))
     return row
 
 
@@ -226,13 +222,20 @@ def _run_ray(con, todo, settings, summary, batch_rows, progress, mtime_of, addre
                 jobs = calls.popleft()
                 pending[actor.process_batch.remote(jobs)] = (actor, jobs)
 
-        try:
-            for _ in range(CALLS_IN_FLIGHT_PER_WORKER):
-                for actor in actors:
-                    feed(actor)
-            while pending:
-                done, _ = ray.wait(list(pending), num_returns=1)
+        starting = {actor.__ray_ready__.remote(): actor for actor in actors}  # fed once it runs: on a busy
+        try:  # cluster an actor that never gets a CPU holds no calls
+            while pending or starting:
+                done, _ = ray.wait([*pending, *starting], num_returns=1)
                 for ref in done:
+                    if ref in starting:
+                        actor = starting.pop(ref)
+                        try:
+                            ray.get(ref)
+                        except ray.exceptions.RayError:
+                            continue  # never started: the others take its share
+                        for _ in range(CALLS_IN_FLIGHT_PER_WORKER):
+                            feed(actor)
+                        continue
                     actor, jobs = pending.pop(ref)
                     try:
                         rows = ray.get(ref)
@@ -241,10 +244,13 @@ def _run_ray(con, todo, settings, summary, batch_rows, progress, mtime_of, addre
                             calls.extendleft([job] for job in reversed(jobs))
                             rows = []
                         else:
-                            rows = [_failed_row(jobs[0], exc)]
+                            rows = [_failed_row(jobs[0], f"failed after {TASK_MAX_RETRIES} retries: {type(exc).__name__}")]
                     for row in rows:
                         w.add(row)
                     feed(actor)
+            for jobs in calls:  # left only when no worker could start
+                for job in jobs:
+                    w.add(_failed_row(job, "no Ray worker could start"))
         finally:
             for actor in actors:  # frees their CPUs at once, also on a cluster that outlives this run
                 ray.kill(actor)
