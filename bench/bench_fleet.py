@@ -1,18 +1,27 @@
 """Fleet ingest throughput: logs/s and MB/s for 200 mixed logs, serial vs Ray with 1 and 2 workers.
 
-    python bench/bench_fleet.py [--dir /tmp/propwatch-fleet-bench] [--data ../shared/data] [--runs serial,ray1,ray2]
+    python bench/bench_fleet.py [--dir /tmp/propwatch-fleet-bench] [--data ../shared/data]
+                                [--runs serial,ray1,ray2] [--json out.json]
 
 The 200 logs are made once into --dir and reused: simulated PX4-like .tlogs
 (``offline.fleet_sim``: 12 vehicles, 20 s and 40 s flights, one vehicle bending a
 propeller) plus the real logs of ../shared/data (3 PX4 ULogs, 1 ArduPilot
 DataFlash, CrazyPAD motor CSVs up to 200 in all; distinct files, since ingest keys
 rows by content). Each run ingests them into a fresh DuckDB file.
-Figures: logs/s and MB/s over the processing time (first task submitted to last
-row committed), Ray start-up apart; the re-ingest of the same 200 against the
-first run; Ray's per-task overhead (1000 empty tasks on the 2-worker instance)
-and the per-log overhead of a Ray worker against the serial loop. The 1-minute
-load average before each run says how busy the shared machine was: on a busy
-2-core machine the 2-worker figure is a lower bound of Ray's scaling.
+Figures: logs/s and MB/s over the processing time (first worker started to last
+row committed: the Ray workers' imports and model loads are inside it, Ray's own
+start-up is apart); the re-ingest of the same 200 against the first run; Ray's
+overhead per empty task and per empty actor call (1000 on a warm 2-worker
+instance) and the per-log difference of 1 Ray worker against the serial loop.
+Every process runs one compute thread (onnxruntime intra-op 1 always; the
+BLAS/OpenMP variables below, which the Ray workers inherit), so the serial loop
+is one core's worth of work and N workers are N.
+
+The machine is shared: for each run the bench reports the CPU seconds other
+users' processes took meanwhile (/proc/stat minus this bench's process tree) and
+the cores its workers kept busy on logs. ``--runs ...,pool2`` adds a control: the
+same worker class on a plain 2-process pool, no Ray, i.e. what this machine gives
+two processes at that moment. A name given twice is run twice; ratios use medians.
 """
 
 from __future__ import annotations
@@ -80,7 +89,8 @@ def make_logs(root: Path, data: Path) -> list[Path]:
 
 
 def cpu_cost(db: Path) -> dict:
-    """Worker CPU seconds per log and per minute of logged flight (load-independent, unlike wall time)."""
+    """Worker CPU seconds per log and per minute of logged flight (less load-dependent than wall time, though it
+    still grows when other work shares the cores and their caches)."""
     import duckdb
 
     con = duckdb.connect(str(db), read_only=True)
@@ -283,10 +293,12 @@ def main(argv: list[str] | None = None) -> int:
                 took_s, rows = pool_ingest(logs, db, settings, int(run.removeprefix("pool")))
             r = dict(run=run, load_1min_before=round(load, 2), logs=len(rows), process_s=round(took_s, 2))
             r.update(logs_per_s=round(len(rows) / took_s, 3), mb_per_s=round(mb / took_s, 3), **cpu_cost(db), **share.figures())
+            r["worker_cores"] = round(r["cpu_s_per_log"] * r["logs"] / took_s, 2)
             results["runs"].append(r)
             print(
                 f"{run:>6}: {r['logs_per_s']:.2f} logs/s (processing {took_s:.1f} s, no Ray: a process pool, the control); "
-                f"load {r['load_1min_before']} before; worker CPU {r['cpu_s_per_log']:.3f} s/log; "
+                f"load {r['load_1min_before']} before; worker CPU {r['cpu_s_per_log']:.3f} s/log, "
+                f"{r['worker_cores']:.2f} cores busy on logs; "
                 f"other users {r['others_cpu_s']:.1f} CPU-s ({r['others_cores']:.2f} cores) in its {r['wall_s']:.1f} s",
                 flush=True,
             )
@@ -313,13 +325,14 @@ def main(argv: list[str] | None = None) -> int:
             **cpu_cost(db),
             **share.figures(),
         )
+        r["worker_cores"] = round(r["cpu_s_per_log"] * r["logs"] / r["process_s"], 2)  # mean cores diagnosing logs
         results["runs"].append(r)
         print(
             f"{run:>6}: {r['logs_per_s']:.2f} logs/s, {r['mb_per_s']:.2f} MB/s (processing {r['process_s']:.1f} s, "
             f"Ray start {r['ray_start_s']:.1f} s, total {r['total_s']:.1f} s; {r['ok']} verdicts, {r['no_verdict']} no verdict, "
             f"{r['error']} errors); re-ingest {r['reingest_s']:.2f} s = {100 * r['reingest_fraction']:.1f} % of the first run; "
             f"load {r['load_1min_before']} before; worker CPU {r['cpu_s_per_log']:.3f} s/log, "
-            f"{r['cpu_s_per_flight_min']:.3f} s per flight-minute; this bench {r['own_cpu_s']:.1f} CPU-s, "
+            f"{r['cpu_s_per_flight_min']:.3f} s per flight-minute, {r['worker_cores']:.2f} cores busy on logs; this bench {r['own_cpu_s']:.1f} CPU-s, "
             f"other users {r['others_cpu_s']:.1f} CPU-s ({r['others_cores']:.2f} cores) in its {r['wall_s']:.1f} s",
             flush=True,
         )
