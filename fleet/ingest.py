@@ -1,27 +1,31 @@
-"""``fleet ingest``: new logs -> diagnose (serial or Ray tasks) -> rows committed per batch.
+"""``fleet ingest``: new logs -> diagnose (serial or Ray actors) -> rows committed per batch.
 
 The driver is the only writer. It finds the logs, hashes their content, skips
 hashes already in the database (a re-run is incremental and idempotent), runs
-``fleet.worker.process_log`` on the rest as Ray tasks (``max_retries``: a task
-whose worker process dies is run again) and inserts the rows it gets back in
-transactions of ``batch_rows``. A log that fails even after the retries
-becomes an error row; nothing crashes the run.
+``fleet.worker.process_log`` on the rest (in this process, or in one
+``LogWorker`` Ray actor per worker CPU that loads the models once and takes a
+few logs per call; a call whose worker process dies is run again on the
+restarted actor) and inserts the rows it gets back in transactions of
+``batch_rows``. A log that fails even after the retries becomes an error row;
+nothing crashes the run.
 """
 
 from __future__ import annotations
 
 import sys
 import time
+from collections import deque
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 from fleet.discover import content_hash, find_logs
 from fleet.raycluster import cluster_cpus, ray_session
 from fleet.schema import export_parquet, forget_errors, insert_rows, known_files, known_hashes, open_db, update_mtimes
-from fleet.worker import IngestSettings, empty_row, process_log, utc_naive
+from fleet.worker import IngestSettings, LogWorker, empty_row, process_log, utc_naive
 
 TASK_MAX_RETRIES = 3  # a worker killed mid-log (OOM killer, preempted node) costs a re-run, not a row
-IN_FLIGHT_PER_CPU = 4  # tasks queued per cluster CPU: keeps workers busy without holding every result
+LOGS_PER_CALL = 4  # logs per actor call: ~0.1-3 s of work against Ray's ~1 ms per call, a short tail
+CALLS_IN_FLIGHT_PER_WORKER = 2  # the next call is queued at the actor while it runs one
 
 
 @dataclass
@@ -81,10 +85,12 @@ def ingest(
     export: str | Path | None = None,
     retry_errors: bool = False,
     rehash: bool = False,
+    logs_per_call: int = LOGS_PER_CALL,
 ) -> IngestSummary:
     """Ingest every new log under ``paths`` into ``db``. ``ray_address`` None or "off": in this process.
 
     ``rehash``: read every file to hash it, even one whose path, size and mtime match its row.
+    ``logs_per_call``: logs per call to a Ray worker (rows do not depend on it, nor on the number of workers).
     """
     t0 = time.perf_counter()
     settings = settings or IngestSettings()
@@ -127,7 +133,7 @@ def ingest(
             if ray_address in (None, "off"):
                 _run_serial(con, todo, settings, summary, batch_rows, progress, mtime_of)
             else:
-                _run_ray(con, todo, settings, summary, batch_rows, progress, mtime_of, ray_address, workers)
+                _run_ray(con, todo, settings, summary, batch_rows, progress, mtime_of, ray_address, workers, logs_per_call)
         if export:
             summary.export = str(export_parquet(con, export))
     finally:
@@ -176,42 +182,77 @@ def _run_serial(con, todo, settings, summary, batch_rows, progress, mtime_of) ->
     summary.process_s = time.perf_counter() - t
 
 
-def _run_ray(con, todo, settings, summary, batch_rows, progress, mtime_of, address, workers) -> None:
+def ray_batches(todo: list[tuple[str, str, int]], logs_per_call: int) -> list[list[tuple[str, str, int]]]:
+    """The logs in calls of ``logs_per_call``, largest files first (a long log started last would end the run alone)."""
+    ordered = sorted(todo, key=lambda job: (-job[2], job[0]))
+    size = max(1, logs_per_call)
+    return [ordered[i : i + size] for i in range(0, len(ordered), size)]
+
+
+def _failed_row(job: tuple[str, str, int], reason: str) -> dict:
+    path, h, size = job
+    row = empty_row(Path(path), h, size)
+    row.update(status="error", error=f"{path}: {reason}", ingested_at=utc_naive(time.time() * 1e6))
+    return row
+
+
+def _run_ray(con, todo, settings, summary, batch_rows, progress, mtime_of, address, workers, logs_per_call) -> None:
+    """One ``LogWorker`` actor per worker CPU, fed calls of a few logs each (two in flight per actor).
+
+    An actor whose process dies is restarted (``max_restarts=-1``) and its unfinished calls are run again
+    (``max_task_retries``); a call that still fails is split into single logs, so only a log that kills
+    its worker every time becomes an error row.
+    """
     t = time.perf_counter()
     with ray_session(address, workers) as ray:
         summary.ray_start_s = time.perf_counter() - t
         summary.mode = "ray"
-        summary.workers = workers or cluster_cpus(ray)
-        task = ray.remote(max_retries=TASK_MAX_RETRIES, num_cpus=1)(process_log)
-        settings_ref = ray.put(settings)
-        window = (workers or cluster_cpus(ray)) * IN_FLIGHT_PER_CPU
+        cpus = cluster_cpus(ray)
+        n = min(workers, cpus) if workers else cpus
+        summary.workers = n
+        actor_cls = ray.remote(num_cpus=1, max_restarts=-1, max_task_retries=TASK_MAX_RETRIES)(LogWorker)
         w = _Writer(con, summary, batch_rows, _progress(len(todo), progress), mtime_of)
         t = time.perf_counter()
-        pending: dict = {}
-        queue = iter(todo)
-        try:
-            while True:
-                for job in queue:
-                    pending[task.remote(*job, settings_ref)] = job
-                    if len(pending) >= window:
-                        break
-                if not pending:
-                    break
-                done, _ = ray.wait(list(pending), num_returns=1)
+        actors = [actor_cls.remote(settings) for _ in range(n)]
+        calls = deque(ray_batches(todo, logs_per_call))
+        pending: dict = {}  # call ref -> (actor, its logs)
+
+        def feed(actor) -> None:
+            if calls:
+                jobs = calls.popleft()
+                pending[actor.process_batch.remote(jobs)] = (actor, jobs)
+
+        starting = {actor.__ray_ready__.remote(): actor for actor in actors}  # fed once it runs: on a busy
+        try:  # cluster an actor that never gets a CPU holds no calls
+            while pending or starting:
+                done, _ = ray.wait([*pending, *starting], num_returns=1)
                 for ref in done:
-                    path, h, size = pending.pop(ref)
+                    if ref in starting:
+                        actor = starting.pop(ref)
+                        try:
+                            ray.get(ref)
+                        except ray.exceptions.RayError:
+                            continue  # never started: the others take its share
+                        for _ in range(CALLS_IN_FLIGHT_PER_WORKER):
+                            feed(actor)
+                        continue
+                    actor, jobs = pending.pop(ref)
                     try:
-                        row = ray.get(ref)
+                        rows = ray.get(ref)
                     except ray.exceptions.RayError as exc:
-                        row = empty_row(Path(path), h, size)
-                        row.update(
-                            status="error",
-                            error=f"{path}: failed after {TASK_MAX_RETRIES} retries: {type(exc).__name__}",
-                            ingested_at=utc_naive(time.time() * 1e6),
-                        )
-                    w.add(row)
+                        if len(jobs) > 1:  # one of them may be what kills the worker: each alone, first
+                            calls.extendleft([job] for job in reversed(jobs))
+                            rows = []
+                        else:
+                            rows = [_failed_row(jobs[0], f"failed after {TASK_MAX_RETRIES} retries: {type(exc).__name__}")]
+                    for row in rows:
+                        w.add(row)
+                    feed(actor)
+            for jobs in calls:  # left only when no worker could start
+                for job in jobs:
+                    w.add(_failed_row(job, "no Ray worker could start"))
         finally:
-            for ref in pending:
-                ray.cancel(ref, force=True)
+            for actor in actors:  # frees their CPUs at once, also on a cluster that outlives this run
+                ray.kill(actor)
             w.close()
         summary.process_s = time.perf_counter() - t

@@ -1,4 +1,4 @@
-"""One log -> one database row: what a Ray task (or the serial loop) runs.
+"""One log -> one database row: what a Ray worker (or the serial loop) runs.
 
 Reads the log with ``monitor.logs``, picks the classifier whose ESC command unit
 matches the log's (so a mixed fleet of PX4 quads and Crazyflies gets each its
@@ -110,6 +110,25 @@ def empty_row(path: Path, log_hash: str, size_bytes: int) -> dict:
     row = dict.fromkeys(COLUMN_NAMES)
     row.update(log_hash=log_hash, path=str(path), size_bytes=size_bytes, propwatch_version=PROPWATCH_VERSION, warnings=[])
     return row
+
+
+class LogWorker:
+    """One long-lived worker (a Ray actor per CPU): loads the classifiers once, then diagnoses batches of logs.
+
+    Rows come back only when the whole batch is done, so a worker killed mid-batch returns nothing and
+    the retried batch gives each of its logs exactly once.
+    """
+
+    def __init__(self, settings: IngestSettings):
+        self.settings = settings
+        try:  # load the models now, not inside the first log's timing; a bad model is reported per log
+            for path in settings.model_paths():
+                _model(path, settings.vehicle_yaml)
+        except Exception:  # noqa: BLE001 - process_log turns the same failure into each log's error row
+            pass
+
+    def process_batch(self, jobs: list[tuple[str, str, int]]) -> list[dict]:
+        return [process_log(path, log_hash, size, self.settings) for path, log_hash, size in jobs]
 
 
 def process_log(path: str, log_hash: str, size_bytes: int, settings: IngestSettings) -> dict:

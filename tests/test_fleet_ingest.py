@@ -123,7 +123,7 @@ def test_ray_rows_equal_serial_rows(fleet_dir, serial_db, tmp_path):
 
 
 def _kill_one_running_task(name: str, killed: list[int], stop: threading.Event, give_up_s: float = 60.0) -> None:
-    """SIGKILL the first process whose title says it is running Ray task ``name`` (Ray sets ``ray::<task>``)."""
+    """SIGKILL the first process whose title says it is running ``name`` (Ray sets ``ray::<task>``, ``ray::<Actor.method>``)."""
     t_end = time.monotonic() + give_up_s
     while not stop.is_set() and time.monotonic() < t_end:
         for pid in filter(str.isdigit, os.listdir("/proc")):
@@ -144,15 +144,15 @@ def test_a_worker_killed_mid_run_loses_no_row(fleet_dir, tmp_path):
     db = tmp_path / "killed.duckdb"
     killed: list[int] = []
     stop = threading.Event()
-    killer = threading.Thread(target=_kill_one_running_task, args=("process_log", killed, stop))
+    killer = threading.Thread(target=_kill_one_running_task, args=("LogWorker.process_batch", killed, stop))
     killer.start()
     try:
-        s = ingest([str(fleet_dir / "sim")], db, ray_address="auto", progress=False, batch_rows=2)
+        s = ingest([str(fleet_dir / "sim")], db, ray_address="auto", progress=False, batch_rows=2, logs_per_call=2)
     finally:
         stop.set()
         killer.join()
     assert killed, "no worker was seen running a task: the kill did not happen"
-    assert killed[0] not in s.worker_pids  # the row of the killed task came from a retry elsewhere
+    assert killed[0] not in s.worker_pids  # the rows of the killed call came from its retry in a restarted worker
     got = rows(db)
     assert len(got) == 6 and len({r["log_hash"] for r in got}) == 6 and len({r["path"] for r in got}) == 6
     assert all(r["status"] == "ok" for r in got), [r["error"] for r in got]
@@ -240,3 +240,16 @@ def test_real_logs_give_their_vehicle_ids(tmp_path):
     assert (r3["vehicle_id"], r3["vehicle_id_source"], r3["status"]) == ("px4_ulog", "dir:1", "no_verdict")
     with pytest.raises(FleetError, match="no such file"):
         ingest([str(tmp_path / "nowhere")], tmp_path / "x.duckdb", ray_address="off")
+
+
+def test_ray_calls_hold_every_log_once_largest_first():
+    from fleet.ingest import ray_batches
+
+    todo = [(f"/logs/{i:02d}.tlog", f"h{i}", size) for i, size in enumerate([5, 90, 5, 40, 7, 90, 1])]
+    calls = ray_batches(todo, 3)
+    assert [len(c) for c in calls] == [3, 3, 1]
+    flat = [job for call in calls for job in call]
+    assert sorted(flat) == sorted(todo)  # each log exactly once
+    assert [size for _, _, size in flat] == [90, 90, 40, 7, 5, 5, 1]  # the long logs start first
+    assert flat[:2] == [todo[1], todo[5]]  # ties in path order: the same calls on every run
+    assert ray_batches(todo, 0) == [[job] for job in flat]
