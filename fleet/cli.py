@@ -60,6 +60,11 @@ def build_parser() -> argparse.ArgumentParser:
     i.add_argument("--batch", type=_positive, default=32, help="rows per database transaction (default 32)")
     i.add_argument("--retry-errors", action="store_true", help="re-run logs whose earlier attempt is an error row")
     i.add_argument(
+        "--rediagnose",
+        action="store_true",
+        help="run every found log again, known or not, replacing its row (after upgrading propwatch or a model)",
+    )
+    i.add_argument(
         "--rehash",
         action="store_true",
         help="hash every file again (default: a path with the size and mtime of its row is known)",
@@ -107,6 +112,7 @@ def _ingest(a: argparse.Namespace) -> int:
         export=a.export,
         retry_errors=a.retry_errors,
         rehash=a.rehash,
+        rediagnose=a.rediagnose,
     )
     if a.json:
         json.dump(s.to_json(), sys.stdout)

@@ -35,7 +35,8 @@ class IngestSummary:
     hashed: int = 0  # files read to hash them (the others kept path, size and mtime since ingest)
     already_known: int = 0
     duplicate_content: int = 0  # same bytes under two paths in this run: one row
-    new: int = 0
+    new: int = 0  # logs run this time (with rediagnose: known ones too)
+    rediagnose: bool = False  # known logs were run again and their rows replaced
     ok: int = 0
     no_verdict: int = 0
     error: int = 0
@@ -85,16 +86,19 @@ def ingest(
     export: str | Path | None = None,
     retry_errors: bool = False,
     rehash: bool = False,
+    rediagnose: bool = False,
     logs_per_call: int = LOGS_PER_CALL,
 ) -> IngestSummary:
     """Ingest every new log under ``paths`` into ``db``. ``ray_address`` None or "off": in this process.
 
     ``rehash``: read every file to hash it, even one whose path, size and mtime match its row.
+    ``rediagnose``: run every found log again, known or not, and replace its row batch by batch (after a new
+    propwatch, model or set rule: a stored verdict says which model made it, not whether it is stale).
     ``logs_per_call``: logs per call to a Ray worker (rows do not depend on it, nor on the number of workers).
     """
     t0 = time.perf_counter()
     settings = settings or IngestSettings()
-    summary = IngestSummary(db=str(db))
+    summary = IngestSummary(db=str(db), rediagnose=rediagnose)
     mtime_of: dict[str, int] = {}
     logs = find_logs(paths)
     summary.found = len(logs)
@@ -117,7 +121,7 @@ def ingest(
         known = known_hashes(con)
         todo, seen, touched = [], set(), []
         for p, h, size in hashed:
-            if h in known:
+            if h in known and not rediagnose:
                 summary.already_known += 1
                 if str(p) in seen_files and seen_files[str(p)][2] == h and seen_files[str(p)][1] != mtime_of[str(p)]:
                     touched.append((mtime_of[str(p)], h))  # same bytes, new mtime: remember it, skip re-reading next time
@@ -162,7 +166,7 @@ class _Writer:
             self.flush()
 
     def flush(self) -> None:
-        insert_rows(self.con, self.rows)
+        insert_rows(self.con, self.rows, replace=self.summary.rediagnose)
         self.rows = []
 
     def close(self) -> None:

@@ -138,8 +138,10 @@ def forget_errors(con, hashes: set[str]) -> int:
     return len(rows)
 
 
-def insert_rows(con, rows: list[dict]) -> None:
-    """Insert ``rows`` (dicts with every column) in one transaction: all of them or none."""
+def insert_rows(con, rows: list[dict], replace: bool = False) -> None:
+    """Insert ``rows`` (dicts with every column) in one transaction: all of them or none. ``replace``: the
+    rows of the same log hashes are deleted in that transaction first (a re-diagnosis: old row or new, never
+    neither)."""
     if not rows:
         return
     for r in rows:
@@ -149,6 +151,8 @@ def insert_rows(con, rows: list[dict]) -> None:
     placeholders = ", ".join("?" for _ in COLUMN_NAMES)
     con.execute("BEGIN TRANSACTION")
     try:
+        if replace:
+            con.executemany("DELETE FROM flights WHERE log_hash = ?", [[r["log_hash"]] for r in rows])
         con.executemany(
             f"INSERT INTO flights ({', '.join(COLUMN_NAMES)}) VALUES ({placeholders})",
             [[r[c] for c in COLUMN_NAMES] for r in rows],

@@ -253,3 +253,36 @@ def test_ray_calls_hold_every_log_once_largest_first():
     assert [size for _, _, size in flat] == [90, 90, 40, 7, 5, 5, 1]  # the long logs start first
     assert flat[:2] == [todo[1], todo[5]]  # ties in path order: the same calls on every run
     assert ray_batches(todo, 0) == [[job] for job in flat]
+
+
+def test_rediagnose_replaces_stale_rows_each_log_still_once(serial_db, fleet_dir, tmp_path):
+    db = tmp_path / "copy.duckdb"
+    shutil.copy(serial_db, db)
+    before = {r["log_hash"]: r for r in rows(db)}
+    con = duckdb.connect(str(db))
+    stale = next(h for h, r in before.items() if r["status"] == "ok")
+    con.execute("UPDATE flights SET verdict_label = 16, model_version = 'an older model' WHERE log_hash = ?", [stale])
+    con.close()
+    plain = ingest([str(fleet_dir / "sim")], db, ray_address="off", progress=False)
+    still = {r["log_hash"]: r for r in rows(db)}[stale]
+    assert plain.new == 0 and still["verdict_label"] == 16  # without the flag the stale verdict stays
+    s = ingest([str(fleet_dir / "sim")], db, ray_address="off", progress=False, rediagnose=True, batch_rows=4)
+    assert s.rediagnose and s.new == 6 and s.already_known == 0
+    after = {r["log_hash"]: r for r in rows(db)}
+    assert len(after) == len(before)  # each log exactly once
+    assert after[stale]["verdict_label"] == before[stale]["verdict_label"]
+    assert after[stale]["model_version"] == before[stale]["model_version"]
+
+
+def test_a_replacing_batch_is_whole_or_not_at_all(tmp_path):
+    con = open_db(tmp_path / "t.duckdb")
+    old = [empty_row(Path(f"/x/{i}.tlog"), f"h{i}", 1) | {"status": "ok"} for i in range(2)]
+    insert_rows(con, old)
+    new = [r | {"status": "no_verdict"} for r in old]
+    insert_rows(con, new[:1], replace=True)
+    assert con.execute("SELECT status FROM flights WHERE log_hash = 'h0'").fetchone()[0] == "no_verdict"
+    broken = [new[1], new[1]]  # the same log twice in one batch: the insert fails after the delete
+    with pytest.raises(duckdb.Error):
+        insert_rows(con, broken, replace=True)
+    assert con.execute("SELECT status FROM flights WHERE log_hash = 'h1'").fetchone()[0] == "ok"  # old row kept
+    con.close()
