@@ -26,6 +26,7 @@ from monitor.effectiveness import HYPOTHESES, Evidence, HypothesisBank, Priors, 
 from monitor.flight import FlightTable
 from monitor.model import Classifier
 from monitor.vehicle import DEFAULT_VEHICLE, REPO_ROOT, load_vehicle
+from offline.classifier.conformal import share_rotors
 from offline.dataset.generate import PRESETS, DatasetSpec, generate
 from offline.physics_calibration import WARMUP_STEPS, flight_balances
 
@@ -41,9 +42,7 @@ def physics_verdicts(ds, bank: HypothesisBank, geometry: RotorGeometry, priors: 
 
 
 def share_verdicts(ds):
-    u = np.square(ds.signals["motor_rpm"][:, WARMUP_STEPS:, :].astype(np.float64))
-    share = u.mean(axis=1) / u.mean(axis=(1, 2))[:, None]
-    return [(int(np.argmax(s)) + 1,) for s in share]
+    return [(int(r),) for r in share_rotors(ds)]
 
 
 def flight_table(ds, f: int) -> FlightTable:

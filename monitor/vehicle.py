@@ -20,7 +20,7 @@ the paper's unbalance ratio (eqs. 14-17) divides omega by U_r in the same way.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import MISSING, dataclass, field, fields
 from pathlib import Path
 
 import numpy as np
@@ -123,6 +123,10 @@ class VehicleConfig:
     @property
     def hover_omega_rad_s(self) -> float:
         return math.sqrt(self.mass_kg * GRAVITY_M_S2 / (4.0 * self.kf_n_per_rad_s2))
+
+
+# The calibration terms: the fields with a neutral default, which a vehicle file may leave out (no source to cite).
+CALIBRATION_TERMS: tuple[str, ...] = tuple(f.name for f in fields(VehicleConfig) if f.default is not MISSING)
 
 
 @dataclass(frozen=True)

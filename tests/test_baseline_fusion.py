@@ -2,18 +2,15 @@
 
 from __future__ import annotations
 
-import contextlib
-import io
 import json
 import shutil
 
 import numpy as np
 import pytest
-from test_diagnose_fixtures import build_model, write_tlog
+from test_diagnose_fixtures import build_model, run_diagnose, write_tlog
 from test_diagnose_json_schema import documented, key_paths
 
 from monitor.baseline import BASELINE_FILE, HealthyBaseline, baseline_from_tables, fuse
-from monitor.diagnose.cli import main as diagnose
 from monitor.labels import LABEL_TABLE, label_from_mask
 from monitor.vehicle import DEFAULT_VEHICLE, REPO_ROOT
 
@@ -50,13 +47,6 @@ def test_fuse_rule_by_hand():
         fuse([0.0] * 3, healthy_says, 1, True)
 
 
-def _run(argv):
-    out = io.StringIO()
-    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(io.StringIO()):
-        code = diagnose([str(a) for a in argv])
-    return code, out.getvalue()
-
-
 @pytest.fixture(scope="module")
 def healthy_log(tmp_path_factory):
     return write_tlog(tmp_path_factory.mktemp("fuse") / "healthy.tlog", duration_s=12.0, faulty=None, seed=5)
@@ -69,20 +59,20 @@ def test_baseline_names_a_rotor_the_classifier_calls_healthy(tmp_path, healthy_l
     d.mkdir()
     shutil.copy(DEFAULT_VEHICLE, d / "vehicle.yaml")
     build_model(d / "classifier.onnx")
-    code, out = _run([healthy_log, "--model", d / "classifier.onnx", "--json"])
+    code, out = run_diagnose([healthy_log, "--model", d / "classifier.onnx", "--json"])
     alone = json.loads(out)["verdict"]
     assert alone["label"] == 1  # the classifier alone: healthy
     # This flight's own shares, measured through the same code the CLI uses.
     light = HealthyBaseline("omega2", (1.0,) * 4, (0.0,) * 4, (0.05,) * 4, None, 20.0, 3, ("a",), ("1", "2", "3", "4"))
     light.save(d / BASELINE_FILE)
-    seen = json.loads(_run([healthy_log, "--vehicle", d, "--json"])[1])["baseline"]["shares"]
+    seen = json.loads(run_diagnose([healthy_log, "--vehicle", d, "--json"])[1])["baseline"]["shares"]
     # Healthy shares 0.1 lower on rotor 1 (the others raised to keep the mean at 1): rotor 1 now sits
     # (s1 - (s1 - 0.1)) / 0.02 = 5 spreads above it, the others (0.1/3)/0.02 = 1.7 below.
     mean = np.asarray(seen) + np.array([-0.1, 0.1 / 3, 0.1 / 3, 0.1 / 3])
     HealthyBaseline(
         "omega2", tuple(mean), (0.0,) * 4, (0.05,) * 4, None, 20.0, 3, ("a",), ("1", "2", "3", "4"), False, "test"
     ).save(d / BASELINE_FILE)
-    code, out = _run([healthy_log, "--vehicle", d, "--json"])
+    code, out = run_diagnose([healthy_log, "--vehicle", d, "--json"])
     res = json.loads(out)
     assert res["baseline"]["deviation_spreads"] == pytest.approx([5.0, -5 / 3, -5 / 3, -5 / 3], abs=0.01)
     assert res["verdict"]["faulty_propellers"] == [1] and res["verdict"]["confidence"] == "confident" and code == 0
@@ -90,7 +80,7 @@ def test_baseline_names_a_rotor_the_classifier_calls_healthy(tmp_path, healthy_l
     assert res["baseline"]["fusion"]["classifier_label"] == 1 and res["baseline"]["fusion"]["spreads_required"] == 3.0
     undocumented = key_paths(res) - set(documented())
     assert not undocumented, f"undocumented keys: {sorted(undocumented)}"
-    text = _run([healthy_log, "--vehicle", d])[1]
+    text = run_diagnose([healthy_log, "--vehicle", d])[1]
     assert "verdict: label 2: imbalance near propeller 1: CG offset or damage" in text, text
     assert "verdict from the baseline and the classifier (label 1 alone): baseline: PX4 rotor(s) [1]" in text, text
 
@@ -117,10 +107,10 @@ def test_real_crazypad_flights_baseline_corrects_the_classifier(tmp_path):
     shutil.copy(REPO_ROOT / "models" / "crazyflie-classifier.onnx", d / "classifier.onnx")
     base.save(d / BASELINE_FILE)
     cut = CRAZYPAD / "motor" / "cut_propeller_M3_3mm" / "E8_log02.csv.gz"
-    res = json.loads(_run([cut, "--format", "crazypad", "--vehicle", d, "--json"])[1])
+    res = json.loads(run_diagnose([cut, "--format", "crazypad", "--vehicle", d, "--json"])[1])
     assert res["baseline"]["fusion"]["classifier_label"] != label_of(2)  # the classifier alone: not M3 alone
     assert res["verdict"]["faulty_propellers"] == [2] and res["verdict"]["faulty_names"] == ["M3"]
     healthy = E8 / "E8_log05.csv.gz"
-    res = json.loads(_run([healthy, "--format", "crazypad", "--vehicle", d, "--json"])[1])
+    res = json.loads(run_diagnose([healthy, "--format", "crazypad", "--vehicle", d, "--json"])[1])
     assert res["baseline"]["fusion"]["classifier_label"] != 1  # the classifier alone: a false alarm
     assert res["verdict"]["label"] == 1 and res["verdict"]["faulty_propellers"] == []

@@ -10,6 +10,8 @@ runs ``excess`` RPM above the others gets label 1 + k.
 
 from __future__ import annotations
 
+import contextlib
+import io
 import json
 import struct
 from pathlib import Path
@@ -158,6 +160,16 @@ def write_tlog(
             put(t, mav.local_position_ned_encode(int(t // 1000), 0.0, 0.0, -1.0 if landed[i] == 2 else 0.0, 0.0, 0.0, 0.0))
     Path(path).write_bytes(bytes(out))
     return Path(path)
+
+
+def run_diagnose(argv) -> tuple[int, str]:
+    """``propwatch diagnose ARGV`` in this process: (exit code, stdout); stderr is swallowed."""
+    from monitor.diagnose.cli import main as diagnose
+
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(io.StringIO()):
+        code = diagnose([str(a) for a in argv])
+    return code, out.getvalue()
 
 
 def test_fixture_model_follows_its_rule(tmp_path):

@@ -4,17 +4,14 @@ a one-rotor verdict is worded "imbalance near ...: CG offset or damage" in text;
 
 from __future__ import annotations
 
-import contextlib
-import io
 import json
 import re
 import shutil
 
 import pytest
-from test_diagnose_fixtures import build_model, write_tlog
+from test_diagnose_fixtures import build_model, run_diagnose, write_tlog
 
 from monitor.baseline import BASELINE_FILE, HealthyBaseline
-from monitor.diagnose.cli import main as diagnose
 from monitor.vehicle import DEFAULT_VEHICLE
 
 
@@ -30,13 +27,6 @@ def _folder(tmp_path, separable):
     return d
 
 
-def _run(argv):
-    out = io.StringIO()
-    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(io.StringIO()):
-        code = diagnose([str(a) for a in argv])
-    return code, out.getvalue()
-
-
 @pytest.fixture(scope="module")
 def faulty3(tmp_path_factory):
     return write_tlog(tmp_path_factory.mktemp("imb") / "f3.tlog", duration_s=12.0, faulty=3, seed=3)
@@ -44,13 +34,13 @@ def faulty3(tmp_path_factory):
 
 def test_not_separable_words_a_one_rotor_verdict_as_an_imbalance(tmp_path, faulty3):
     d = _folder(tmp_path, False)
-    code, text = _run([faulty3, "--vehicle", d])
+    code, text = run_diagnose([faulty3, "--vehicle", d])
     assert code == 0
     assert "verdict: label 4: imbalance near propeller 3: CG offset or damage, from" in text, text
     assert re.search(r"propeller 3: P\(faulty\) = [\d.]+  <- IMBALANCE", text) and "<- FAULTY" not in text, text
     # The baseline's own words follow its deviations (shares alone never tell a CG offset from damage).
     assert re.search(r"healthy baseline \(spreads\): [-+\d., ]+ -> imbalance near 3: CG offset or damage", text), text
-    code, out = _run([faulty3, "--vehicle", d, "--json"])
+    code, out = run_diagnose([faulty3, "--vehicle", d, "--json"])
     res = json.loads(out)
     assert res["verdict"]["faulty_propellers"] == [3]  # the JSON verdict is unchanged
     assert res["baseline"]["cg_damage_separable"] is False
@@ -59,11 +49,11 @@ def test_not_separable_words_a_one_rotor_verdict_as_an_imbalance(tmp_path, fault
 @pytest.mark.parametrize("separable", [None, True])
 def test_unmeasured_or_separable_names_the_fault(tmp_path, faulty3, separable):
     d = _folder(tmp_path, separable)
-    code, text = _run([faulty3, "--vehicle", d])
+    code, text = run_diagnose([faulty3, "--vehicle", d])
     assert code == 0 and "verdict: label 4: propeller 3 faulty, from" in text and "<- FAULTY" in text, text
     verdict_line = next(line for line in text.splitlines() if line.startswith("verdict:"))
     assert "imbalance" not in verdict_line and "IMBALANCE" not in text, text
-    res = json.loads(_run([faulty3, "--vehicle", d, "--json"])[1])
+    res = json.loads(run_diagnose([faulty3, "--vehicle", d, "--json"])[1])
     assert res["verdict"]["faulty_propellers"] == [3]
     assert ("cg_damage_separable" in res["baseline"]) == (separable is not None)
 

@@ -11,7 +11,7 @@ import yaml
 from monitor import esc, features, labels, resample
 from monitor.config import from_mapping, to_mapping
 from monitor.errors import ConfigError
-from monitor.vehicle import DEFAULT_VEHICLE, load_vehicle, load_vehicle_with_sources, quad_x_positions
+from monitor.vehicle import CALIBRATION_TERMS, DEFAULT_VEHICLE, load_vehicle, load_vehicle_with_sources, quad_x_positions
 
 REPO = Path(__file__).resolve().parent.parent
 
@@ -28,19 +28,7 @@ def test_paper_vehicle_loads_with_every_value_cited():
     # every leaf has a non-empty source
     flat = to_mapping(v)
     n_leaves = sum(len(x) if isinstance(x, dict) else 1 for x in flat.values())
-    assert len(lv.sources) == n_leaves - sum(
-        1
-        for k in flat
-        if k
-        in (
-            "cg_offset_frd_m",
-            "motor_efficiency",
-            "motor_time_constant_ratio",
-            "linear_drag_n_per_m_s",
-            "wind_ned_m_s",
-            "gyro_bias_frd_rad_s",
-        )
-    )
+    assert len(lv.sources) == n_leaves - sum(1 for k in flat if k in CALIBRATION_TERMS)
 
 
 def test_hover_from_hand_calculation():

@@ -9,7 +9,7 @@ import yaml
 
 from monitor.config import from_mapping, load_dataclass
 from monitor.errors import ConfigError
-from monitor.vehicle import DEFAULT_VEHICLE, load_vehicle
+from monitor.vehicle import CALIBRATION_TERMS, DEFAULT_VEHICLE, load_vehicle
 from offline.sim.controller import ControllerConfig
 from offline.sim.simulator import SimConfig
 
@@ -83,19 +83,7 @@ def test_every_vehicle_value_cites_a_source():
 
     loaded = load_vehicle_with_sources(DEFAULT_VEHICLE)
     names = [f.name for f in dataclasses.fields(loaded.config)]
-    required = [
-        n
-        for n in names
-        if n
-        not in (
-            "cg_offset_frd_m",
-            "motor_efficiency",
-            "motor_time_constant_ratio",
-            "linear_drag_n_per_m_s",
-            "wind_ned_m_s",
-            "gyro_bias_frd_rad_s",
-        )
-    ]
+    required = [n for n in names if n not in CALIBRATION_TERMS]
     for n in required:
         assert any(k == n or k.startswith(n + ".") for k in loaded.sources), n
 

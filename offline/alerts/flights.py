@@ -36,7 +36,7 @@ from monitor.labels import LABEL_MASKS
 from monitor.model import Classifier
 from monitor.resample import US_PER_S
 from monitor.vehicle import VehicleConfig
-from offline.dataset.generate import DatasetSpec, routes, simulate_flights, vehicle_variant
+from offline.dataset.generate import DatasetSpec, degraded_signals, routes, simulate_flights, vehicle_variant
 from offline.dataset.onset import SwitchedPropellers
 
 
@@ -135,7 +135,6 @@ def _simulate_randomised(vehicle: VehicleConfig, fs: FlightSet, clf: Classifier,
     from offline.sim.assumptions import REGISTER, draw_flights
     from offline.sim.perflight import PerFlightTerms
     from offline.sim.simulator import simulate
-    from offline.sim.telemetry import degrade_flight
 
     spec = DatasetSpec(
         "alerts", waypoints=("random",), duration_s=fs.duration_s, propellers="quadratic", physics="randomised", seed=fs.seed
@@ -189,19 +188,7 @@ def _simulate_randomised(vehicle: VehicleConfig, fs: FlightSet, clf: Classifier,
             seed=seeds,
             per_flight=PerFlightTerms.from_flights(phys, vehicle),
         )
-        sig = flog.signals()
-        degraded = {k: np.empty(np.shape(v), np.float64) for k, v in sig.items()}
-        for b, f in enumerate(phys):
-            one = degrade_flight(
-                {k: v[b] for k, v in sig.items()},
-                float(flog.log_rate_hz),
-                f["attitude_log_delay_s"],
-                f["telemetry_jitter_std_s"],
-                f["telemetry_drop_prob"],
-                np.random.default_rng([int(f["noise_seed"]) % 2**63, 1]),
-            )
-            for k, v in one.items():
-                degraded[k][b] = v
+        degraded = degraded_signals(flog, phys)
         names = [f"{fs.kind}-r{fs.seed}-{i}" + (f"-pickup{step[i]:+.2f}@{pickup_s[i]:.0f}s" if pickup[i] else "") for i in idx]
         part = _classify(flog, clf, cond[idx], onset[idx], "", signals=degraded, names=names)
         for b, f in enumerate(part):  # each damaged rotor's loss at its own hover speed (median before the onset)

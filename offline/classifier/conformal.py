@@ -21,6 +21,7 @@ read here.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -57,17 +58,20 @@ def classifier_probabilities(ds: FaultDataset, clf: Classifier, hop: int = 10) -
     return np.asarray(out)
 
 
-def physics_log_likelihoods(ds: FaultDataset, vehicle, priors: Priors | None = None) -> np.ndarray:
-    """(F, 16) the moment balance's marginal log-likelihood of each set, per flight."""
-    priors = priors or Priors()
+def physics_log_likelihoods(ds: FaultDataset, vehicle, *priors: Priors) -> np.ndarray:
+    """(F, 16) the moment balance's marginal log-likelihood of each set, per flight; with several ``priors``
+    (k, F, 16), one per priors, from the same balances (computed once; the priors share their noise model)."""
+    each = priors or (Priors(),)
     geometry = RotorGeometry.from_vehicle(vehicle)
-    bank = HypothesisBank(priors, geometry)
-    out = []
+    banks = [HypothesisBank(p, geometry) for p in each]
+    out = [[] for _ in each]
     for z, h, std in flight_balances(ds, geometry):
-        ev = Evidence()
-        ev.add(z, h, std, priors)
-        out.append(bank.posterior(ev).log_likelihood)
-    return np.asarray(out)
+        for o, p, bank in zip(out, each, banks, strict=True):
+            ev = Evidence()
+            ev.add(z, h, std, p)
+            o.append(bank.posterior(ev).log_likelihood)
+    res = np.asarray(out)
+    return res if len(priors) > 1 else res[0]
 
 
 def conformal_threshold(truth_scores: np.ndarray, coverage: float) -> float:
@@ -83,7 +87,11 @@ def conformal_threshold(truth_scores: np.ndarray, coverage: float) -> float:
 
 
 def measure(scores: np.ndarray, truth: np.ndarray, threshold: float) -> dict:
-    sets = [hypothesis_set(s, threshold) for s in scores]
+    return set_metrics([hypothesis_set(s, threshold) for s in scores], truth)
+
+
+def set_metrics(sets: list[list[dict]], truth: np.ndarray) -> dict:
+    """Coverage, size and accuracy of per-flight hypothesis sets (``hypothesis_set``'s form) against the truth."""
     members = [[_LABEL_OF[frozenset(h["faulty_propellers"])] - 1 for h in hs] for hs in sets]
     single = [i for i, t in enumerate(truth) if len(LABEL_TABLE[t + 1]) == 1]
     return {
@@ -112,12 +120,9 @@ class Region:
     log_likelihood_unmeasured: np.ndarray | None = None  # (F, 16) the balance with an unmeasured airframe
     airframe_log_bayes_factor: np.ndarray | None = None  # (F,) the airframe check's statistic
 
-    def log_bayes_factors(self) -> np.ndarray:
-        return self.airframe_log_bayes_factor
-
     def unmeasured(self, flagged_above: float) -> Region:
         """The flights of this region the airframe check flags, scored as an unmeasured airframe."""
-        keep = self.log_bayes_factors() > flagged_above
+        keep = self.airframe_log_bayes_factor > flagged_above
         return Region(
             name=self.name,
             truth=self.truth[keep],
@@ -127,25 +132,22 @@ class Region:
         )
 
 
-def airframe_check_statistic(ds: FaultDataset, vehicle) -> np.ndarray:
-    """(F,) per flight, as monitor.diagnose.physics computes it for a log."""
-    check = Priors().for_airframe_check()
-    a = physics_log_likelihoods(ds, vehicle, check)
-    b = physics_log_likelihoods(ds, vehicle, check.with_unmeasured_airframe())
-    return np.array([airframe_log_bayes_factor(x, y) for x, y in zip(a, b, strict=True)])
-
-
 def region_of(path: Path, clf: Classifier, vehicle) -> Region:
     ds = load_dataset(path)
     ds.check_model(clf.info.metadata["vehicle"]["name"], clf.info.sample_rate_hz, clf.info.features)
+    base, check = Priors(), Priors().for_airframe_check()
+    ll, ll_u, check_n, check_u = physics_log_likelihoods(
+        ds, vehicle, base, base.with_unmeasured_airframe(), check, check.with_unmeasured_airframe()
+    )
     return Region(
         name=path.stem,
         truth=truth_labels(ds),
         label_probability=classifier_probabilities(ds, clf),
-        log_likelihood=physics_log_likelihoods(ds, vehicle),
+        log_likelihood=ll,
         share_rotor=share_rotors(ds),
-        log_likelihood_unmeasured=physics_log_likelihoods(ds, vehicle, Priors().with_unmeasured_airframe()),
-        airframe_log_bayes_factor=airframe_check_statistic(ds, vehicle),
+        log_likelihood_unmeasured=ll_u,
+        # the airframe check's statistic per flight, as monitor.diagnose.physics computes it for a log
+        airframe_log_bayes_factor=np.array([airframe_log_bayes_factor(a, b) for a, b in zip(check_n, check_u, strict=True)]),
     )
 
 
@@ -203,10 +205,10 @@ def airframe_check(nominal: list[Region], unmeasured: list[Region], score: str, 
     """The airframe check's threshold (the log Bayes factor that at most 2 % of each nominal region's flights
     exceed) and the conformal threshold of ``score`` under an unmeasured airframe, covering the flights the
     check flags in each of ``unmeasured``'s regions (drawn airframes, scored with the widened balance)."""
-    bf_max = max(float(np.quantile(r.log_bayes_factors(), AIRFRAME_CHECK_QUANTILE)) for r in nominal)
+    bf_max = max(float(np.quantile(r.airframe_log_bayes_factor, AIRFRAME_CHECK_QUANTILE)) for r in nominal)
     flagged_regions = [r.unmeasured(bf_max) for r in unmeasured]
     c = candidate(flagged_regions, score, rho, coverage)
-    flagged = {r.name: float(np.mean(r.log_bayes_factors() > bf_max)) for r in [*nominal, *unmeasured]}
+    flagged = {r.name: float(np.mean(r.airframe_log_bayes_factor > bf_max)) for r in [*nominal, *unmeasured]}
     for name, f in flagged.items():
         log(f"airframe check: {name} flagged {100 * f:.1f} % (log Bayes factor > {bf_max:.2f})")
     for name, m in c["regions"].items():
@@ -223,27 +225,19 @@ def airframe_check(nominal: list[Region], unmeasured: list[Region], score: str, 
 
 def measure_with_check(r: Region, score: str, rho: float, threshold: float, check: dict) -> dict:
     """``measure`` as diagnose answers: flights the check flags get the unmeasured airframe's scores and threshold."""
-    flag = r.log_bayes_factors() > check["log_bayes_factor_max"]
+    flag = r.airframe_log_bayes_factor > check["log_bayes_factor_max"]
     nominal = region_scores(r, score, rho)
-    wide = np.array(
-        [flight_score(p, ll, score, rho) for p, ll in zip(r.label_probability, r.log_likelihood_unmeasured, strict=True)]
-    )
+    wide = region_scores(dataclasses.replace(r, log_likelihood=r.log_likelihood_unmeasured), score, rho)
     sets = [
         hypothesis_set(wide[i], check["unmeasured_threshold"]) if flag[i] else hypothesis_set(nominal[i], threshold)
         for i in range(len(r.truth))
     ]
-    members = [[_LABEL_OF[frozenset(h["faulty_propellers"])] - 1 for h in hs] for hs in sets]
-    single = [i for i, t in enumerate(r.truth) if len(LABEL_TABLE[t + 1]) == 1]
-    return {
-        "flights": len(r.truth),
-        "flagged": float(np.mean(flag)),
-        "truth_in_set": float(np.mean([t in m for t, m in zip(r.truth, members)])),
-        "mean_set_size": float(np.mean([len(m) for m in members])),
-        "exact": float(np.mean([m[0] == t for t, m in zip(r.truth, members)])),
-        "single_exact": float(np.mean([members[i][0] == r.truth[i] for i in single])) if single else None,
-        "sure_and_right": float(np.mean([m == [t] for t, m in zip(r.truth, members)])),
-        "sure_and_wrong": float(np.mean([len(m) == 1 and m[0] != t for t, m in zip(r.truth, members)])),
-    }
+    m = set_metrics(sets, r.truth)
+    first = [hs[0]["faulty_propellers"] for hs in sets]
+    m["sure_and_wrong"] = float(
+        np.mean([len(hs) == 1 and f != list(LABEL_TABLE[t + 1]) for hs, f, t in zip(sets, first, r.truth)])
+    )
+    return {"flights": m.pop("flights"), "flagged": float(np.mean(flag)), **m}
 
 
 def calibrate(model: Path, data: list[Path], checks: list[Path], coverage: float, log=print, unmeasured: list[Path] = ()) -> dict:

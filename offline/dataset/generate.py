@@ -278,7 +278,6 @@ def simulate_randomised(
     from offline.sim.assumptions import draw_flights
     from offline.sim.perflight import PerFlightTerms
     from offline.sim.simulator import simulate
-    from offline.sim.telemetry import degrade_flight
 
     phys = draw_flights(register, spec.seed, idx)
     grid = np.empty((len(idx), 4), dtype=object)
@@ -296,8 +295,16 @@ def simulate_randomised(
         seed=seeds,
         per_flight=PerFlightTerms.from_flights(phys, vehicle),
     )
+    return degraded_signals(flog, phys, np.float32)
+
+
+def degraded_signals(flog, phys, dtype=np.float64) -> dict[str, np.ndarray]:
+    """A batch's canonical signals with each flight's drawn telemetry delay, jitter and drops applied
+    (``offline.sim.telemetry.degrade_flight``, seeded by the flight's own noise seed)."""
+    from offline.sim.telemetry import degrade_flight
+
     sig = flog.signals()
-    out = {k: np.empty(np.shape(v), np.float32) for k, v in sig.items()}
+    out = {k: np.empty(np.shape(v), dtype) for k, v in sig.items()}
     for b, f in enumerate(phys):
         one = degrade_flight(
             {k: v[b] for k, v in sig.items()},
