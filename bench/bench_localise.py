@@ -61,12 +61,12 @@ def flight_table(ds, f: int) -> FlightTable:
     )
 
 
-def system_verdicts(ds, clf: Classifier, vehicle, hop: int = 10):
-    """The verdict ``propwatch diagnose`` gives each flight (its propeller set)."""
-    out = []
-    for f in range(ds.n_flights):
+def system_verdicts(ds, clf: Classifier, vehicle, hop: int = 10, flights=None):
+    """The verdict ``propwatch diagnose`` gives each flight (its propeller set); ``flights``: only these (others None)."""
+    out = [None] * ds.n_flights
+    for f in range(ds.n_flights) if flights is None else flights:
         d = diagnose_table(flight_table(ds, f), clf, hop=hop, vehicle=vehicle)
-        out.append(tuple(d.verdict["faulty_propellers"]) if d.verdict else None)
+        out[f] = tuple(d.verdict["faulty_propellers"]) if d.verdict else None
     return out
 
 

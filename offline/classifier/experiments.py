@@ -99,6 +99,13 @@ EXPERIMENTS: dict[str, tuple[tuple[str, ...], dict]] = {
     # drawn from the register of unmeasured assumptions (offline/sim/assumptions.py; torque per thrust of both
     # signs), the airframe's own terms at nominal (a calibrated airframe: `propwatch adapt` measures them).
     "randomised physics x60 +yaw robust dropout": (("RN-varied",), {**_YAW_ROBUST_20, "dropout": 0.3}),
+    # The same recipe on RN-varied and RR-varied pooled (RR: `make dataset-randomised AIRFRAME=drawn NAME=RR`, the
+    # airframe's CG, motor spread, arm and ESC errors drawn too: an unmeasured airframe); twice the flights at half
+    # the window stride, so an epoch holds as many windows as the row above.
+    "randomised physics, airframes nominal+drawn x60 +yaw robust dropout": (
+        ("RN-varied", "RR-varied"),
+        {**_YAW_ROBUST_20, "dropout": 0.3, "train_stride": 64},
+    ),
 }
 EVAL_SETS = ("A-bent", "B-bent", "C-bent", "A-cracked", "B-cracked", "C-cracked")
 # Row groups by the data folder they need (`--only base` / `--only x60`, as `make card` runs them).
@@ -106,6 +113,7 @@ ROW_GROUPS = {
     "x60": tuple(n for n in EXPERIMENTS if "x60" in n and EXPERIMENTS[n][0] == ("R-varied",)),
     "base": tuple(n for n in EXPERIMENTS if "x60" not in n),
     "randomised": tuple(n for n in EXPERIMENTS if EXPERIMENTS[n][0] == ("RN-varied",)),
+    "airframes": tuple(n for n in EXPERIMENTS if EXPERIMENTS[n][0] == ("RN-varied", "RR-varied")),
 }
 
 
@@ -178,7 +186,7 @@ def main(argv: list[str] | None = None) -> int:
         "--only",
         default=",".join(EXPERIMENTS),
         help="comma-separated rows, or a group: base (data with R-mixed, R-varied 30/label), x60 (R-varied 60/label), "
-        "randomised (RN-varied, make dataset-randomised)",
+        "randomised (RN-varied, make dataset-randomised), airframes (RN-varied + RR-varied, AIRFRAME=drawn NAME=RR)",
     )
     p.add_argument("--hop", type=int, default=10, help="evaluation window hop")
     p.add_argument("--epochs", type=int, default=TrainConfig.epochs)
