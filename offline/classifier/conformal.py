@@ -252,6 +252,8 @@ def calibrate(model: Path, data: list[Path], checks: list[Path], coverage: float
         log(
             f"{c['score']:30s} rho {c['sparsity_prior']:<5g} threshold {c['threshold']:.5f} "
             f"worst size {c['worst_set_size']:.2f} singles >= share: {'yes' if c['singles_never_below_share'] else 'no'}"
+            + "  exact / singles % by region: "
+            + "  ".join(_pct(m["exact"]) + "/" + _pct(m["single_exact"]) for m in c["regions"].values())
         )
     best = choose(cands)
     for name, m in best["regions"].items():
@@ -292,6 +294,10 @@ def calibrate(model: Path, data: list[Path], checks: list[Path], coverage: float
         "calibration_data": [{"path": str(p), "manifest": load_dataset(p).manifest} for p in data],
         "checks": checked,
     }
+
+
+def _pct(x: float | None) -> str:
+    return "-" if x is None else f"{100 * x:.0f}"
 
 
 def fmt(m: dict) -> str:
