@@ -223,6 +223,35 @@ def fuse(deviation_spreads, label_probability, classifier_label: int, classifier
     }
 
 
+def cg_or_damage(label: int, motor_names) -> dict:
+    """The verdict of an imbalance on an airframe whose flights do not tell a CG offset from damage.
+
+    ``label`` is the fused verdict's (a set of rotors working harder than healthy). Measured on the CrazyPAD
+    flights (``offline/crazypad/README.md``): masses near M3 and cut M3 propellers move shares, command
+    activity, vibration and the response gain alike, so neither cause is named: no propeller is called
+    faulty (label 1, ``faulty_propellers`` empty, confidence ``ambiguous``), the rotors are an imbalance, and
+    ``hypotheses`` holds both explanations (damaged propellers on them; intact propellers with the CG moved
+    toward them). Returns the verdict's new fields and the hypotheses.
+    """
+    rotors = list(LABEL_TABLE[label])
+    if not rotors:
+        raise ValueError("cg_or_damage: a healthy label is no imbalance")
+    names = [str(motor_names[i - 1]) for i in rotors]
+    where = " + ".join(names)
+    return {
+        "label": 1,
+        "faulty_propellers": [],
+        "faulty_names": [],
+        "confidence": "ambiguous",
+        "imbalance_rotors": rotors,
+        "imbalance_names": names,
+        "hypotheses": [
+            {"faulty_propellers": rotors, "cause": f"damaged propeller on {where}"},
+            {"faulty_propellers": [], "cause": f"CG offset toward {where} (a mass near it), propellers intact"},
+        ],
+    }
+
+
 def baseline_from_tables(
     tables: list[FlightTable],
     files: list[str],

@@ -9,6 +9,9 @@ propellers intact) from a damaged M3 propeller (cuts, tape) on the real flights:
   if anything does;
 - **activity**: std of each motor's sample-to-sample command change over its mean, at 100 Hz
   (``monitor.features.motor_command_activity``), M3 over the mean of the other three;
+- **response gain** (``monitor.response_gain``): per rotor, the roll acceleration per change of its command
+  (gyro rate differentiated in controller logs, the estimator's roll angle twice in motor logs, which log
+  no rate), relative to the mean of the four; a damaged M3 should lower M3's, a mass near it should not;
 - **vibration**: mean-square of the acceleration above 15 Hz (motor logs: the estimator's
   acceleration; ``monitor.features.vibration_energy``) or of the gyro rates (controller logs).
 
@@ -25,15 +28,21 @@ from pathlib import Path
 
 import numpy as np
 
-from monitor.errors import LogFormatError
+from monitor.errors import LogFormatError, ModelError
 from monitor.features import motor_command_activity, vibration_energy
 from monitor.logs import read_log
+from monitor.response_gain import angular_acceleration, fit_response_gain
 from offline.crazypad.data import DEFAULT_ROOT, CrazypadFlight
 from offline.crazypad.real import core_mask, log_format
 from offline.crazypad.vehicle import bitcraze_order
 
 NATIVE_RATE_HZ = 100.0  # CrazyPAD's logging rate (data README: median dt 9.9 ms)
 M3 = 2  # index of Bitcraze M3 in M1..M4 order
+# Command-to-thrust lag of the response-gain fit: the Crazyflie's motor time constant (models/crazyflie.yaml,
+# motor_time_constant_s); on the healthy calibration flights 3-4 samples at 100 Hz explain most variance.
+MOTOR_LAG_S = 0.03
+# Roll moment sign of each rotor for more thrust, PX4 order (Bitcraze M1, M3, M4, M2): -y of its arm (FRD).
+ROLL_SIGNS_PX4 = np.array([-1.0, 1.0, 1.0, -1.0])
 
 # Conditions by what they are physically: a CG offset (propellers intact) or propeller damage.
 CG_OFFSET_KINDS = ("added_mass_near_motor", "hanging_mass_on_string")
@@ -53,6 +62,8 @@ class FlightEvidence:
     shares: np.ndarray  # (4,) mean command / mean of the four, Bitcraze M1..M4
     activity: np.ndarray  # (4,) motor_command_activity, Bitcraze M1..M4
     vibration: float  # accel (m/s^2)^2 (motor logs) or gyro (rad/s)^2 (controller logs) above 15 Hz
+    roll_gain: np.ndarray  # (4,) roll response gain per rotor over the mean of the four, Bitcraze M1..M4
+    roll_gain_r2: float  # variance of the roll acceleration that fit explains
 
     @property
     def config(self) -> str:
@@ -72,6 +83,8 @@ class FlightEvidence:
             "activity_M3_over_others": self.m3_activity_ratio,
             "activity_mean": float(np.mean(self.activity)),
             "vibration_log10": float(np.log10(self.vibration)) if self.vibration > 0 else float("nan"),
+            "response_gain_M3": float(self.roll_gain[M3]),
+            "response_gain_M1": float(self.roll_gain[0]),
         }
 
 
@@ -91,7 +104,13 @@ def flight_evidence(flight: CrazypadFlight, root: str | Path = DEFAULT_ROOT) -> 
     else:
         sig = np.stack([tab.roll_rate_rad_s, tab.pitch_rate_rad_s, tab.yaw_rate_rad_s], axis=1)
     vib = _segment_mean(sig, mask) if sig is not None else float("nan")
-    return FlightEvidence(flight, shares, activity, vib)
+    acc = angular_acceleration(tab.roll_rate_rad_s, tab.roll_rad, NATIVE_RATE_HZ)
+    try:
+        fit = fit_response_gain(cmd, acc, NATIVE_RATE_HZ, mask, MOTOR_LAG_S)
+        gain, r2 = bitcraze_order(fit.relative(ROLL_SIGNS_PX4)), fit.r2
+    except ModelError:  # too little steady flight for the fit: no gain evidence, the rest stands
+        gain, r2 = np.full(4, np.nan), float("nan")
+    return FlightEvidence(flight, shares, activity, vib, gain, r2)
 
 
 def _segment_mean(sig: np.ndarray, mask: np.ndarray) -> float:
