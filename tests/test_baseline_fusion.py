@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import shutil
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -69,20 +70,26 @@ def test_baseline_names_a_rotor_the_classifier_calls_healthy(tmp_path, healthy_l
     # Healthy shares 0.1 lower on rotor 1 (the others raised to keep the mean at 1): rotor 1 now sits
     # (s1 - (s1 - 0.1)) / 0.02 = 5 spreads above it, the others (0.1/3)/0.02 = 1.7 below.
     mean = np.asarray(seen) + np.array([-0.1, 0.1 / 3, 0.1 / 3, 0.1 / 3])
-    HealthyBaseline(
-        "omega2", tuple(mean), (0.0,) * 4, (0.05,) * 4, None, 20.0, 3, ("a",), ("1", "2", "3", "4"), False, "test"
-    ).save(d / BASELINE_FILE)
-    code, out = run_diagnose([healthy_log, "--vehicle", d, "--json"])
-    res = json.loads(out)
-    assert res["baseline"]["deviation_spreads"] == pytest.approx([5.0, -5 / 3, -5 / 3, -5 / 3], abs=0.01)
-    assert res["verdict"]["faulty_propellers"] == [1] and res["verdict"]["confidence"] == "confident" and code == 0
-    assert [p["faulty"] for p in res["propellers"]] == [True, False, False, False]
-    assert res["baseline"]["fusion"]["classifier_label"] == 1 and res["baseline"]["fusion"]["spreads_required"] == 3.0
-    undocumented = key_paths(res) - set(documented())
-    assert not undocumented, f"undocumented keys: {sorted(undocumented)}"
-    text = run_diagnose([healthy_log, "--vehicle", d])[1]
-    assert "verdict: label 2: imbalance near propeller 1: CG offset or damage" in text, text
-    assert "verdict from the baseline and the classifier (label 1 alone): baseline: PX4 rotor(s) [1]" in text, text
+    for separable in (None, False):
+        HealthyBaseline(
+            "omega2", tuple(mean), (0.0,) * 4, (0.05,) * 4, None, 20.0, 3, ("a",), ("1", "2", "3", "4"), separable, "test"
+        ).save(d / BASELINE_FILE)
+        code, out = run_diagnose([healthy_log, "--vehicle", d, "--json"])
+        res = json.loads(out)
+        assert res["baseline"]["deviation_spreads"] == pytest.approx([5.0, -5 / 3, -5 / 3, -5 / 3], abs=0.01)
+        assert res["baseline"]["fusion"]["classifier_label"] == 1 and res["baseline"]["fusion"]["spreads_required"] == 3.0
+        undocumented = key_paths(res) - set(documented())
+        assert not undocumented, f"undocumented keys: {sorted(undocumented)}"
+        text = run_diagnose([healthy_log, "--vehicle", d])[1]
+        assert "verdict from the baseline and the classifier (label 1 alone): baseline: PX4 rotor(s) [1]" in text, text
+        if separable is None:  # nobody measured CG offset against damage: the rotor is named
+            assert res["verdict"]["faulty_propellers"] == [1] and res["verdict"]["confidence"] == "confident" and code == 0
+            assert [p["faulty"] for p in res["propellers"]] == [True, False, False, False]
+            assert "verdict: label 2: propeller 1 faulty" in text, text
+        else:  # measured alike: an imbalance near rotor 1, no propeller called faulty
+            assert res["verdict"]["faulty_propellers"] == [] and res["verdict"]["imbalance_rotors"] == [1] and code == 3
+            assert not any(p["faulty"] for p in res["propellers"])
+            assert "verdict: imbalance near propeller 1: CG offset or damage (no propeller called faulty)" in text, text
 
 
 CRAZYPAD = REPO_ROOT.parent / "shared" / "data" / "crazypad"
@@ -110,6 +117,14 @@ def test_real_crazypad_flights_baseline_corrects_the_classifier(tmp_path):
     res = json.loads(run_diagnose([cut, "--format", "crazypad", "--vehicle", d, "--json"])[1])
     assert res["baseline"]["fusion"]["classifier_label"] != label_of(2)  # the classifier alone: not M3 alone
     assert res["verdict"]["faulty_propellers"] == [2] and res["verdict"]["faulty_names"] == ["M3"]
+    # The shipped CrazyPAD finding (cg_damage_separable false): the same flight is an imbalance near M3, not a fault.
+    from offline.crazypad.evidence import CG_DAMAGE_EVIDENCE, CG_DAMAGE_SEPARABLE
+
+    replace(base, cg_damage_separable=CG_DAMAGE_SEPARABLE, cg_damage_evidence=CG_DAMAGE_EVIDENCE).save(d / BASELINE_FILE)
+    res = json.loads(run_diagnose([cut, "--format", "crazypad", "--vehicle", d, "--json"])[1])
+    assert res["verdict"]["faulty_propellers"] == [] and res["verdict"]["imbalance_names"] == ["M3"]
+    assert [h["faulty_propellers"] for h in res["hypotheses"]] == [[2], []]
+    base.save(d / BASELINE_FILE)
     healthy = E8 / "E8_log05.csv.gz"
     res = json.loads(run_diagnose([healthy, "--format", "crazypad", "--vehicle", d, "--json"])[1])
     assert res["baseline"]["fusion"]["classifier_label"] != 1  # the classifier alone: a false alarm
