@@ -7,7 +7,9 @@ stretch, this fits
 
     alpha(t) = sum_i beta_i * u_i(t - lag) + c
 
-where ``alpha`` is one body axis's angular acceleration (differentiated gyro rate, or the twice-differentiated
+(both sides through the same [1/4, 1/2, 1/4] smoother first: a linear filter on both sides of a linear model
+keeps its coefficients, and it removes the Nyquist-rate alternation of the logged Crazyflie commands, an alias
+of the 500 Hz controller) where ``alpha`` is one body axis's angular acceleration (differentiated gyro rate, or the twice-differentiated
 Euler angle where no rate is logged), ``u_i`` rotor i's command minus its moving mean over ``highpass_s``
 (so the trim, and with it a CG offset's constant moment, drops out), ``alpha`` high-passed alike, ``c`` a
 moment bias. ``lag`` is the motor's time constant: a command moves thrust that much later.
@@ -48,7 +50,13 @@ class ResponseGain:
 
 
 def _moving_mean(x: np.ndarray, n: int) -> np.ndarray:
-    k = np.ones(n) / n
+    return _filter(x, np.ones(n) / n)
+
+
+SMOOTHER = np.array([0.25, 0.5, 0.25])  # zero gain at the Nyquist rate
+
+
+def _filter(x: np.ndarray, k: np.ndarray) -> np.ndarray:
     if x.ndim == 1:
         return np.convolve(x, k, mode="same")
     return np.stack([np.convolve(x[:, j], k, mode="same") for j in range(x.shape[1])], axis=1)
@@ -91,7 +99,7 @@ def fit_response_gain(
     for a, b in true_runs(np.asarray(mask, dtype=bool)):
         if b - a < max(min_stretch_s * rate_hz, 2 * w + lag + 10):
             continue
-        u, y = cmd[a:b], acc[a:b]
+        u, y = _filter(cmd[a:b], SMOOTHER), _filter(acc[a:b], SMOOTHER)
         u = (u - _moving_mean(u, w))[w:-w]
         y = (y - _moving_mean(y, w))[w:-w]
         if lag:
