@@ -31,6 +31,28 @@ BASELINE_FILE = "baseline.json"
 SPREAD_FLOOR = 0.02
 OUTLIER_SPREADS = 3.0  # a share this many spreads from the airframe's healthy mean is not healthy
 
+# Student's t quantiles t_{df}.isf(p) at p = Phi(-3) = 0.0013499, the one-sided tail of the Gaussian 3-sigma rule,
+# for df = 1..30 (scipy.stats.t.isf; a test checks them where scipy is installed). A new flight against the mean and
+# std of n healthy flights follows t with n - 1 degrees of freedom, scaled by sqrt(1 + 1/n) (prediction interval):
+# with 3-4 flights the tails are far heavier than 3 sigma.
+T_ISF_3SIGMA = (
+    235.8015, 19.2067, 9.2189, 6.6202, 5.5071, 4.9041, 4.5300, 4.2766, 4.0943, 3.9569,
+    3.8499, 3.7643, 3.6942, 3.6358, 3.5864, 3.5441, 3.5075, 3.4755, 3.4472, 3.4222,
+    3.3997, 3.3796, 3.3613, 3.3448, 3.3296, 3.3158, 3.3030, 3.2913, 3.2804, 3.2703,
+)  # fmt: skip
+
+
+def t_spreads_required(n_flights: int) -> float | None:
+    """The spreads a share must be from the healthy mean of ``n_flights`` to be as rare as a Gaussian 3 sigma,
+    with the std estimated from those flights: t_{n-1} quantile * sqrt(1 + 1/n). None below 2 flights (no std).
+    Beyond 31 flights the first-order Cornish-Fisher term z + (z^3 + z) / (4 df) stands in for the table."""
+    if n_flights < 2:
+        return None
+    df = n_flights - 1
+    z = OUTLIER_SPREADS
+    q = T_ISF_3SIGMA[df - 1] if df <= len(T_ISF_3SIGMA) else z + (z**3 + z) / (4.0 * df)
+    return float(q * np.sqrt(1.0 + 1.0 / n_flights))
+
 
 def _rows_and_basis(table: FlightTable) -> tuple[np.ndarray, np.ndarray, str]:
     """Airborne rows with all four values known, their per-rotor values, and the basis.
@@ -95,11 +117,15 @@ class HealthyBaseline:
             return {"basis": basis, "note": f"baseline measured on {self.basis} shares, this log gives {basis}: not compared"}
         dev = self.deviation(shares)
         out = [int(i) + 1 for i in np.flatnonzero(np.abs(dev) > OUTLIER_SPREADS)]
+        k_t = t_spreads_required(self.n_flights)
         res = {
             "basis": basis,
             "shares": [round(float(s), 4) for s in shares],
             "deviation_spreads": [round(float(d), 2) for d in dev],
             "rotors_beyond_3_spreads": out,
+            # The same rule with Student's t for a baseline of n_flights (the 3 above assumes a known spread).
+            "t_spreads_required": None if k_t is None else round(k_t, 2),
+            "rotors_beyond_t_spreads": None if k_t is None else [int(i) + 1 for i in np.flatnonzero(np.abs(dev) > k_t)],
             "verdict": self.verdict(dev),
         }
         if self.cg_damage_separable is not None:

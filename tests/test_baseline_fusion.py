@@ -129,3 +129,35 @@ def test_real_crazypad_flights_baseline_corrects_the_classifier(tmp_path):
     res = json.loads(run_diagnose([healthy, "--format", "crazypad", "--vehicle", d, "--json"])[1])
     assert res["baseline"]["fusion"]["classifier_label"] != 1  # the classifier alone: a false alarm
     assert res["verdict"]["label"] == 1 and res["verdict"]["faulty_propellers"] == []
+
+
+def test_student_t_spreads_by_hand():
+    """A new flight against the mean and std of n healthy flights: t_{n-1} at the Gaussian 3-sigma tail, times
+    sqrt(1 + 1/n). By hand for n = 4: t_3.isf(0.0013499) = 9.2189 (tables), times sqrt(1.25) = 10.307."""
+    from monitor.baseline import T_ISF_3SIGMA, t_spreads_required
+
+    assert t_spreads_required(1) is None
+    assert t_spreads_required(4) == pytest.approx(9.2189 * np.sqrt(1.25), rel=1e-6)
+    assert t_spreads_required(31) == pytest.approx(3.2703 * np.sqrt(1 + 1 / 31), rel=1e-6)
+    # Many flights: back toward the Gaussian 3 (first-order expansion past the table, continuous at its end).
+    assert 3.0 < t_spreads_required(1000) < 3.02
+    assert abs(t_spreads_required(32) - t_spreads_required(31)) < 0.05
+    stats = pytest.importorskip("scipy.stats")
+    tail = stats.norm.sf(3.0)
+    assert T_ISF_3SIGMA == pytest.approx([stats.t.isf(tail, df) for df in range(1, 31)], abs=1e-4)
+
+
+def test_compare_reports_the_t_rule_beside_the_3_spread_rule(healthy_log):
+    """Rotor 1 at 5 spreads above a 4-flight baseline: beyond 3 spreads, not beyond the t rule's 10.31."""
+    from monitor.baseline import flight_shares
+    from monitor.logs import read_log
+
+    table = read_log(healthy_log)
+    seen, basis = flight_shares(table)
+    mean = seen + np.array([-0.1, 0.1 / 3, 0.1 / 3, 0.1 / 3])
+    b = HealthyBaseline(basis, tuple(mean), (0.0,) * 4, (0.05,) * 4, None, 20.0, 4, ("a",), ("1", "2", "3", "4"))
+    res = b.compare(table)
+    assert res["rotors_beyond_3_spreads"] == [1]
+    assert res["t_spreads_required"] == pytest.approx(10.31) and res["rotors_beyond_t_spreads"] == []
+    one = HealthyBaseline(basis, tuple(mean), (0.0,) * 4, (0.05,) * 4, None, 20.0, 1, ("a",), ("1", "2", "3", "4"))
+    assert one.compare(table)["t_spreads_required"] is None and one.compare(table)["rotors_beyond_t_spreads"] is None
