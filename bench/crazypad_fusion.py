@@ -53,13 +53,13 @@ from offline.crazypad.vehicle import PROJECT_INDEX_OF_BITCRAZE  # noqa: E402
 
 MODEL = REPO / "models" / "crazyflie-classifier.onnx"
 MANIFEST = REPO / "models" / "crazyflie-classifier.manifest.json"
-METHODS = ("classifier", "baseline", "fused", "verdict")
+METHODS = ("classifier", "baseline", "baseline_t", "fused", "verdict")
 HOP = 20  # propwatch diagnose's default
 
 
-def baseline_label(dev: np.ndarray) -> int:
+def baseline_label(dev: np.ndarray, spreads: float = OUTLIER_SPREADS) -> int:
     k = int(np.argmax(dev))
-    if dev[k] <= OUTLIER_SPREADS:
+    if dev[k] <= spreads:
         return 1
     return label_from_mask([i == k for i in range(4)])
 
@@ -119,7 +119,8 @@ def score(args) -> dict:
             if f.airframe != af or kind(f) != k or f.role == "calibration":
                 continue
             d = diagnose_table(tables[f.file], clf, hop=HOP, esc=vehicle.esc)
-            dev = np.asarray(base.compare(tables[f.file])["deviation_spreads"])
+            seen = base.compare(tables[f.file])
+            dev = np.asarray(seen["deviation_spreads"])
             row = {
                 "file": f.file,
                 "airframe": af,
@@ -130,6 +131,9 @@ def score(args) -> dict:
                 "deviation_spreads": dev.tolist(),
             }
             row["baseline"] = baseline_label(dev)
+            row["t_spreads_required"] = seen["t_spreads_required"]
+            k_t = seen["t_spreads_required"]  # None for a one-flight baseline: no t rule
+            row["baseline_t"] = None if k_t is None else baseline_label(dev, k_t)
             if d.verdict is None:
                 row.update(classifier=None, fused=None, verdict=None, imbalance=None, reason=d.reason)
             else:
@@ -187,9 +191,10 @@ def markdown(t: dict, nominal: dict) -> str:
         return f"{100 * s['accuracy']:.0f} % / {100 * s['called_faulty']:.0f} %"
 
     head = "| condition | flights | nominal sim (stored): exact / called a fault | " + " | ".join(
-        f"{m}: exact | {m}: called a fault" for m in ("adapted classifier", "baseline only", "fused", "verdict")
+        f"{m}: exact | {m}: called a fault"
+        for m in ("adapted classifier", "baseline only", "baseline t rule", "fused", "verdict")
     )
-    lines = [head + " | verdict: imbalance located | verdict: any imbalance |", "|---|---|---|" + "---|---|" * 4 + "---|---|"]
+    lines = [head + " | verdict: imbalance located | verdict: any imbalance |", "|---|---|---|" + "---|---|" * 5 + "---|---|"]
     for g, s in t.items():
         n = s["flights"]
         cells = [c for m in METHODS for c in (cell(s[m]["exact"], n), cell(s[m]["called_fault"], n))]
@@ -226,6 +231,9 @@ def main(argv=None) -> int:
             # Lists of rows: the manifest's keys are sorted on writing, the rows keep the report's order.
             "tables_by_log_kind": {k: [{"condition": g, **row} for g, row in tk.items()] for k, tk in tables.items()},
             "outlier_spreads": OUTLIER_SPREADS,
+            "t_spreads_required_by_baseline": sorted(
+                {(r["airframe"], r["logs"], r["t_spreads_required"]) for r in res["rows"] if r["t_spreads_required"]}
+            ),
             "healthy_calibration_max_deviation_spreads": worst,
             "hop_steps": HOP,
             "git_revision": git_revision(),

@@ -32,6 +32,8 @@ SHOWN = (
     "vibration_log10",
     "response_gain_M3",
     "response_gain_M1",
+    "coupling_YT",
+    "coupling_RP",
 )
 
 
