@@ -143,8 +143,9 @@ class HealthyBaseline:
     def verdict(self, dev: np.ndarray) -> str:
         """What the shares alone can say. A rotor that works harder than this airframe's healthy
         flights is an *imbalance* near it: a damaged propeller and a CG offset toward that rotor
-        (a mass near it) move the shares alike, and on the real CrazyPAD flights no share, activity
-        or vibration evidence told them apart (offline/crazypad/README.md), so both are named."""
+        (a mass near it) move the shares alike, and on the real CrazyPAD flights no share, activity,
+        vibration, response-gain or command-coupling evidence told them apart (offline/crazypad/README.md), so
+        both are named."""
         k = int(np.argmax(dev))
         if dev[k] <= OUTLIER_SPREADS:
             return f"no rotor beyond {OUTLIER_SPREADS:g} spreads of this airframe's healthy flights"

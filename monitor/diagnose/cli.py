@@ -28,11 +28,14 @@ Output with ``--json`` (stdout), for one LOG (every key: docs/diagnose-json.md):
      "hypotheses": [{"faulty_propellers": [...], "probability": p}, ...] | null,
      "hypothesis_rule": {"score", "threshold", "coverage", "calibration_flights"} | null,
      "rotor_effectiveness": [4 values] | null, "rotor_effectiveness_std": [4 values] | null,
-     "baseline": {"basis", "shares", "deviation_spreads", "rotors_beyond_3_spreads", "verdict",
+     "baseline": {"basis", "shares", "deviation_spreads", "rotors_beyond_3_spreads", "t_spreads_required",
+                  "rotors_beyond_t_spreads", "verdict",
                   "fusion": {"rule", "classifier_label", "classifier_confidence", "spreads_required"}}}
                   (--vehicle DIR only; there ``verdict`` is the classifier fused with the airframe's baseline,
                   monitor.baseline.fuse: a rotor beyond 3 healthy spreads is named, none is healthy unless
-                  the classifier alone is confident)
+                  the classifier alone is confident; where the baseline says a CG offset and damage look alike
+                  (cg_damage_separable false) a fault becomes an imbalance: "imbalance_rotors",
+                  "imbalance_names" in ``verdict``, no faulty propeller, both causes in ``hypotheses``)
 
 Confidence: a model shipped with a conformal rule (``classifier.sets.json``,
 monitor/hypotheses.py) gives a set of hypotheses: every propeller set whose

@@ -59,8 +59,9 @@ DAMAGE_KINDS = ("propeller_cut", "tape_on_propeller")
 # adapted on CrazyPAD logs carries it in its healthy baseline, so its one-rotor verdicts name both causes.
 CG_DAMAGE_SEPARABLE = False
 CG_DAMAGE_EVIDENCE = (
-    "offline/crazypad/README.md, bench/crazypad_separation.py: on the shared CrazyPAD flights no activity, vibration "
-    "or moment-pattern evidence separates masses near M3 from a damaged M3 propeller"
+    "offline/crazypad/README.md, bench/crazypad_separation.py: on the shared CrazyPAD flights no activity, vibration, "
+    "moment-pattern, 100 Hz response-gain or command-coupling evidence separates masses near M3 from a damaged M3 "
+    "propeller"
 )
 
 
