@@ -206,12 +206,16 @@ def format_text(d: Diagnosis, baseline=None) -> str:
         if baseline is not None and imb:  # CG offset and damage measured alike on this airframe
             where = " + ".join(rotor_name(names[i - 1], i) for i in imb)
             what = f"{baseline.imbalance_wording(where)} (no propeller called faulty)"
-        lines.append(
-            f"verdict: {what}, from {d.windows} windows: {conf} (label probability "
-            + f"{d.verdict.get('label_probability_of_verdict', float('nan')):.2f}, "
-            + f"{100 * d.verdict.get('agreeing_windows', float('nan')):.0f} % of windows agree; marked FAULTY from "
-            + f"{d.verdict.get('faulty_probability_required', float('nan')):.2f})"
-        )
+        if baseline is not None and imb:  # the label (1) is no claim here: say what the imbalance rests on
+            lines.append(f"verdict: {what}, from {d.windows} windows: {conf} (the rotors' shares against this airframe's")
+            lines[-1] += " healthy baseline; a CG offset and damage were measured alike on its kind of flights)"
+        else:
+            lines.append(
+                f"verdict: {what}, from {d.windows} windows: {conf} (label probability "
+                + f"{d.verdict.get('label_probability_of_verdict', float('nan')):.2f}, "
+                + f"{100 * d.verdict.get('agreeing_windows', float('nan')):.0f} % of windows agree; marked FAULTY from "
+                + f"{d.verdict.get('faulty_probability_required', float('nan')):.2f})"
+            )
         for p in d.propellers:
             lines.append(
                 f"  {rotor_name(p['name'], p['propeller'])}: P(faulty) = {p['fault_probability']:.3f}"
