@@ -13,7 +13,11 @@ airframe, from their own even-numbered healthy logs:
 - adapted classifier: ``models/crazyflie-classifier.onnx`` (calibrated simulation) as ``propwatch diagnose``
   runs it (hop 20);
 - baseline only: the rotor with the largest deviation when it is beyond 3 spreads, else healthy;
-- fused: ``monitor.baseline.fuse``, what ``propwatch diagnose LOG --vehicle DIR`` now says.
+- fused: ``monitor.baseline.fuse``;
+- verdict: what ``propwatch diagnose LOG --vehicle DIR`` now says of an airframe adapted on CrazyPAD logs, whose
+  baseline carries ``cg_damage_separable: false`` (``offline/crazypad/evidence.py``): a fused fault becomes an
+  imbalance near its rotors (``monitor.baseline.cg_or_damage``), no propeller called faulty. "Imbalance located"
+  = the imbalance's rotors are the damaged ones (cuts, tape) or the ones the mass hangs near (masses, strings).
 
 Exact = the paper's label (cuts and tape are faults of their rotors; masses and strings are healthy).
 "Called a fault" = any propeller named. No constant of the fusion is fitted on a fault flight (see
@@ -36,29 +40,51 @@ import numpy as np
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
-from monitor.baseline import OUTLIER_SPREADS, baseline_from_tables, fuse  # noqa: E402
+from monitor.baseline import OUTLIER_SPREADS, baseline_from_tables, cg_or_damage, fuse  # noqa: E402
 from monitor.diagnose.engine import diagnose_table  # noqa: E402
-from monitor.labels import label_from_mask  # noqa: E402
+from monitor.labels import LABEL_TABLE, label_from_mask  # noqa: E402
 from monitor.model import Classifier  # noqa: E402
 from monitor.vehicle import load_vehicle  # noqa: E402
 from offline.crazypad.data import AIRFRAMES, DEFAULT_ROOT, load_manifest, select  # noqa: E402
+from offline.crazypad.evidence import CG_DAMAGE_SEPARABLE, CG_OFFSET_KINDS  # noqa: E402
 from offline.crazypad.experiment import GROUP_ORDER, truth_label  # noqa: E402
 from offline.crazypad.real import read_flight  # noqa: E402
+from offline.crazypad.vehicle import PROJECT_INDEX_OF_BITCRAZE  # noqa: E402
 
 MODEL = REPO / "models" / "crazyflie-classifier.onnx"
 MANIFEST = REPO / "models" / "crazyflie-classifier.manifest.json"
-METHODS = ("classifier", "baseline", "fused")
+METHODS = ("classifier", "baseline", "baseline_t", "fused", "verdict")
 HOP = 20  # propwatch diagnose's default
 
 
-def baseline_label(dev: np.ndarray) -> int:
+def baseline_label(dev: np.ndarray, spreads: float = OUTLIER_SPREADS) -> int:
     k = int(np.argmax(dev))
-    if dev[k] <= OUTLIER_SPREADS:
+    if dev[k] <= spreads:
         return 1
     return label_from_mask([i == k for i in range(4)])
 
 
 KINDS = ("motor", "controller")
+
+
+def location_label(f) -> int:
+    """Where the condition sits: the damaged rotors (cuts, tape), the rotors a mass hangs near (masses, strings;
+    "near M3+M4" in the group name), none (healthy); as a label of PX4 rotors."""
+    if f.fault_kind not in CG_OFFSET_KINDS:
+        return truth_label(f)
+    near = f.group.split(" near ")[1].split("+")
+    mask = [False] * 4
+    for m in near:
+        mask[PROJECT_INDEX_OF_BITCRAZE[m]] = True
+    return label_from_mask(mask)
+
+
+def shipped_verdict(fused_label: int) -> tuple[int, list[int]]:
+    """(label, imbalance rotors) of ``diagnose --vehicle DIR`` on a CrazyPAD-adapted airframe."""
+    if CG_DAMAGE_SEPARABLE is False and LABEL_TABLE[fused_label]:
+        v = cg_or_damage(fused_label, ["M1", "M3", "M4", "M2"])
+        return v["label"], v["imbalance_rotors"]
+    return fused_label, []
 
 
 def kind(f) -> str:
@@ -93,22 +119,28 @@ def score(args) -> dict:
             if f.airframe != af or kind(f) != k or f.role == "calibration":
                 continue
             d = diagnose_table(tables[f.file], clf, hop=HOP, esc=vehicle.esc)
-            dev = np.asarray(base.compare(tables[f.file])["deviation_spreads"])
+            seen = base.compare(tables[f.file])
+            dev = np.asarray(seen["deviation_spreads"])
             row = {
                 "file": f.file,
                 "airframe": af,
                 "logs": k,
                 "group": f.group,
                 "truth": truth_label(f),
+                "location": location_label(f),
                 "deviation_spreads": dev.tolist(),
             }
             row["baseline"] = baseline_label(dev)
+            row["t_spreads_required"] = seen["t_spreads_required"]
+            k_t = seen["t_spreads_required"]  # None for a one-flight baseline: no t rule
+            row["baseline_t"] = None if k_t is None else baseline_label(dev, k_t)
             if d.verdict is None:
-                row.update(classifier=None, fused=None, reason=d.reason)
+                row.update(classifier=None, fused=None, verdict=None, imbalance=None, reason=d.reason)
             else:
                 row["classifier"] = d.verdict["label"]
                 conf = d.verdict["confidence"] == "confident"
                 row["fused"] = fuse(dev, d.label_probability, d.verdict["label"], conf)["label"]
+                row["verdict"], row["imbalance"] = shipped_verdict(row["fused"])
             rows.append(row)
     return {"rows": rows, "healthy_leave_one_out": loo}
 
@@ -134,6 +166,11 @@ def table(rows: list[dict]) -> dict:
                 "exact": sum(r[m] == r["truth"] for r in rs),
                 "called_fault": sum(r[m] is not None and r[m] != 1 for r in rs),
             }
+        loc = [r for r in rs if r["location"] != 1]
+        out[g]["verdict"]["imbalance_located"] = sum(
+            bool(r["imbalance"]) and sorted(r["imbalance"]) == sorted(LABEL_TABLE[r["location"]]) for r in loc
+        )
+        out[g]["verdict"]["imbalance_any"] = sum(bool(r["imbalance"]) for r in rs)
     return out
 
 
@@ -154,12 +191,14 @@ def markdown(t: dict, nominal: dict) -> str:
         return f"{100 * s['accuracy']:.0f} % / {100 * s['called_faulty']:.0f} %"
 
     head = "| condition | flights | nominal sim (stored): exact / called a fault | " + " | ".join(
-        f"{m}: exact | {m}: called a fault" for m in ("adapted classifier", "baseline only", "fused")
+        f"{m}: exact | {m}: called a fault"
+        for m in ("adapted classifier", "baseline only", "baseline t rule", "fused", "verdict")
     )
-    lines = [head + " |", "|---|---|---|" + "---|---|" * 3]
+    lines = [head + " | verdict: imbalance located | verdict: any imbalance |", "|---|---|---|" + "---|---|" * 5 + "---|---|"]
     for g, s in t.items():
         n = s["flights"]
         cells = [c for m in METHODS for c in (cell(s[m]["exact"], n), cell(s[m]["called_fault"], n))]
+        cells += [cell(s["verdict"]["imbalance_located"], n), cell(s["verdict"]["imbalance_any"], n)]
         lines.append(f"| {g} | {n} | {nom(g)} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
@@ -192,6 +231,9 @@ def main(argv=None) -> int:
             # Lists of rows: the manifest's keys are sorted on writing, the rows keep the report's order.
             "tables_by_log_kind": {k: [{"condition": g, **row} for g, row in tk.items()] for k, tk in tables.items()},
             "outlier_spreads": OUTLIER_SPREADS,
+            "t_spreads_required_by_baseline": sorted(
+                {(r["airframe"], r["logs"], r["t_spreads_required"]) for r in res["rows"] if r["t_spreads_required"]}
+            ),
             "healthy_calibration_max_deviation_spreads": worst,
             "hop_steps": HOP,
             "git_revision": git_revision(),

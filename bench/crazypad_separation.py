@@ -22,7 +22,19 @@ sys.path.insert(0, str(REPO))
 from offline.crazypad.data import DEFAULT_ROOT, load_manifest  # noqa: E402
 from offline.crazypad.evidence import effect_sizes, flight_evidence, separation  # noqa: E402
 
-SHOWN = ("share_M1", "share_M2", "share_M3", "share_M4", "activity_M3_over_others", "activity_mean", "vibration_log10")
+SHOWN = (
+    "share_M1",
+    "share_M2",
+    "share_M3",
+    "share_M4",
+    "activity_M3_over_others",
+    "activity_mean",
+    "vibration_log10",
+    "response_gain_M3",
+    "response_gain_M1",
+    "coupling_YT",
+    "coupling_RP",
+)
 
 
 def main(argv=None) -> int:

@@ -31,6 +31,28 @@ BASELINE_FILE = "baseline.json"
 SPREAD_FLOOR = 0.02
 OUTLIER_SPREADS = 3.0  # a share this many spreads from the airframe's healthy mean is not healthy
 
+# Student's t quantiles t_{df}.isf(p) at p = Phi(-3) = 0.0013499, the one-sided tail of the Gaussian 3-sigma rule,
+# for df = 1..30 (scipy.stats.t.isf; a test checks them where scipy is installed). A new flight against the mean and
+# std of n healthy flights follows t with n - 1 degrees of freedom, scaled by sqrt(1 + 1/n) (prediction interval):
+# with 3-4 flights the tails are far heavier than 3 sigma.
+T_ISF_3SIGMA = (
+    235.8015, 19.2067, 9.2189, 6.6202, 5.5071, 4.9041, 4.5300, 4.2766, 4.0943, 3.9569,
+    3.8499, 3.7643, 3.6942, 3.6358, 3.5864, 3.5441, 3.5075, 3.4755, 3.4472, 3.4222,
+    3.3997, 3.3796, 3.3613, 3.3448, 3.3296, 3.3158, 3.3030, 3.2913, 3.2804, 3.2703,
+)  # fmt: skip
+
+
+def t_spreads_required(n_flights: int) -> float | None:
+    """The spreads a share must be from the healthy mean of ``n_flights`` to be as rare as a Gaussian 3 sigma,
+    with the std estimated from those flights: t_{n-1} quantile * sqrt(1 + 1/n). None below 2 flights (no std).
+    Beyond 31 flights the first-order Cornish-Fisher term z + (z^3 + z) / (4 df) stands in for the table."""
+    if n_flights < 2:
+        return None
+    df = n_flights - 1
+    z = OUTLIER_SPREADS
+    q = T_ISF_3SIGMA[df - 1] if df <= len(T_ISF_3SIGMA) else z + (z**3 + z) / (4.0 * df)
+    return float(q * np.sqrt(1.0 + 1.0 / n_flights))
+
 
 def _rows_and_basis(table: FlightTable) -> tuple[np.ndarray, np.ndarray, str]:
     """Airborne rows with all four values known, their per-rotor values, and the basis.
@@ -95,11 +117,15 @@ class HealthyBaseline:
             return {"basis": basis, "note": f"baseline measured on {self.basis} shares, this log gives {basis}: not compared"}
         dev = self.deviation(shares)
         out = [int(i) + 1 for i in np.flatnonzero(np.abs(dev) > OUTLIER_SPREADS)]
+        k_t = t_spreads_required(self.n_flights)
         res = {
             "basis": basis,
             "shares": [round(float(s), 4) for s in shares],
             "deviation_spreads": [round(float(d), 2) for d in dev],
             "rotors_beyond_3_spreads": out,
+            # The same rule with Student's t for a baseline of n_flights (the 3 above assumes a known spread).
+            "t_spreads_required": None if k_t is None else round(k_t, 2),
+            "rotors_beyond_t_spreads": None if k_t is None else [int(i) + 1 for i in np.flatnonzero(np.abs(dev) > k_t)],
             "verdict": self.verdict(dev),
         }
         if self.cg_damage_separable is not None:
@@ -117,8 +143,9 @@ class HealthyBaseline:
     def verdict(self, dev: np.ndarray) -> str:
         """What the shares alone can say. A rotor that works harder than this airframe's healthy
         flights is an *imbalance* near it: a damaged propeller and a CG offset toward that rotor
-        (a mass near it) move the shares alike, and on the real CrazyPAD flights no share, activity
-        or vibration evidence told them apart (offline/crazypad/README.md), so both are named."""
+        (a mass near it) move the shares alike, and on the real CrazyPAD flights no share, activity,
+        vibration, response-gain or command-coupling evidence told them apart (offline/crazypad/README.md), so
+        both are named."""
         k = int(np.argmax(dev))
         if dev[k] <= OUTLIER_SPREADS:
             return f"no rotor beyond {OUTLIER_SPREADS:g} spreads of this airframe's healthy flights"
@@ -220,6 +247,35 @@ def fuse(deviation_spreads, label_probability, classifier_label: int, classifier
         "faulty_propellers": [],
         "confidence": "confident",
         "rule": f"no rotor beyond {OUTLIER_SPREADS:g} spreads and the classifier is not confident of a fault: healthy",
+    }
+
+
+def cg_or_damage(label: int, motor_names) -> dict:
+    """The verdict of an imbalance on an airframe whose flights do not tell a CG offset from damage.
+
+    ``label`` is the fused verdict's (a set of rotors working harder than healthy). Measured on the CrazyPAD
+    flights (``offline/crazypad/README.md``): masses near M3 and cut M3 propellers move shares, command
+    activity, vibration and the response gain alike, so neither cause is named: no propeller is called
+    faulty (label 1, ``faulty_propellers`` empty, confidence ``ambiguous``), the rotors are an imbalance, and
+    ``hypotheses`` holds both explanations (damaged propellers on them; intact propellers with the CG moved
+    toward them). Returns the verdict's new fields and the hypotheses.
+    """
+    rotors = list(LABEL_TABLE[label])
+    if not rotors:
+        raise ValueError("cg_or_damage: a healthy label is no imbalance")
+    names = [str(motor_names[i - 1]) for i in rotors]
+    where = " + ".join(names)
+    return {
+        "label": 1,
+        "faulty_propellers": [],
+        "faulty_names": [],
+        "confidence": "ambiguous",
+        "imbalance_rotors": rotors,
+        "imbalance_names": names,
+        "hypotheses": [
+            {"faulty_propellers": rotors, "cause": f"damaged propeller on {where}"},
+            {"faulty_propellers": [], "cause": f"CG offset toward {where} (a mass near it), propellers intact"},
+        ],
     }
 
 

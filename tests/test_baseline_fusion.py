@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import shutil
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -69,20 +70,26 @@ def test_baseline_names_a_rotor_the_classifier_calls_healthy(tmp_path, healthy_l
     # Healthy shares 0.1 lower on rotor 1 (the others raised to keep the mean at 1): rotor 1 now sits
     # (s1 - (s1 - 0.1)) / 0.02 = 5 spreads above it, the others (0.1/3)/0.02 = 1.7 below.
     mean = np.asarray(seen) + np.array([-0.1, 0.1 / 3, 0.1 / 3, 0.1 / 3])
-    HealthyBaseline(
-        "omega2", tuple(mean), (0.0,) * 4, (0.05,) * 4, None, 20.0, 3, ("a",), ("1", "2", "3", "4"), False, "test"
-    ).save(d / BASELINE_FILE)
-    code, out = run_diagnose([healthy_log, "--vehicle", d, "--json"])
-    res = json.loads(out)
-    assert res["baseline"]["deviation_spreads"] == pytest.approx([5.0, -5 / 3, -5 / 3, -5 / 3], abs=0.01)
-    assert res["verdict"]["faulty_propellers"] == [1] and res["verdict"]["confidence"] == "confident" and code == 0
-    assert [p["faulty"] for p in res["propellers"]] == [True, False, False, False]
-    assert res["baseline"]["fusion"]["classifier_label"] == 1 and res["baseline"]["fusion"]["spreads_required"] == 3.0
-    undocumented = key_paths(res) - set(documented())
-    assert not undocumented, f"undocumented keys: {sorted(undocumented)}"
-    text = run_diagnose([healthy_log, "--vehicle", d])[1]
-    assert "verdict: label 2: imbalance near propeller 1: CG offset or damage" in text, text
-    assert "verdict from the baseline and the classifier (label 1 alone): baseline: PX4 rotor(s) [1]" in text, text
+    for separable in (None, False):
+        HealthyBaseline(
+            "omega2", tuple(mean), (0.0,) * 4, (0.05,) * 4, None, 20.0, 3, ("a",), ("1", "2", "3", "4"), separable, "test"
+        ).save(d / BASELINE_FILE)
+        code, out = run_diagnose([healthy_log, "--vehicle", d, "--json"])
+        res = json.loads(out)
+        assert res["baseline"]["deviation_spreads"] == pytest.approx([5.0, -5 / 3, -5 / 3, -5 / 3], abs=0.01)
+        assert res["baseline"]["fusion"]["classifier_label"] == 1 and res["baseline"]["fusion"]["spreads_required"] == 3.0
+        undocumented = key_paths(res) - set(documented())
+        assert not undocumented, f"undocumented keys: {sorted(undocumented)}"
+        text = run_diagnose([healthy_log, "--vehicle", d])[1]
+        assert "verdict from the baseline and the classifier (label 1 alone): baseline: PX4 rotor(s) [1]" in text, text
+        if separable is None:  # nobody measured CG offset against damage: the rotor is named
+            assert res["verdict"]["faulty_propellers"] == [1] and res["verdict"]["confidence"] == "confident" and code == 0
+            assert [p["faulty"] for p in res["propellers"]] == [True, False, False, False]
+            assert "verdict: label 2: propeller 1 faulty" in text, text
+        else:  # measured alike: an imbalance near rotor 1, no propeller called faulty
+            assert res["verdict"]["faulty_propellers"] == [] and res["verdict"]["imbalance_rotors"] == [1] and code == 3
+            assert not any(p["faulty"] for p in res["propellers"])
+            assert "verdict: imbalance near propeller 1: CG offset or damage (no propeller called faulty)" in text, text
 
 
 CRAZYPAD = REPO_ROOT.parent / "shared" / "data" / "crazypad"
@@ -110,7 +117,47 @@ def test_real_crazypad_flights_baseline_corrects_the_classifier(tmp_path):
     res = json.loads(run_diagnose([cut, "--format", "crazypad", "--vehicle", d, "--json"])[1])
     assert res["baseline"]["fusion"]["classifier_label"] != label_of(2)  # the classifier alone: not M3 alone
     assert res["verdict"]["faulty_propellers"] == [2] and res["verdict"]["faulty_names"] == ["M3"]
+    # The shipped CrazyPAD finding (cg_damage_separable false): the same flight is an imbalance near M3, not a fault.
+    from offline.crazypad.evidence import CG_DAMAGE_EVIDENCE, CG_DAMAGE_SEPARABLE
+
+    replace(base, cg_damage_separable=CG_DAMAGE_SEPARABLE, cg_damage_evidence=CG_DAMAGE_EVIDENCE).save(d / BASELINE_FILE)
+    res = json.loads(run_diagnose([cut, "--format", "crazypad", "--vehicle", d, "--json"])[1])
+    assert res["verdict"]["faulty_propellers"] == [] and res["verdict"]["imbalance_names"] == ["M3"]
+    assert [h["faulty_propellers"] for h in res["hypotheses"]] == [[2], []]
+    base.save(d / BASELINE_FILE)
     healthy = E8 / "E8_log05.csv.gz"
     res = json.loads(run_diagnose([healthy, "--format", "crazypad", "--vehicle", d, "--json"])[1])
     assert res["baseline"]["fusion"]["classifier_label"] != 1  # the classifier alone: a false alarm
     assert res["verdict"]["label"] == 1 and res["verdict"]["faulty_propellers"] == []
+
+
+def test_student_t_spreads_by_hand():
+    """A new flight against the mean and std of n healthy flights: t_{n-1} at the Gaussian 3-sigma tail, times
+    sqrt(1 + 1/n). By hand for n = 4: t_3.isf(0.0013499) = 9.2189 (tables), times sqrt(1.25) = 10.307."""
+    from monitor.baseline import T_ISF_3SIGMA, t_spreads_required
+
+    assert t_spreads_required(1) is None
+    assert t_spreads_required(4) == pytest.approx(9.2189 * np.sqrt(1.25), rel=1e-6)
+    assert t_spreads_required(31) == pytest.approx(3.2703 * np.sqrt(1 + 1 / 31), rel=1e-6)
+    # Many flights: back toward the Gaussian 3 (first-order expansion past the table, continuous at its end).
+    assert 3.0 < t_spreads_required(1000) < 3.02
+    assert abs(t_spreads_required(32) - t_spreads_required(31)) < 0.05
+    stats = pytest.importorskip("scipy.stats")
+    tail = stats.norm.sf(3.0)
+    assert T_ISF_3SIGMA == pytest.approx([stats.t.isf(tail, df) for df in range(1, 31)], abs=1e-4)
+
+
+def test_compare_reports_the_t_rule_beside_the_3_spread_rule(healthy_log):
+    """Rotor 1 at 5 spreads above a 4-flight baseline: beyond 3 spreads, not beyond the t rule's 10.31."""
+    from monitor.baseline import flight_shares
+    from monitor.logs import read_log
+
+    table = read_log(healthy_log)
+    seen, basis = flight_shares(table)
+    mean = seen + np.array([-0.1, 0.1 / 3, 0.1 / 3, 0.1 / 3])
+    b = HealthyBaseline(basis, tuple(mean), (0.0,) * 4, (0.05,) * 4, None, 20.0, 4, ("a",), ("1", "2", "3", "4"))
+    res = b.compare(table)
+    assert res["rotors_beyond_3_spreads"] == [1]
+    assert res["t_spreads_required"] == pytest.approx(10.31) and res["rotors_beyond_t_spreads"] == []
+    one = HealthyBaseline(basis, tuple(mean), (0.0,) * 4, (0.05,) * 4, None, 20.0, 1, ("a",), ("1", "2", "3", "4"))
+    assert one.compare(table)["t_spreads_required"] is None and one.compare(table)["rotors_beyond_t_spreads"] is None

@@ -1,6 +1,7 @@
 """``diagnose --vehicle DIR``: where the airframe's baseline says a CG offset and a damaged propeller look alike,
-a one-rotor verdict is worded "imbalance near ...: CG offset or damage" in text; the JSON keeps
-``faulty_propellers`` and says why in ``baseline.cg_damage_separable``."""
+a fault verdict becomes an ambiguous imbalance: "imbalance near ...: CG offset or damage" in text; in JSON no
+propeller in ``faulty_propellers``, the rotors in ``imbalance_rotors``, both causes in ``hypotheses``, and why in
+``baseline.cg_damage_separable``."""
 
 from __future__ import annotations
 
@@ -35,14 +36,25 @@ def faulty3(tmp_path_factory):
 def test_not_separable_words_a_one_rotor_verdict_as_an_imbalance(tmp_path, faulty3):
     d = _folder(tmp_path, False)
     code, text = run_diagnose([faulty3, "--vehicle", d])
-    assert code == 0
-    assert "verdict: label 4: imbalance near propeller 3: CG offset or damage, from" in text, text
+    assert code == 3  # ambiguous: not a confident verdict
+    assert "verdict: imbalance near propeller 3: CG offset or damage (no propeller called faulty), from" in text, text
     assert re.search(r"propeller 3: P\(faulty\) = [\d.]+  <- IMBALANCE", text) and "<- FAULTY" not in text, text
+    assert "cannot tell apart: damaged propeller on 3 or CG offset toward 3" in text, text
     # The baseline's own words follow its deviations (shares alone never tell a CG offset from damage).
     assert re.search(r"healthy baseline \(spreads\): [-+\d., ]+ -> imbalance near 3: CG offset or damage", text), text
     code, out = run_diagnose([faulty3, "--vehicle", d, "--json"])
     res = json.loads(out)
-    assert res["verdict"]["faulty_propellers"] == [3]  # the JSON verdict is unchanged
+    v = res["verdict"]
+    assert code == 3 and v["faulty_propellers"] == [] and v["label"] == 1 and v["confidence"] == "ambiguous"
+    assert v["imbalance_rotors"] == [3] and v["imbalance_names"] == ["3"]
+    assert [h["faulty_propellers"] for h in res["hypotheses"]] == [[3], []]
+    assert res["hypothesis_rule"] is None
+    assert not any(p["faulty"] for p in res["propellers"]) and [p["suspect"] for p in res["propellers"]] == [
+        False,
+        False,
+        True,
+        False,
+    ]
     assert res["baseline"]["cg_damage_separable"] is False
 
 

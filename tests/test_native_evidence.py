@@ -118,3 +118,8 @@ def test_flight_evidence_of_a_real_flight():
     assert np.all(np.isfinite(healthy.activity)) and healthy.vibration > 0
     # A 3-g mass near M3 loads M3 (README: share 1.204 vs 1.080 healthy).
     assert heavy.shares[2] > healthy.shares[2] + 0.1
+    # The 100 Hz response-gain fit (estimator roll twice differentiated: motor logs hold no rate) explains part of
+    # the roll acceleration (R^2 0.3-0.5 on the healthy motor logs) and gives four relative gains averaging 1.
+    assert 0.1 < healthy.roll_gain_r2 < 1.0
+    assert np.mean(healthy.roll_gain) == pytest.approx(1.0)
+    assert all(np.isfinite(v) for v in healthy.couplings.values())

@@ -28,11 +28,14 @@ Output with ``--json`` (stdout), for one LOG (every key: docs/diagnose-json.md):
      "hypotheses": [{"faulty_propellers": [...], "probability": p}, ...] | null,
      "hypothesis_rule": {"score", "threshold", "coverage", "calibration_flights"} | null,
      "rotor_effectiveness": [4 values] | null, "rotor_effectiveness_std": [4 values] | null,
-     "baseline": {"basis", "shares", "deviation_spreads", "rotors_beyond_3_spreads", "verdict",
+     "baseline": {"basis", "shares", "deviation_spreads", "rotors_beyond_3_spreads", "t_spreads_required",
+                  "rotors_beyond_t_spreads", "verdict",
                   "fusion": {"rule", "classifier_label", "classifier_confidence", "spreads_required"}}}
                   (--vehicle DIR only; there ``verdict`` is the classifier fused with the airframe's baseline,
                   monitor.baseline.fuse: a rotor beyond 3 healthy spreads is named, none is healthy unless
-                  the classifier alone is confident)
+                  the classifier alone is confident; where the baseline says a CG offset and damage look alike
+                  (cg_damage_separable false) a fault becomes an imbalance: "imbalance_rotors",
+                  "imbalance_names" in ``verdict``, no faulty propeller, both causes in ``hypotheses``)
 
 Confidence: a model shipped with a conformal rule (``classifier.sets.json``,
 monitor/hypotheses.py) gives a set of hypotheses: every propeller set whose
@@ -199,20 +202,32 @@ def format_text(d: Diagnosis, baseline=None) -> str:
     else:
         conf = d.verdict.get("confidence", "confident")
         what, mark = describe_label(d.verdict["label"], names, conf), "  <- FAULTY"
-        one = d.verdict["faulty_propellers"]
-        if baseline is not None and len(one) == 1:  # CG offset and damage measured alike on this airframe
-            imbalance = baseline.imbalance_wording(rotor_name(names[one[0] - 1], one[0]))
-            what, mark = (f"label {d.verdict['label']}: {imbalance}", "  <- IMBALANCE") if imbalance else (what, mark)
-        lines.append(
-            f"verdict: {what}, from {d.windows} windows: {conf} (label probability "
-            + f"{d.verdict.get('label_probability_of_verdict', float('nan')):.2f}, "
-            + f"{100 * d.verdict.get('agreeing_windows', float('nan')):.0f} % of windows agree; marked FAULTY from "
-            + f"{d.verdict.get('faulty_probability_required', float('nan')):.2f})"
-        )
+        imb = d.verdict.get("imbalance_rotors")
+        if baseline is not None and imb:  # CG offset and damage measured alike on this airframe
+            where = " + ".join(rotor_name(names[i - 1], i) for i in imb)
+            what = f"{baseline.imbalance_wording(where)} (no propeller called faulty)"
+        if baseline is not None and imb:  # the label (1) is no claim here: say what the imbalance rests on
+            lines.append(f"verdict: {what}, from {d.windows} windows: {conf} (the rotors' shares against this airframe's")
+            lines[-1] += " healthy baseline; a CG offset and damage were measured alike on its kind of flights)"
+        else:
+            lines.append(
+                f"verdict: {what}, from {d.windows} windows: {conf} (label probability "
+                + f"{d.verdict.get('label_probability_of_verdict', float('nan')):.2f}, "
+                + f"{100 * d.verdict.get('agreeing_windows', float('nan')):.0f} % of windows agree; marked FAULTY from "
+                + f"{d.verdict.get('faulty_probability_required', float('nan')):.2f})"
+            )
         for p in d.propellers:
             lines.append(
                 f"  {rotor_name(p['name'], p['propeller'])}: P(faulty) = {p['fault_probability']:.3f}"
-                + (mark if p["faulty"] else "  <- suspect" if p.get("suspect") else "")
+                + (
+                    mark
+                    if p["faulty"]
+                    else "  <- IMBALANCE"
+                    if imb and p["propeller"] in imb
+                    else "  <- suspect"
+                    if p.get("suspect")
+                    else ""
+                )
             )
     if d.decision is not None:
         alerts = d.decision["alerts"]
@@ -227,7 +242,9 @@ def format_text(d: Diagnosis, baseline=None) -> str:
         lines.append(f"  rotor effectiveness (fraction of nominal thrust, moment balance over {d.physics.windows} x 5 s): {eff}")
         sets = _sets_text(d.physics.hypotheses, names)
         lines.append(("  physics cannot tell apart: " if d.physics.ambiguous else "  physics: ") + sets)
-    if d.hypotheses is not None:
+    if d.hypotheses is not None and d.hypothesis_rule is None:  # an imbalance's causes (monitor.baseline.cg_or_damage)
+        lines.append("  cannot tell apart: " + " or ".join(h.get("cause", str(h["faulty_propellers"])) for h in d.hypotheses))
+    elif d.hypotheses is not None:
         r = d.hypothesis_rule
         what = "cannot tell apart" if len(d.hypotheses) > 1 else "one set"
         lines.append(
@@ -239,13 +256,15 @@ def format_text(d: Diagnosis, baseline=None) -> str:
     return "\n".join(lines)
 
 
-def fuse_verdict(d: Diagnosis, comparison: dict, motor_names) -> None:
+def fuse_verdict(d: Diagnosis, comparison: dict, motor_names, cg_damage_separable: bool | None = None) -> None:
     """Replace the classifier's verdict by the fusion with the airframe's healthy baseline (``monitor.baseline.fuse``).
 
     Adds ``comparison["fusion"]`` (the rule that decided and what the classifier alone said). Nothing changes
-    where there is no verdict or the baseline was not compared (another basis).
+    where there is no verdict or the baseline was not compared (another basis). Where the airframe's flights
+    were measured not to tell a CG offset from damage (``cg_damage_separable`` False), a fault verdict becomes
+    an ambiguous imbalance with both explanations as hypotheses (``monitor.baseline.cg_or_damage``).
     """
-    from monitor.baseline import OUTLIER_SPREADS, fuse
+    from monitor.baseline import OUTLIER_SPREADS, cg_or_damage, fuse
     from monitor.labels import LABEL_TABLE
 
     if d.verdict is None or d.label_probability is None or "deviation_spreads" not in comparison:
@@ -272,6 +291,15 @@ def fuse_verdict(d: Diagnosis, comparison: dict, motor_names) -> None:
     for p in d.propellers:
         bad = p["propeller"] in LABEL_TABLE[label]
         p["faulty"], p["suspect"] = bad and conf == "confident", bad and conf != "confident"
+    if cg_damage_separable is False and LABEL_TABLE[label]:
+        imb = cg_or_damage(label, motor_names)
+        d.hypotheses, d.hypothesis_rule = imb.pop("hypotheses"), None
+        v.update(imb, label_probability_of_verdict=round(float(d.label_probability[0]), 4))
+        if window_labels:
+            v["agreeing_windows"] = round(sum(int(x) == 1 for x in window_labels) / len(window_labels), 4)
+        comparison["fusion"]["rule"] += "; CG offset and damage look alike on this airframe: an imbalance, no fault named"
+        for p in d.propellers:
+            p["faulty"], p["suspect"] = False, p["propeller"] in imb["imbalance_rotors"]
 
 
 EXIT_NOT_CONFIDENT = 3
@@ -334,7 +362,7 @@ def main(argv: list[str] | None = None) -> int:
         res_baseline = None
         if baseline is not None:
             res_baseline = baseline.compare(table)
-            fuse_verdict(d, res_baseline, table.motor_names)
+            fuse_verdict(d, res_baseline, table.motor_names, baseline.cg_damage_separable)
         if d.verdict is None:
             code = worse(code, 1)
         elif d.verdict.get("confidence") != "confident":

@@ -40,7 +40,8 @@ def card_markdown(m: dict) -> str:
             [
                 "",
                 f"**CG offset or damage**: not separable on this airframe's kind of flights ({base['cg_damage_evidence']});"
-                ' a one-rotor verdict reads "imbalance near ROTOR: CG offset or damage".',
+                ' a fault verdict reads "imbalance near ROTOR: CG offset or damage" and names no faulty propeller'
+                " (both causes are its hypotheses).",
             ]
             if base.get("cg_damage_separable") is False
             else []

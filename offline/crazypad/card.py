@@ -105,6 +105,24 @@ def fusion_lines(fusion: dict | None) -> list[str]:
         f"{fusion['healthy_calibration_max_deviation_spreads']:.2f} spreads. Cells: exact / called a propeller fault.",
     ]
     methods = (("classifier", "adapted classifier"), ("baseline", "baseline only"), ("fused", "fused"))
+    tables = fusion["tables_by_log_kind"].values()
+    if all("baseline_t" in row for t in tables for row in t):  # absent in manifests written before it
+        ks = ", ".join(f"{af} {kind} {k:.1f}" for af, kind, k in fusion.get("t_spreads_required_by_baseline", []))
+        lines[-1] += (
+            f" Baseline t rule = baseline only with Student's t in place of {k:g} spreads "
+            f"(`monitor.baseline.t_spreads_required`, spreads required per baseline: {ks}); reported, not used."
+        )
+        methods = methods[:2] + (("baseline_t", "baseline, t rule"),) + methods[2:]
+    shipped = all("verdict" in row for t in tables for row in t)  # absent in manifests written before it
+    if shipped:
+        lines[-1] += (
+            " Verdict = what `diagnose --vehicle DIR` says on this airframe, whose baseline records that a CG offset "
+            "and damage look alike (`cg_damage_separable: false`): a fused fault becomes an imbalance near its rotors, "
+            "no propeller called faulty (`monitor.baseline.cg_or_damage`); its cells: exact / called a propeller fault "
+            "/ imbalance located (at the damaged rotors, or the rotors a mass hangs near) / any imbalance flagged (an "
+            "ambiguous verdict, exit code 3: on a healthy flight, a false alarm)."
+        )
+        methods += (("verdict", "verdict (imbalance rule)"),)
     for kind, table in sorted(fusion["tables_by_log_kind"].items(), key=lambda kv: kv[0] != "motor"):  # motor logs first
         what = "logged motor commands" if kind == "motor" else "commands rebuilt by the firmware mixer"
         lines += [
@@ -117,6 +135,8 @@ def fusion_lines(fusion: dict | None) -> list[str]:
         for row in table:
             n = row["flights"]
             cells = [f"{row[m]['exact']}/{n} / {row[m]['called_fault']}/{n}" for m, _ in methods]
+            if shipped:
+                cells[-1] += f" / {row['verdict']['imbalance_located']}/{n} / {row['verdict']['imbalance_any']}/{n}"
             lines.append(f"| {row['condition']} | {n} | " + " | ".join(cells) + " |")
     return lines
 

@@ -9,6 +9,13 @@ propellers intact) from a damaged M3 propeller (cuts, tape) on the real flights:
   if anything does;
 - **activity**: std of each motor's sample-to-sample command change over its mean, at 100 Hz
   (``monitor.features.motor_command_activity``), M3 over the mean of the other three;
+- **response gain** (``monitor.response_gain``): per rotor, the roll acceleration per change of its command
+  (gyro rate differentiated in controller logs, the estimator's roll angle twice in motor logs, which log
+  no rate), relative to the mean of the four; a damaged M3 should lower M3's, a mass near it should not;
+- **command couplings**: the controller's roll/pitch/yaw/thrust channels recovered from the four commands
+  (Hadamard transform of the quad-X mixer), high-passed; in closed loop a rotor whose thrust or torque per
+  command differs from the others makes one channel answer another (yaw answering thrust: ``coupling_YT``,
+  cov(Y, T) / var(T); roll against pitch: ``coupling_RP``, cov(R, P) / (var R + var P));
 - **vibration**: mean-square of the acceleration above 15 Hz (motor logs: the estimator's
   acceleration; ``monitor.features.vibration_energy``) or of the gyro rates (controller logs).
 
@@ -25,15 +32,25 @@ from pathlib import Path
 
 import numpy as np
 
-from monitor.errors import LogFormatError
+from monitor.errors import LogFormatError, ModelError
 from monitor.features import motor_command_activity, vibration_energy
+from monitor.flight import true_runs
 from monitor.logs import read_log
+from monitor.response_gain import angular_acceleration, fit_response_gain
 from offline.crazypad.data import DEFAULT_ROOT, CrazypadFlight
 from offline.crazypad.real import core_mask, log_format
 from offline.crazypad.vehicle import bitcraze_order
 
 NATIVE_RATE_HZ = 100.0  # CrazyPAD's logging rate (data README: median dt 9.9 ms)
 M3 = 2  # index of Bitcraze M3 in M1..M4 order
+# Command-to-thrust lag of the response-gain fit: the Crazyflie's motor time constant (models/crazyflie.yaml,
+# motor_time_constant_s); on the healthy calibration flights 3-4 samples at 100 Hz explain most variance.
+MOTOR_LAG_S = 0.03
+# Roll moment sign of each rotor for more thrust, PX4 order (Bitcraze M1, M3, M4, M2): -y of its arm (FRD).
+ROLL_SIGNS_PX4 = np.array([-1.0, 1.0, 1.0, -1.0])
+PITCH_SIGNS_PX4 = np.array([1.0, -1.0, 1.0, -1.0])  # +x of its arm
+YAW_SIGNS_PX4 = np.array([1.0, 1.0, -1.0, -1.0])  # spin: M1, M3 CCW; M4, M2 CW
+COUPLING_HIGHPASS_S = 0.5  # as the response-gain fit: the trim and the flight script's manoeuvres (< 2 Hz) drop out
 
 # Conditions by what they are physically: a CG offset (propellers intact) or propeller damage.
 CG_OFFSET_KINDS = ("added_mass_near_motor", "hanging_mass_on_string")
@@ -42,8 +59,9 @@ DAMAGE_KINDS = ("propeller_cut", "tape_on_propeller")
 # adapted on CrazyPAD logs carries it in its healthy baseline, so its one-rotor verdicts name both causes.
 CG_DAMAGE_SEPARABLE = False
 CG_DAMAGE_EVIDENCE = (
-    "offline/crazypad/README.md, bench/crazypad_separation.py: on the shared CrazyPAD flights no activity, vibration "
-    "or moment-pattern evidence separates masses near M3 from a damaged M3 propeller"
+    "offline/crazypad/README.md, bench/crazypad_separation.py: on the shared CrazyPAD flights no activity, vibration, "
+    "moment-pattern, 100 Hz response-gain or command-coupling evidence separates masses near M3 from a damaged M3 "
+    "propeller"
 )
 
 
@@ -53,6 +71,9 @@ class FlightEvidence:
     shares: np.ndarray  # (4,) mean command / mean of the four, Bitcraze M1..M4
     activity: np.ndarray  # (4,) motor_command_activity, Bitcraze M1..M4
     vibration: float  # accel (m/s^2)^2 (motor logs) or gyro (rad/s)^2 (controller logs) above 15 Hz
+    roll_gain: np.ndarray  # (4,) roll response gain per rotor over the mean of the four, Bitcraze M1..M4
+    roll_gain_r2: float  # variance of the roll acceleration that fit explains
+    couplings: dict  # {"YT": ..., "RP": ...}, see command_couplings
 
     @property
     def config(self) -> str:
@@ -72,6 +93,10 @@ class FlightEvidence:
             "activity_M3_over_others": self.m3_activity_ratio,
             "activity_mean": float(np.mean(self.activity)),
             "vibration_log10": float(np.log10(self.vibration)) if self.vibration > 0 else float("nan"),
+            "response_gain_M3": float(self.roll_gain[M3]),
+            "response_gain_M1": float(self.roll_gain[0]),
+            "coupling_YT": float(self.couplings["YT"]),
+            "coupling_RP": float(self.couplings["RP"]),
         }
 
 
@@ -91,7 +116,31 @@ def flight_evidence(flight: CrazypadFlight, root: str | Path = DEFAULT_ROOT) -> 
     else:
         sig = np.stack([tab.roll_rate_rad_s, tab.pitch_rate_rad_s, tab.yaw_rate_rad_s], axis=1)
     vib = _segment_mean(sig, mask) if sig is not None else float("nan")
-    return FlightEvidence(flight, shares, activity, vib)
+    acc = angular_acceleration(tab.roll_rate_rad_s, tab.roll_rad, NATIVE_RATE_HZ)
+    try:
+        fit = fit_response_gain(cmd, acc, NATIVE_RATE_HZ, mask, MOTOR_LAG_S)
+        gain, r2 = bitcraze_order(fit.relative(ROLL_SIGNS_PX4)), fit.r2
+    except ModelError:  # too little steady flight for the fit: no gain evidence, the rest stands
+        gain, r2 = np.full(4, np.nan), float("nan")
+    return FlightEvidence(flight, shares, activity, vib, gain, r2, command_couplings(cmd, mask))
+
+
+def command_couplings(motor_cmd: np.ndarray, mask: np.ndarray) -> dict[str, float]:
+    """Closed-loop couplings between the controller's channels, from (T, 4) commands in PX4 order (module doc)."""
+    h = np.stack([np.full(4, 0.25), ROLL_SIGNS_PX4 / 4, PITCH_SIGNS_PX4 / 4, YAW_SIGNS_PX4 / 4])
+    w = int(round(COUPLING_HIGHPASS_S * NATIVE_RATE_HZ))
+    parts = []
+    for a, b in true_runs(mask):
+        c = np.asarray(motor_cmd[a:b], dtype=np.float64) @ h.T  # T, R, P, Y
+        if b - a < 3 * w or not np.isfinite(c).all():
+            continue
+        k = np.ones(w) / w
+        c = c - np.stack([np.convolve(c[:, j], k, mode="same") for j in range(4)], axis=1)
+        parts.append(c[w:-w])
+    if not parts:
+        return {"YT": float("nan"), "RP": float("nan")}
+    cov = np.cov(np.concatenate(parts).T)
+    return {"YT": float(cov[3, 0] / cov[0, 0]), "RP": float(cov[1, 2] / (cov[1, 1] + cov[2, 2]))}
 
 
 def _segment_mean(sig: np.ndarray, mask: np.ndarray) -> float:
