@@ -219,3 +219,34 @@ def test_a_conformal_rule_beside_the_model_gives_the_hypothesis_set(capsys, mode
     rule_path(ruled).write_text("{")  # a damaged rule is an error naming the file, not a silent fallback
     assert diagnose([str(logs[2]), "--model", str(ruled), "--json"]) == 2
     assert "ruled.sets.json" in capsys.readouterr().err
+
+
+def test_with_a_set_rule_the_fault_probability_is_the_verdicts_own_score(capsys, model, logs, tmp_path):
+    # A rule beside the model fuses and reweighs the network's label probabilities (here: a sparsity prior,
+    # 0.1 per damaged propeller); the verdict is that score's best set, and its per-propeller probabilities must
+    # be the same score's marginals, not the network's, or a verdict could name a propeller the probabilities
+    # call unlikely. The network's own mean stays, under its own key.
+    import shutil
+
+    from monitor.hypotheses import flight_score, rule_path
+    from monitor.labels import LABEL_TABLE
+
+    _, plain = run(capsys, logs[2], "--model", model, "--json")
+    assert "network_fault_probability" not in plain["verdict"]
+    ruled = tmp_path / "ruled.onnx"
+    shutil.copy(model, ruled)
+    rule = {"score": "classifier", "threshold": 0.05, "coverage": 0.95, "calibration_flights": 160}
+    rule_path(ruled).write_text(json.dumps({"rule": {**rule, "sparsity_prior": 0.1}}))
+    _, res = run(capsys, logs[2], "--model", ruled, "--json")
+    v = res["verdict"]
+    np.testing.assert_allclose(v["network_fault_probability"], plain["verdict"]["fault_probability"], atol=1e-9)
+    scores = flight_score(np.asarray(res["label_probability"]), None, "classifier", 0.1)
+    by_hand = [sum(scores[k - 1] for k in LABEL_TABLE if rotor in LABEL_TABLE[k]) for rotor in (1, 2, 3, 4)]
+    np.testing.assert_allclose(v["fault_probability"], by_hand, atol=1e-6)
+    assert [p["fault_probability"] for p in res["propellers"]] == v["fault_probability"]
+    best = res["hypotheses"][0]
+    assert v["faulty_propellers"] == best["faulty_propellers"]
+    for rotor in best["faulty_propellers"]:  # every named propeller is at least as likely as the set naming it
+        assert v["fault_probability"][rotor - 1] >= best["probability"] - 1e-4
+    # The prior moved probability off the network's: a score that merely copied it would fail here.
+    assert not np.allclose(v["fault_probability"], v["network_fault_probability"], atol=1e-3)

@@ -9,7 +9,12 @@ envelope (its mean RPM against the RPM the model was trained on).
 
 Verdict: the label with the highest mean probability over the windows used;
 ``faulty_propellers`` are that label's propellers; ``fault_probability[i]``
-is the mean over windows of the model's P(propeller i faulty).
+is the mean over windows of the model's P(propeller i faulty). With a
+conformal rule beside the model (``monitor.hypotheses``), the verdict is the
+most probable set of the rule's score, and ``fault_probability[i]`` is that
+same score's marginal (the summed probability of every set holding propeller i),
+so the verdict and its probabilities never disagree; the network's own mean
+stays in ``network_fault_probability``.
 
 Confidence, in words (``verdict.confidence``): ``confident`` when that label's
 mean probability reaches ``DecisionConfig.faulty_probability`` (0.9); else
@@ -35,7 +40,7 @@ from monitor.esc import EscCurve
 from monitor.features import compute_features, signals_needed, sliding_windows, valid_windows
 from monitor.flight import FlightTable
 from monitor.hypotheses import SetRule, flight_score, hypothesis_set, load_rule
-from monitor.labels import LABEL_TABLE, label_for
+from monitor.labels import LABEL_TABLE, fault_probability_from_label_probs, label_for
 from monitor.model import Classifier
 from monitor.resample import US_PER_S
 
@@ -279,8 +284,10 @@ def diagnose_table(
         if why_not:
             d.warnings.append(why_not)
     rule = load_rule(clf.path)
+    network_p = None
     if rule is not None:
-        label = apply_rule(d, rule, mean_labels)
+        label, scores = apply_rule(d, rule, mean_labels)
+        network_p, p = p, fault_probability_from_label_probs(scores)
         agree = float(np.mean(np.argmax(labels, axis=1) + 1 == label))
         confidence = "confident" if len(d.hypotheses) == 1 else "ambiguous"
     else:
@@ -295,6 +302,8 @@ def diagnose_table(
         "agreeing_windows": round(agree, 4),
         "faulty_probability_required": cfg.faulty_probability,
     }
+    if network_p is not None:
+        d.verdict["network_fault_probability"] = [float(x) for x in network_p]
     d.label_probability = [float(x) for x in mean_labels]
     d.propellers = [
         {
@@ -316,8 +325,9 @@ def diagnose_table(
     return d
 
 
-def apply_rule(d: Diagnosis, rule: SetRule, mean_labels: np.ndarray) -> int:
-    """Set ``d.hypotheses`` from the model's conformal rule; the label of the most probable set.
+def apply_rule(d: Diagnosis, rule: SetRule, mean_labels: np.ndarray) -> tuple[int, np.ndarray]:
+    """Set ``d.hypotheses`` from the model's conformal rule; the label of the most probable set and the (16,)
+    score of every set (label order).
 
     The score fuses the moment balance only where the log gave one (``d.physics``); otherwise the classifier's
     probabilities alone are scored against the same threshold, and ``hypothesis_rule.score`` says so."""
@@ -344,7 +354,8 @@ def apply_rule(d: Diagnosis, rule: SetRule, mean_labels: np.ndarray) -> int:
             "nominal looks like damage here, so the hypotheses are those of an unmeasured airframe; calibrate this "
             "vehicle with `propwatch adapt` on its healthy flights"
         )
-    d.hypotheses = hypothesis_set(flight_score(mean_labels, ll, score, rule.sparsity_prior), threshold)
+    scores = flight_score(mean_labels, ll, score, rule.sparsity_prior)
+    d.hypotheses = hypothesis_set(scores, threshold)
     d.hypothesis_rule = {
         "score": score,
         "threshold": threshold,
@@ -355,7 +366,7 @@ def apply_rule(d: Diagnosis, rule: SetRule, mean_labels: np.ndarray) -> int:
         "coverage": rule.coverage,
         "calibration_flights": rule.calibration_flights,
     }
-    return label_for(d.hypotheses[0]["faulty_propellers"])
+    return label_for(d.hypotheses[0]["faulty_propellers"]), scores
 
 
 def verdict_confidence(labels: np.ndarray, label: int, cfg: DecisionConfig) -> tuple[str, float]:
