@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import functools
 import json
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -177,12 +178,54 @@ class FlightSets:
     def add(self, label_probability: np.ndarray) -> tuple[tuple[tuple[int, ...], float], ...] | None:
         """Add one window; the set over the recent windows as ((propellers), probability) pairs, None without a
         threshold."""
+        deferred = self.add_deferred(label_probability)
+        return None if deferred is None else tuple(deferred)
+
+    def add_deferred(self, label_probability: np.ndarray) -> RecentSet | None:
+        """``add``, with the set worked out only when something reads it (an alert's wording, 20 windows a
+        second that are mostly never read). The recent windows are copied now, so it is the set ``add`` gives."""
         p = np.asarray(label_probability, dtype=np.float64)
         if self.threshold is None or p.shape != (N_LABELS,) or not np.all(np.isfinite(p)):
             return None
         self._ring[self._head] = p
         self._head = (self._head + 1) % len(self._ring)
         self._n = min(self._n + 1, len(self._ring))
-        mean = self._ring.sum(axis=0) / self._n  # empty rows are zeros
-        hyps = hypothesis_set(flight_score(mean, None, "classifier", self.sparsity_prior), self.threshold)
-        return tuple((tuple(h["faulty_propellers"]), h["probability"]) for h in hyps)
+        return RecentSet(self._ring.copy(), self._n, self.threshold, self.sparsity_prior)
+
+
+class RecentSet(Sequence):
+    """The hypothesis set of one ``FlightSets`` state, computed on first read; reads as the tuple ``add`` returns
+    (((propellers), probability), ...), never empty (the most probable set is always in)."""
+
+    __slots__ = ("_ring", "_n", "_threshold", "_rho", "_pairs")
+
+    def __init__(self, ring: np.ndarray, n: int, threshold: float, sparsity_prior: float):
+        self._ring, self._n, self._threshold, self._rho = ring, n, threshold, sparsity_prior  # ring: a copy, as it was
+        self._pairs: tuple[tuple[tuple[int, ...], float], ...] | None = None
+
+    def _value(self) -> tuple[tuple[tuple[int, ...], float], ...]:
+        if self._pairs is None:
+            mean = self._ring.sum(axis=0) / self._n  # empty rows are zeros
+            hyps = hypothesis_set(flight_score(mean, None, "classifier", self._rho), self._threshold)
+            self._pairs = tuple((tuple(h["faulty_propellers"]), h["probability"]) for h in hyps)
+        return self._pairs
+
+    def __bool__(self) -> bool:
+        return True  # hypothesis_set always keeps the best set
+
+    def __len__(self) -> int:
+        return len(self._value())
+
+    def __getitem__(self, i):
+        return self._value()[i]
+
+    def __iter__(self):
+        return iter(self._value())
+
+    def __eq__(self, other) -> bool:
+        return tuple(self) == (tuple(other) if isinstance(other, RecentSet) else other)
+
+    __hash__ = None  # type: ignore[assignment]  # mutable cache, compared by value
+
+    def __repr__(self) -> str:
+        return f"RecentSet({self._value()!r})"

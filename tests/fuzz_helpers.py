@@ -86,7 +86,7 @@ class FakeLink:
     def set_system_id(self, system_id: int) -> None:
         pass
 
-    def autopilot_seen(self) -> None:
+    def autopilot_seen(self, msg=None) -> None:
         pass
 
     def stats(self) -> dict:

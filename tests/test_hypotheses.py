@@ -196,3 +196,27 @@ def test_flight_sets_word_an_onset_from_the_recent_windows_not_the_healthy_minut
     assert s[0][0] == ()  # what the daemon said before: the onset drowned in the flight's healthy half minute
     with pytest.raises(ValueError):
         FlightSets(rule, horizon=0)
+
+
+def test_deferred_flight_sets_are_the_sets_add_gives_whenever_they_are_read():
+    """The daemon defers each window's set until an alert reads it: read later (after more windows, a reset),
+    it is still the set of its own window, and it reads as the tuple ``add`` returns."""
+    from monitor.hypotheses import FlightSets, RecentSet, SetRule
+
+    rule = SetRule("classifier", 0.05, 0.95, 160, sparsity_prior=0.7)
+    eager, lazy = FlightSets(rule, horizon=5), FlightSets(rule, horizon=5)
+    rng = np.random.default_rng(4)
+    want, got = [], []
+    for k in range(60):
+        p = rng.dirichlet(np.full(16, 0.3))
+        if k == 30:
+            eager.reset(), lazy.reset()
+        want.append(eager.add(p))
+        got.append(lazy.add_deferred(p))
+    for w, g in zip(want, got):
+        assert isinstance(g, RecentSet) and bool(g) and len(g) == len(w) >= 1
+        assert tuple(g) == w and g == w and g[0] == w[0]
+        assert sorted(g, key=lambda x: -x[1]) == sorted(w, key=lambda x: -x[1])
+    bad = np.full(16, np.nan)
+    assert lazy.add_deferred(bad) is None and eager.add(bad) is None
+    assert FlightSets(SetRule("classifier x moment balance", 0.3, 0.95, 160)).add_deferred(np.full(16, 1 / 16)) is None

@@ -79,6 +79,9 @@ class LinkConfig:
     allow_addresses: tuple[str, ...] = ()
     allow_sources: tuple[str, ...] = ()
     max_peers: int = 8  # udpin: distinct sender addresses remembered for the report (replies go only to the autopilot's)
+    # udpin: sleep through the datagrams that cannot complete the next 20 Hz step and read them together
+    # (monitor.daemon.pacing): ~5x fewer wake-ups; latency is still counted from each datagram's arrival.
+    pace_reads: bool = True
 
     def __post_init__(self) -> None:
         _check(0 <= self.system_id <= 255, "link.system_id", "must be 0..255")

@@ -7,6 +7,9 @@ method here that could send anything that changes the flight.
 URLs: ``udpin:HOST:PORT``, ``udpout:HOST:PORT``, ``tcp:HOST:PORT``, a serial
 device with its baud rate (``/dev/ttyAMA0,921600``), or a ``.tlog`` file
 (played at its recorded pace times ``tlog_speed``; 0 = as fast as it reads).
+On ``udpin`` one read takes every datagram waiting (bounded), each with the
+kernel's arrival stamp where Linux gives one, so the loop can sleep between
+grid steps (``monitor.daemon.pacing``) without hiding the wait from the latency.
 
 Trust (``LinkGuard``): with a signing key, pymavlink's MAVLink 2 signing
 verifies every incoming frame (unsigned, MAVLink 1 and badly signed frames
@@ -22,6 +25,9 @@ from __future__ import annotations
 import logging
 import os
 import select
+import socket
+import struct
+import sys
 import time
 from collections import Counter, OrderedDict
 from collections.abc import Callable
@@ -49,6 +55,13 @@ REOPEN_PERIOD_S = 1.0
 UDP_MAX_PACKET = 65535
 SIGNING_KEY_BYTES = 32
 MAX_SIGNING_STREAMS = 256  # pymavlink keeps one timestamp per (link, sys, comp) it ever saw: keep it bounded
+MAX_DATAGRAMS_PER_READ = 256  # a read drains the socket, within bounds (PX4 sends ~100 a second)
+# Kernel receive stamps (struct timespec on CLOCK_REALTIME), Linux only; Python's socket module does not name
+# the option. 35 = SO_TIMESTAMPNS (asm-generic: x86, arm, arm64, riscv); SCM_TIMESTAMPNS is the same number.
+SO_TIMESTAMPNS = getattr(socket, "SO_TIMESTAMPNS", 35)
+_TIMESPEC = struct.Struct("@ll")
+_ANC_BUFSIZE = socket.CMSG_SPACE(_TIMESPEC.size)
+NS_PER_S = 1_000_000_000
 
 
 @dataclass(frozen=True)
@@ -124,7 +137,8 @@ class Link:
         self.is_udpin = url.startswith(("udpin:", "udp:"))
         self.peers: OrderedDict[tuple[str, int], int] = OrderedDict()  # udpin senders, bounded, for the report
         self.rejected: Counter = Counter()  # why frames/datagrams were dropped
-        self._batch_addr: tuple[str, int] | None = None
+        self._origin: dict[int, tuple[str, int]] = {}  # id(message) -> sender address, for the last udpin read
+        self.drained = True  # the last read left nothing waiting
         self._autopilot_addr: tuple[str, int] | None = None
         self._signing: Any = None
         if self.is_log:
@@ -159,6 +173,7 @@ class Link:
                 )
                 self._signing = self.conn.mav.signing  # its counters outlive a reopen's connection
             if self.is_udpin:
+                _stamp_arrivals(self.conn.port)
                 self.conn.clients = set()  # replies go to the autopilot's address only, once it is known
                 if self._autopilot_addr is not None:
                     self.conn.clients.add(self._autopilot_addr)
@@ -196,10 +211,16 @@ class Link:
         self.conn.mav.srcComponent = self.component_id
 
     # -- reading ---------------------------------------------------------------
-    def read(self, timeout_s: float) -> list[tuple[Any, float]]:
-        """Messages available within ``timeout_s``, each with its arrival time (perf_counter)."""
+    def read(self, timeout_s: float) -> list[tuple[Any, float, float]]:
+        """Messages available within ``timeout_s``: (message, arrival, read) times on the perf_counter clock.
+
+        On ``udpin`` every datagram waiting is read (up to ``MAX_DATAGRAMS_PER_READ``; ``drained`` says
+        whether that left the socket empty), and the arrival is the kernel's receive stamp where it gives
+        one (SO_TIMESTAMPNS, Linux): the time a datagram waited in the socket counts in the latency.
+        Elsewhere the arrival is the read."""
+        self.drained = True
         if self.is_log:
-            return self._read_log(timeout_s)
+            return [(m, t, t) for m, t in self._read_log(timeout_s)]
         if self.conn is None and time.monotonic() >= self._next_open:
             self._try_open()
         if self.conn is None:
@@ -212,14 +233,46 @@ class Link:
         ready, _, _ = select.select([fd], [], [], timeout_s)
         if not ready:
             return []
-        data = self._recv()
+        if self.is_udpin:
+            return self._read_datagrams()
+        data = self.conn.recv(4096)
         received = time.perf_counter()
-        if data is None:
-            return []
         if not data:
             if self.is_tcp:  # readable and empty: the peer closed the connection
                 raise ConnectionError(f"{self.url}: connection closed by the peer")
             return []
+        return [(m, received, received) for m in self._parse(data, received)]
+
+    def _read_datagrams(self) -> list[tuple[Any, float, float]]:
+        """Every datagram waiting on the udpin socket, in order; the sender's address is checked and never
+        added as a peer (our own recvmsg, not pymavlink's)."""
+        port = self.conn.port
+        out: list[tuple[Any, float, float]] = []
+        self._origin = {}
+        for _ in range(MAX_DATAGRAMS_PER_READ):
+            try:
+                data, anc, _flags, addr = port.recvmsg(UDP_MAX_PACKET, _ANC_BUFSIZE)
+            except (BlockingIOError, InterruptedError):
+                return out
+            read_s = time.perf_counter()
+            received = read_s - _queued_s(anc, time.time_ns())
+            if not self.guard.address_ok(addr):
+                self.rejected["address not allowed"] += 1
+                continue
+            self.peers[addr] = self.peers.pop(addr, 0) + 1
+            while len(self.peers) > self.guard.max_peers:
+                self.peers.popitem(last=False)
+                self.rejected["peers forgotten"] += 1
+            if not data:
+                continue
+            for m in self._parse(data, received):
+                self._origin[id(m)] = addr
+                out.append((m, received, read_s))
+        self.drained = False
+        return out
+
+    def _parse(self, data: bytes, received: float) -> list[Any]:
+        """The messages in ``data`` (BAD_DATA for what does not parse), signature and source checks applied."""
         self.bytes_in += len(data)
         if self.conn.first_byte:
             self.conn.auto_mavlink_version(data)
@@ -227,7 +280,7 @@ class Link:
             msgs = self.conn.mav.parse_buffer(data) or []
         except Exception as exc:  # noqa: BLE001 - pymavlink raises MAVError and struct errors on garbage
             log.debug("parse error: %s", exc)
-            return [(_BadData(str(exc)), received)]
+            return [_BadData(str(exc))]
         if self._signing is not None:
             self.rejected["invalid or missing signature"] += sum(
                 1 for m in msgs if m.get_type() == "BAD_DATA" and "signature" in str(getattr(m, "reason", ""))
@@ -240,35 +293,18 @@ class Link:
             ]
             self.rejected["source not allowed"] += len(msgs) - len(kept)
             msgs = kept
-        return [(m, received) for m in msgs]
+        return msgs
 
-    def _recv(self) -> bytes | None:
-        """One read; for UDP our own recvfrom, so the sender's address is checked and never added as a peer."""
-        if not self.is_udpin:
-            return self.conn.recv(4096)
-        try:
-            data, addr = self.conn.port.recvfrom(UDP_MAX_PACKET)
-        except (BlockingIOError, InterruptedError):
-            return None
-        if not self.guard.address_ok(addr):
-            self.rejected["address not allowed"] += 1
-            return None
-        self._batch_addr = addr
-        self.peers[addr] = self.peers.pop(addr, 0) + 1
-        while len(self.peers) > self.guard.max_peers:
-            self.peers.popitem(last=False)
-            self.rejected["peers forgotten"] += 1
-        return data
-
-    def autopilot_seen(self) -> None:
-        """The message being handled is the autopilot's HEARTBEAT: udpin answers that address, and only it."""
-        if not self.is_udpin or self.conn is None or self._batch_addr is None:
+    def autopilot_seen(self, msg: Any = None) -> None:
+        """``msg`` is the autopilot's HEARTBEAT: udpin answers the address it came from, and only that one."""
+        addr = self._origin.get(id(msg))
+        if not self.is_udpin or self.conn is None or addr is None:
             return
-        if self._batch_addr != self._autopilot_addr:
+        if addr != self._autopilot_addr:
             if self._autopilot_addr is not None:
-                log.warning("autopilot now at %s:%d (was %s:%d)", *self._batch_addr, *self._autopilot_addr)
-            self._autopilot_addr = self._batch_addr
-            self.conn.clients = {self._batch_addr}
+                log.warning("autopilot now at %s:%d (was %s:%d)", *addr, *self._autopilot_addr)
+            self._autopilot_addr = addr
+            self.conn.clients = {addr}
             self.conn.clients_last_alive = {}
 
     def _prune_signing_streams(self) -> None:
@@ -358,6 +394,27 @@ class Link:
                 0,
             )
         )
+
+
+def _stamp_arrivals(sock: socket.socket) -> bool:
+    """Ask the kernel to stamp each datagram's arrival (Linux); False where it cannot."""
+    if not sys.platform.startswith("linux"):
+        return False
+    try:
+        sock.setsockopt(socket.SOL_SOCKET, SO_TIMESTAMPNS, 1)
+    except OSError as exc:
+        log.info("no kernel receive stamps (%s): latency is measured from the read", exc)
+        return False
+    return True
+
+
+def _queued_s(ancillary: list[tuple[int, int, bytes]], now_ns: int) -> float:
+    """How long a datagram waited in the socket, from its kernel stamp (0 without one, or for a clock step)."""
+    for level, kind, payload in ancillary:
+        if level == socket.SOL_SOCKET and kind == SO_TIMESTAMPNS and len(payload) >= _TIMESPEC.size:
+            sec, nsec = _TIMESPEC.unpack_from(payload)
+            return max(0, now_ns - (sec * NS_PER_S + nsec)) / NS_PER_S
+    return 0.0
 
 
 class _BadData:

@@ -30,11 +30,12 @@ import numpy as np
 
 from monitor import mavlink_decode as md
 from monitor.daemon.config import MonitorConfig
+from monitor.daemon.pacing import ReadPacer
 from monitor.daemon.plausible import Plausibility
 from monitor.daemon.resampler import GridStep, StreamingHold, StreamSpec
 from monitor.decision import StepInputs
 from monitor.esc import EscCurve
-from monitor.features import feature_function
+from monitor.features import step_feature_function
 from monitor.model import Classifier
 from monitor.resample import US_PER_S, period_us
 
@@ -69,6 +70,7 @@ CLOCK_BACK_US = 1_000_000
 REBOOT_BACK_US = 10_000_000
 REBOOT_BOOT_US = 30_000_000
 NAN6 = (math.nan,) * 6
+PACING_STREAMS = ("attitude", "motor")  # the hold's fast streams: a step is final once both passed it
 
 
 class Pipeline:
@@ -79,7 +81,8 @@ class Pipeline:
         r, inf = config.resample, config.inference
         classifier.check_compatible(classifier.info.features, r.rate_hz, inf.window)
         self.features = classifier.info.features
-        self._compute_features = feature_function(self.features)  # every signal is always passed (_step)
+        self._compute_features = step_feature_function(self.features)  # = feature_function on one step, bit for bit
+        self._feats = np.empty(len(self.features), dtype=np.float32)  # this step's row, reused
         self.window = inf.window
         self.decoder = md.MavlinkDecoder(
             system_id=config.link.system_id or None,
@@ -101,7 +104,9 @@ class Pipeline:
             },
             reorder_us=_us(r.reorder_s),
         )
+        self.pacer = ReadPacer(PACING_STREAMS)  # when the next step can complete, for the loop's sleep
         self._channels = np.asarray(config.input.motor_outputs, dtype=np.int64)
+        self._layouts: dict[tuple[int, int], np.ndarray | bool] = {}  # (first channel, count) -> indices, False = unmapped
         self._source = {"servo": "SERVO_OUTPUT_RAW", "actuator": "ACTUATOR_OUTPUT_STATUS"}.get(config.input.motor_source)
         self.seen_landed = config.input.landed_state == "required"
         self.stats = {
@@ -193,6 +198,7 @@ class Pipeline:
     def reset(self) -> None:
         """Drop everything held (grid and ring); decoding state (autopilot, clock) is kept."""
         self.hold.reset()
+        self.pacer.reset()
         self.plausible.reset()
         self._bad_times.clear()
         self._clear()
@@ -201,14 +207,27 @@ class Pipeline:
         return [self._step(g, time.perf_counter()) for g in self.hold.flush()]
 
     def _map(self, first: int, values: tuple[float, ...]) -> np.ndarray | None:
-        idx = self._channels - first
-        if idx.min() < 0 or idx.max() >= len(values):
+        key = (first, len(values))  # a handful of layouts per vehicle (ports, ESC index offsets): bounded
+        idx = self._layouts.get(key)
+        if idx is None:
+            idx = self._channels - first
+            idx = self._layouts[key] = idx if idx.min() >= 0 and idx.max() < len(values) else False
+        if idx is False:
             self.stats["motor_msgs_unmapped"] += 1
             return None
         return np.asarray(values, dtype=np.float64)[idx]
 
     def _push(self, stream: str, t_us: int, values, received_s: float) -> list[StepResult]:
-        return [self._step(g, received_s) for g in self.hold.push(stream, t_us, values)]
+        steps = [self._step(g, received_s) for g in self.hold.push(stream, t_us, values)]
+        if stream in PACING_STREAMS:
+            self.pacer.observe(stream, int(t_us), received_s, bool(steps))
+        return steps
+
+    def wake_at(self, now_s: float) -> float | None:
+        """The earliest time (``received_s``'s clock) a message can complete the next grid step; None when the
+        schedule is not known (``monitor.daemon.pacing``)."""
+        g = self.hold.next_g
+        return None if g is None else self.pacer.wake_at(g + self.hold.reorder_us, now_s)
 
     # -- one grid step -------------------------------------------------------------------
     def _clear(self) -> None:
@@ -242,16 +261,8 @@ class Pipeline:
         v = g.values
         airborne = self._airborne(v)
         att = v["attitude"]
-        signals = {
-            "motor_rpm": v["motor"][None, :],
-            "roll_rad": att[0:1],
-            "pitch_rad": att[1:2],
-            "yaw_rad": att[2:3],
-            "roll_rate_rad_s": att[3:4],
-            "pitch_rate_rad_s": att[4:5],
-            "yaw_rate_rad_s": att[5:6],
-        }
-        feats = self._compute_features(signals)[0]
+        feats = self._feats
+        self._compute_features(v["motor"], att, feats)
         bad = self._bad_times
         while bad and bad[0] <= g.timestamp_us - self._period_us:
             bad.popleft()

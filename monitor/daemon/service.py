@@ -27,6 +27,7 @@ from monitor.daemon.config import MonitorConfig
 from monitor.daemon.events import EventWriter
 from monitor.daemon.latency import LatencyHistogram
 from monitor.daemon.link import MAV_CMD_SET_MESSAGE_INTERVAL, Link
+from monitor.daemon.pacing import MAX_PAUSE_S
 from monitor.daemon.pipeline import Pipeline
 from monitor.daemon.rotor_evidence import RecentEffectiveness
 from monitor.daemon.sdnotify import Notifier
@@ -38,8 +39,9 @@ log = logging.getLogger("propwatch.monitor")
 
 READ_TIMEOUT_S = 0.1  # select() returns at once when data comes; this only paces idle housekeeping
 # Housekeeping (heartbeat, stream requests, blindness, held-back STATUSTEXT) at most this often, not after
-# each of the ~100 datagrams a second: its deadlines are 0.5 s and longer, and alerts are sent as they are made.
-TICK_PERIOD_S = 0.05
+# each of the ~100 datagrams a second: its deadlines are 0.5 s and longer (blind.frozen_clock_s 1 s by default),
+# and alerts are sent as they are made. Each run costs ~0.1 ms of a cold CPU: 10 a second, not 20.
+TICK_PERIOD_S = 0.1
 BAD_DATA_LOG_PERIOD_S = 5.0
 MOTOR_STREAM = {"servo": "SERVO_OUTPUT_RAW", "actuator": "ACTUATOR_OUTPUT_STATUS", "esc": "ESC_STATUS"}
 LANDED_RATE_HZ = 2.0  # EXTENDED_SYS_STATE: a state, not a signal
@@ -62,7 +64,10 @@ class Counters:
     notices: int = 0
     sink_reports: int = 0
     acks: Counter = field(default_factory=Counter)
-    latency: LatencyHistogram = field(default_factory=LatencyHistogram)
+    reads: int = 0  # loop turns (each one wake-up at least)
+    paces: int = 0  # sleeps until the next step could complete (monitor.daemon.pacing)
+    latency: LatencyHistogram = field(default_factory=LatencyHistogram)  # from the arrival of the completing message
+    latency_from_read: LatencyHistogram = field(default_factory=LatencyHistogram)  # from its read (the older measure)
 
 
 class Daemon:
@@ -130,6 +135,7 @@ class Daemon:
         self._tick_reason: str | None = None  # the loop's own blindness (link, clock, streams), else None
         self._status_base = ""
         self._status_sent = ""
+        self._queued_s = 0.0  # how long the message being handled waited in the socket before its read
 
     def fast_streams(self) -> tuple[str, ...]:
         return ("ATTITUDE", MOTOR_STREAM[self.cfg.input.motor_source])
@@ -146,6 +152,9 @@ class Daemon:
             self.link.url,
         )
         next_tick = 0.0
+        # Sleep through datagrams that cannot complete the next step (monitor.daemon.pacing): udpin only, where
+        # the kernel keeps every datagram with its arrival stamp while we sleep.
+        pace = self.cfg.link.pace_reads and getattr(self.link, "is_udpin", False)
         while not self.stop.is_set():
             try:
                 batch = self.link.read(READ_TIMEOUT_S)
@@ -153,12 +162,15 @@ class Daemon:
                 log.error("link error on %s: %s; reopening", self.link.url, exc)
                 self.link.close()
                 continue
-            for msg, received in batch:
-                self.handle(msg, received)
+            self.counters.reads += 1
+            for msg, received, read in batch:
+                self.handle(msg, received, read)
             now = time.monotonic()
             if now >= next_tick:
                 next_tick = now + TICK_PERIOD_S
                 self._tick_guarded(now)
+            if pace and self.link.drained:
+                self._pause()
             if self.link.is_log and self.link.eof:
                 for step in self.pipeline.flush():
                     self._on_step(step)
@@ -169,6 +181,14 @@ class Daemon:
         self.summary()
         return 0
 
+    def _pause(self) -> None:
+        """Sleep until the next grid step can first complete (at most ``MAX_PAUSE_S``)."""
+        now = time.perf_counter()
+        wake = self.pipeline.wake_at(now)
+        if wake is not None and wake > now:
+            self.counters.paces += 1
+            time.sleep(min(wake - now, MAX_PAUSE_S))
+
     def _tick_guarded(self, now: float) -> None:
         try:
             self.tick(now)
@@ -177,8 +197,11 @@ class Daemon:
             if self._error_log_limit.allow():
                 log.exception("error in the loop's periodic work (%d so far); continuing", self.counters.internal_errors)
 
-    def handle(self, msg, received_s: float) -> None:
+    def handle(self, msg, received_s: float, read_s: float | None = None) -> None:
+        """One message that arrived at ``received_s`` and was read at ``read_s`` (perf_counter; read = arrival
+        when not given)."""
         kind = msg.get_type()
+        self._queued_s = 0.0 if read_s is None else read_s - received_s
         self.counters.messages += 1
         if kind == "BAD_DATA":
             self.counters.bad_data += 1
@@ -207,7 +230,7 @@ class Daemon:
             if kind == "HEARTBEAT":
                 self._armed = bool(getattr(msg, "base_mode", 0) & md.MAV_MODE_FLAG_SAFETY_ARMED)
                 self._last_autopilot_hb = now
-                self.link.autopilot_seen()
+                self.link.autopilot_seen(msg)
                 if not self._link_up:
                     self._link_up = True
                     self._link_up_at = now
@@ -270,10 +293,11 @@ class Daemon:
         self._apply_pause()
         if not step.valid or step.fault_probability is None:
             return
-        if step.latency_s is not None:
-            self.counters.latency.add(step.latency_s)
+        self._add_latency(step)
         self._send_named_values(step)
-        hyps = self.flight_sets.add(step.label_probability) if self.flight_sets and step.label_probability is not None else None
+        hyps = None  # the set is worked out only if an alert words it (RecentSet)
+        if self.flight_sets and step.label_probability is not None:
+            hyps = self.flight_sets.add_deferred(step.label_probability)
         ev = WindowEvidence(step.fault_probability, step.label_probability, hypotheses=hyps)
         for a in self.decision.window_evidence(t, ev):
             self._announce(a, step.time_boot_ms, step)
@@ -331,6 +355,12 @@ class Daemon:
         self._set_status(f"last alert: {a.text} at t={time_boot_ms} ms")
         self.events.write_record(event)
 
+    def _add_latency(self, step) -> None:
+        """From the completing message's arrival (its kernel stamp on udpin), and from its read."""
+        if step.latency_s is not None:
+            self.counters.latency.add(step.latency_s)
+            self.counters.latency_from_read.add(step.latency_s - self._queued_s)
+
     def _send_named_values(self, step) -> None:
         if self.cfg.alerts.named_value_float:
             for i, v in enumerate(step.fault_probability):
@@ -374,8 +404,7 @@ class Daemon:
             return
         if step.fault_probability is None:
             return
-        if step.latency_s is not None:
-            self.counters.latency.add(step.latency_s)
+        self._add_latency(step)
         self._send_named_values(step)
         p = step.fault_probability
         alert = self.rule.update(step.time_boot_ms, p, step.label_probability, step.battery_v)
@@ -539,7 +568,6 @@ class Daemon:
     # -- reporting -----------------------------------------------------------------------
     def report(self) -> dict:
         c = self.counters
-        lat = c.latency
         ev = self.events
         return {
             "messages": c.messages,
@@ -566,11 +594,12 @@ class Daemon:
             "hold_overflow": self.pipeline.hold.overflow,
             "ignored": {f"{s}/{k}": n for (s, k), n in self.pipeline.decoder.ignored.most_common(REPORT_TOP_N)},
             "undecodable": dict(self.pipeline.decoder.undecodable.most_common(REPORT_TOP_N)),
-            "latency_ms": {
-                "n": lat.n,
-                "p50": lat.percentile_s(50) * 1e3,
-                "p99": lat.percentile_s(99) * 1e3,
-                "max": lat.max_s * 1e3,
+            "latency_ms": _percentiles_ms(c.latency),
+            "latency_from_read_ms": _percentiles_ms(c.latency_from_read),
+            "loop": {
+                "reads": c.reads,
+                "paces": c.paces,
+                "pace_misses": self.pipeline.pacer.misses,
             },
             "decision": self.decision.verdict() if self.sequential else None,
             "esc_rejected": dict(self.esc_telemetry.rejected),
@@ -592,6 +621,10 @@ class Daemon:
 
     def write_report(self, path: str | Path) -> None:
         Path(path).write_text(json.dumps(self.report(), indent=2, default=float) + "\n", encoding="utf-8")
+
+
+def _percentiles_ms(lat: LatencyHistogram) -> dict:
+    return {"n": lat.n, "p50": lat.percentile_s(50) * 1e3, "p99": lat.percentile_s(99) * 1e3, "max": lat.max_s * 1e3}
 
 
 def _blind_reason(step_reason: str) -> tuple[str, str]:
