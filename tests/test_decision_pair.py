@@ -172,3 +172,24 @@ def test_replayed_pair_onset_of_our_simulator_is_named_with_its_pair():
     assert faults and all(t > f.onset_s for t, _, _ in faults)
     assert all(any(set(s) <= {3, 4} for s in sets) for _, _, sets in faults), faults  # never a wrong propeller
     assert any((3, 4) in sets for _, _, sets in faults), faults  # the pair itself is named
+
+
+def test_evaluation_scores_sets_against_the_truth():
+    from offline.alerts.flights import AlertFlight
+    from offline.alerts.rules import summarise
+
+    def flight(truth, onset_s=30.0, loss=0.1):
+        z = np.zeros((1600, 4))
+        return AlertFlight(
+            "f", 20.0, 100, z, z, z[:, 0], z[:, 0], z[:, 0], z[:, 0], z[:, :3], truth, onset_s, (loss,) * len(truth)
+        )
+
+    pair_only = (40.0, "fault", (1, 2, 3, 4), ((1, 2), (3, 4)))
+    widened = (40.0, "fault", (1,), ((1,), (1, 2)))
+    onset = [flight((1, 2)), flight((4,)), flight((1,)), flight((1, 3))]
+    alerts = [[pair_only], [pair_only], [widened], [widened]]
+    row = summarise({"healthy": [[]], "onset": alerts}, [flight(())], onset)
+    assert row["pair_onsets"] == 2 and row["pair_alert_contains_truth"] == 0.5  # 1+2 named; 1+3 only overlapped
+    assert row["pair_alert_overlaps_truth"] == 1.0
+    assert row["single_onsets"] == 2 and row["single_detected"] == 0.5  # "1 or 1+2" calls 1; "1+2 or 3+4" not 4
+    assert row["wrong_propeller_alerts"] == 1 and row["set_alerts"] == 4
