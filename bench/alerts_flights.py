@@ -25,15 +25,14 @@ from monitor.vehicle import REPO_ROOT, load_vehicle
 def load_flights(set_name: str, n: int, seed: int, cache: Path, model: str, physics: str = "randomised", pickup: float = 0.25):
     """The set through the same cache as ``python -m offline.alerts.evaluate --cache``."""
     from monitor.decision import file_sha256
-    from offline.alerts.evaluate import FLIGHT_S, cached
-    from offline.alerts.flights import FlightSet, evalsim_set, simulate_set
+    from offline.alerts.evaluate import cached, evalsim_cached
+    from offline.alerts.flights import FlightSet, simulate_set
 
     sha = file_sha256(model)
     log = lambda m: print(m, file=sys.stderr)  # noqa: E731
     sim, kind = set_name.split("-", 1)
     if sim == "evalsim":
-        key = {"kind": f"evalsim-{kind}", "n": n, "seed": seed, "duration_s": FLIGHT_S, "model": sha}
-        return cached(str(cache), key, lambda: evalsim_set(kind, n, seed, Classifier(model), FLIGHT_S, log=log))
+        return evalsim_cached(str(cache), kind, n, seed, Classifier(model), sha, log)
     fs = FlightSet(
         kind, n, seed=seed, physics=physics, pickup_fraction=pickup if kind == "healthy" and physics == "randomised" else 0.0
     )
@@ -71,27 +70,35 @@ def replay_listing(f, d: Decision) -> list[dict]:
 
 
 def share_spread(flights) -> dict:
-    """Yaw-free omega^2 share (mean over SHARE_AVERAGE_S) minus the flight's first 10 s: pooled std and tails."""
-    from monitor.decision import _YAW_FREE, BASELINE_S, SHARE_AVERAGE_S
+    """Yaw-free omega^2 share (mean over SHARE_AVERAGE_S) and the yaw balance y = (s1 + s2 - s3 - s4) / 2 (mean
+    over YAW_AVERAGE_S) minus the flight's first 10 s: pooled std and tails of each."""
+    from monitor.decision import _Y, _YAW_FREE, BASELINE_S, SHARE_AVERAGE_S, YAW_AVERAGE_S
 
-    devs = []
+    devs, ydevs = [], []
     for f in flights:
         w2 = f.motor_rpm**2
         sh = w2 / w2.mean(axis=1, keepdims=True)
         c = np.cumsum(np.vstack([np.zeros((1, 4)), sh]), axis=0)
         n = int(round(SHARE_AVERAGE_S * f.rate_hz))
-        x = ((c[n:] - c[:-n]) / n) @ _YAW_FREE.T
+        m = (c[n:] - c[:-n]) / n
+        x = m @ _YAW_FREE.T
         n0 = int(BASELINE_S * f.rate_hz)
         devs.append(x[n0:] - x[:n0].mean(axis=0))
-    d = np.abs(np.concatenate(devs))
-    return {
-        "flights": len(flights),
-        "std": round(float(np.sqrt(np.mean(d**2))), 4),
-        "quantiles_abs": {q: round(float(np.quantile(d, q)), 4) for q in (0.5, 0.9, 0.99, 0.999)},
-        "per_flight_max_abs_p50_p90_max": np.round(
-            np.quantile([x.max() for x in (np.abs(v) for v in devs)], [0.5, 0.9, 1.0]), 4
-        ).tolist(),
-    }
+        ny = int(round(YAW_AVERAGE_S * f.rate_hz))
+        y = ((c[ny:] - c[:-ny]) / ny) @ _Y  # the decision's yaw balance: mean over YAW_AVERAGE_S
+        ydevs.append(y[n0:] - (m[:n0] @ _Y).mean())
+
+    def spread(devs):
+        d = np.abs(np.concatenate(devs))
+        return {
+            "std": round(float(np.sqrt(np.mean(d**2))), 4),
+            "quantiles_abs": {q: round(float(np.quantile(d, q)), 4) for q in (0.5, 0.9, 0.99, 0.999)},
+            "per_flight_max_abs_p50_p90_max": np.round(
+                np.quantile([x.max() for x in (np.abs(v) for v in devs)], [0.5, 0.9, 1.0]), 4
+            ).tolist(),
+        }
+
+    return {"flights": len(flights), **spread(devs), "yaw_balance": spread(ydevs)}
 
 
 def main(argv=None) -> int:

@@ -51,8 +51,8 @@ def test_threshold_follows_the_configured_false_alarm_rate():
     cal = Calibration({"absolute": None, "change": (8.0, 0.4), "physics": (7.0, 0.3)}, "sha")
     lo, hi = (thresholds(DecisionConfig(false_alarms_per_hour=r), window_s, "sha", cal) for r in (1.0, 0.01))
     assert hi.fault["change"] > lo.fault["change"] and hi.fault["physics"] > lo.fault["physics"]
-    # ln(rate) = a - b h at a third of the budget for each statistic: h = (a - ln(rate / 3)) / b
-    assert lo.fault["change"] == pytest.approx((8.0 - math.log(1.0 / 3)) / 0.4)
+    # ln(rate) = a - b h, the fault budget shared by the two statistics that may raise FAULT: h = (a - ln(rate / 2)) / b
+    assert lo.fault["change"] == pytest.approx((8.0 - math.log(1.0 / 2)) / 0.4)
     assert math.isinf(hi.fault["absolute"])  # disabled by the calibration
     # A calibration of another model is not used: analytic thresholds instead.
     other = thresholds(DecisionConfig(), window_s, "another-model", cal)

@@ -102,10 +102,11 @@ def test_a_calibration_for_another_share_statistic_is_not_used_for_it(tmp_path):
     path.write_text(json.dumps({"fits": fits, "model_sha256": "sha", "provenance": prov}))
     cal = load_calibration(path)
     th = thresholds(cfg, WINDOW / RATE_HZ, "sha", cal)
-    # 0.1/h for three statistics is rarer than 1 per 5 h: the fault threshold is above the highest healthy value
-    assert th.fault["physics"] > 9.0 and th.fault["physics"] == pytest.approx(max((3.0 - math.log(0.1 / 3)) / 1.5, 9.0), rel=1e-5)
-    # 2/h for three is resolved by 5 h: the fitted tail alone
-    assert th.suspect["physics"] == pytest.approx((3.0 - math.log(2.0 / 3)) / 1.5)
+    # 0.1/h shared by the two statistics that may raise FAULT (physics, pair) is rarer than 1 per 5 h: the fault
+    # threshold is above the highest healthy value
+    assert th.fault["physics"] > 9.0 and th.fault["physics"] == pytest.approx(max((3.0 - math.log(0.1 / 2)) / 1.5, 9.0), rel=1e-5)
+    # 1/h shared by all four statistics is resolved by 5 h: the fitted tail alone
+    assert th.suspect["physics"] == pytest.approx((3.0 - math.log(1.0 / 4)) / 1.5)
     other = thresholds(DecisionConfig(min_thrust_loss=0.05), WINDOW / RATE_HZ, "sha", cal)
     assert "analytic" in other.source and other.fault["physics"] != th.fault["physics"]
     assert other.fault["change"] == th.fault["change"]  # the network's statistics keep their calibration

@@ -154,7 +154,7 @@ class AlertConfig:
     # consecutive: the older rule below (threshold x consecutive windows), kept for comparison.
     rule: str = "sequential"
     false_alarms_per_hour: float = 0.1  # fault level (WARNING / CRITICAL)
-    suspect_false_alarms_per_hour: float = 2.0  # suspect level (NOTICE)
+    suspect_false_alarms_per_hour: float = 1.0  # suspect level (NOTICE; was 2.0, models/decision-evaluation.md)
     aggressive_tilt_deg: float = 45.0  # windows holding a manoeuvre beyond this add no evidence
     aggressive_rate_deg_s: float = 200.0
     collective_step_fraction: float = 0.07  # payload drop / pick-up: 10-s median RPM change that re-learns baselines

@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from monitor.decision import STATISTICS, Decision, DecisionConfig, Thresholds, file_sha256, physics_statistic
+from monitor.decision import STATISTICS, Decision, DecisionConfig, Thresholds, file_sha256, pair_statistic, physics_statistic
 from offline.alerts.flights import AlertFlight
 from offline.alerts.rules import replay_decision
 from offline.manifest import make_manifest
@@ -116,6 +116,7 @@ def calibrate(healthy: list[AlertFlight], model_path: str | Path, cfg: DecisionC
             "min_events_per_point": MIN_EVENTS,
             "tail_max_rate_per_h": TAIL_MAX_RATE_PER_H,
             "physics_statistic": physics_statistic(cfg),
+            "pair_statistic": pair_statistic(cfg),
             "points_h_crossings": points,
         },
     }

@@ -15,6 +15,7 @@ size in the table.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import hashlib
 import json
 import math
@@ -33,6 +34,7 @@ from offline.alerts.rules import consecutive_rule, decision_rule, px4_rule, summ
 from offline.manifest import make_manifest
 
 FLIGHT_S = 80.0
+EVALSIM_BLOCK = 8  # evalsim simulates 8 flights per batch
 
 
 def parse_args(argv):
@@ -54,6 +56,7 @@ def parse_args(argv):
     p.add_argument("--pickup-fraction", type=float, default=0.25, help="our healthy flights with a mid-flight payload step")
     p.add_argument("--cache", default="", help="keep classified flight sets here (pickles keyed by set and model)")
     p.add_argument("--list-alerts", action="store_true", help="also list every alert per flight in alerts.json")
+    p.add_argument("--compare-suspect-rate", type=float, default=None, help="one more row: the rule at this suspect rate")
     p.add_argument(
         "--compare-with",
         default="",
@@ -82,6 +85,16 @@ def cached(cache: str, key: dict, make):
     return out
 
 
+def evalsim_cached(cache: str, kind: str, n: int, seed: int, clf, sha: str, log) -> list:
+    """evalsim's first ``n`` flights of set ``kind``, cached in blocks of EVALSIM_BLOCK: a larger set reuses a smaller one's."""
+    out = []
+    for start in range(0, n, EVALSIM_BLOCK):
+        m = min(EVALSIM_BLOCK, n - start)
+        key = {"kind": f"evalsim-{kind}", "start": start, "n": m, "seed": seed, "duration_s": FLIGHT_S, "model": sha}
+        out += cached(cache, key, lambda s=start, m=m: evalsim_set(kind, m, seed, clf, FLIGHT_S, log=log, start=s))
+    return out
+
+
 def main(argv=None) -> int:
     args = parse_args(argv)
     started = time.monotonic()
@@ -95,8 +108,7 @@ def main(argv=None) -> int:
         return cached(args.cache, {**fs.__dict__, "model": sha}, lambda: simulate_set(vehicle, fs, clf, log=log))
 
     def theirs(kind: str, n: int):
-        key = {"kind": f"evalsim-{kind}", "n": n, "seed": args.seed, "duration_s": FLIGHT_S, "model": sha}
-        return cached(args.cache, key, lambda: evalsim_set(kind, n, args.seed, clf, FLIGHT_S, log=log))
+        return evalsim_cached(args.cache, kind, n, args.seed, clf, sha, log)
 
     ours_kw = dict(physics=args.physics)
     if args.calibrate:
@@ -141,13 +153,22 @@ def main(argv=None) -> int:
             "onset": theirs("onset", args.evalsim_onset_flights or args.onset_flights),
         }
     rules = {
-        f"decision (CUSUM, {cfg.false_alarms_per_hour}/h target)": decision_rule(cfg, calibration, use_stored=False),
+        f"decision (CUSUM, {cfg.false_alarms_per_hour}/h fault, {cfg.suspect_false_alarms_per_hour}/h suspect target)": decision_rule(
+            cfg, calibration, use_stored=False
+        ),
         "today: P >= 0.9 for 20 windows": consecutive_rule(AlertConfig(threshold=0.9, consecutive=20)),
         "PX4 imbalanced-prop metric (FD_IMB_PROP_THR 30)": px4_rule(),
     }
     if calibration is not None:  # ablation: the same rule with the network's statistics off (omega^2 shares alone)
         share_only = Calibration({**calibration.fits, "absolute": None, "change": None}, *_rest(calibration))
         rules["ablation: decision on omega^2 shares alone (network off)"] = decision_rule(cfg, share_only, use_stored=False)
+        no_pair = Calibration({**calibration.fits, "pair": None}, *_rest(calibration))
+        rules["ablation: without the pair statistic (yaw balance off)"] = decision_rule(cfg, no_pair, use_stored=False)
+    if args.compare_suspect_rate is not None:
+        other = dataclasses.replace(cfg, suspect_false_alarms_per_hour=args.compare_suspect_rate)
+        rules[f"the same at a {other.suspect_false_alarms_per_hour}/h suspect target"] = decision_rule(
+            other, calibration, use_stored=False
+        )
     if args.compare_with:
         rules[f"previous decision ({_revision(args.compare_with)})"] = previous_rule(args.compare_with)
     rows: dict = {}
@@ -224,7 +245,8 @@ def previous_rule(checkout: str):
     cal = mod.load_calibration(Path(checkout) / "models" / "decision-calibration.json")
 
     def run(f):
-        return replay_decision(f, mod.Decision(old_cfg, f.rate_hz, f.window, calibration=cal, use_stored_calibration=False))
+        d = mod.Decision(old_cfg, f.rate_hz, f.window, calibration=cal, use_stored_calibration=False)
+        return replay_decision(f, d, with_sets=True)
 
     return run
 
@@ -240,8 +262,8 @@ def markdown(r: dict) -> str:
         "",
         "| simulator | rule | healthy flights (h) | false alarms / h (95 % upper) | suspect / h | single onsets >= 8 % | "
         "single >= 8 % detected | median / p95 latency | all singles detected | wrong-propeller alerts (suspect) | alerts before onset "
-        "| pairs: alert overlaps truth |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "| pairs: alert overlaps truth | pairs: alert or its set contains truth | set alerts after onset |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for sim, rows in r["rows"].items():
         for name, v in rows.items():
@@ -256,11 +278,16 @@ def markdown(r: dict) -> str:
                 if v["pair_alert_overlaps_truth"] is None
                 else f"{100 * v['pair_alert_overlaps_truth']:.0f} % of {v['pair_onsets']}"
             )
+            contains = (
+                "-"
+                if v.get("pair_alert_contains_truth") is None
+                else f"{100 * v['pair_alert_contains_truth']:.0f} % of {v['pair_onsets']}"
+            )
             lines.append(
                 f"| {sim} | {name} | {v['healthy_flights']} ({v['healthy_hours']}) | {v['false_alarms_per_hour']} "
                 f"({v['false_alarms_per_hour_upper95']}) | {v['suspect_false_alarms_per_hour']} | {v['single_onsets']} | {det} | "
                 f"{_f(v['latency_median_s'], ' s')} / {_f(v['latency_p95_s'], ' s')} | {all_det} | {v['wrong_propeller_alerts']} ({v.get('wrong_propeller_suspects', '-')}) | "
-                f"{v['alerts_before_onset']} | {pair} |"
+                f"{v['alerts_before_onset']} | {pair} | {contains} | {v.get('set_alerts', '-')} |"
             )
     lines += ["", "Simulators: " + "; ".join(f"{k}: {v}" for k, v in r["simulators"].items() if k in r["rows"])]
     return "\n".join(lines)

@@ -237,10 +237,14 @@ def _classify(
 
 
 # -- the evaluation-only simulator (offline/evalsim): never used to calibrate, only to score ---------------
-def evalsim_set(kind: str, n_flights: int, seed: int, clf: Classifier, duration_s: float = 80.0, log=print) -> list[AlertFlight]:
+def evalsim_set(
+    kind: str, n_flights: int, seed: int, clf: Classifier, duration_s: float = 80.0, log=print, start: int = 0
+) -> list[AlertFlight]:
     """``kind``: evalsim's ``healthy`` (one nuisance each: gusts, CG, weak motor, sag, payload pick-up, ...) or
     ``onset`` (5-20 % thrust loss on singles and pairs). Each flight goes through its .tlog and the log reader,
-    as diagnose and the daemon would see it (telemetry jitter and drops included)."""
+    as diagnose and the daemon would see it (telemetry jitter and drops included). Flights ``start`` to
+    ``start + n_flights - 1`` of the set (evalsim's flight i depends on (seed, i) only), so a larger set extends
+    a smaller one."""
     import tempfile
     from pathlib import Path
 
@@ -252,7 +256,7 @@ def evalsim_set(kind: str, n_flights: int, seed: int, clf: Classifier, duration_
     from offline.sim.io_tlog import write_tlog
     from offline.sim.log import BOOT_OFFSET_US
 
-    specs = build_set(kind, flights=n_flights, seed=seed, duration_s=duration_s)
+    specs = build_set(kind, flights=start + n_flights, seed=seed, duration_s=duration_s)[start:]
     esc = choose_esc(clf, "")
     out = []
     with tempfile.TemporaryDirectory(prefix="propwatch-alerts-") as tmp:

@@ -1,7 +1,9 @@
 """Alert rules replayed over one flight's window outputs -> the alerts they would raise.
 
 Times: step j of a flight is at (j + 1) / rate s; window k (hop 1) ends at step
-k + window - 1. Every rule returns ``[(t_s, level, propellers)]``; an empty
+k + window - 1. Every rule returns ``[(t_s, level, propellers)]`` or
+``[(t_s, level, propellers, sets)]`` (``sets``: the candidate faulty sets the
+alert names, e.g. ``((1,), (1, 2))`` for ``PROP 1 or 1+2?``); an empty
 propeller tuple is an alert that names none (vibration metrics).
 
 * ``decision``: ``monitor.decision.Decision``, the shipped rule, fed step by step as the daemon feeds it.
@@ -28,7 +30,8 @@ PX4_FD_IMB_PROP_THR = 30.0  # PX4 parameter FD_IMB_PROP_THR default
 PX4_IMB_LPF_TAU_S = 5.0  # FailureDetector _imbalanced_prop_lpf_time_constant
 
 
-def replay_decision(f: AlertFlight, decision: Decision) -> list[tuple[float, str, tuple[int, ...]]]:
+def replay_decision(f: AlertFlight, decision: Decision, with_sets: bool = False) -> list[tuple]:
+    """``[(t_s, level, propellers)]``, with each alert's candidate sets as a fourth element when ``with_sets``."""
     out = []
     w = f.window
     for j in range(len(f.mean_rpm)):
@@ -37,13 +40,15 @@ def replay_decision(f: AlertFlight, decision: Decision) -> list[tuple[float, str
         k = j - w + 1
         if k >= 0:
             for a in decision.window_evidence(t, WindowEvidence(f.fault_probability[k])):
-                out.append((t, a.level, a.propellers))
+                sets = tuple(getattr(a, "sets", ())) or (a.propellers,)
+                out.append((t, a.level, a.propellers, sets) if with_sets else (t, a.level, a.propellers))
     return out
 
 
 def decision_rule(cfg: DecisionConfig, calibration=None, use_stored: bool = True):
     def run(f: AlertFlight):
-        return replay_decision(f, Decision(cfg, f.rate_hz, f.window, calibration=calibration, use_stored_calibration=use_stored))
+        d = Decision(cfg, f.rate_hz, f.window, calibration=calibration, use_stored_calibration=use_stored)
+        return replay_decision(f, d, with_sets=True)
 
     return run
 
@@ -90,27 +95,51 @@ def px4_rule(threshold: float = PX4_FD_IMB_PROP_THR):
 MIN_CALLED_LOSS = 0.08  # issue 13: single-propeller onsets of >= 8 % thrust loss must be alerted
 
 
+def _with_sets(alert: tuple) -> tuple:
+    """(t_s, level, propellers, sets): an alert without sets names one set, its propellers."""
+    return alert if len(alert) == 4 else (*alert, (alert[2],))
+
+
+def _wrong(p: tuple, sets: tuple, truth: set) -> bool:
+    """An alert names a wrong propeller when none of its candidate sets lies within the truth."""
+    return bool(p) and not any(s and set(s) <= truth for s in sets)
+
+
 def summarise(rule_alerts: dict[str, list], healthy: list[AlertFlight], onset: list[AlertFlight]) -> dict:
     """One table row: false alarms per healthy hour (fault and suspect), detection, latency, wrong propellers.
 
     Detection and latency count single-propeller onsets of >= ``MIN_CALLED_LOSS`` thrust loss at hover (all of
-    them where a flight does not know its loss); ``single_detected_all`` counts every single onset.
+    them where a flight does not know its loss); ``single_detected_all`` counts every single onset. An alert
+    that names several candidate sets (``PROP 1 or 1+2?``) is wrong only when no set lies within the truth;
+    ``set_alerts`` counts the fault alerts after an onset that name more than one set. Pairs: ``overlaps``, a
+    fault alert after the onset names a propeller of the pair; ``contains`` (issue 13's done-when), the alert
+    or one of its sets contains both.
     """
-    h_alerts, o_alerts = rule_alerts["healthy"], rule_alerts["onset"]
+    h_alerts = [[_with_sets(a) for a in al] for al in rule_alerts["healthy"]]
+    o_alerts = [[_with_sets(a) for a in al] for al in rule_alerts["onset"]]
     hours = sum(f.hours for f in healthy)
-    fa = sum(1 for al in h_alerts for _, lvl, _ in al if lvl == "fault")
-    fs = sum(1 for al in h_alerts for _, lvl, _ in al if lvl == "suspect")
+    fa = sum(1 for al in h_alerts for _, lvl, _, _ in al if lvl == "fault")
+    fs = sum(1 for al in h_alerts for _, lvl, _, _ in al if lvl == "suspect")
     lat, hit, wrong, pair_ok, n_single, n_pair, early = [], 0, 0, 0, 0, 0, 0
-    n_all, hit_all, wrong_suspect = 0, 0, 0
+    n_all, hit_all, wrong_suspect, pair_contains, set_alerts = 0, 0, 0, 0, 0
     for f, al in zip(onset, o_alerts):
         truth = set(f.truth)
-        faults = [(t, p) for t, lvl, p in al if lvl == "fault"]
-        early += sum(1 for t, _ in faults if t < f.onset_s)
-        wrong += sum(1 for _, p in faults if p and not set(p) <= truth)
-        wrong_suspect += sum(1 for _, lvl, p in al if lvl == "suspect" and p and not set(p) <= truth)
-        after = [(t - f.onset_s, p) for t, p in faults if t >= f.onset_s]
-        if len(truth) == 1:
-            ok = [dt for dt, p in after if truth <= set(p) or not p]
+        faults = [(t, p, sets) for t, lvl, p, sets in al if lvl == "fault"]
+        early += sum(1 for t, _, _ in faults if t < f.onset_s)
+        wrong += sum(1 for _, p, sets in faults if _wrong(p, sets, truth))
+        wrong_suspect += sum(1 for _, lvl, p, sets in al if lvl == "suspect" and _wrong(p, sets, truth))
+        set_alerts += sum(1 for t, _, sets in faults if t >= f.onset_s and len(sets) > 1)
+        after = [(t - f.onset_s, p) for t, p, _ in faults if t >= f.onset_s]
+        if len(truth) == 1:  # a set alert calls a single when one of its sets holds it and none is wrong
+            ok = [
+                t - f.onset_s
+                for t, p, sets in faults
+                if t >= f.onset_s
+                and (
+                    not p
+                    or (truth <= set(p) if len(sets) == 1 else not _wrong(p, sets, truth) and any(truth <= set(s) for s in sets))
+                )
+            ]
             n_all += 1
             hit_all += bool(ok)
             if getattr(f, "thrust_loss", ()) and f.thrust_loss[0] < MIN_CALLED_LOSS:
@@ -123,6 +152,8 @@ def summarise(rule_alerts: dict[str, list], healthy: list[AlertFlight], onset: l
             n_pair += 1
             if any(set(p) & truth for _, p in after):
                 pair_ok += 1
+            if any(t >= f.onset_s and any(truth <= set(s) for s in (p, *sets)) for t, p, sets in faults):
+                pair_contains += 1
     lat_a = np.asarray(lat)
     return {
         "healthy_flights": len(healthy),
@@ -142,6 +173,8 @@ def summarise(rule_alerts: dict[str, list], healthy: list[AlertFlight], onset: l
         "alerts_before_onset": early,
         "pair_onsets": n_pair,
         "pair_alert_overlaps_truth": round(pair_ok / n_pair, 4) if n_pair else None,
+        "pair_alert_contains_truth": round(pair_contains / n_pair, 4) if n_pair else None,
+        "set_alerts": set_alerts,
     }
 
 
