@@ -80,7 +80,7 @@ class LinkConfig:
     allow_sources: tuple[str, ...] = ()
     max_peers: int = 8  # udpin: distinct sender addresses remembered for the report (replies go only to the autopilot's)
     # udpin: sleep through the datagrams that cannot complete the next 20 Hz step and read them together
-    # (monitor.daemon.pacing): ~5x fewer wake-ups; latency is still counted from each datagram's arrival.
+    # (monitor.daemon.pacing): measured 85 -> 55-60 wake-ups/s at 20 Hz; latency still counts from each arrival.
     pace_reads: bool = True
 
     def __post_init__(self) -> None:
