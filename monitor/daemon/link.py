@@ -396,16 +396,14 @@ class Link:
         )
 
 
-def _stamp_arrivals(sock: socket.socket) -> bool:
-    """Ask the kernel to stamp each datagram's arrival (Linux); False where it cannot."""
+def _stamp_arrivals(sock: socket.socket) -> None:
+    """Ask the kernel to stamp each datagram's arrival (Linux); elsewhere the arrival is the read."""
     if not sys.platform.startswith("linux"):
-        return False
+        return
     try:
         sock.setsockopt(socket.SOL_SOCKET, SO_TIMESTAMPNS, 1)
     except OSError as exc:
         log.info("no kernel receive stamps (%s): latency is measured from the read", exc)
-        return False
-    return True
 
 
 def _queued_s(ancillary: list[tuple[int, int, bytes]], now_ns: int) -> float:

@@ -88,7 +88,6 @@ class ReadPacer:
 
     def __init__(self, streams: tuple[str, ...]):
         self.streams = tuple(streams)
-        self.planned = 0  # wake-ups planned (a pause was taken)
         self.misses = 0  # completed steps whose sample waited past the tolerance for a planned wake-up
         self.reset()
 
