@@ -33,7 +33,10 @@ from offline.evalsim.sets import write_set
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_localise import add_model_option, model_paths  # noqa: E402
 
-SETS = {"paper": 32, "shift": 32, "healthy": 22}  # flights: two per label (bent-like, cracked-like); 2 x 11 nuisances
+SETS = {"paper": 32, "shift_quarter": 32, "shift_half": 32, "shift": 32, "healthy": 22}
+# flights: two per label (bent-like, cracked-like); 2 x 11 nuisances. shift_quarter / shift_half are shift flight for
+# flight with its airframe spread (motor, CG, inertia) at 1/4 and 1/2: how localisation degrades as the airframe
+# leaves its file.
 
 
 def pct(x) -> str:
@@ -118,10 +121,13 @@ def main(argv=None) -> int:
                 "(bench/bench_localise.py). *evalsim*: the evaluation-only simulator (RotorPy dynamics, own "
                 "controller, damaged blades' torque per thrust falling), never used for training or selection: "
                 "`paper` = new routes; `shift` = +30 % payload, motor spread ±4-8 %, CG ±1 cm, inertia ±10 %, gusts; "
+                "`shift_half` / `shift_quarter` = `shift` flight for flight (same routes, payload, damage, wind) with "
+                "that airframe spread halved / quartered (quarter: motors ±1-2 %, CG ±2.5 mm); "
                 "`healthy` = one nuisance each (drag, CG, weak or slow motor, sag, payload pick-up, ...). "
                 "The moment balance assumes the nominal airframe (rotors matched to 1 %, CG within 0.5 mm): on "
-                "`shift` that assumption is false and nothing in this table holds up without the airframe's own "
-                "healthy baseline (`propwatch adapt`)."
+                "`shift` that assumption is false, on `shift_quarter` already stretched (a 2.5 mm CG offset is a 6 % "
+                "roll/pitch moment, 5 of the balance's CG standard deviations), and nothing in this table holds up "
+                "without the airframe's own healthy baseline (`propwatch adapt`)."
             ),
             columns=("data", "verdict", "exact", "single", "set size / truth in set", "flights"),
             rows=tuple(card_rows(evalsim, ours)),

@@ -204,6 +204,29 @@ def test_build_set_is_deterministic_and_extends():
         build_set("nope")
 
 
+def test_scaled_shift_sets_differ_from_shift_only_in_the_airframe_spread():
+    from offline.evalsim.sets import build_set
+
+    shift = build_set("shift", 4, seed=0)
+    nominal = np.asarray(build_set("paper", 1, seed=0)[0].airframe.inertia_diag_kg_m2)
+    for name, scale in (("shift_half", 0.5), ("shift_quarter", 0.25)):
+        for a, b in zip(shift, build_set(name, 4, seed=0), strict=True):
+            assert b.name == a.name.replace("shift", name)
+            assert (b.seed, b.waypoints_ned_m, b.wind, b.airframe.damage) == (
+                a.seed,
+                a.waypoints_ned_m,
+                a.wind,
+                a.airframe.damage,
+            )
+            assert b.airframe.payload_kg == a.airframe.payload_kg
+            eff_a, eff_b = np.asarray(a.airframe.motor_thrust_efficiency), np.asarray(b.airframe.motor_thrust_efficiency)
+            np.testing.assert_allclose(eff_b - 1.0, scale * (eff_a - 1.0), rtol=1e-12)
+            np.testing.assert_allclose(b.airframe.cg_offset_frd_m, scale * np.asarray(a.airframe.cg_offset_frd_m), rtol=1e-12)
+            ia, ib = np.asarray(a.airframe.inertia_diag_kg_m2), np.asarray(b.airframe.inertia_diag_kg_m2)
+            np.testing.assert_allclose(ib / nominal - 1.0, scale * (ia / nominal - 1.0), rtol=1e-9)
+            assert np.abs(eff_a - 1.0).max() > 0.0 and np.abs(a.airframe.cg_offset_frd_m).max() > 0.0
+
+
 # --- I/O -----------------------------------------------------------------------------------
 
 

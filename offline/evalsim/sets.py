@@ -4,7 +4,9 @@ NEVER used for training or model selection (see the package docstring).
 
 | set | what varies |
 | paper | 1.5 kg paper quad, new routes, all 16 labels, evalsim's own bent/cracked-like damage |
-| shift | as paper + 30 % payload, motor efficiency spread ±4-8 %, CG offset, inertia error, gusty wind |
+| shift | as paper + 30 % payload, motor efficiency spread ±4-8 %, CG offset ±1 cm, inertia error ±10 %, gusty wind |
+| shift_half, shift_quarter | ``shift`` flight for flight with the airframe spread (motor, CG, inertia) halved /
+  quartered: how localisation degrades as the airframe leaves its file |
 | healthy | healthy flights, each with ONE nuisance (``NUISANCES``) |
 | onset | a fault (single propeller or pair, 5-20 % thrust loss) starting mid-flight at a recorded time |
 | hidden | per airframe one hidden effect (CG, weak motor, motor lag, linear drag, ESC curve): 2 healthy + 4 single faults |
@@ -158,18 +160,32 @@ def _paper_torque_rising(v, seed, i, duration_s) -> FlightSpec:
     return replace(spec, name=f"paper_torque_rising_{i:04d}", airframe=spec.airframe.with_(damage=rising))
 
 
-def _shift(v, seed, i, duration_s) -> FlightSpec:
-    rng = _rng("shift", seed, i)
-    label = i % 16 + 1
-    kind = "bent" if (i // 16) % 2 == 0 else "cracked"
-    spread = rng.uniform(0.04, 0.08)
-    af = _base(v, rng, spread).with_(
-        payload_kg=0.3 * v.mass_kg,
-        cg_offset_frd_m=(float(rng.uniform(-0.01, 0.01)), float(rng.uniform(-0.01, 0.01)), 0.0),
-        inertia_diag_kg_m2=tuple(float(x) for x in np.asarray(v.inertia_diag_kg_m2) * (1 + rng.uniform(-0.1, 0.1, 3))),
-        damage=_damage(rng, LABEL_TABLE[label], kind),
-    )
-    return _spec("shift", seed, i, af, rng, duration_s, wind=_gusty_wind(rng), nuisance=kind)
+def _shift_scaled(scale: float, set_name: str) -> Callable:
+    """``shift`` with its airframe spread (motor efficiency, CG offset, inertia error) scaled by ``scale``; the
+    routes, payload, damage, wind and noise are ``shift``'s flight for flight (same random draws, same flight
+    seeds), so a set of scale 0.25 differs from ``shift`` only in how far the airframe is from its file."""
+
+    def build(v, seed, i, duration_s) -> FlightSpec:
+        rng = _rng("shift", seed, i)
+        label = i % 16 + 1
+        kind = "bent" if (i // 16) % 2 == 0 else "cracked"
+        spread = scale * rng.uniform(0.04, 0.08)
+        af = _base(v, rng, spread)
+        cg = (float(scale * rng.uniform(-0.01, 0.01)), float(scale * rng.uniform(-0.01, 0.01)), 0.0)
+        inertia = np.asarray(v.inertia_diag_kg_m2) * (1 + scale * rng.uniform(-0.1, 0.1, 3))
+        af = af.with_(
+            payload_kg=0.3 * v.mass_kg,
+            cg_offset_frd_m=cg,
+            inertia_diag_kg_m2=tuple(float(x) for x in inertia),
+            damage=_damage(rng, LABEL_TABLE[label], kind),
+        )
+        spec = _spec("shift", seed, i, af, rng, duration_s, wind=_gusty_wind(rng), nuisance=kind)
+        return spec if set_name == "shift" else replace(spec, name=f"{set_name}_{i:04d}")
+
+    return build
+
+
+_shift = _shift_scaled(1.0, "shift")
 
 
 def _with_nuisance(af: Airframe, v, rng: np.random.Generator, name: str, duration_s: float):
@@ -295,6 +311,8 @@ _BUILDERS: dict[str, tuple[Callable, int]] = {
     # name -> (builder, default flight count: one cycle)
     "paper": (_paper, 16),
     "shift": (_shift, 16),
+    "shift_quarter": (_shift_scaled(0.25, "shift_quarter"), 16),
+    "shift_half": (_shift_scaled(0.5, "shift_half"), 16),
     "healthy": (_healthy, len(NUISANCES)),
     "onset": (_onset, len(ONSET_PATTERNS)),
     "hidden": (_hidden, 6 * len(HIDDEN_EFFECTS)),
