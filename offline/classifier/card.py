@@ -205,8 +205,10 @@ def write_card(path: str | Path, manifest: dict, results: list[Result], tables: 
             "weighed 0.1^k, the weakest prior whose singles never fall below the omega^2-share baseline in any region). "
             "An airframe check (moment balance, log Bayes factor unmeasured : nominal airframe) flags logs no damage on "
             "the nominal airframe explains; they get the wide sets of an unmeasured airframe and a warning. On a "
-            "motor spread of 4-8 % and CG offsets of 1 cm (drawn airframes) nothing locates a 3-12 % loss: run "
-            "`propwatch adapt`."
+            "motor spread of 4-8 % and CG offsets of 1 cm (drawn airframes) nothing locates a 3-12 % loss, and a "
+            "quarter of that (motors +-1-2 %, CG +-2.5 mm: evalsim `shift_quarter` in the table above) already costs "
+            "most single-propeller verdicts, which the check does not flag: network and balance were made for an "
+            "airframe as its file says. Run `propwatch adapt` on a vehicle before trusting its verdicts."
         )
     if spec.get("physics", "fixed") == "fixed":
         lines.append(
