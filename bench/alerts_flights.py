@@ -25,7 +25,7 @@ from monitor.vehicle import REPO_ROOT, load_vehicle
 def load_flights(set_name: str, n: int, seed: int, cache: Path, model: str, physics: str = "randomised", pickup: float = 0.25):
     """The set through the same cache as ``python -m offline.alerts.evaluate --cache``."""
     from monitor.decision import file_sha256
-    from offline.alerts.evaluate import cached, evalsim_cached
+    from offline.alerts.evaluate import cached, evalsim_cached, set_key
     from offline.alerts.flights import FlightSet, simulate_set
 
     sha = file_sha256(model)
@@ -37,7 +37,7 @@ def load_flights(set_name: str, n: int, seed: int, cache: Path, model: str, phys
         kind, n, seed=seed, physics=physics, pickup_fraction=pickup if kind == "healthy" and physics == "randomised" else 0.0
     )
     vehicle = load_vehicle(REPO_ROOT / "models" / "vehicle.yaml")
-    return cached(str(cache), {**fs.__dict__, "model": sha}, lambda: simulate_set(vehicle, fs, Classifier(model), log=log))
+    return cached(str(cache), set_key(fs, sha), lambda: simulate_set(vehicle, fs, Classifier(model), log=log))
 
 
 def replay_listing(f, d: Decision) -> list[dict]:

@@ -10,6 +10,13 @@ per vehicle variant; the calibration's simulator, on other seeds) and the evalua
 and pairs; never used to calibrate). The issue's full size is >= 10 healthy flight-hours per simulator and
 >= 200 onset flights: ``--healthy-hours 10 --onset-flights 200`` (the default); smaller runs say their
 size in the table.
+
+Healthy hours are *classified* hours, the time the false-alarm rate is divided by (``AlertFlight.hours``:
+a flight counts from its first full classifier window, so an 80-s flight counts 75.05 s). The flight count
+that reaches them is computed up front (``healthy_flight_count``); the output gives flown and classified
+hours. Our healthy set is the flown-hours set of earlier runs (``ceil(H h / 80 s)`` flights, cached and
+unchanged) with the extra flights appended as a second set (``FlightSet.first_flight``); evalsim's flight i
+depends on (seed, i) only, so its larger set extends the smaller one.
 """
 
 from __future__ import annotations
@@ -35,6 +42,9 @@ from offline.manifest import make_manifest
 
 FLIGHT_S = 80.0
 EVALSIM_BLOCK = 8  # evalsim simulates 8 flights per batch
+# evalsim's flights reach us through a .tlog and the log reader, whose grid starts at the first grid instant at
+# or after the first message: an 80-s flight gives 1599 or 1600 samples at 20 Hz (measured on its healthy set).
+EVALSIM_SAMPLES_SHORT = 1
 
 
 def parse_args(argv):
@@ -42,12 +52,22 @@ def parse_args(argv):
     p.add_argument("--model", default=str(REPO_ROOT / "models" / "classifier.onnx"))
     p.add_argument("--vehicle", default=str(REPO_ROOT / "models" / "vehicle.yaml"))
     p.add_argument("--out", default="out/alerts", help="where alerts.json and alerts.md go")
-    p.add_argument("--healthy-hours", type=float, default=10.0, help="healthy flight-hours to evaluate on")
+    p.add_argument(
+        "--healthy-hours",
+        type=float,
+        default=10.0,
+        help="classified healthy flight-hours to evaluate on (the hours the false-alarm rate is divided by: each "
+        "flight counts from its first full classifier window); as many 80-s flights as reach them",
+    )
     p.add_argument("--onset-flights", type=int, default=200, help="onset flights (3/4 single propeller, 1/4 pairs)")
-    p.add_argument("--evalsim-healthy-hours", type=float, default=None, help="evalsim's (default: --healthy-hours)")
+    p.add_argument(
+        "--evalsim-healthy-hours", type=float, default=None, help="evalsim's classified healthy hours (default: --healthy-hours)"
+    )
     p.add_argument("--evalsim-onset-flights", type=int, default=None, help="evalsim's (default: --onset-flights)")
     p.add_argument("--calibrate", action="store_true", help="(re)write the calibration first")
-    p.add_argument("--calibration-hours", type=float, default=2.0)
+    p.add_argument(
+        "--calibration-hours", type=float, default=2.0, help="flown hours of calibration flights (ceil(H h / 80 s) flights)"
+    )
     p.add_argument("--calibration-out", default=str(DEFAULT_CALIBRATION))
     p.add_argument("--calibration-seed", type=int, default=100)
     p.add_argument("--seed", type=int, default=200, help="first seed of the evaluation flights (never the calibration's)")
@@ -66,7 +86,43 @@ def parse_args(argv):
 
 
 def _n(hours: float) -> int:
+    """Flights of FLIGHT_S in ``hours`` flown hours."""
     return max(1, math.ceil(hours * 3600.0 / FLIGHT_S))
+
+
+def classified_s(duration_s: float, rate_hz: float, window: int, samples_short: int = 0) -> float:
+    """Seconds of one flight the evaluation counts (``AlertFlight.hours``): one classified window per sample
+    from the first full window on, ``(samples - window + 1) / rate`` with ``duration x rate`` samples, less
+    ``samples_short`` where the log reader can lose the last one."""
+    samples = round(duration_s * rate_hz) - samples_short
+    if samples < window:
+        raise ValueError(f"a {duration_s} s flight at {rate_hz} Hz has {samples} samples, fewer than one {window}-sample window")
+    return (samples - window + 1) / rate_hz
+
+
+def healthy_flight_count(hours: float, per_flight_s: float) -> int:
+    """The fewest flights of ``per_flight_s`` classified seconds that reach ``hours`` classified hours."""
+    return max(1, math.ceil(hours * 3600.0 / per_flight_s - 1e-9))  # 10 h of 75.0-s flights is 480, not 481
+
+
+def healthy_sets(hours: float, per_flight_s: float, **kw) -> list[FlightSet]:
+    """Our healthy flights for ``hours`` classified hours: the flown-hours set (``_n(hours)`` flights, the set
+    earlier runs drew and cached) and, when that falls short, the rest appended as a second set."""
+    n = healthy_flight_count(hours, per_flight_s)
+    first = min(n, _n(hours))
+    sets = [FlightSet("healthy", n_flights=first, **kw)]
+    if n > first:
+        sets.append(FlightSet("healthy", n_flights=n - first, first_flight=first, **kw))
+    return sets
+
+
+def set_key(fs: FlightSet, model_sha: str) -> dict:
+    """The cache key of one of our flight sets; ``first_flight`` joins it only when set, so sets cached before
+    the field existed keep their key."""
+    key = {**fs.__dict__, "model": model_sha}
+    if fs.first_flight == 0:
+        del key["first_flight"]
+    return key
 
 
 def cached(cache: str, key: dict, make):
@@ -105,7 +161,7 @@ def main(argv=None) -> int:
     log = lambda m: print(m, file=sys.stderr)  # noqa: E731
 
     def ours(fs: FlightSet):
-        return cached(args.cache, {**fs.__dict__, "model": sha}, lambda: simulate_set(vehicle, fs, clf, log=log))
+        return cached(args.cache, set_key(fs, sha), lambda: simulate_set(vehicle, fs, clf, log=log))
 
     def theirs(kind: str, n: int):
         return evalsim_cached(args.cache, kind, n, args.seed, clf, sha, log)
@@ -134,24 +190,48 @@ def main(argv=None) -> int:
     calibration = load_calibration(args.calibration_out)
     th = thresholds(cfg, clf.info.window / clf.info.sample_rate_hz, None, calibration)
     n_single = max(1, round(0.75 * args.onset_flights))
+    rate_hz, window = clf.info.sample_rate_hz, clf.info.window
+    per_flight_s = {
+        "ours": classified_s(FLIGHT_S, rate_hz, window),
+        "evalsim": classified_s(FLIGHT_S, rate_hz, window, EVALSIM_SAMPLES_SHORT),
+    }
+    asked_h = {"ours": args.healthy_hours, "evalsim": args.evalsim_healthy_hours or args.healthy_hours}
+    healthy = healthy_sets(
+        asked_h["ours"],
+        per_flight_s["ours"],
+        seed=args.seed,
+        pickup_fraction=args.pickup_fraction if args.physics == "randomised" else 0.0,
+        **ours_kw,
+    )
     sets = {
-        "healthy": FlightSet(
-            "healthy",
-            n_flights=_n(args.healthy_hours),
-            seed=args.seed,
-            pickup_fraction=args.pickup_fraction if args.physics == "randomised" else 0.0,
-            **ours_kw,
-        ),
+        **{"healthy" if i == 0 else f"healthy from flight {fs.first_flight}": fs for i, fs in enumerate(healthy)},
         "single": FlightSet("single", n_flights=n_single, seed=args.seed + 1, **ours_kw),
         "pair": FlightSet("pair", n_flights=max(1, args.onset_flights - n_single), seed=args.seed + 2, **ours_kw),
     }
-    flights = {"ours": {k: ours(fs) for k, fs in sets.items()}}
-    flights["ours"]["onset"] = flights["ours"].pop("single") + flights["ours"].pop("pair")
+    flights = {
+        "ours": {
+            "healthy": [f for fs in healthy for f in ours(fs)],
+            "onset": ours(sets["single"]) + ours(sets["pair"]),
+        }
+    }
     if not args.no_evalsim:
         flights["evalsim"] = {
-            "healthy": theirs("healthy", _n(args.evalsim_healthy_hours or args.healthy_hours)),
+            "healthy": theirs("healthy", healthy_flight_count(asked_h["evalsim"], per_flight_s["evalsim"])),
             "onset": theirs("onset", args.evalsim_onset_flights or args.onset_flights),
         }
+    hours = {
+        sim: {
+            "flights": len(fl["healthy"]),
+            "flown_h": round(len(fl["healthy"]) * FLIGHT_S / 3600.0, 3),
+            "classified_h": round(sum(f.hours for f in fl["healthy"]), 3),
+            "asked_classified_h": asked_h[sim],
+        }
+        for sim, fl in flights.items()
+    }
+    for sim, h in hours.items():
+        log(f"{sim}: {h['flights']} healthy flights, {h['flown_h']} h flown, {h['classified_h']} h classified")
+        if h["classified_h"] < h["asked_classified_h"]:
+            log(f"WARNING: {sim}: {h['classified_h']} classified hours, fewer than the {h['asked_classified_h']} asked")
     rules = {
         f"decision (CUSUM, {cfg.false_alarms_per_hour}/h fault, {cfg.suspect_false_alarms_per_hour}/h suspect target)": decision_rule(
             cfg, calibration, use_stored=False
@@ -200,6 +280,7 @@ def main(argv=None) -> int:
             "evalsim": "offline.evalsim: its 'healthy' set (one nuisance each) and 'onset' set (5-20 % thrust loss)",
         },
         "thresholds": th.as_dict(),
+        "healthy_hours": hours,
         "rows": rows,
         "sets": {k: fs.__dict__ for k, fs in sets.items()},
         **({"decision_alerts": listed} if args.list_alerts else {}),
@@ -290,6 +371,16 @@ def markdown(r: dict) -> str:
                 f"{v['alerts_before_onset']} | {pair} | {contains} | {v.get('set_alerts', '-')} |"
             )
     lines += ["", "Simulators: " + "; ".join(f"{k}: {v}" for k, v in r["simulators"].items() if k in r["rows"])]
+    if "healthy_hours" in r:
+        lines += [
+            "",
+            "Healthy hours (classified: from each flight's first full classifier window, the hours the rates are per): "
+            + "; ".join(
+                f"{sim}: {h['flights']} flights, {h['flown_h']} h flown, {h['classified_h']} h classified "
+                f"(asked: {h['asked_classified_h']} h)"
+                for sim, h in r["healthy_hours"].items()
+            ),
+        ]
     return "\n".join(lines)
 
 

@@ -58,6 +58,14 @@ class FlightSet:
     physics: str = "fixed"  # "randomised": each flight's physics from the assumption register (airframe drawn)
     pickup_fraction: float = 0.0  # randomised only: flights with a mid-flight payload pick-up or drop
     pickup_mass_step: tuple[float, float] = (0.1, 0.4)  # the mass step, fraction of the flight's mass (+ pick-up)
+    first_flight: int = 0  # index of the set's first flight: flights first_flight .. first_flight + n_flights - 1
+
+    def rng(self) -> np.random.Generator:
+        """The stream of the set's per-flight draws (conditions, payload, onset, payload step), drawn as arrays
+        of ``n_flights``: a set of n flights is not the first n of a larger set. A set appended to another
+        (``first_flight`` > 0) draws from its own stream and, under randomised physics, gives its flights the
+        indices ``first_flight`` on, so their physics, routes and sensor seeds are new flights of the seed."""
+        return np.random.default_rng([self.seed, 13] if self.first_flight == 0 else [self.seed, 13, self.first_flight])
 
 
 @dataclass
@@ -95,7 +103,7 @@ def simulate_set(vehicle: VehicleConfig, fs: FlightSet, clf: Classifier, log=pri
         return _simulate_randomised(vehicle, fs, clf, log)
     if fs.physics != "fixed":
         raise ValueError(f"physics: 'fixed' or 'randomised', got {fs.physics!r}")
-    rng = np.random.default_rng([fs.seed, 13])
+    rng = fs.rng()
     out: list[AlertFlight] = []
     spec = DatasetSpec(
         "alerts",
@@ -123,13 +131,16 @@ def simulate_set(vehicle: VehicleConfig, fs: FlightSet, clf: Classifier, log=pri
             after = build_propellers(veh, cond, kind=fs.propellers, rng_seed=seed + 1)
             props = SwitchedPropellers(before, after, onset)
         flog = simulate_flights(veh, wps, cond, payload, dataclasses.replace(spec, seed=seed), seed, propellers=props)
-        out += _classify(flog, clf, cond, onset, f"{fs.kind}-s{fs.seed}-{c0}")
+        out += _classify(flog, clf, cond, onset, f"{fs.kind}-s{fs.seed}-{fs.first_flight + c0}")
         log(f"alerts: {fs.kind} seed {fs.seed}: {len(out)}/{fs.n_flights} flights")
     return out
 
 
 def _simulate_randomised(vehicle: VehicleConfig, fs: FlightSet, clf: Classifier, log) -> list[AlertFlight]:
-    """Flights with physics from the assumption register (see the module doc); flight i depends on (seed, i) only."""
+    """Flights with physics from the assumption register (see the module doc).
+
+    Flight i's physics, route and sensor seed depend on (seed, i) only (i counts from ``fs.first_flight``);
+    its payload and payload step come from the set's stream (``FlightSet.rng``)."""
     from offline.dataset.generate import flight_sim_seed, sim_config
     from offline.propellers import build_propellers
     from offline.sim.assumptions import REGISTER, draw_flights
@@ -139,20 +150,21 @@ def _simulate_randomised(vehicle: VehicleConfig, fs: FlightSet, clf: Classifier,
     spec = DatasetSpec(
         "alerts", waypoints=("random",), duration_s=fs.duration_s, propellers="quadratic", physics="randomised", seed=fs.seed
     )
-    rng = np.random.default_rng([fs.seed, 13])
+    rng = fs.rng()
     n = fs.n_flights
+    first = fs.first_flight
     cond = _conditions(fs.kind, n, rng)
     payload = rng.uniform(*fs.payload_kg, n)
     onset = np.full(n, np.inf) if fs.kind == "healthy" else rng.uniform(*fs.onset_s, n)
     pickup = rng.random(n) < fs.pickup_fraction
     pickup_s = rng.uniform(0.3 * fs.duration_s, 0.7 * fs.duration_s, n)
     step = rng.uniform(*fs.pickup_mass_step, n) * np.where(rng.random(n) < 0.75, 1.0, -1.0)  # 3 in 4 pick up
-    wps, _ = routes(spec, n, seed=fs.seed)
+    wps = routes(spec, first + n, seed=fs.seed)[0][first:]  # flight i's route depends on (seed, i) only
     out: list[AlertFlight] = []
     for c0 in range(0, n, fs.chunk_flights):
-        idx = np.arange(c0, min(n, c0 + fs.chunk_flights))
-        phys = draw_flights(REGISTER, fs.seed, idx)
-        seeds = np.array([flight_sim_seed(fs.seed, i) for i in idx])
+        idx = np.arange(c0, min(n, c0 + fs.chunk_flights))  # into this set's arrays; flight first + i of the seed
+        phys = draw_flights(REGISTER, fs.seed, first + idx)
+        seeds = np.array([flight_sim_seed(fs.seed, first + i) for i in idx])
         before = np.empty((len(idx), 4), dtype=object)
         after = np.empty((len(idx), 4), dtype=object)
         switch_s = np.full(len(idx), np.inf)
@@ -189,7 +201,9 @@ def _simulate_randomised(vehicle: VehicleConfig, fs: FlightSet, clf: Classifier,
             per_flight=PerFlightTerms.from_flights(phys, vehicle),
         )
         degraded = degraded_signals(flog, phys)
-        names = [f"{fs.kind}-r{fs.seed}-{i}" + (f"-pickup{step[i]:+.2f}@{pickup_s[i]:.0f}s" if pickup[i] else "") for i in idx]
+        names = [
+            f"{fs.kind}-r{fs.seed}-{first + i}" + (f"-pickup{step[i]:+.2f}@{pickup_s[i]:.0f}s" if pickup[i] else "") for i in idx
+        ]
         part = _classify(flog, clf, cond[idx], onset[idx], "", signals=degraded, names=names)
         for b, f in enumerate(part):  # each damaged rotor's loss at its own hover speed (median before the onset)
             n0 = max(int(min(onset[idx[b]], fs.duration_s) * f.rate_hz), 1)
