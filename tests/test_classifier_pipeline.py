@@ -190,3 +190,23 @@ def test_shipped_configuration_is_the_ablations_last_row():
     sets, changes = EXPERIMENTS[SHIPPED_ROW]
     assert sets == ("RN-varied",) and dataclasses.replace(TrainConfig(), **changes) == SHIPPED
     assert list(EXPERIMENTS)[-1] == SHIPPED_ROW
+
+
+def test_a_spent_learning_rate_schedule_holds_its_last_rate_instead_of_raising():
+    # A later epoch may hold more windows than the first (random window offset), so the OneCycle schedule sized
+    # from the first epoch can run out; stepping on must hold the final rate, not raise.
+    import torch
+
+    from offline.classifier.train import step_schedule
+
+    opt = torch.optim.Adam([torch.nn.Parameter(torch.zeros(1))], lr=1e-3)
+    sched = torch.optim.lr_scheduler.OneCycleLR(opt, max_lr=1e-3, total_steps=4)
+    rates = []
+    for _ in range(7):
+        opt.step()
+        step_schedule(sched)
+        rates.append(opt.param_groups[0]["lr"])
+    assert sched.last_epoch == 4 and rates[4:] == [rates[3]] * 3  # spent after its 4 steps: the last rate is held
+    assert rates[0] > rates[2]  # the schedule itself ran (annealed toward its floor)
+    with pytest.raises(ValueError):
+        sched.step()  # what step_schedule guards against

@@ -165,7 +165,7 @@ def train(ds: FaultDataset, cfg: TrainConfig, log=print) -> TrainedModel:
             loss = (per.reshape(len(bi), -1).mean(dim=1) * w).sum() / w.sum()
             loss.backward()
             opt.step()
-            sched.step()
+            step_schedule(sched)
             tot += loss.item() * len(bi)
             count += len(bi)
             correct += int((_predicted_labels(net, logits) == label_index[bi[:, 0]]).sum())
@@ -180,6 +180,16 @@ def train(ds: FaultDataset, cfg: TrainConfig, log=print) -> TrainedModel:
     return TrainedModel(
         net, cfg, vehicle_info(ds), ds.sample_rate_hz, norm, ds.manifest, train_f.tolist(), test_f.tolist(), history, ds.name
     )
+
+
+def step_schedule(sched) -> None:
+    """Step a OneCycleLR schedule, holding its last rate once it is spent.
+
+    Its length is fixed from the first epoch's batches; with a random window offset per epoch a later epoch
+    can hold a few more windows (pooled sets: 39744 then 41472 at stride 64), and stepping past the end raises.
+    Runs whose epochs fit are stepped exactly as before."""
+    if sched.last_epoch < sched.total_steps:
+        sched.step()
 
 
 def _predicted_labels(net: FaultCnn, logits: torch.Tensor) -> np.ndarray:
