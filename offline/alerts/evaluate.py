@@ -332,55 +332,20 @@ def previous_rule(checkout: str):
     return run
 
 
-def _f(v, unit: str = "") -> str:
-    return "-" if v is None else f"{v}{unit}"
-
-
 def markdown(r: dict) -> str:
+    from offline.alerts.card import COLUMNS, hours_line, rows
+
     lines = [
         f"Decision thresholds (absolute, change: nat-s; physics: nats; null = disabled): suspect {r['thresholds']['suspect']}, fault "
         f"{r['thresholds']['fault']} ({r['thresholds']['source']}). CPU {r['cpu_s']} s.",
         "",
-        "| simulator | rule | healthy flights (h) | false alarms / h (95 % upper) | suspect / h | single onsets >= 8 % | "
-        "single >= 8 % detected | median / p95 latency | all singles detected | wrong-propeller alerts (suspect) | alerts before onset "
-        "| pairs: alert overlaps truth | pairs: alert or its set contains truth | set alerts after onset |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "| " + " | ".join(COLUMNS) + " |",
+        "|" + "---|" * len(COLUMNS),
     ]
-    for sim, rows in r["rows"].items():
-        for name, v in rows.items():
-            det = "-" if v["single_detected"] is None else f"{100 * v['single_detected']:.1f} %"
-            all_det = (
-                "-"
-                if v.get("single_detected_all") is None
-                else f"{100 * v['single_detected_all']:.1f} % of {v['single_onsets_all']}"
-            )
-            pair = (
-                "-"
-                if v["pair_alert_overlaps_truth"] is None
-                else f"{100 * v['pair_alert_overlaps_truth']:.0f} % of {v['pair_onsets']}"
-            )
-            contains = (
-                "-"
-                if v.get("pair_alert_contains_truth") is None
-                else f"{100 * v['pair_alert_contains_truth']:.0f} % of {v['pair_onsets']}"
-            )
-            lines.append(
-                f"| {sim} | {name} | {v['healthy_flights']} ({v['healthy_hours']}) | {v['false_alarms_per_hour']} "
-                f"({v['false_alarms_per_hour_upper95']}) | {v['suspect_false_alarms_per_hour']} | {v['single_onsets']} | {det} | "
-                f"{_f(v['latency_median_s'], ' s')} / {_f(v['latency_p95_s'], ' s')} | {all_det} | {v['wrong_propeller_alerts']} ({v.get('wrong_propeller_suspects', '-')}) | "
-                f"{v['alerts_before_onset']} | {pair} | {contains} | {v.get('set_alerts', '-')} |"
-            )
+    lines += ["| " + " | ".join(cells) + " |" for cells in rows(r)]
     lines += ["", "Simulators: " + "; ".join(f"{k}: {v}" for k, v in r["simulators"].items() if k in r["rows"])]
     if "healthy_hours" in r:
-        lines += [
-            "",
-            "Healthy hours (classified: from each flight's first full classifier window, the hours the rates are per): "
-            + "; ".join(
-                f"{sim}: {h['flights']} flights, {h['flown_h']} h flown, {h['classified_h']} h classified "
-                f"(asked: {h['asked_classified_h']} h)"
-                for sim, h in r["healthy_hours"].items()
-            ),
-        ]
+        lines += ["", hours_line(r)]
     return "\n".join(lines)
 
 

@@ -153,8 +153,10 @@ def write_card(path: str | Path, manifest: dict, results: list[Result], tables: 
         "",
         "Precision/recall are fault-vs-normal (label 1 vs any other), positive = fault, as in the paper.",
         "",
-        "## Onboard figures (daemon alert rule: "
-        f"P >= {rule['threshold']} for {rule['consecutive']} windows, refractory {rule['refractory_s']} s)",
+        "## Onboard figures of the window rule "
+        f"(P >= {rule['threshold']} for {rule['consecutive']} windows, refractory {rule['refractory_s']} s)",
+        "The daemon's rule before the decision layer, measured when this model was built on our simulator's shifted "
+        'flights; what the daemon alerts on now, on both simulators: "Alert decisions on both simulators" below.',
         f"- False alarms: {fa['alarms']} in {fa['classified_hours']:.2f} h of healthy shifted flights "
         f"({fa['flights']} flights) = **{fa['alarms_per_hour']:.2f} per flight-hour**; "
         f"{100 * fa['windows_over_threshold']:.3f} % of (window, propeller) scores were over the threshold.",
