@@ -310,6 +310,11 @@ def pair_statistic(cfg: DecisionConfig) -> dict:
     return {"form": "yaw-balance-cusum-v1", "min_thrust_loss": cfg.min_thrust_loss, **noise}
 
 
+def _clip_llr(llr: np.ndarray) -> np.ndarray:
+    """np.clip(llr, -LLR_CLIP, LLR_CLIP), NaN kept, without np.clip's Python-level wrappers (every window)."""
+    return np.minimum(np.maximum(llr, -LLR_CLIP), LLR_CLIP)
+
+
 def window_llr(fault_probability) -> np.ndarray:
     """Clipped per-propeller log-likelihood ratio of one window (NaN -> 0: no evidence)."""
     out = np.zeros(N_PROPS)
@@ -541,7 +546,7 @@ class RotorShare:
         if rpm is None:
             return
         w2 = np.asarray(rpm, dtype=np.float64) ** 2
-        m = w2.mean()
+        m = w2.sum() / w2.size  # w2.mean() bit for bit, without its wrapper: this runs at every step
         if not (np.isfinite(w2).all() and m > 0):
             self._n = self._yn = 0  # a gap: the window starts again
             return
@@ -549,7 +554,8 @@ class RotorShare:
         self._ring[self._i] = share
         self._i = (self._i + 1) % self.window
         self._n += 1
-        self._yring[self._yi] = 0.5 * (share[0] + share[1] - share[2] - share[3])
+        s1, s2, s3, s4 = share.tolist()  # Python floats: the same double arithmetic as numpy scalars, cheaper
+        self._yring[self._yi] = 0.5 * (s1 + s2 - s3 - s4)
         self._yi = (self._yi + 1) % self.yaw_window
         self._yn += 1
 
@@ -563,7 +569,7 @@ class RotorShare:
         self.yaw_llr = np.zeros(len(SAME_SPIN_PAIRS))
         if self._n < self.window:
             return None
-        m = self._ring.mean(axis=0)
+        m = self._ring.sum(axis=0) / self.window  # the ring's mean, bit for bit (see push)
         x = _YAW_FREE @ m
         y = float(_Y @ m)  # the baseline's share of the yaw balance: over BASELINE_S like the shares'
         if self.baseline is None:
@@ -581,14 +587,14 @@ class RotorShare:
         if quiet:
             self.baseline = self.baseline + d * k
         if self._yn >= self.yaw_window:
-            dy = float(self._yring.mean()) - self.yaw_baseline
+            dy = float(self._yring.sum() / self.yaw_window) - self.yaw_baseline
             if quiet if yaw_quiet is None else yaw_quiet:
                 self.yaw_baseline += dy * k
             # Two one-sided tests of the yaw balance: the CCW pair's shares up (+dy) or the CW pair's (-dy).
             yd, ys = self.yaw_delta, self.yaw_sigma
-            self.yaw_llr = np.clip(np.array([yd * (dy - yd / 2), yd * (-dy - yd / 2)]) / ys**2, -LLR_CLIP, LLR_CLIP)
+            self.yaw_llr = _clip_llr(np.array([yd * (dy - yd / 2), yd * (-dy - yd / 2)]) / ys**2)
         llr = self.delta * (d - self.delta / 2) / self.sigma**2
-        return np.clip(llr, -LLR_CLIP, LLR_CLIP)
+        return _clip_llr(llr)
 
 
 # -- vibration --------------------------------------------------------------------------------

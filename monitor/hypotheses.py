@@ -185,7 +185,7 @@ class FlightSets:
         """``add``, with the set worked out only when something reads it (an alert's wording, 20 windows a
         second that are mostly never read). The recent windows are copied now, so it is the set ``add`` gives."""
         p = np.asarray(label_probability, dtype=np.float64)
-        if self.threshold is None or p.shape != (N_LABELS,) or not np.all(np.isfinite(p)):
+        if self.threshold is None or p.shape != (N_LABELS,) or not np.isfinite(p).all():
             return None
         self._ring[self._head] = p
         self._head = (self._head + 1) % len(self._ring)

@@ -197,3 +197,12 @@ def test_statustext_wording():
     assert statustext("fault", [(1,), (1, 2)]) == "PROP 1 or 1+2?"
     long = statustext("fault", [(1,), (1, 2), (1, 3), (1, 4), (1, 2, 3), (1, 2, 4), (1, 3, 4), (1, 2, 3, 4)])
     assert len(long) <= 50 and long.startswith("PROP 1 or 1+2") and long.endswith("?")
+
+
+def test_the_per_window_clip_is_np_clip_bit_for_bit():
+    # RotorShare clips with minimum/maximum (cheaper per window): the same values as np.clip, NaN and -0.0 included.
+    from monitor.decision import LLR_CLIP, _clip_llr
+
+    x = np.array([np.nan, -np.inf, np.inf, -0.0, 0.0, LLR_CLIP, -LLR_CLIP, 1e300, -1e300, 0.3, -7.25])
+    expected = np.clip(x, -LLR_CLIP, LLR_CLIP)
+    assert _clip_llr(x).tobytes() == expected.tobytes()

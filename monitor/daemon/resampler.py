@@ -81,6 +81,10 @@ class StreamingHold:
 
     def reset(self) -> None:
         self._streams = {k: _Stream(s) for k, s in self.specs.items()}
+        # What _is_final reads at every sample, worked out once: the pacing streams, and the boot time past an
+        # instant after which it is final whatever they hold.
+        self._pacing = [s for s in self._streams.values() if s.spec.paces]
+        self._horizon_us = max((s.spec.max_age_us for s in self._pacing), default=0) + self.reorder_us
         self.next_g: int | None = None
         self.last_emitted: int | None = None
         self.clock_us: int | None = None
@@ -113,10 +117,10 @@ class StreamingHold:
         return self._emit(final_only=False)
 
     def _is_final(self, g: int) -> bool:
-        horizon = max(s.spec.max_age_us for s in self._streams.values() if s.spec.paces) + self.reorder_us
-        if self.clock_us is not None and self.clock_us >= g + horizon:
+        if self.clock_us is not None and self.clock_us >= g + self._horizon_us:
             return True
-        return all(s.last_t is not None and s.last_t > g + self.reorder_us for s in self._streams.values() if s.spec.paces)
+        after = g + self.reorder_us
+        return all(s.last_t is not None and s.last_t > after for s in self._pacing)
 
     def _emit(self, final_only: bool) -> list[GridStep]:
         out: list[GridStep] = []
