@@ -133,14 +133,18 @@ class Region:
 
 
 def region_of(path: Path, clf: Classifier, vehicle) -> Region:
-    ds = load_dataset(path)
+    return region_from_dataset(load_dataset(path), path.stem, clf, vehicle)
+
+
+def region_from_dataset(ds: FaultDataset, name: str, clf: Classifier, vehicle) -> Region:
+    """A region's per-flight inputs of every score (classifier, moment balance, airframe check, ω²-share)."""
     ds.check_model(clf.info.metadata["vehicle"]["name"], clf.info.sample_rate_hz, clf.info.features)
     base, check = Priors(), Priors().for_airframe_check()
     ll, ll_u, check_n, check_u = physics_log_likelihoods(
         ds, vehicle, base, base.with_unmeasured_airframe(), check, check.with_unmeasured_airframe()
     )
     return Region(
-        name=path.stem,
+        name=name,
         truth=truth_labels(ds),
         label_probability=classifier_probabilities(ds, clf),
         log_likelihood=ll,
