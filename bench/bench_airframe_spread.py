@@ -25,20 +25,9 @@ from monitor.model import Classifier  # noqa: E402
 from monitor.vehicle import DEFAULT_VEHICLE, load_vehicle  # noqa: E402
 from offline.classifier.conformal import measure_with_check, region_from_dataset, share_singles  # noqa: E402
 from offline.dataset.generate import DatasetSpec, generate  # noqa: E402
-from offline.sim.assumptions import AIRFRAME_TERMS, REGISTER, nominal_airframe  # noqa: E402
+from offline.sim.assumptions import scaled_airframe  # noqa: E402
 
 SCALES = (0.0, 0.25, 0.5, 1.0)
-
-
-def scaled_airframe(scale: float):
-    """The register with every airframe term's range scaled about its nominal value (0: nominal, 1: the register)."""
-    if scale == 0.0:
-        return nominal_airframe()
-    reg = REGISTER
-    for name in AIRFRAME_TERMS:
-        a = REGISTER[name]
-        reg = reg.with_range(name, a.nominal + scale * (a.low - a.nominal), a.nominal + scale * (a.high - a.nominal))
-    return reg
 
 
 def main(argv=None) -> int:

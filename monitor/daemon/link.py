@@ -241,7 +241,7 @@ class Link:
             if self.is_tcp:  # readable and empty: the peer closed the connection
                 raise ConnectionError(f"{self.url}: connection closed by the peer")
             return []
-        return [(m, received, received) for m in self._parse(data, received)]
+        return [(m, received, received) for m in self._parse(data)]
 
     def _read_datagrams(self) -> list[tuple[Any, float, float]]:
         """Every datagram waiting on the udpin socket, in order; the sender's address is checked and never
@@ -265,13 +265,13 @@ class Link:
                 self.rejected["peers forgotten"] += 1
             if not data:
                 continue
-            for m in self._parse(data, received):
+            for m in self._parse(data):
                 self._origin[id(m)] = addr
                 out.append((m, received, read_s))
         self.drained = False
         return out
 
-    def _parse(self, data: bytes, received: float) -> list[Any]:
+    def _parse(self, data: bytes) -> list[Any]:
         """The messages in ``data`` (BAD_DATA for what does not parse), signature and source checks applied."""
         self.bytes_in += len(data)
         if self.conn.first_byte:

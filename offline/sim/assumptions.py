@@ -493,9 +493,15 @@ AIRFRAME_TERMS = (
 
 def nominal_airframe(register: AssumptionRegister = REGISTER) -> AssumptionRegister:
     """``register`` with the airframe's own terms (``AIRFRAME_TERMS``) at their nominal values."""
+    return scaled_airframe(0.0, register)
+
+
+def scaled_airframe(scale: float, register: AssumptionRegister = REGISTER) -> AssumptionRegister:
+    """``register`` with every airframe term's range scaled about its nominal value: 0 the airframe as its file
+    says, 1 the register's own (an airframe nobody measured)."""
     for name in AIRFRAME_TERMS:
-        nominal = register[name].nominal
-        register = register.with_range(name, nominal, nominal)
+        a = register[name]
+        register = register.with_range(name, a.nominal + scale * (a.low - a.nominal), a.nominal + scale * (a.high - a.nominal))
     return register
 
 
