@@ -6,7 +6,7 @@ STAMP := $(VENV)/.installed
 DATA ?= ../shared/data
 OUT ?= out
 
-.PHONY: setup demo test lint bench models propellers classifier crazypad clean calibrate-physics evaluate-physics dataset-randomised card card-text calibrate-alerts evaluate-alerts
+.PHONY: setup demo test lint bench models propellers classifier crazypad clean calibrate-physics evaluate-physics dataset-randomised card card-text calibrate-alerts evaluate-alerts evaluate-torque-sign
 
 $(STAMP): pyproject.toml
 	$(PY) -m venv $(VENV)
@@ -108,6 +108,11 @@ calibrate-alerts: $(STAMP)
 
 evaluate-alerts: $(STAMP)
 	$(BIN)/python -m offline.alerts.evaluate --out $(OUT)/alerts $(ALERT_ARGS)
+
+# Issue 12's torque-sign check: the damaged blade's torque-per-thrust change up (+2..+10 %) vs down (-10..-2 %),
+# 192 singles each; fails when the shipped system's single-propeller accuracy moves by more than 2 points (~6 min).
+evaluate-torque-sign: $(STAMP)
+	$(BIN)/python bench/bench_torque_sign.py --flights-per-label 48 --check
 
 clean:
 	rm -rf $(VENV) $(OUT) .pytest_cache

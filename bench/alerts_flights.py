@@ -71,10 +71,11 @@ def replay_listing(f, d: Decision) -> list[dict]:
 
 def share_spread(flights) -> dict:
     """Yaw-free omega^2 share (mean over SHARE_AVERAGE_S) and the yaw balance y = (s1 + s2 - s3 - s4) / 2 (mean
-    over YAW_AVERAGE_S) minus the flight's first 10 s: pooled std and tails of each."""
+    over YAW_AVERAGE_S) minus the flight's first 10 s: pooled std and tails of each; and the largest rise of one
+    rotor's yaw-free share over YAW_AVERAGE_S (what words a yaw-balance alert: monitor.decision.YAW_FREE_RISE)."""
     from monitor.decision import _Y, _YAW_FREE, BASELINE_S, SHARE_AVERAGE_S, YAW_AVERAGE_S
 
-    devs, ydevs = [], []
+    devs, ydevs, rises = [], [], []
     for f in flights:
         w2 = f.motor_rpm**2
         sh = w2 / w2.mean(axis=1, keepdims=True)
@@ -87,6 +88,8 @@ def share_spread(flights) -> dict:
         ny = int(round(YAW_AVERAGE_S * f.rate_hz))
         y = ((c[ny:] - c[:-ny]) / ny) @ _Y  # the decision's yaw balance: mean over YAW_AVERAGE_S
         ydevs.append(y[n0:] - (m[:n0] @ _Y).mean())
+        x10 = ((c[ny:] - c[:-ny]) / ny) @ _YAW_FREE.T
+        rises.append((x10[n0:] - x[:n0].mean(axis=0)).max(axis=1))
 
     def spread(devs):
         d = np.abs(np.concatenate(devs))
@@ -98,7 +101,9 @@ def share_spread(flights) -> dict:
             ).tolist(),
         }
 
-    return {"flights": len(flights), **spread(devs), "yaw_balance": spread(ydevs)}
+    r = np.concatenate(rises)
+    rise = {q: round(float(np.quantile(r, q)), 4) for q in (0.5, 0.9, 0.99, 0.999)}
+    return {"flights": len(flights), **spread(devs), "yaw_balance": spread(ydevs), "largest_yaw_free_rise_10s": rise}
 
 
 def main(argv=None) -> int:

@@ -126,6 +126,24 @@ def test_by_default_the_network_alone_raises_suspect_never_fault():
         DecisionConfig(fault_evidence="network")
 
 
+def test_suspect_evidence_physics_lets_the_network_raise_nothing_and_gives_its_rate_to_the_shares():
+    # The same confidently-wrong network as above, with alerts.suspect_evidence: physics: no NOTICE at all. The
+    # suspect rate is then shared by the two physics statistics, not four, so their suspect thresholds are lower.
+    def p(t):
+        return np.array([0.01, 0.02, 0.999 if t >= 42.5 else 0.01, 0.01])
+
+    cfg = DecisionConfig(suspect_evidence="physics")
+    assert fly(analytic(cfg), p, 70.0) == []
+    both, physics = analytic().thresholds, analytic(cfg).thresholds
+    assert math.isinf(physics.suspect["absolute"]) and math.isinf(physics.suspect["change"])
+    assert physics.suspect["physics"] < both.suspect["physics"] and physics.suspect["pair"] < both.suspect["pair"]
+    assert physics.fault == both.fault  # the fault level is not touched
+    with pytest.raises(ConfigError, match="suspect_evidence"):
+        DecisionConfig(suspect_evidence="network")
+    with pytest.raises(ConfigError, match="suspect_evidence"):
+        DecisionConfig(fault_evidence="all", suspect_evidence="physics")
+
+
 def test_omega2_share_rise_alerts_without_the_network():
     # Rotor 2 loses thrust at 40 s: the controller spins it 4 % faster (omega^2 +8 %); the network sees nothing.
     rng = np.random.default_rng(0)

@@ -111,6 +111,36 @@ def test_flight_sets_word_the_daemons_alerts_as_the_flights_hypotheses():
     assert [h for h, _ in sets.add(q / q.sum())] == [()]
 
 
+def test_a_fault_raised_by_physics_is_worded_by_physics_not_by_the_networks_set():
+    # The default (fault_evidence "physics"): rotor 2's omega^2 share rises by 10 % (a thrust loss) while the network,
+    # confidently wrong on an airframe it never saw, words the flight {2, 3}. The FAULT, raised by the shares, says
+    # PROP 2 (the shares' rotor); the network's set stays in the event's hypotheses, and words its own NOTICE.
+    from monitor.decision import Decision, DecisionConfig, StepInputs, WindowEvidence
+    from monitor.hypotheses import FlightSets, SetRule
+
+    sets = FlightSets(SetRule("classifier", 0.3, 0.95, 160, thresholds=(("classifier", 0.3),)))
+    p = np.full(16, 0.001)
+    p[8] = 1.0  # label 9 = {2, 3}
+    p /= p.sum()
+    d = Decision(DecisionConfig(), 20.0, 100, use_stored_calibration=False)
+    rng = np.random.default_rng(0)
+    ann = []
+    for j in range(1600):
+        t = (j + 1) / 20.0
+        w2 = np.ones(4) + (0.10 * (np.eye(4)[1] - 0.25) if t >= 40.0 else 0.0)
+        rpm = 6500.0 * np.sqrt(w2 * (1.0 + 0.01 * rng.standard_normal(4)))
+        d.step(t, StepInputs(True, float(rpm.mean()), 0.02, 0.05, 15.5, rpm))
+        if j >= 99:
+            fp = np.array([0.01, 0.999, 0.999, 0.01]) if t >= 40.0 else np.full(4, 0.01)
+            hyps = sets.add(p) if t >= 40.0 else None
+            ann += d.window_evidence(t, WindowEvidence(fp, p, hypotheses=hyps))
+    fault = [a for a in ann if a.level == "fault"]
+    assert fault and fault[0].propellers == (2,) and fault[0].text.startswith("PROP 2 FAULT"), [a.text for a in ann]
+    assert [h["faulty_propellers"] for h in fault[0].event()["hypotheses"]] == [[2, 3]]
+    notices = [a for a in ann if a.level == "suspect"]
+    assert any(a.text == "PROP 2+3 SUSPECT" for a in notices), [a.text for a in notices]
+
+
 def test_sparsity_prior_names_the_single_rotor_where_physics_cannot_split_it_from_a_triple():
     # {1} (label 2) and {1, 3, 4} (label 14) differ only through the unmeasured torque change: equal evidence.
     p = np.full(16, 0.01)

@@ -161,6 +161,7 @@ class AlertConfig:
     battery_sag_fraction: float = 0.04  # voltage lost within one window that discounts evidence
     min_thrust_loss: float = 0.08  # the smallest per-rotor thrust loss the omega^2-share evidence calls (CUSUM reference)
     fault_evidence: str = "physics"  # "physics": only the omega^2 shares raise FAULT (the network: suspect); "all"
+    suspect_evidence: str = "all"  # "physics": the network raises nothing, not even SUSPECT (it only words); "all"
     calibration_path: str = ""  # '' = models/decision-calibration.json (threshold calibration of the model)
     # Consecutive rule. Threshold and run length chosen on the shipped classifier (bc948c1) over simulated flights on random
     # routes: 8 healthy x 80 s (0.165 flight-hours) and 8 single-propeller faults (bent/cracked, each rotor).
@@ -194,6 +195,7 @@ class AlertConfig:
             battery_sag_fraction=self.battery_sag_fraction,
             min_thrust_loss=self.min_thrust_loss,
             fault_evidence=self.fault_evidence,
+            suspect_evidence=self.suspect_evidence,
             calibration_path=self.calibration_path,
         )
 

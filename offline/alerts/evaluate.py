@@ -239,6 +239,9 @@ def main(argv=None) -> int:
         "today: P >= 0.9 for 20 windows": consecutive_rule(AlertConfig(threshold=0.9, consecutive=20)),
         "PX4 imbalanced-prop metric (FD_IMB_PROP_THR 30)": px4_rule(),
     }
+    if cfg.suspect_evidence == "all":  # the configurable alternative: the network raises nothing, it only words
+        physics_suspects = dataclasses.replace(cfg, suspect_evidence="physics")
+        rules["the same with alerts.suspect_evidence: physics"] = decision_rule(physics_suspects, calibration, use_stored=False)
     if calibration is not None:  # ablation: the same rule with the network's statistics off (omega^2 shares alone)
         share_only = Calibration({**calibration.fits, "absolute": None, "change": None}, *_rest(calibration))
         rules["ablation: decision on omega^2 shares alone (network off)"] = decision_rule(cfg, share_only, use_stored=False)
