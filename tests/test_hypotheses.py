@@ -212,6 +212,15 @@ def test_choose_takes_the_weakest_prior_whose_singles_match_the_share_baseline()
     assert choose(none_ok)["sparsity_prior"] == 0.1  # nothing qualifies: the strongest prior tried
 
 
+def test_conformal_cli_refuses_a_sparsity_prior_outside_0_1_before_reading_anything(tmp_path, capsys):
+    from offline.classifier.conformal import main
+
+    for bad in ("0", "1.5", "-0.1"):
+        with pytest.raises(SystemExit) as exc:
+            main(["--data", str(tmp_path / "missing.npz"), "--sparsity-prior", bad, "--dry-run"])
+        assert exc.value.code == 2 and "--sparsity-prior must be in (0, 1]" in capsys.readouterr().err
+
+
 def test_flight_sets_word_an_onset_from_the_recent_windows_not_the_healthy_minutes_before():
     from monitor.hypotheses import FlightSets, SetRule
 

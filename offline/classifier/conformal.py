@@ -244,14 +244,22 @@ def measure_with_check(r: Region, score: str, rho: float, threshold: float, chec
     return {"flights": m.pop("flights"), "flagged": float(np.mean(flag)), **m}
 
 
-def calibrate(model: Path, data: list[Path], checks: list[Path], coverage: float, log=print, unmeasured: list[Path] = ()) -> dict:
+def calibrate(
+    model: Path,
+    data: list[Path],
+    checks: list[Path],
+    coverage: float,
+    log=print,
+    unmeasured: list[Path] = (),
+    sparsity_grid: tuple[float, ...] = SPARSITY_GRID,
+) -> dict:
     clf = Classifier(model)
     vehicle = load_vehicle(DEFAULT_VEHICLE)
     regions = [region_of(p, clf, vehicle) for p in data]
     for r in regions:
         s = share_singles(r)
         log(f"{r.name}: {len(r.truth)} flights, ω²-share singles {'-' if s is None else f'{100 * s:.1f} %'}")
-    cands = [candidate(regions, s, rho, coverage) for rho in SPARSITY_GRID for s in SCORES]
+    cands = [candidate(regions, s, rho, coverage) for rho in sparsity_grid for s in SCORES]
     for c in cands:
         log(
             f"{c['score']:30s} rho {c['sparsity_prior']:<5g} threshold {c['threshold']:.5f} "
@@ -335,8 +343,18 @@ def main(argv: list[str] | None = None) -> int:
     )
     p.add_argument("--coverage", type=float, default=0.95, help="target coverage (default 0.95)")
     p.add_argument("--dry-run", action="store_true", help="print the figures, write nothing")
+    p.add_argument(
+        "--sparsity-prior",
+        type=float,
+        default=None,
+        help="fix rho instead of choosing it from the grid (to compare models at one prior; the selection rule still "
+        "picks the score)",
+    )
     a = p.parse_args(argv)
-    res = calibrate(a.model, a.data, a.check, a.coverage, unmeasured=a.unmeasured)
+    if a.sparsity_prior is not None and not 0.0 < a.sparsity_prior <= 1.0:
+        p.error(f"--sparsity-prior must be in (0, 1], got {a.sparsity_prior}")
+    grid = SPARSITY_GRID if a.sparsity_prior is None else (a.sparsity_prior,)
+    res = calibrate(a.model, a.data, a.check, a.coverage, unmeasured=a.unmeasured, sparsity_grid=grid)
     if a.dry_run:
         return 0
     manifest = make_manifest("hypothesis-set-rule", {"model": str(a.model), "coverage": a.coverage}, None, **res)
