@@ -327,7 +327,7 @@ def _thresholds(cfg: DecisionConfig, window_s: float, rates: dict, model_sha256,
 def physics_statistic(cfg: DecisionConfig) -> dict:
     """What a physics-statistic calibration holds for: its thresholds mean nothing for another reference or noise model."""
     return {
-        "form": "share-cusum-v2",
+        "form": "share-cusum-v3",  # v3: the baseline spans BASELINE_S of evidence windows, not of flight
         "min_thrust_loss": cfg.min_thrust_loss,
         "share_sigma": SHARE_SIGMA,
         "share_average_s": SHARE_AVERAGE_S,
@@ -337,7 +337,7 @@ def physics_statistic(cfg: DecisionConfig) -> dict:
 def pair_statistic(cfg: DecisionConfig) -> dict:
     """What a pair-statistic calibration holds for (reference and noise model of the yaw balance)."""
     noise = {"yaw_sigma": YAW_SIGMA, "yaw_average_s": YAW_AVERAGE_S}
-    return {"form": "yaw-balance-cusum-v1", "min_thrust_loss": cfg.min_thrust_loss, **noise}
+    return {"form": "yaw-balance-cusum-v2", "min_thrust_loss": cfg.min_thrust_loss, **noise}  # v2: its baseline as the shares'
 
 
 def _clip_llr(llr: np.ndarray) -> np.ndarray:
@@ -539,7 +539,7 @@ class RotorShare:
     no training; against the airframe's own baseline it is blind to CG
     offsets and motor spread (issue 12's baseline names 24 of 24 that way).
 
-    Baseline: the mean over the first ``BASELINE_S`` of full windows, then an
+    Baseline: the mean over the first ``BASELINE_S`` of evidence windows (held ones do not count), then an
     exponential average (time constant ``SHARE_BASELINE_TAU_S``) fed only while
     no evidence is gathering (``quiet``), so slow drifts (battery sag) are
     absorbed and a step is not.
@@ -564,6 +564,7 @@ class RotorShare:
         self._i = 0
         self._n = 0
         self._base: list[np.ndarray] = []
+        self._base_s = 0.0  # seconds of evidence windows the baseline has seen (held windows are not evidence)
         self.baseline: np.ndarray | None = None
         # The yaw balance (pair statistic): y = (s1 + s2 - s3 - s4) / 2, mean over YAW_AVERAGE_S, against its baseline.
         self.yaw_delta = min_thrust_loss
@@ -582,6 +583,7 @@ class RotorShare:
         self._sring[:] = np.nan
         self._n = self._yn = 0
         self._base, self.baseline, self.yaw_baseline = [], None, None
+        self._base_s = 0.0
 
     def push(self, rpm: np.ndarray | None) -> None:
         if rpm is None:
@@ -622,7 +624,11 @@ class RotorShare:
         y = float(_Y @ m)  # the baseline's share of the yaw balance: over BASELINE_S like the shares'
         if self.baseline is None:
             self._base.append(np.append(x, y))
-            if (self._n - self.window) / self.rate_hz >= BASELINE_S and len(self._base) >= 3:
+            self._base_s += dt_s
+            # BASELINE_S of windows that were evidence, not of flight: windows held for a manoeuvre never reach
+            # here, and a baseline finalised on the half second after a hold took a transient for the airframe's
+            # trim (session 7: a false rotor-2 fault 14 s before an onset, from 10 windows after a 7-s hold).
+            if self._base_s >= BASELINE_S and len(self._base) >= 3:
                 self.baseline = np.mean(self._base, axis=0)[:N_PROPS]
                 # The yaw balance's own mean over the last YAW_AVERAGE_S (its 2-s means scatter by 0.05)
                 self.yaw_baseline = float(

@@ -149,3 +149,31 @@ def test_replayed_onset_raises_suspect_then_fault_on_the_right_propeller():
     alerts = replay_decision(f, Decision(DecisionConfig(), f.rate_hz, f.window))
     assert [lvl for _, lvl, _ in alerts] == ["suspect", "fault"] and all(p == (4,) for _, _, p in alerts), alerts
     assert f.onset_s < alerts[0][0] and alerts[1][0] - f.onset_s <= 10.0
+
+
+def test_the_share_baseline_spans_ten_seconds_of_evidence_not_the_half_second_after_a_hold():
+    # An airframe whose CG puts rotor 1's yaw-free share 0.08 up (rotor 2's down) in steady flight. A manoeuvre
+    # beyond the training envelope (tilt 60 deg, 5-12 s) holds every window until 17 s; the recovery leaves the
+    # shares at 0.11 until 19 s. A baseline finalised on the first windows after the hold would read the transient
+    # as the trim, and rotor 2 (0.03 above it from then on: beyond the reference, half the shift of an 8 % loss)
+    # would be called faulty within seconds. Over 10 s of evidence windows it reads the trim, and nothing is raised.
+    rng = np.random.default_rng(7)
+
+    def rpm(t):
+        offset = 0.11 if 12.0 <= t < 19.0 else 0.08
+        return HOVER_RPM * shares(offset) * (1.0 + 0.002 * rng.standard_normal(4))
+
+    d = analytic()
+    out = []
+    for j in range(int(90 * RATE_HZ)):
+        t = (j + 1) / RATE_HZ
+        r = rpm(t)
+        tilt = math.radians(60.0) if 5.0 <= t < 12.0 else 0.05
+        d.step(t, StepInputs(True, float(np.mean(r)), tilt, 0.1, 15.5, r))
+        if j >= WINDOW - 1:
+            out += d.window_evidence(t, WindowEvidence(np.full(4, 0.01)))
+        if t == 20.0:
+            assert d.share.baseline is None  # 3 s of evidence windows since the hold, not 10
+    assert d.regime.counts["aggressive"] >= 1
+    assert out == [], [(a.t_s, a.text) for a in out]
+    assert abs(d.share.baseline[0] - 0.08) < 0.02  # the trim, not the recovery transient
