@@ -290,6 +290,7 @@ def thresholds(
 
 
 def _thresholds(cfg: DecisionConfig, window_s: float, rates: dict, model_sha256, calibration) -> Thresholds:
+    """Every statistic's threshold at each level's per-statistic rate (``rates``): calibrated or Wald's bound."""
 
     def wald(st: str, r: float) -> float:
         # The share statistics count nats per independent sample (SHARE_AVERAGE_S of shares), the others nat-seconds;
