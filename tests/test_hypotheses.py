@@ -209,7 +209,14 @@ def test_choose_takes_the_weakest_prior_whose_singles_match_the_share_baseline()
     best = choose(cands)
     assert (best["score"], best["sparsity_prior"]) == ("moment balance", 0.3)
     none_ok = [c("classifier", 1.0, 2.0, False), c("classifier", 0.1, 3.0, False)]
-    assert choose(none_ok)["sparsity_prior"] == 0.1  # nothing qualifies: the strongest prior tried
+    assert choose(none_ok)["sparsity_prior"] == 0.1  # nothing qualifies, no shortfall known: the strongest prior tried
+    # nothing qualifies: the prior whose singles fall least below the share (then the weakest such prior), not the
+    # strongest, which may cost far wider sets for no gain in singles
+    short = [
+        {**c("classifier x moment balance", r, size, False), "worst_singles_shortfall": f}
+        for r, size, f in ((1.0, 2.7, 0.15), (0.3, 3.4, 0.05), (0.1, 4.7, 0.05), (0.03, 6.8, 0.08))
+    ]
+    assert choose(short)["sparsity_prior"] == 0.3
 
 
 def test_conformal_cli_refuses_a_sparsity_prior_outside_0_1_before_reading_anything(tmp_path, capsys):
