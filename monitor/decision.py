@@ -985,7 +985,7 @@ class Decision:
         rank = LEVELS.index(level)
         core = tuple(i + 1 for i in range(N_PROPS) if LEVELS.index(self.level[i]) >= rank)
         if not core and LEVELS.index(self.pair_level) >= rank:  # physics raised it: physics words it
-            return list(self._pair_sets or self._yaw_alone_sets())
+            return list(self._pair_sets)  # set in _levels whenever the pair level rises
         # The network's recent set words a level the network may raise (alerts.suspect_evidence / fault_evidence
         # "all"); a level only physics raises is worded by physics (the evaluation of issue 13 scores that wording).
         network_raises = "absolute" in (self._fault_statistics if level == "fault" else self._suspect_statistics)
