@@ -74,6 +74,12 @@ class Vehicle:
         return f"{p} ({names[p - 1]})" if names and names[p - 1] != str(p) else str(p)
 
 
+def _probability(h: dict) -> str:
+    """A hypothesis' probability, or what stands instead (the in-flight rule ranks its sets without weighing them)."""
+    p = h.get("probability")
+    return f"{float(p):.3f}" if p is not None else html.escape(str(h.get("evidence") or h.get("cause") or "-"))
+
+
 def effectiveness_trends(flights: list[dict]) -> list[tuple[int, float, int]]:
     """(propeller, fitted drop, flights used) for each rotor whose effectiveness trends down by TREND_DROP or more."""
     eff = [f["rotor_effectiveness"] for f in flights if f["rotor_effectiveness"] is not None][-TREND_FLIGHTS:]
@@ -299,8 +305,7 @@ def flight_page(f: dict, v: Vehicle) -> str:
             body += (
                 "<h2>Hypotheses</h2><table><tr><th>faulty propellers</th><th>probability</th></tr>"
                 + "".join(
-                    f"<tr><td>{e(str(h.get('faulty_propellers')))}</td><td class='num'>{float(h.get('probability', 0)):.3f}</td></tr>"
-                    for h in hyp
+                    f"<tr><td>{e(str(h.get('faulty_propellers')))}</td><td class='num'>{_probability(h)}</td></tr>" for h in hyp
                 )
                 + "</table>"
             )

@@ -47,7 +47,10 @@ propellers only ``suspect``. A model without a rule is ``confident`` when the
 label's mean probability is >= 0.9, else ``suspect`` (at least half the
 windows agree on its label) or ``uncertain``. ``decision`` is the onboard daemon's own rule (monitor.decision: a
 CUSUM whose thresholds follow alerts.false_alarms_per_hour) replayed over the
-log: when in the flight it would have said suspect / fault, on which propeller.
+log: when in the flight it would have said suspect / fault, on which propeller. Where it reached fault level,
+the verdict is its answer (``verdict.source`` "in-flight change", ``verdict.change_boot_s``; the whole flight's
+verdict in ``verdict.whole_flight``): a propeller damaged mid-flight is outvoted in a whole-flight mean by the
+healthy part before it, while the rule tests the flight against its own start.
 
 For several LOGs: ``{"results": [one object as above per LOG, in order]}``;
 a log that cannot be read appears as ``{"log": PATH, "error": "..."}``.
@@ -209,6 +212,13 @@ def format_text(d: Diagnosis, baseline=None) -> str:
         if baseline is not None and imb:  # the label (1) is no claim here: say what the imbalance rests on
             lines.append(f"verdict: {what}, from {d.windows} windows: {conf} (the rotors' shares against this airframe's")
             lines[-1] += " healthy baseline; a CG offset and damage were measured alike on its kind of flights)"
+        elif d.verdict.get("source") == "in-flight change":
+            whole = d.verdict["whole_flight"]
+            lines.append(
+                f"verdict: {what}, from the in-flight rule's fault at {d.verdict['change_boot_s']:.1f} s: {conf} "
+                f"(the flight against its own start; the whole flight's {d.windows} windows said "
+                f"{describe_label(whole['label'], names, whole['confidence'])})"
+            )
         else:
             lines.append(
                 f"verdict: {what}, from {d.windows} windows: {conf} (label probability "
@@ -216,9 +226,10 @@ def format_text(d: Diagnosis, baseline=None) -> str:
                 + f"{100 * d.verdict.get('agreeing_windows', float('nan')):.0f} % of windows agree; marked FAULTY from "
                 + f"{d.verdict.get('faulty_probability_required', float('nan')):.2f})"
             )
+        over = " over the whole flight" if d.verdict.get("source") == "in-flight change" else ""
         for p in d.propellers:
             lines.append(
-                f"  {rotor_name(p['name'], p['propeller'])}: P(faulty) = {p['fault_probability']:.3f}"
+                f"  {rotor_name(p['name'], p['propeller'])}: P(faulty{over}) = {p['fault_probability']:.3f}"
                 + (
                     mark
                     if p["faulty"]
@@ -242,7 +253,14 @@ def format_text(d: Diagnosis, baseline=None) -> str:
         lines.append(f"  rotor effectiveness (fraction of nominal thrust, moment balance over {d.physics.windows} x 5 s): {eff}")
         sets = _sets_text(d.physics.hypotheses, names)
         lines.append(("  physics cannot tell apart: " if d.physics.ambiguous else "  physics: ") + sets)
-    if d.hypotheses is not None and d.hypothesis_rule is None:  # an imbalance's causes (monitor.baseline.cg_or_damage)
+    change = d.verdict is not None and d.verdict.get("source") == "in-flight change" and not d.verdict.get("imbalance_rotors")
+    if d.hypotheses is not None and change:
+        what = "cannot tell apart" if len(d.hypotheses) > 1 else "one set"
+        sets = " or ".join(
+            "{" + ", ".join(rotor_name(names[i - 1], i) for i in h["faulty_propellers"]) + "}" for h in d.hypotheses
+        )
+        lines.append(f"  verdict set (the in-flight rule's, most likely first; {what}): {sets}")
+    elif d.hypotheses is not None and d.hypothesis_rule is None:  # an imbalance's causes (monitor.baseline.cg_or_damage)
         lines.append("  cannot tell apart: " + " or ".join(h.get("cause", str(h["faulty_propellers"])) for h in d.hypotheses))
     elif d.hypotheses is not None:
         r = d.hypothesis_rule
@@ -270,6 +288,24 @@ def fuse_verdict(d: Diagnosis, comparison: dict, motor_names, cg_damage_separabl
     if d.verdict is None or d.label_probability is None or "deviation_spreads" not in comparison:
         return
     v = d.verdict
+    if v.get("source") == "in-flight change":
+        # The flight against its own start already answers; the whole-flight shares against the airframe's
+        # healthy flights mix the time before the change in. Where this airframe's flights do not tell a CG
+        # offset from damage, a change is worded as an imbalance all the same (a mass that shifted in flight).
+        comparison["fusion"] = {
+            "rule": "in-flight change: the in-flight rule's verdict stands (baseline not fused)",
+            "classifier_label": v["whole_flight"]["label"],
+            "classifier_confidence": v["whole_flight"]["confidence"],
+            "spreads_required": OUTLIER_SPREADS,
+        }
+        if cg_damage_separable is False and v["faulty_propellers"]:
+            imb = cg_or_damage(v["label"], motor_names)
+            d.hypotheses, d.hypothesis_rule = imb.pop("hypotheses"), None
+            v.update(imb)
+            comparison["fusion"]["rule"] += "; CG offset and damage look alike on this airframe: an imbalance, no fault named"
+            for p in d.propellers:
+                p["faulty"], p["suspect"] = False, p["propeller"] in imb["imbalance_rotors"]
+        return
     f = fuse(comparison["deviation_spreads"], d.label_probability, v["label"], v.get("confidence") == "confident")
     comparison["fusion"] = {
         "rule": f["rule"],

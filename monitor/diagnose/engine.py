@@ -54,6 +54,7 @@ RPM_RATIO_WARN = (0.85, 1.15)
 RPM_RATIO_REFUSE = (0.6, 1.6)
 # The paper's flights are gentle; beyond this attitude the model has not been trained.
 LARGE_ATTITUDE_RAD = np.deg2rad(45.0)
+LARGE_ATTITUDE_MAX_FRACTION = 0.01  # of the airborne time: beyond it, a warning (and no in-flight verdict)
 QUADROTOR = "MAV_TYPE_QUADROTOR"  # the one vehicle type the models are for (pymavlink's MAV_TYPE name)
 RPM_FEATURES = ("rpm_1", "rpm_2", "rpm_3", "rpm_4", "rpm_mean")
 
@@ -193,7 +194,7 @@ def envelope_checks(
     tilt = np.maximum(np.abs(table.roll_rad[air]), np.abs(table.pitch_rad[air]))
     big = float(np.mean(np.nan_to_num(tilt) > LARGE_ATTITUDE_RAD))
     figures["large_attitude_fraction"] = round(big, 4)
-    if big > 0.01:
+    if big > LARGE_ATTITUDE_MAX_FRACTION:
         warnings.append(
             f"{100 * big:.1f} % of the airborne time has roll or pitch beyond 45 deg "
             "(aggressive flight, flip or crash): outside the model's training"
@@ -322,7 +323,27 @@ def diagnose_table(
         "fault_probability": np.round(faults, 5).tolist(),
         "label": (np.argmax(labels, axis=1) + 1).tolist(),
     }
+    apply_in_flight_fault(d, table.motor_names, in_flight_unfit(table, d.envelope))
     return d
+
+
+def in_flight_unfit(table: FlightTable, figures: dict) -> list[str]:
+    """Why the in-flight rule's answer should not be the verdict on this log (empty: it may be).
+
+    The rule's thresholds hold a false-alarm rate on flights like its calibration flights: streams at the
+    grid's rate or faster, RPM inside the model's training envelope, gentle attitudes. A log outside that
+    (another vehicle's 10 Hz DataFlash, a flip) keeps the whole-flight verdict; the rule's alerts stay listed."""
+    why = []
+    rates = table.extras.get("stream_rates_hz") or {}
+    slow = [f"{n} at {r:.1f} Hz" for n, r in rates.items() if 0 < r < 0.9 * table.rate_hz]
+    if slow:
+        why.append(f"streams logged below the {table.rate_hz:g} Hz grid ({', '.join(slow)})")
+    z, ratio = figures.get("rpm_z"), figures.get("rpm_ratio")
+    if (z is not None and z > RPM_Z_WARN) or (ratio is not None and not RPM_RATIO_WARN[0] <= ratio <= RPM_RATIO_WARN[1]):
+        why.append("RPM outside the model's training envelope")
+    if figures.get("large_attitude_fraction", 0.0) > LARGE_ATTITUDE_MAX_FRACTION:
+        why.append(f"more than {100 * LARGE_ATTITUDE_MAX_FRACTION:g} % of the airborne time beyond 45 deg")
+    return why
 
 
 def apply_rule(d: Diagnosis, rule: SetRule, mean_labels: np.ndarray) -> tuple[int, np.ndarray]:
@@ -390,14 +411,85 @@ def replay_decision(
     battery = np.asarray(table.battery_v, dtype=np.float64)
     at = {int(e): k for k, e in enumerate(ends)}
     alerts = []
+    fault = None  # the last window at fault level: {"t_boot_s", "hypothesis_sets"} (a landing later resets the levels)
     for j in range(len(t_s)):
         air = bool(table.airborne[j])
         dec.step(float(t_s[j]), StepInputs(air, mean_rpm[j], tilt[j], rates[j], battery[j], rpm[j]))
         k = at.get(j)
         if k is not None:
             for a in dec.window_evidence(float(t_s[j]), WindowEvidence(faults[k], labels[k])):
-                alerts.append({"t_boot_s": round(a.t_s, 2), "level": a.level, "propellers": list(a.propellers), "text": a.text})
-    return {"alerts": alerts, "final": dec.verdict()}
+                alerts.append(
+                    {
+                        "t_boot_s": round(a.t_s, 2),
+                        "level": a.level,
+                        "propellers": list(a.propellers),
+                        "text": a.text,
+                        "hypothesis_sets": [list(s) for s in a.sets],
+                    }
+                )
+            if "fault" in dec.level or dec.pair_level == "fault":
+                sets = [list(s) for s in dec.hypothesis_sets("fault") if s]
+                if sets:
+                    fault = {"t_boot_s": round(float(t_s[j]), 2), "hypothesis_sets": sets}
+    out = {"alerts": alerts, "final": dec.verdict()}
+    first = next((a for a in alerts if a["level"] == "fault"), None)
+    if fault is not None and first is not None:
+        out["in_flight_fault"] = {"first_fault_boot_s": first["t_boot_s"], "last_fault_boot_s": fault["t_boot_s"], **fault}
+        del out["in_flight_fault"]["t_boot_s"]
+    return out
+
+
+def apply_in_flight_fault(d: Diagnosis, motor_names, unfit: list[str] = ()) -> None:
+    """Where the in-flight rule raised a fault, the verdict is its answer, not the whole flight's.
+
+    The whole-flight verdict weighs every window alike: a propeller damaged half-way through a flight is
+    outvoted by the healthy half before it, and on an airframe unlike its vehicle file the flight's static
+    imbalance looks like damage wherever it is. The in-flight rule tests the flight against its own first
+    10 s of evidence (``monitor.decision``: a change, calibrated to a false-alarm rate on healthy flights of
+    both simulators), so where it reached fault level its sets stand: the verdict is its most likely set,
+    ``hypotheses`` its candidate sets, most likely first (ranked, not weighed: no probability), ``confident``
+    only when it names one set. The whole-flight verdict and its hypotheses stay in ``verdict.whole_flight``
+    (``hypothesis_rule`` is the rule that made those); ``fault_probability`` and ``label_probability`` stay the
+    whole flight's.
+    A flight faulty from take-off shows no change and keeps the whole-flight verdict; so does a log the rule
+    does not fit (``unfit``: why, from ``in_flight_unfit``), with a warning."""
+    change = (d.decision or {}).get("in_flight_fault")
+    if d.verdict is None or not change:
+        return
+    if unfit:
+        d.warnings.append(
+            f"the in-flight rule reached fault level at {change['first_fault_boot_s']:.1f} s "
+            f"({' or '.join('+'.join(map(str, s)) for s in change['hypothesis_sets'])}) but this log is not like the "
+            f"flights its thresholds were calibrated on ({'; '.join(unfit)}): the verdict stays the whole flight's"
+        )
+        return
+    sets = change["hypothesis_sets"]
+    label = label_for(sets[0])
+    conf = "confident" if len(sets) == 1 else "ambiguous"
+    v = d.verdict
+    v["whole_flight"] = {
+        "label": v["label"],
+        "faulty_propellers": v["faulty_propellers"],
+        "confidence": v["confidence"],
+        "hypotheses": d.hypotheses,
+    }
+    v.update(
+        label=label,
+        faulty_propellers=list(LABEL_TABLE[label]),
+        faulty_names=[motor_names[i - 1] for i in LABEL_TABLE[label]],
+        confidence=conf,
+        source="in-flight change",
+        change_boot_s=change["first_fault_boot_s"],
+    )
+    if d.label_probability is not None:  # the whole flight's probability of this label, as for any verdict
+        v["label_probability_of_verdict"] = round(float(d.label_probability[label - 1]), 4)
+    window_labels = d.timeline.get("label") or []
+    if window_labels:
+        v["agreeing_windows"] = round(sum(int(x) == label for x in window_labels) / len(window_labels), 4)
+    d.hypotheses = [{"faulty_propellers": list(s), "evidence": "in-flight change"} for s in sets]
+    for p in d.propellers:
+        bad = p["propeller"] in LABEL_TABLE[label]
+        p["faulty"], p["suspect"] = bad and conf == "confident", bad and conf != "confident"
 
 
 def predict_at(clf: Classifier, feats: np.ndarray, ends: np.ndarray, window: int, batch: int):

@@ -143,7 +143,19 @@ def page(d: Diagnosis, png_name: str) -> str:
         f"<p><b>No verdict:</b> {e(d.reason or '')}</p>"
         if d.verdict is None
         else f"<p><b>Verdict: {e(describe_label(d.verdict['label'], [p['name'] for p in d.propellers], conf))}</b>"
-        f" ({d.windows} windows; {conf}: label probability {d.verdict.get('label_probability_of_verdict', float('nan')):.2f},"
+        + (
+            f" (from the in-flight rule's fault at {d.verdict['change_boot_s']:.1f} s boot time, the flight against its"
+            " own start; over the whole flight: "
+            + e(
+                describe_label(
+                    d.verdict["whole_flight"]["label"], [p["name"] for p in d.propellers], d.verdict["whole_flight"]["confidence"]
+                )
+            )
+            + ")"
+            if d.verdict.get("source") == "in-flight change"
+            else ""
+        )
+        + f" ({d.windows} windows; {conf}: label probability {d.verdict.get('label_probability_of_verdict', float('nan')):.2f},"
         f" {100 * d.verdict.get('agreeing_windows', float('nan')):.0f} % of windows agree)</p><table border=1 cellpadding=4><tr><th>propeller</th><th>PX4 rotor</th>"
         f"<th>P(faulty)</th><th>verdict</th></tr>{rows}</table>"
     )

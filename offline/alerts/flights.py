@@ -136,8 +136,20 @@ def simulate_set(vehicle: VehicleConfig, fs: FlightSet, clf: Classifier, log=pri
     return out
 
 
-def _simulate_randomised(vehicle: VehicleConfig, fs: FlightSet, clf: Classifier, log) -> list[AlertFlight]:
-    """Flights with physics from the assumption register (see the module doc).
+@dataclass(frozen=True)
+class RandomisedChunk:
+    """One simulated chunk of a randomised set: the simulator's log and what each flight of it holds."""
+
+    flog: object  # offline.sim.log.SimLog of len(names) flights
+    phys: list  # each flight's draw from the register
+    cond: np.ndarray  # (n, 4) 0 healthy, 1 bent, 2 cracked (after the onset)
+    onset_s: np.ndarray  # (n,) inf for healthy
+    names: list[str]
+    after: np.ndarray  # (n, 4) each rotor's signature after the switch
+
+
+def randomised_chunks(vehicle: VehicleConfig, fs: FlightSet):
+    """The set's flights, chunk by chunk, as the simulator logged them (``RandomisedChunk``).
 
     Flight i's physics, route and sensor seed depend on (seed, i) only (i counts from ``fs.first_flight``);
     its payload and payload step come from the set's stream (``FlightSet.rng``)."""
@@ -160,7 +172,6 @@ def _simulate_randomised(vehicle: VehicleConfig, fs: FlightSet, clf: Classifier,
     pickup_s = rng.uniform(0.3 * fs.duration_s, 0.7 * fs.duration_s, n)
     step = rng.uniform(*fs.pickup_mass_step, n) * np.where(rng.random(n) < 0.75, 1.0, -1.0)  # 3 in 4 pick up
     wps = routes(spec, first + n, seed=fs.seed)[0][first:]  # flight i's route depends on (seed, i) only
-    out: list[AlertFlight] = []
     for c0 in range(0, n, fs.chunk_flights):
         idx = np.arange(c0, min(n, c0 + fs.chunk_flights))  # into this set's arrays; flight first + i of the seed
         phys = draw_flights(REGISTER, fs.seed, first + idx)
@@ -200,17 +211,24 @@ def _simulate_randomised(vehicle: VehicleConfig, fs: FlightSet, clf: Classifier,
             seed=seeds,
             per_flight=PerFlightTerms.from_flights(phys, vehicle),
         )
-        degraded = degraded_signals(flog, phys)
         names = [
             f"{fs.kind}-r{fs.seed}-{first + i}" + (f"-pickup{step[i]:+.2f}@{pickup_s[i]:.0f}s" if pickup[i] else "") for i in idx
         ]
-        part = _classify(flog, clf, cond[idx], onset[idx], "", signals=degraded, names=names)
+        yield RandomisedChunk(flog, list(phys), cond[idx], onset[idx], names, after)
+
+
+def _simulate_randomised(vehicle: VehicleConfig, fs: FlightSet, clf: Classifier, log) -> list[AlertFlight]:
+    """Flights with physics from the assumption register (see the module doc), classified at every step."""
+    out: list[AlertFlight] = []
+    for ch in randomised_chunks(vehicle, fs):
+        degraded = degraded_signals(ch.flog, ch.phys)
+        part = _classify(ch.flog, clf, ch.cond, ch.onset_s, "", signals=degraded, names=ch.names)
         for b, f in enumerate(part):  # each damaged rotor's loss at its own hover speed (median before the onset)
-            n0 = max(int(min(onset[idx[b]], fs.duration_s) * f.rate_hz), 1)
+            n0 = max(int(min(ch.onset_s[b], fs.duration_s) * f.rate_hz), 1)
             s_hover = np.median(f.motor_rpm[:n0], axis=0) / (vehicle.omega_max_rad_s * RPM_PER_RAD_S)
-            f.thrust_loss = tuple(round(float(1.0 - after[b, p - 1].thrust_factor(s_hover[p - 1])), 4) for p in f.truth)
+            f.thrust_loss = tuple(round(float(1.0 - ch.after[b, p - 1].thrust_factor(s_hover[p - 1])), 4) for p in f.truth)
         out += part
-        log(f"alerts: {fs.kind} seed {fs.seed} (randomised): {len(out)}/{n} flights")
+        log(f"alerts: {fs.kind} seed {fs.seed} (randomised): {len(out)}/{fs.n_flights} flights")
     return out
 
 

@@ -1,0 +1,114 @@
+"""Diagnose on a log whose propeller was damaged mid-flight answers with the in-flight rule, not the whole-flight mean.
+
+The behaviour test uses flights of the evaluation-only simulator (offline/evalsim: RotorPy dynamics, its own
+controller and damage model), which nothing trains or selects on: a propeller on each of the four rotors in
+turn, damaged 25-38 s into an 80 s flight. The whole-flight verdict called three of these four healthy and
+the fourth the wrong rotor (the healthy half outvotes the damaged one); a tool that guesses a rotor passes
+one in four.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import json
+
+import pytest
+from test_diagnose_fixtures import build_model, write_tlog
+from test_diagnose_json_schema import documented, key_paths
+
+from monitor.diagnose.cli import main as diagnose
+from monitor.diagnose.engine import Diagnosis, apply_in_flight_fault
+from monitor.vehicle import REPO_ROOT
+from offline.sim.log import BOOT_OFFSET_US
+
+SHIPPED = REPO_ROOT / "models" / "classifier.onnx"
+
+
+def run(argv) -> tuple[int, dict, str]:
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        code = diagnose([str(a) for a in argv])
+    return code, out.getvalue(), err.getvalue()
+
+
+@pytest.fixture(scope="module")
+def evalsim_onsets(tmp_path_factory):
+    pytest.importorskip("rotorpy")
+    from offline.evalsim.score import load_set
+    from offline.evalsim.sets import write_set
+
+    folder = write_set("onset", tmp_path_factory.mktemp("onset"), flights=4, seed=0)
+    _, truths = load_set(folder)
+    return [(folder / t["file"], t) for t in truths]
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not SHIPPED.is_file(), reason="models/classifier.onnx not built")
+def test_a_propeller_damaged_mid_flight_is_named_on_flights_of_the_other_simulator(evalsim_onsets):
+    doc = documented()
+    for path, truth in evalsim_onsets:
+        assert len(truth["faulty_propellers"]) == 1  # the set's first four flights: rotors 1, 2, 3, 4 alone
+        code, out, _ = run([path, "--json"])
+        res = json.loads(out)
+        v = res["verdict"]
+        assert v["faulty_propellers"] == truth["faulty_propellers"], (path.name, v)
+        assert v["source"] == "in-flight change" and "whole_flight" in v
+        onset_boot_s = BOOT_OFFSET_US / 1e6 + truth["fault_onset_s"]
+        assert onset_boot_s < v["change_boot_s"] < onset_boot_s + 15.0  # after the damage, within 15 s of it
+        assert res["decision"]["in_flight_fault"]["first_fault_boot_s"] == v["change_boot_s"]
+        # the hypotheses are the rule's sets, the verdict's first; the truth is among them
+        sets = [h["faulty_propellers"] for h in res["hypotheses"]]
+        assert sets[0] == v["faulty_propellers"] and truth["faulty_propellers"] in sets
+        assert all(h["evidence"] == "in-flight change" and "probability" not in h for h in res["hypotheses"])
+        assert code == (0 if len(sets) == 1 else 3)
+        undocumented = sorted(key_paths(res) - set(doc))
+        assert not undocumented, f"add these keys to docs/diagnose-json.md: {undocumented}"
+    # the text says where the answer comes from
+    _, text, _ = run([evalsim_onsets[2][0]])
+    assert "from the in-flight rule's fault at" in text and "verdict set (the in-flight rule's" in text
+
+
+def test_a_flight_without_a_fault_level_change_keeps_the_whole_flight_verdict(tmp_path):
+    model = build_model(tmp_path / "toy.onnx")
+    tlog = write_tlog(tmp_path / "f3.tlog", duration_s=12.0, faulty=3, seed=3)
+    _, out, _ = run([tlog, "--model", model, "--json"])
+    res = json.loads(out)
+    assert res["decision"]["alerts"] == [] and "in_flight_fault" not in res["decision"]
+    assert "source" not in res["verdict"] and "whole_flight" not in res["verdict"]
+
+
+def test_the_in_flight_answer_replaces_the_verdict_and_keeps_the_whole_flight_one():
+    d = Diagnosis("x.tlog", {"label": 1, "faulty_propellers": [], "faulty_names": [], "confidence": "ambiguous"}, 50, [])
+    d.propellers = [{"propeller": i, "faulty": False, "suspect": False} for i in range(1, 5)]
+    d.hypotheses = [{"faulty_propellers": [], "probability": 0.6}, {"faulty_propellers": [4], "probability": 0.4}]
+    d.decision = {"alerts": [], "final": {}}
+    apply_in_flight_fault(d, ["1", "2", "3", "4"])
+    assert d.verdict["faulty_propellers"] == [] and "source" not in d.verdict  # no change: nothing moves
+    d.decision["in_flight_fault"] = {"first_fault_boot_s": 40.0, "last_fault_boot_s": 70.0, "hypothesis_sets": [[3], [3, 4]]}
+    apply_in_flight_fault(d, ["1", "2", "3", "4"])
+    v = d.verdict
+    assert (v["label"], v["faulty_propellers"], v["confidence"], v["change_boot_s"]) == (4, [3], "ambiguous", 40.0)
+    assert v["whole_flight"]["faulty_propellers"] == [] and v["whole_flight"]["hypotheses"][1]["faulty_propellers"] == [4]
+    assert [p["suspect"] for p in d.propellers] == [False, False, True, False] and not any(p["faulty"] for p in d.propellers)
+
+
+def test_the_fleet_report_shows_a_ranked_set_without_a_probability():
+    from fleet.report import _probability
+
+    assert _probability({"faulty_propellers": [3], "probability": 0.25}) == "0.250"
+    assert _probability({"faulty_propellers": [3], "evidence": "in-flight change"}) == "in-flight change"
+
+
+LOG171 = REPO_ROOT.parent / "shared" / "data" / "ardupilot_log171" / "log171.bin"
+
+
+@pytest.mark.skipif(not (LOG171.is_file() and SHIPPED.is_file()), reason="real ArduPilot log or shipped model missing")
+def test_a_log_unlike_the_rules_calibration_flights_keeps_the_whole_flight_verdict():
+    # A real ArduCopter flight of another quad, attitude at 10 Hz, ending in a flip: the in-flight rule reaches fault
+    # level on it (network and ω² shares of a vehicle it was not calibrated for), which must not become the verdict.
+    _, out, _ = run([LOG171, "--json"])
+    res = json.loads(out)
+    assert "source" not in res["verdict"] and "whole_flight" not in res["verdict"]
+    if "in_flight_fault" in res["decision"]:
+        assert any("in-flight rule reached fault level" in w and "9.9 Hz" in w for w in res["warnings"]), res["warnings"]
