@@ -223,6 +223,9 @@ def run_inprocess(args) -> dict:
     from monitor.daemon.sdnotify import Notifier
     from monitor.daemon.service import Daemon
     from monitor.model import Classifier, choose_esc
+    from monitor.vehicle import DEFAULT_VEHICLE, load_vehicle
+
+    vehicle = load_vehicle(DEFAULT_VEHICLE)
 
     with tempfile.TemporaryDirectory() as tmp:
         model, tlog = build_inputs(args, Path(tmp))
@@ -235,7 +238,10 @@ def run_inprocess(args) -> dict:
     best = None
     for _ in range(args.repeat):
         cfg = monitor_config_from_mapping({"alerts": {"rule": args.rule}})
-        daemon = Daemon(cfg, _NullLink(), Pipeline(clf, cfg, choose_esc(clf, "")), EventWriter(None), Notifier({}))
+        # with the vehicle's geometry for the alerts' rotor effectiveness, as `propwatch monitor` runs
+        daemon = Daemon(
+            cfg, _NullLink(), Pipeline(clf, cfg, choose_esc(clf, "")), EventWriter(None), Notifier({}), vehicle=vehicle
+        )
         c0 = time.process_time()
         for i, m in enumerate(msgs):
             daemon.handle(m, time.perf_counter())

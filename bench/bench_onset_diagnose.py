@@ -32,6 +32,8 @@ from pathlib import Path
 import numpy as np
 
 from monitor.diagnose.engine import diagnose_table
+from monitor.diagnose.physics import physics_evidence
+from monitor.esc import RPM_PER_RAD_S
 from monitor.logs import read_log
 from monitor.model import Classifier, choose_esc
 from monitor.vehicle import DEFAULT_VEHICLE, REPO_ROOT, load_vehicle
@@ -54,7 +56,20 @@ def ours_flights(n: int, out: Path, duration_s: float) -> list[dict]:
                 path = write_tlog(out / f"{name}.tlog", ch.flog, b)
                 onset = float(np.ceil(ch.onset_s[b] * ch.flog.log_rate_hz) / ch.flog.log_rate_hz)
                 faulty = [int(i) + 1 for i in np.flatnonzero(ch.cond[b])]
-                truths.append({"file": str(path), "faulty_propellers": faulty, "onset_boot_s": BOOT_OFFSET_US / 1e6 + onset})
+                # each rotor's thrust factor at its own hover speed (median before the onset), as make evaluate-alerts
+                rpm = np.asarray(ch.flog.signals()["motor_rpm"][b], dtype=np.float64)
+                s_hover = np.median(rpm[: max(int(onset * ch.flog.log_rate_hz), 1)], axis=0) / (
+                    vehicle.omega_max_rad_s * RPM_PER_RAD_S
+                )
+                factor = [float(ch.after[b, r].thrust_factor(s_hover[r])) for r in range(4)]
+                truths.append(
+                    {
+                        "file": str(path),
+                        "faulty_propellers": faulty,
+                        "onset_boot_s": BOOT_OFFSET_US / 1e6 + onset,
+                        "thrust_factor_at_hover": factor,
+                    }
+                )
     return truths
 
 
@@ -70,6 +85,7 @@ def evalsim_flights(n: int, out: Path, seed: int) -> list[dict]:
             "file": str(out / t["file"]),
             "faulty_propellers": sorted(t["faulty_propellers"]),
             "onset_boot_s": BOOT_OFFSET_US / 1e6 + t["fault_onset_s"],
+            "thrust_factor_at_hover": t["thrust_factor_at_hover"],
         }
         for t in truths[:n]
     ]
@@ -85,6 +101,7 @@ def shares(table, rows: np.ndarray) -> np.ndarray:
 def score_flight(t: dict, clf: Classifier, esc, vehicle) -> dict:
     table = read_log(t["file"], esc=esc, rate_hz=clf.info.sample_rate_hz, extras=True)
     d = diagnose_table(table, clf, hop=1, esc=esc, vehicle=vehicle)
+    whole_eff, _ = physics_evidence(table, vehicle, window=clf.info.window)  # what diagnose read before
     if d.verdict is None:
         return {**t, "error": d.reason}
     v = d.verdict
@@ -101,6 +118,9 @@ def score_flight(t: dict, clf: Classifier, esc, vehicle) -> dict:
         "source": v.get("source", "whole flight"),
         "change_boot_s": v.get("change_boot_s"),
         "hypotheses": [sorted(h["faulty_propellers"]) for h in (d.to_json()["hypotheses"] or [])],
+        "rotor_effectiveness": d.to_json()["rotor_effectiveness"],
+        "whole_flight_effectiveness": whole_eff.rotor_effectiveness if whole_eff is not None else None,
+        "rotor_effectiveness_std": d.to_json()["rotor_effectiveness_std"],
         "share_rotor": int(np.argmax(shares(table, air))) + 1,
         "share_change_rotor": None if change is None else int(np.argmax(change)) + 1,
     }
@@ -117,8 +137,26 @@ def summary(rows: list[dict]) -> dict:
     def wrong(key):
         return lambda r: bool(set(r[key]) - set(r["faulty_propellers"]))
 
+    # The moment balance's reading of each damaged rotor against its true thrust factor at hover (singles, where
+    # diagnose gave one): what a person checks by hand.
+    def eff(key):
+        err = [
+            r[key][r["faulty_propellers"][0] - 1] - r["thrust_factor_at_hover"][r["faulty_propellers"][0] - 1]
+            for r in single
+            if r.get(key) is not None
+        ]
+        a = np.abs(np.asarray(err))
+        return {
+            f"{key}_singles_given": len(err),
+            f"{key}_singles_abs_error_median": round(float(np.median(a)), 4) if err else None,
+            # of every single flight: a withheld reading is not within 2 points
+            f"{key}_singles_within_2_points": round(float(np.sum(a <= 0.02) / len(single)), 4) if single else None,
+        }
+
     return {
         "flights": len(rows),
+        **eff("rotor_effectiveness"),
+        **eff("whole_flight_effectiveness"),
         "no_verdict": len(rows) - len(ok),
         "singles": len(single),
         "pairs": len(pair),
@@ -147,6 +185,12 @@ def pct(x) -> str:
     return "-" if x is None else f"{100 * x:.1f} %"
 
 
+def effect(s: dict, key: str) -> str:
+    med = s[f"{key}_singles_abs_error_median"]
+    given = s[f"{key}_singles_given"]
+    return f"{pct(s[f'{key}_singles_within_2_points'])} ({'-' if med is None else f'{100 * med:.1f}'}; given {given})"
+
+
 COLUMNS = (
     "simulator",
     "verdict",
@@ -155,6 +199,7 @@ COLUMNS = (
     "pairs",
     "truth in hypotheses (mean sets)",
     "names a healthy propeller",
+    "single's effectiveness within ±2 points (median error, points; readings given)",
     "flights",
 )
 
@@ -172,6 +217,7 @@ def table_rows(res: dict) -> list[tuple[str, ...]]:
                 "-",
                 "-",
                 pct(s["whole_flight_names_a_healthy_propeller"]),
+                effect(s, "whole_flight_effectiveness"),
                 n,
             )
         )
@@ -184,12 +230,23 @@ def table_rows(res: dict) -> list[tuple[str, ...]]:
                 pct(s["diagnose_pair_exact"]),
                 f"{pct(s['diagnose_truth_in_hypotheses'])} ({s['diagnose_mean_hypotheses']:.2f})",
                 pct(s["diagnose_names_a_healthy_propeller"]),
+                effect(s, "rotor_effectiveness"),
                 n,
             )
         )
-        rows.append((sim, "ω²-share", "-", pct(s["share_single_exact"]), "-", "-", "-", str(s["singles"])))
+        rows.append((sim, "ω²-share", "-", pct(s["share_single_exact"]), "-", "-", "-", "-", str(s["singles"])))
         rows.append(
-            (sim, "ω²-share change (told the onset)", "-", pct(s["share_change_single_exact"]), "-", "-", "-", str(s["singles"]))
+            (
+                sim,
+                "ω²-share change (told the onset)",
+                "-",
+                pct(s["share_change_single_exact"]),
+                "-",
+                "-",
+                "-",
+                "-",
+                str(s["singles"]),
+            )
         )
     return rows
 
@@ -213,7 +270,11 @@ def write_card_table(res: dict, argv_text: str) -> None:
             "that is not damaged. *ours*: physics drawn from the assumption register (airframe terms included), "
             "written as .tlog without the register's telemetry degradation; *evalsim*: the evaluation-only "
             "simulator's `onset` set (its own damage model, controller and telemetry), never used for training or "
-            "selection. The ω²-share change is told the true onset time, which no monitor knows."
+            "selection. The ω²-share change is told the true onset time, which no monitor knows. Effectiveness: "
+            "`rotor_effectiveness` of the damaged rotor of each single against its true thrust factor at hover, "
+            "within ±2 points as a share of all singles (a withheld reading counts as a miss); before, diagnose read "
+            "the whole flight's balance; now, with an in-flight change, the windows after it against the flight's own "
+            "balance before it."
         ),
         columns=COLUMNS,
         rows=tuple(table_rows(res)),

@@ -4,7 +4,7 @@ The behaviour test uses flights of the evaluation-only simulator (offline/evalsi
 controller and damage model), which nothing trains or selects on: a propeller on each of the four rotors in
 turn, damaged 25-38 s into an 80 s flight. The whole-flight verdict called three of these four healthy and
 the fourth the wrong rotor (the healthy half outvotes the damaged one); a tool that guesses a rotor passes
-one in four.
+one in four. The rotor's effectiveness is read after the change, against the flight's own balance before it.
 """
 
 from __future__ import annotations
@@ -62,6 +62,12 @@ def test_a_propeller_damaged_mid_flight_is_named_on_flights_of_the_other_simulat
         assert sets[0] == v["faulty_propellers"] and truth["faulty_propellers"] in sets
         assert all(h["evidence"] == "in-flight change" and "probability" not in h for h in res["hypotheses"])
         assert code == (0 if len(sets) == 1 else 3)
+        # the moment balance reads the windows after the change against the flight's own before it: the damaged
+        # rotor's thrust within 2 points of the truth (the whole flight's balance fits neither half, read 2-60 %)
+        rotor = truth["faulty_propellers"][0]
+        assert abs(res["rotor_effectiveness"][rotor - 1] - truth["thrust_factor_at_hover"][rotor - 1]) <= 0.02, res
+        assert all(abs(x - 1.0) <= 0.02 for i, x in enumerate(res["rotor_effectiveness"]) if i + 1 != rotor)
+        assert res["rotor_effectiveness_basis"].startswith("windows after the in-flight change")
         undocumented = sorted(key_paths(res) - set(doc))
         assert not undocumented, f"add these keys to docs/diagnose-json.md: {undocumented}"
     # the text says where the answer comes from
@@ -112,3 +118,38 @@ def test_a_log_unlike_the_rules_calibration_flights_keeps_the_whole_flight_verdi
     assert "source" not in res["verdict"] and "whole_flight" not in res["verdict"]
     if "in_flight_fault" in res["decision"]:
         assert any("in-flight rule reached fault level" in w and "9.9 Hz" in w for w in res["warnings"]), res["warnings"]
+
+
+def _fault_events(tmp_path, tlog):
+    from test_decision_daemon import replay_shipped
+
+    _, alerts = replay_shipped(tmp_path, tlog)
+    return [a for a in alerts if a["level"] == "fault" and a.get("rotor_effectiveness") is not None]
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not SHIPPED.is_file(), reason="models/classifier.onnx not built")
+def test_the_daemons_alert_reads_the_damaged_rotor_against_the_flights_own_start(tmp_path, evalsim_onsets):
+    """The alert's rotor effectiveness (the last 5 s) is read against this flight's own balance before the change:
+    on an airframe with its own motor spread and CG offset (our simulator, airframe drawn from the register) the
+    nominal-airframe reading put the loss on another rotor (rotor 4 losing 8 %: read 1.00, rotor 2 read 0.94)."""
+    from monitor.esc import RPM_PER_RAD_S
+    from monitor.vehicle import DEFAULT_VEHICLE, load_vehicle
+    from offline.alerts.flights import FlightSet, randomised_chunks
+    from offline.sim.io_tlog import write_tlog as write_sim_tlog
+
+    vehicle = load_vehicle(DEFAULT_VEHICLE)
+    ch = next(randomised_chunks(vehicle, FlightSet("single", n_flights=1, physics="randomised", seed=211)))
+    rotor = int(ch.cond[0].nonzero()[0][0]) + 1
+    rpm = ch.flog.signals()["motor_rpm"][0]
+    s_hover = rpm[: int(ch.onset_s[0] * ch.flog.log_rate_hz)].mean(axis=0) / (vehicle.omega_max_rad_s * RPM_PER_RAD_S)
+    truth = ch.after[0, rotor - 1].thrust_factor(s_hover[rotor - 1])
+    assert truth < 0.95  # a loss the reading must find
+    ours = _fault_events(tmp_path / "ours", write_sim_tlog(tmp_path / "ours.tlog", ch.flog, 0))
+    path, t = evalsim_onsets[2]  # the other simulator: rotor 3
+    other = _fault_events(tmp_path / "evalsim", path)
+    for events, r, factor in ((ours, rotor, truth), (other, 3, t["thrust_factor_at_hover"][2])):
+        assert events, "no fault alert"
+        eff = events[-1]["rotor_effectiveness"]
+        assert abs(eff[r - 1] - factor) <= 0.02, (r, factor, eff)
+        assert all(abs(x - 1.0) <= 0.02 for i, x in enumerate(eff) if i + 1 != r), eff

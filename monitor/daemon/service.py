@@ -347,6 +347,7 @@ class Daemon:
             event["probabilities"] = [round(float(p), 4) for p in step.fault_probability]
             event["battery_v"] = None if math.isnan(step.battery_v) else round(step.battery_v, 2)
         if self.rotors is not None:
+            self.rotors.freeze()  # the flight's own baseline ends before the change the alert is about
             event.update(self.rotors.event_fields())
         log.warning("%s t=%d ms: %s (%s evidence)", a.level.upper(), time_boot_ms, a.text, a.evidence)
         # The ground station first: a failing disk must never delay or lose the alert itself.
@@ -377,7 +378,12 @@ class Daemon:
     def _rotor_step(self, step) -> None:
         if self.rotors is not None:
             inputs = step.inputs
-            self.rotors.push(inputs.motor_rpm if inputs is not None else None, step.rates_rad_s, step.valid)
+            self.rotors.push(
+                inputs.motor_rpm if inputs is not None else None,
+                step.rates_rad_s,
+                step.valid,
+                airborne=bool(inputs.airborne) if inputs is not None else True,
+            )
 
     def _on_step(self, step) -> None:
         self._rotor_step(step)

@@ -250,7 +250,8 @@ def format_text(d: Diagnosis, baseline=None) -> str:
             f"{rotor_name(n, i + 1)} {m:.2f}±{s:.2f}"
             for i, (n, m, s) in enumerate(zip(names, d.physics.rotor_effectiveness, d.physics.rotor_effectiveness_std))
         )
-        lines.append(f"  rotor effectiveness (fraction of nominal thrust, moment balance over {d.physics.windows} x 5 s): {eff}")
+        over = f"{d.physics.windows} x 5 s" + (f", {d.physics_basis}" if d.physics_basis else "")
+        lines.append(f"  rotor effectiveness (fraction of nominal thrust, moment balance over {over}): {eff}")
         sets = _sets_text(d.physics.hypotheses, names)
         lines.append(("  physics cannot tell apart: " if d.physics.ambiguous else "  physics: ") + sets)
     change = d.verdict is not None and d.verdict.get("source") == "in-flight change" and not d.verdict.get("imbalance_rotors")

@@ -34,7 +34,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from monitor.decision import Decision, DecisionConfig, StepInputs, WindowEvidence, file_sha256
-from monitor.diagnose.physics import PhysicsEvidence, physics_evidence
+from monitor.diagnose.physics import PhysicsEvidence, own_baseline, physics_evidence
 from monitor.errors import ModelError
 from monitor.esc import EscCurve
 from monitor.features import compute_features, signals_needed, sliding_windows, valid_windows
@@ -76,6 +76,7 @@ class Diagnosis:
     physics: PhysicsEvidence | None = None  # rotor effectiveness and the sets the moment balance allows
     hypotheses: list[dict] | None = None  # the model's conformal set (monitor.hypotheses), when it has a rule
     hypothesis_rule: dict | None = None  # that rule: score, threshold, coverage, calibration flights
+    physics_basis: str | None = None  # which windows the physics evidence read, when not the whole flight's
 
     def to_json(self) -> dict:
         """The ``--json`` object (every key documented in docs/diagnose-json.md).
@@ -101,6 +102,7 @@ class Diagnosis:
             "hypothesis_rule": self.hypothesis_rule,
             "rotor_effectiveness": self.physics.rotor_effectiveness if self.physics else None,
             "rotor_effectiveness_std": self.physics.rotor_effectiveness_std if self.physics else None,
+            **({"rotor_effectiveness_basis": self.physics_basis} if self.physics_basis else {}),
         }
 
 
@@ -280,10 +282,9 @@ def diagnose_table(
     p = faults.mean(axis=0)
     d.windows = len(ends)
     cfg = DecisionConfig()
+    physics_why_not = None
     if vehicle is not None:
-        d.physics, why_not = physics_evidence(table, vehicle, window=info.window)
-        if why_not:
-            d.warnings.append(why_not)
+        d.physics, physics_why_not = physics_evidence(table, vehicle, window=info.window)
     rule = load_rule(clf.path)
     network_p = None
     if rule is not None:
@@ -324,7 +325,35 @@ def diagnose_table(
         "label": (np.argmax(labels, axis=1) + 1).tolist(),
     }
     apply_in_flight_fault(d, table.motor_names, in_flight_unfit(table, d.envelope))
+    if vehicle is not None and d.verdict.get("source") == "in-flight change":
+        after_change_physics(d, table, vehicle, info.window)
+    elif physics_why_not:
+        d.warnings.append(physics_why_not)
     return d
+
+
+# The onset precedes the first announcement by the rule's detection delay (median 4-5 s, p95 under 10 s on both
+# simulators): the flight's own baseline ends this long before it.
+PRE_CHANGE_MARGIN_S = 10.0
+
+
+def after_change_physics(d: Diagnosis, table: FlightTable, vehicle, window: int) -> None:
+    """The moment balance of the windows after the in-flight change, against the flight's own balance before it.
+
+    The balance fits one effectiveness per rotor: over a flight whose propeller changed mid-way it fits neither
+    half (on evalsim's onset flights its most probable set was all four rotors, read at 2-60 % of nominal). After
+    the change, with the airframe's trim, CG and motor spread at this operating point taken from the windows before
+    it (``own_baseline``), it reads what the damage took."""
+    change_s = float(d.verdict["change_boot_s"])
+    first_s = min([a["t_boot_s"] for a in d.decision["alerts"]] + [change_s])
+    base = own_baseline(table, vehicle, first_s - PRE_CHANGE_MARGIN_S, window)
+    d.physics, why_not = physics_evidence(table, vehicle, baseline=base, window=window, between_boot_s=(change_s, np.inf))
+    d.physics_basis = f"windows after the in-flight change at {change_s:.1f} s, " + (
+        "against the flight's own balance before " + f"{first_s - PRE_CHANGE_MARGIN_S:.1f} s" if base else "nominal airframe"
+    )
+    if why_not:
+        d.physics_basis = None
+        d.warnings.append(f"after the in-flight change: {why_not}")
 
 
 def in_flight_unfit(table: FlightTable, figures: dict) -> list[str]:

@@ -71,17 +71,48 @@ def usable_window_starts(table: FlightTable, window: int) -> np.ndarray:
     return np.asarray(starts, dtype=np.int64)
 
 
-def table_evidence(table: FlightTable, geometry: RotorGeometry, priors: Priors, window: int) -> Evidence:
-    ev = Evidence()
+def table_balances(
+    table: FlightTable, geometry: RotorGeometry, window: int, between_boot_s: tuple[float, float] | None = None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(z, H, std) of the flight's usable non-overlapping windows (``monitor.effectiveness.window_balance``);
+    ``between_boot_s``: only windows lying wholly inside that span of boot time (s)."""
     starts = usable_window_starts(table, window)
+    if between_boot_s is not None and len(starts):
+        t_s = np.asarray(table.timestamp_us, dtype=np.float64) / 1e6
+        lo, hi = between_boot_s
+        starts = starts[(t_s[starts] >= lo) & (t_s[starts + window - 1] <= hi)]
     if len(starts) == 0:
-        return ev
+        return np.zeros((0, 3)), np.zeros((0, 3, 8)), np.zeros((0, 3))
     sig = table.signals()
     rates = np.stack([sig["roll_rate_rad_s"], sig["pitch_rate_rad_s"], sig["yaw_rate_rad_s"]], axis=-1)
     idx = starts[:, None] + np.arange(window)[None, :]
-    z, h, std = window_balance(sig["motor_rpm"][idx], rates[idx], geometry, table.rate_hz)
-    ev.add(z, h, std, priors)
+    return window_balance(sig["motor_rpm"][idx], rates[idx], geometry, table.rate_hz)
+
+
+def table_evidence(
+    table: FlightTable, geometry: RotorGeometry, priors: Priors, window: int, between_boot_s: tuple[float, float] | None = None
+) -> Evidence:
+    ev = Evidence()
+    z, h, std = table_balances(table, geometry, window, between_boot_s)
+    if len(z):
+        ev.add(z, h, std, priors)
     return ev
+
+
+# A baseline read from a flight's own windows: the spread of its windows' balances, floored at this (the per-window
+# noise floor of the balance, Priors.noise_floor).
+OWN_BASELINE_STD_FLOOR = 0.01
+
+
+def own_baseline(table: FlightTable, vehicle, until_boot_s: float, window: int = 100) -> Baseline | None:
+    """The flight's own balance before ``until_boot_s`` as a ``Baseline`` (the airframe's trim, CG offset and
+    motor spread at this flight's operating point, in the balance's units); None with fewer than 2 windows."""
+    z, _, _ = table_balances(table, RotorGeometry.from_vehicle(vehicle), window, (-np.inf, until_boot_s))
+    z = z[np.isfinite(z).all(axis=1)]
+    if len(z) < 2:
+        return None
+    std = np.maximum(z.std(axis=0, ddof=1), OWN_BASELINE_STD_FLOOR)
+    return Baseline(disturbance_mean=tuple(map(float, z.mean(axis=0))), disturbance_std=tuple(map(float, std)))
 
 
 def physics_evidence(
@@ -90,11 +121,13 @@ def physics_evidence(
     priors: Priors | None = None,
     baseline: Baseline | None = None,
     window: int = 100,
+    between_boot_s: tuple[float, float] | None = None,
 ) -> tuple[PhysicsEvidence | None, str | None]:
-    """(evidence, None), or (None, why not) when there is no usable window or the balance does not close."""
+    """(evidence, None), or (None, why not) when there is no usable window or the balance does not close.
+    ``between_boot_s``: only the windows inside that span (e.g. after an in-flight change)."""
     priors = priors or Priors()
     geometry = RotorGeometry.from_vehicle(vehicle)
-    ev = table_evidence(table, geometry, priors, window)
+    ev = table_evidence(table, geometry, priors, window, between_boot_s)
     if ev.windows == 0:
         return None, f"no rotor-effectiveness evidence: no {window}-step airborne window with rates and RPM measured"
     v = HypothesisBank(priors, geometry, baseline).posterior(ev)
