@@ -153,3 +153,26 @@ def test_the_daemons_alert_reads_the_damaged_rotor_against_the_flights_own_start
         eff = events[-1]["rotor_effectiveness"]
         assert abs(eff[r - 1] - factor) <= 0.02, (r, factor, eff)
         assert all(abs(x - 1.0) <= 0.02 for i, x in enumerate(eff) if i + 1 != r), eff
+
+
+def test_an_adapted_airframes_baseline_does_not_overrule_the_in_flight_answer():
+    from monitor.diagnose.cli import fuse_verdict
+
+    def change_verdict():
+        d = Diagnosis("x.tlog", {"label": 1, "faulty_propellers": [], "faulty_names": [], "confidence": "ambiguous"}, 50, [])
+        d.propellers = [{"propeller": i, "faulty": False, "suspect": False} for i in range(1, 5)]
+        d.label_probability = [1.0 / 16] * 16
+        d.decision = {"in_flight_fault": {"first_fault_boot_s": 40.0, "last_fault_boot_s": 70.0, "hypothesis_sets": [[3]]}}
+        apply_in_flight_fault(d, ["M1", "M2", "M3", "M4"])
+        return d
+
+    # the whole flight's shares against the airframe's healthy ones name rotor 1: the change on rotor 3 stands
+    d, comparison = change_verdict(), {"deviation_spreads": [5.0, 0.0, 0.5, 0.0]}
+    fuse_verdict(d, comparison, ["M1", "M2", "M3", "M4"], cg_damage_separable=True)
+    assert d.verdict["faulty_propellers"] == [3] and d.verdict["confidence"] == "confident"
+    assert comparison["fusion"]["rule"].startswith("in-flight change")
+    # where this airframe's flights do not tell a CG offset from damage, the change is an imbalance naming no propeller
+    d, comparison = change_verdict(), {"deviation_spreads": [0.0, 0.0, 5.0, 0.0]}
+    fuse_verdict(d, comparison, ["M1", "M2", "M3", "M4"], cg_damage_separable=False)
+    assert d.verdict["faulty_propellers"] == [] and d.verdict["imbalance_rotors"] == [3] and d.hypothesis_rule is None
+    assert [p["suspect"] for p in d.propellers] == [False, False, True, False]
