@@ -36,6 +36,7 @@ from monitor.diagnose.physics import physics_evidence
 from monitor.esc import RPM_PER_RAD_S
 from monitor.logs import read_log
 from monitor.model import Classifier, choose_esc
+from monitor.resample import US_PER_S
 from monitor.vehicle import DEFAULT_VEHICLE, REPO_ROOT, load_vehicle
 from offline.sim.log import BOOT_OFFSET_US
 
@@ -66,7 +67,7 @@ def ours_flights(n: int, out: Path, duration_s: float) -> list[dict]:
                     {
                         "file": str(path),
                         "faulty_propellers": faulty,
-                        "onset_boot_s": BOOT_OFFSET_US / 1e6 + onset,
+                        "onset_boot_s": BOOT_OFFSET_US / US_PER_S + onset,
                         "thrust_factor_at_hover": factor,
                     }
                 )
@@ -84,7 +85,7 @@ def evalsim_flights(n: int, out: Path, seed: int) -> list[dict]:
         {
             "file": str(out / t["file"]),
             "faulty_propellers": sorted(t["faulty_propellers"]),
-            "onset_boot_s": BOOT_OFFSET_US / 1e6 + t["fault_onset_s"],
+            "onset_boot_s": BOOT_OFFSET_US / US_PER_S + t["fault_onset_s"],
             "thrust_factor_at_hover": t["thrust_factor_at_hover"],
         }
         for t in truths[:n]
@@ -106,7 +107,7 @@ def score_flight(t: dict, clf: Classifier, esc, vehicle) -> dict:
         return {**t, "error": d.reason}
     v = d.verdict
     whole = v.get("whole_flight", v)
-    t_s = np.asarray(table.timestamp_us, dtype=np.float64) / 1e6
+    t_s = np.asarray(table.timestamp_us, dtype=np.float64) / US_PER_S
     air = np.asarray(table.airborne, dtype=bool)
     before, after = air & (t_s < t["onset_boot_s"]), air & (t_s >= t["onset_boot_s"] + 5.0)
     change = shares(table, after) - shares(table, before) if before.sum() > 100 and after.sum() > 100 else None

@@ -12,13 +12,17 @@ from __future__ import annotations
 import contextlib
 import io
 import json
+from types import SimpleNamespace
 
+import numpy as np
 import pytest
 from test_diagnose_fixtures import build_model, write_tlog
 from test_diagnose_json_schema import documented, key_paths
 
 from monitor.diagnose.cli import main as diagnose
 from monitor.diagnose.engine import Diagnosis, apply_in_flight_fault
+from monitor.logs.raw import airborne_mask
+from monitor.resample import US_PER_S
 from monitor.vehicle import REPO_ROOT
 from offline.sim.log import BOOT_OFFSET_US
 
@@ -54,7 +58,7 @@ def test_a_propeller_damaged_mid_flight_is_named_on_flights_of_the_other_simulat
         v = res["verdict"]
         assert v["faulty_propellers"] == truth["faulty_propellers"], (path.name, v)
         assert v["source"] == "in-flight change" and "whole_flight" in v
-        onset_boot_s = BOOT_OFFSET_US / 1e6 + truth["fault_onset_s"]
+        onset_boot_s = BOOT_OFFSET_US / US_PER_S + truth["fault_onset_s"]
         assert onset_boot_s < v["change_boot_s"] < onset_boot_s + 15.0  # after the damage, within 15 s of it
         assert res["decision"]["in_flight_fault"]["first_fault_boot_s"] == v["change_boot_s"]
         # the hypotheses are the rule's sets, the verdict's first; the truth is among them
@@ -176,3 +180,19 @@ def test_an_adapted_airframes_baseline_does_not_overrule_the_in_flight_answer():
     fuse_verdict(d, comparison, ["M1", "M2", "M3", "M4"], cg_damage_separable=False)
     assert d.verdict["faulty_propellers"] == [] and d.verdict["imbalance_rotors"] == [3] and d.hypothesis_rule is None
     assert [p["suspect"] for p in d.propellers] == [False, False, True, False]
+
+
+def test_a_throttle_dip_in_flight_is_not_a_landing():
+    """A mean motor command under lift throttle for a fraction of a second between two airborne stretches (evalsim's
+    controller on a fast descent: 1104 us for 0.2 s) is flight, not a landing that would reset the in-flight rule;
+    a stop on the ground longer than a second still ends the flight."""
+    rate_hz, n = 20.0, 1200
+    grid = (np.arange(n) * 50_000).astype(np.int64)
+    cmd = np.full((n, 4), 1400.0)
+    cmd[:100] = cmd[-100:] = 1000.0  # on the ground before and after
+    cmd[300:305] = 1104.0  # a 0.25 s dip in flight
+    cmd[600:640] = 1000.0  # 2 s on the ground: landed and took off again
+    raw = SimpleNamespace(cmd_unit="us", armed=None, landed=None, height_m=None, min_height_m=0.25)
+    mask = airborne_mask(raw, grid, cmd, rate_hz)
+    assert mask[300:305].all() and mask[100:600].all()
+    assert not mask[600:640].any() and mask[640:1100].all() and not mask[:100].any() and not mask[1100:].any()

@@ -26,6 +26,7 @@ from monitor.effectiveness import (
     window_balance,
 )
 from monitor.flight import FlightTable
+from monitor.resample import US_PER_S
 
 CREDIBLE_MASS = 0.95
 # A rotor outside this range of nominal thrust is not a damaged propeller but a balance that does not
@@ -78,7 +79,7 @@ def table_balances(
     ``between_boot_s``: only windows lying wholly inside that span of boot time (s)."""
     starts = usable_window_starts(table, window)
     if between_boot_s is not None and len(starts):
-        t_s = np.asarray(table.timestamp_us, dtype=np.float64) / 1e6
+        t_s = np.asarray(table.timestamp_us, dtype=np.float64) / US_PER_S
         lo, hi = between_boot_s
         starts = starts[(t_s[starts] >= lo) & (t_s[starts + window - 1] <= hi)]
     if len(starts) == 0:

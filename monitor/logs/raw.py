@@ -39,6 +39,11 @@ LIFT_CMD = {"us": 1150.0, "cf16": 0.15 * 65535.0}
 DEFAULT_MIN_HEIGHT_M = 0.25
 # Airborne stretches shorter than this are take-off bounces, not flight.
 MIN_SEGMENT_S = 1.0
+# A mean motor command below lift throttle for at most this long between two airborne stretches, while armed and
+# (where logged) the land detector says in the air, is a throttle dip in flight (a fast descent, a controller
+# transient, a dropped output sample), not a landing: evalsim's controller dips to 1104 us for 0.2 s on descents,
+# which reset the in-flight rule's evidence as if the vehicle had landed.
+MAX_THROTTLE_DIP_S = 1.0
 
 
 @dataclass(frozen=True)
@@ -119,8 +124,8 @@ def airborne_mask(raw: RawFlight, grid: np.ndarray, motor_cmd: np.ndarray, rate_
     """Armed, rotors above lift throttle, off the ground (height / land detector when logged)."""
     lift = LIFT_CMD[raw.cmd_unit]
     # The mean, not each rotor: in hard manoeuvres one rotor can drop to idle while flying.
-    # A row with any unknown motor is not counted as airborne (NaN compares False).
-    mask = np.mean(motor_cmd, axis=1) > lift
+    # A row with any unknown motor is not counted as airborne (NaN compares False), unless it lies in a short dip.
+    mask = _fill_short_gaps(np.mean(motor_cmd, axis=1) > lift, int(round(MAX_THROTTLE_DIP_S * rate_hz)))
     if raw.armed is not None and len(raw.armed):
         mask &= _hold_flag(raw.armed, grid) == 1.0
     if raw.landed is not None and len(raw.landed):
@@ -134,6 +139,16 @@ def airborne_mask(raw: RawFlight, grid: np.ndarray, motor_cmd: np.ndarray, rate_
 
 def _hold_flag(s: Stream, grid: np.ndarray) -> np.ndarray:
     return hold(s.t_us, s.values, grid, s.max_age_us or STATE_MAX_AGE_US)
+
+
+def _fill_short_gaps(mask: np.ndarray, max_len: int) -> np.ndarray:
+    """``mask`` with its false runs of at most ``max_len`` steps between two true runs set true."""
+    out = mask.copy()
+    runs = true_runs(mask)
+    for (_, e), (s, _) in zip(runs[:-1], runs[1:], strict=True):
+        if s - e <= max_len:
+            out[e:s] = True
+    return out
 
 
 def _drop_short(mask: np.ndarray, min_len: int) -> np.ndarray:
