@@ -24,7 +24,10 @@ suspect one marks them ``suspect``. ``label_probability_of_verdict`` and
 ``agreeing_windows`` (the share of windows whose most likely label is the
 verdict's) say how sure it is. The in-flight decision is the daemon's own rule
 (``monitor.decision``), replayed over the log step by step: ``decision`` holds
-its suspect / fault announcements and final state.
+its suspect / fault announcements and final state. Where it reached fault level
+(and the log is like its calibration flights), the verdict is its answer and the
+moment balance reads the windows after the change against the flight's own start
+(``apply_in_flight_fault``, ``after_change_physics``).
 """
 
 from __future__ import annotations
@@ -348,9 +351,8 @@ def after_change_physics(d: Diagnosis, table: FlightTable, vehicle, window: int)
     first_s = min([a["t_boot_s"] for a in d.decision["alerts"]] + [change_s])
     base = own_baseline(table, vehicle, first_s - PRE_CHANGE_MARGIN_S, window)
     d.physics, why_not = physics_evidence(table, vehicle, baseline=base, window=window, between_boot_s=(change_s, np.inf))
-    d.physics_basis = f"windows after the in-flight change at {change_s:.1f} s, " + (
-        "against the flight's own balance before " + f"{first_s - PRE_CHANGE_MARGIN_S:.1f} s" if base else "nominal airframe"
-    )
+    against = f"against the flight's own balance before {first_s - PRE_CHANGE_MARGIN_S:.1f} s" if base else "nominal airframe"
+    d.physics_basis = f"windows after the in-flight change at {change_s:.1f} s, {against}"
     if why_not:
         d.physics_basis = None
         d.warnings.append(f"after the in-flight change: {why_not}")
@@ -463,8 +465,11 @@ def replay_decision(
     out = {"alerts": alerts, "final": dec.verdict()}
     first = next((a for a in alerts if a["level"] == "fault"), None)
     if fault is not None and first is not None:
-        out["in_flight_fault"] = {"first_fault_boot_s": first["t_boot_s"], "last_fault_boot_s": fault["t_boot_s"], **fault}
-        del out["in_flight_fault"]["t_boot_s"]
+        out["in_flight_fault"] = {
+            "first_fault_boot_s": first["t_boot_s"],
+            "last_fault_boot_s": fault["t_boot_s"],
+            "hypothesis_sets": fault["hypothesis_sets"],
+        }
     return out
 
 
@@ -500,7 +505,8 @@ def apply_in_flight_fault(d: Diagnosis, motor_names, unfit: list[str] = ()) -> N
         "label": v["label"],
         "faulty_propellers": v["faulty_propellers"],
         "confidence": v["confidence"],
-        "hypotheses": d.hypotheses,
+        # as ``to_json`` gives them: the conformal set, else the moment balance's credible set
+        "hypotheses": d.hypotheses if d.hypotheses is not None else (d.physics.hypotheses if d.physics else None),
     }
     v.update(
         label=label,
