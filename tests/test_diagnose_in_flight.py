@@ -64,7 +64,9 @@ def test_a_propeller_damaged_mid_flight_is_named_on_flights_of_the_other_simulat
         # the hypotheses are the rule's sets, the verdict's first; the truth is among them
         sets = [h["faulty_propellers"] for h in res["hypotheses"]]
         assert sets[0] == v["faulty_propellers"] and truth["faulty_propellers"] in sets
-        assert all(h["evidence"] == "in-flight change" and "probability" not in h for h in res["hypotheses"])
+        p = [h["probability"] for h in res["hypotheses"]]
+        assert p == sorted(p, reverse=True) and abs(sum(p) - 1.0) < 2e-3  # weighed among the rule's sets
+        assert all(h["evidence"].startswith("in-flight change") for h in res["hypotheses"])
         assert code == (0 if len(sets) == 1 else 3)
         # the moment balance reads the windows after the change against the flight's own before it: the damaged
         # rotor's thrust within 2 points of the truth (the whole flight's balance fits neither half, read 2-60 %)
@@ -76,7 +78,7 @@ def test_a_propeller_damaged_mid_flight_is_named_on_flights_of_the_other_simulat
         assert not undocumented, f"add these keys to docs/diagnose-json.md: {undocumented}"
     # the text says where the answer comes from
     _, text, _ = run([evalsim_onsets[2][0]])
-    assert "from the in-flight rule's fault at" in text and "verdict set (the in-flight rule's" in text
+    assert "from the in-flight rule's fault at" in text and "verdict set (the in-flight rule's, weighed by" in text
 
 
 def test_a_flight_without_a_fault_level_change_keeps_the_whole_flight_verdict(tmp_path):

@@ -257,10 +257,10 @@ def format_text(d: Diagnosis, baseline=None) -> str:
     change = d.verdict is not None and d.verdict.get("source") == "in-flight change" and not d.verdict.get("imbalance_rotors")
     if d.hypotheses is not None and change:
         what = "cannot tell apart" if len(d.hypotheses) > 1 else "one set"
-        sets = " or ".join(
-            "{" + ", ".join(rotor_name(names[i - 1], i) for i in h["faulty_propellers"]) + "}" for h in d.hypotheses
+        lines.append(
+            f"  verdict set (the in-flight rule's, weighed by the moment balance after the change; {what}): "
+            + _sets_text(d.hypotheses, names)
         )
-        lines.append(f"  verdict set (the in-flight rule's, most likely first; {what}): {sets}")
     elif d.hypotheses is not None and d.hypothesis_rule is None:  # an imbalance's causes (monitor.baseline.cg_or_damage)
         lines.append("  cannot tell apart: " + " or ".join(h.get("cause", str(h["faulty_propellers"])) for h in d.hypotheses))
     elif d.hypotheses is not None:
