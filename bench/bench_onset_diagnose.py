@@ -33,10 +33,10 @@ import numpy as np
 
 from monitor.diagnose.engine import diagnose_table
 from monitor.diagnose.physics import physics_evidence
-from monitor.esc import RPM_PER_RAD_S
 from monitor.logs import read_log
 from monitor.model import Classifier, choose_esc
 from monitor.resample import US_PER_S
+from monitor.share_baseline import omega2_shares, share_baseline
 from monitor.vehicle import DEFAULT_VEHICLE, REPO_ROOT, load_vehicle
 from offline.sim.log import BOOT_OFFSET_US
 
@@ -57,12 +57,8 @@ def ours_flights(n: int, out: Path, duration_s: float) -> list[dict]:
                 path = write_tlog(out / f"{name}.tlog", ch.flog, b)
                 onset = float(np.ceil(ch.onset_s[b] * ch.flog.log_rate_hz) / ch.flog.log_rate_hz)
                 faulty = [int(i) + 1 for i in np.flatnonzero(ch.cond[b])]
-                # each rotor's thrust factor at its own hover speed (median before the onset), as make evaluate-alerts
-                rpm = np.asarray(ch.flog.signals()["motor_rpm"][b], dtype=np.float64)
-                s_hover = np.median(rpm[: max(int(onset * ch.flog.log_rate_hz), 1)], axis=0) / (
-                    vehicle.omega_max_rad_s * RPM_PER_RAD_S
-                )
-                factor = [float(ch.after[b, r].thrust_factor(s_hover[r])) for r in range(4)]
+                # each rotor's thrust factor at its own hover speed, as make evaluate-alerts
+                factor = ch.hover_thrust_factors(b, ch.flog.signals()["motor_rpm"][b], vehicle, duration_s).tolist()
                 truths.append(
                     {
                         "file": str(path),
@@ -78,9 +74,9 @@ def evalsim_flights(n: int, out: Path, seed: int) -> list[dict]:
     from offline.evalsim.score import load_set
     from offline.evalsim.sets import write_set
 
-    if not (out / "manifest.json").is_file() or len(load_set(out)[1]) < n:  # flight i depends on (seed, i) only
-        write_set("onset", out, flights=n, seed=seed)
-    _, truths = load_set(out)
+    truths = load_set(out)[1] if (out / "manifest.json").is_file() else []
+    if len(truths) < n:  # flight i depends on (seed, i) only: a larger set extends a smaller one
+        _, truths = load_set(write_set("onset", out, flights=n, seed=seed))
     return [
         {
             "file": str(out / t["file"]),
@@ -92,25 +88,20 @@ def evalsim_flights(n: int, out: Path, seed: int) -> list[dict]:
     ]
 
 
-def shares(table, rows: np.ndarray) -> np.ndarray:
-    w2 = np.square(np.asarray(table.motor_rpm, dtype=np.float64)[rows])
-    w2 = w2[np.isfinite(w2).all(axis=1)]
-    m = w2.mean(axis=0)
-    return m / m.mean()
-
-
 def score_flight(t: dict, clf: Classifier, esc, vehicle) -> dict:
     table = read_log(t["file"], esc=esc, rate_hz=clf.info.sample_rate_hz, extras=True)
     d = diagnose_table(table, clf, hop=1, esc=esc, vehicle=vehicle)
     whole_eff, _ = physics_evidence(table, vehicle, window=clf.info.window)  # what diagnose read before
     if d.verdict is None:
         return {**t, "error": d.reason}
-    v = d.verdict
+    v, res = d.verdict, d.to_json()
     whole = v.get("whole_flight", v)
     t_s = np.asarray(table.timestamp_us, dtype=np.float64) / US_PER_S
     air = np.asarray(table.airborne, dtype=bool)
     before, after = air & (t_s < t["onset_boot_s"]), air & (t_s >= t["onset_boot_s"] + 5.0)
-    change = shares(table, after) - shares(table, before) if before.sum() > 100 and after.sum() > 100 else None
+    change = None
+    if before.sum() > 100 and after.sum() > 100:
+        change = omega2_shares(table.motor_cmd, after, esc) - omega2_shares(table.motor_cmd, before, esc)
     return {
         **t,
         "whole_flight": sorted(whole["faulty_propellers"]),
@@ -118,12 +109,12 @@ def score_flight(t: dict, clf: Classifier, esc, vehicle) -> dict:
         "confidence": v["confidence"],
         "source": v.get("source", "whole flight"),
         "change_boot_s": v.get("change_boot_s"),
-        "hypotheses": [sorted(h["faulty_propellers"]) for h in (d.to_json()["hypotheses"] or [])],
-        "rotor_effectiveness": d.to_json()["rotor_effectiveness"],
+        "hypotheses": [sorted(h["faulty_propellers"]) for h in (res["hypotheses"] or [])],
+        "rotor_effectiveness": res["rotor_effectiveness"],
         "whole_flight_effectiveness": whole_eff.rotor_effectiveness if whole_eff is not None else None,
-        "rotor_effectiveness_std": d.to_json()["rotor_effectiveness_std"],
-        "share_rotor": int(np.argmax(shares(table, air))) + 1,
-        "share_change_rotor": None if change is None else int(np.argmax(change)) + 1,
+        "rotor_effectiveness_std": res["rotor_effectiveness_std"],
+        "share_rotor": share_baseline(omega2_shares(table.motor_cmd, air, esc)),
+        "share_change_rotor": None if change is None else share_baseline(change),
     }
 
 

@@ -139,7 +139,6 @@ def test_the_daemons_alert_reads_the_damaged_rotor_against_the_flights_own_start
     """The alert's rotor effectiveness (the last 5 s) is read against this flight's own balance before the change:
     on an airframe with its own motor spread and CG offset (our simulator, airframe drawn from the register) the
     nominal-airframe reading put the loss on another rotor (rotor 4 losing 8 %: read 1.00, rotor 2 read 0.94)."""
-    from monitor.esc import RPM_PER_RAD_S
     from monitor.vehicle import DEFAULT_VEHICLE, load_vehicle
     from offline.alerts.flights import FlightSet, randomised_chunks
     from offline.sim.io_tlog import write_tlog as write_sim_tlog
@@ -147,9 +146,7 @@ def test_the_daemons_alert_reads_the_damaged_rotor_against_the_flights_own_start
     vehicle = load_vehicle(DEFAULT_VEHICLE)
     ch = next(randomised_chunks(vehicle, FlightSet("single", n_flights=1, physics="randomised", seed=211)))
     rotor = int(ch.cond[0].nonzero()[0][0]) + 1
-    rpm = ch.flog.signals()["motor_rpm"][0]
-    s_hover = rpm[: int(ch.onset_s[0] * ch.flog.log_rate_hz)].mean(axis=0) / (vehicle.omega_max_rad_s * RPM_PER_RAD_S)
-    truth = ch.after[0, rotor - 1].thrust_factor(s_hover[rotor - 1])
+    truth = ch.hover_thrust_factors(0, ch.flog.signals()["motor_rpm"][0], vehicle, 80.0)[rotor - 1]
     assert truth < 0.95  # a loss the reading must find
     ours = _fault_events(tmp_path / "ours", write_sim_tlog(tmp_path / "ours.tlog", ch.flog, 0))
     path, t = evalsim_onsets[2]  # the other simulator: rotor 3

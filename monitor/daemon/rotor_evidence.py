@@ -26,10 +26,8 @@ from collections import deque
 
 import numpy as np
 
-from monitor.diagnose.physics import OWN_BASELINE_STD_FLOOR, PLAUSIBLE_EFFECTIVENESS
+from monitor.diagnose.physics import PLAUSIBLE_EFFECTIVENESS, PRE_CHANGE_MARGIN_S, baseline_from_balances
 from monitor.effectiveness import Baseline, HypothesisBank, Priors, RotorGeometry, window_balance
-
-PRE_CHANGE_MARGIN_S = 10.0  # a window joins the flight's own baseline this long after it ends (the detection delay)
 
 
 class RecentEffectiveness:
@@ -55,7 +53,7 @@ class RecentEffectiveness:
     def new_flight(self) -> None:
         """Forget the flight's own baseline (a landing; the next flight starts its own)."""
         self._pending: deque[tuple[int, np.ndarray]] = deque()  # (step it ended at, z (3,)) not yet old enough
-        self._base_n, self._base_sum, self._base_sq = 0, np.zeros(3), np.zeros(3)
+        self._base: list[np.ndarray] = []  # the balances (3,) of the windows in the baseline: one per 5 s of flight
         self._frozen = False
         self._step = 0
 
@@ -65,19 +63,14 @@ class RecentEffectiveness:
         self._pending.clear()
 
     def baseline(self) -> Baseline | None:
-        """The flight's own balance so far as a ``Baseline``; None with fewer than two windows."""
-        if self._base_n < 2:
-            return None
-        mean = self._base_sum / self._base_n
-        var = np.maximum(self._base_sq / self._base_n - mean**2, 0.0) * self._base_n / (self._base_n - 1)
-        std = np.maximum(np.sqrt(var), OWN_BASELINE_STD_FLOOR)
-        return Baseline(disturbance_mean=tuple(map(float, mean)), disturbance_std=tuple(map(float, std)))
+        """The flight's own balance so far as a ``Baseline`` (``baseline_from_balances``, as diagnose reads a log)."""
+        return baseline_from_balances(np.array(self._base)) if len(self._base) >= 2 else None
 
     def push(self, motor_rpm, rates_rad_s, valid: bool, airborne: bool = True) -> None:
         """One grid step: commanded RPM (4,), body rates FRD (3,); an invalid step breaks the run; a step on the
         ground ends the flight's baseline."""
         if not airborne:
-            if self._base_n or self._pending or self._frozen:
+            if self._base or self._pending or self._frozen:
                 self.new_flight()
             self.reset()
             return
@@ -103,10 +96,7 @@ class RecentEffectiveness:
             if np.isfinite(z).all():
                 self._pending.append((self._step, z))
         while self._pending and self._step - self._pending[0][0] >= self._margin_steps:
-            z = self._pending.popleft()[1]
-            self._base_n += 1
-            self._base_sum += z
-            self._base_sq += z * z
+            self._base.append(self._pending.popleft()[1])
 
     def _balance(self):
         s = slice(self._head, self._head + self.window)  # oldest first

@@ -77,7 +77,7 @@ import json
 import sys
 from pathlib import Path
 
-from monitor.diagnose.engine import Diagnosis, describe_label, diagnose_table, rotor_name, round_floats
+from monitor.diagnose.engine import Diagnosis, describe_label, diagnose_table, name_verdict, rotor_name, round_floats
 from monitor.errors import PropwatchError
 from monitor.esc import EscCurve
 from monitor.logs import read_raw, to_flight_table
@@ -299,44 +299,25 @@ def fuse_verdict(d: Diagnosis, comparison: dict, motor_names, cg_damage_separabl
             "classifier_confidence": v["whole_flight"]["confidence"],
             "spreads_required": OUTLIER_SPREADS,
         }
-        if cg_damage_separable is False and v["faulty_propellers"]:
-            imb = cg_or_damage(v["label"], motor_names)
-            d.hypotheses, d.hypothesis_rule = imb.pop("hypotheses"), None
-            v.update(imb)
-            comparison["fusion"]["rule"] += "; CG offset and damage look alike on this airframe: an imbalance, no fault named"
-            for p in d.propellers:
-                p["faulty"], p["suspect"] = False, p["propeller"] in imb["imbalance_rotors"]
-        return
-    f = fuse(comparison["deviation_spreads"], d.label_probability, v["label"], v.get("confidence") == "confident")
-    comparison["fusion"] = {
-        "rule": f["rule"],
-        "classifier_label": v["label"],
-        "classifier_confidence": v.get("confidence"),
-        "spreads_required": OUTLIER_SPREADS,
-    }
-    label, conf = f["label"], f["confidence"]
-    window_labels = d.timeline.get("label") or []
-    v.update(
-        label=label,
-        faulty_propellers=list(LABEL_TABLE[label]),
-        faulty_names=[motor_names[i - 1] for i in LABEL_TABLE[label]],
-        confidence=conf,
-        label_probability_of_verdict=round(float(d.label_probability[label - 1]), 4),
-    )
-    if window_labels:
-        v["agreeing_windows"] = round(sum(int(x) == label for x in window_labels) / len(window_labels), 4)
-    for p in d.propellers:
-        bad = p["propeller"] in LABEL_TABLE[label]
-        p["faulty"], p["suspect"] = bad and conf == "confident", bad and conf != "confident"
+        label = v["label"]
+    else:
+        f = fuse(comparison["deviation_spreads"], d.label_probability, v["label"], v.get("confidence") == "confident")
+        comparison["fusion"] = {
+            "rule": f["rule"],
+            "classifier_label": v["label"],
+            "classifier_confidence": v.get("confidence"),
+            "spreads_required": OUTLIER_SPREADS,
+        }
+        label = f["label"]
+        name_verdict(d, label, f["confidence"], motor_names)
     if cg_damage_separable is False and LABEL_TABLE[label]:
         imb = cg_or_damage(label, motor_names)
         d.hypotheses, d.hypothesis_rule = imb.pop("hypotheses"), None
-        v.update(imb, label_probability_of_verdict=round(float(d.label_probability[0]), 4))
-        if window_labels:
-            v["agreeing_windows"] = round(sum(int(x) == 1 for x in window_labels) / len(window_labels), 4)
+        name_verdict(d, imb["label"], imb["confidence"], motor_names)
+        v.update(imb)
         comparison["fusion"]["rule"] += "; CG offset and damage look alike on this airframe: an imbalance, no fault named"
         for p in d.propellers:
-            p["faulty"], p["suspect"] = False, p["propeller"] in imb["imbalance_rotors"]
+            p["suspect"] = p["propeller"] in imb["imbalance_rotors"]
 
 
 EXIT_NOT_CONFIDENT = 3

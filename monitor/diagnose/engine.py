@@ -37,7 +37,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from monitor.decision import Decision, DecisionConfig, StepInputs, WindowEvidence, file_sha256
-from monitor.diagnose.physics import SET_PRIOR, PhysicsEvidence, own_baseline, physics_evidence
+from monitor.diagnose.physics import PRE_CHANGE_MARGIN_S, SET_PRIOR, PhysicsEvidence, own_baseline, physics_evidence
 from monitor.errors import ModelError
 from monitor.esc import EscCurve
 from monitor.features import compute_features, signals_needed, sliding_windows, valid_windows
@@ -359,25 +359,7 @@ def weigh_in_flight_sets(d: Diagnosis, motor_names) -> None:
     w = w / w.sum()
     order = np.argsort(-w, kind="stable")  # most probable first; ties keep the rule's order
     d.hypotheses = [{"faulty_propellers": list(sets[i]), "probability": round(float(w[i]), 4), "evidence": basis} for i in order]
-    label = label_for(d.hypotheses[0]["faulty_propellers"])
-    if label != d.verdict["label"]:
-        d.verdict.update(
-            label=label, faulty_propellers=list(LABEL_TABLE[label]), faulty_names=[motor_names[i - 1] for i in LABEL_TABLE[label]]
-        )
-        if d.label_probability is not None:
-            d.verdict["label_probability_of_verdict"] = round(float(d.label_probability[label - 1]), 4)
-        window_labels = d.timeline.get("label") or []
-        if window_labels:
-            d.verdict["agreeing_windows"] = round(sum(int(x) == label for x in window_labels) / len(window_labels), 4)
-        conf = d.verdict["confidence"]
-        for p in d.propellers:
-            bad = p["propeller"] in LABEL_TABLE[label]
-            p["faulty"], p["suspect"] = bad and conf == "confident", bad and conf != "confident"
-
-
-# The onset precedes the first announcement by the rule's detection delay (median 4-5 s, p95 under 10 s on both
-# simulators): the flight's own baseline ends this long before it.
-PRE_CHANGE_MARGIN_S = 10.0
+    name_verdict(d, label_for(d.hypotheses[0]["faulty_propellers"]), d.verdict["confidence"], motor_names)
 
 
 def after_change_physics(d: Diagnosis, table: FlightTable, vehicle, window: int) -> None:
@@ -513,6 +495,26 @@ def replay_decision(
     return out
 
 
+def name_verdict(d: Diagnosis, label: int, confidence: str, motor_names) -> None:
+    """Point ``d.verdict`` and ``d.propellers`` at ``label`` with ``confidence``: its propellers and names, the whole
+    flight's probability of that label and the share of windows agreeing with it, FAULTY only when confident."""
+    v = d.verdict
+    v.update(
+        label=label,
+        faulty_propellers=list(LABEL_TABLE[label]),
+        faulty_names=[motor_names[i - 1] for i in LABEL_TABLE[label]],
+        confidence=confidence,
+    )
+    if d.label_probability is not None:
+        v["label_probability_of_verdict"] = round(float(d.label_probability[label - 1]), 4)
+    window_labels = d.timeline.get("label") or []
+    if window_labels:
+        v["agreeing_windows"] = round(sum(int(x) == label for x in window_labels) / len(window_labels), 4)
+    for p in d.propellers:
+        bad = p["propeller"] in LABEL_TABLE[label]
+        p["faulty"], p["suspect"] = bad and confidence == "confident", bad and confidence != "confident"
+
+
 def apply_in_flight_fault(d: Diagnosis, motor_names, unfit: list[str] = ()) -> None:
     """Where the in-flight rule raised a fault, the verdict is its answer, not the whole flight's.
 
@@ -538,8 +540,6 @@ def apply_in_flight_fault(d: Diagnosis, motor_names, unfit: list[str] = ()) -> N
         )
         return
     sets = change["hypothesis_sets"]
-    label = label_for(sets[0])
-    conf = "confident" if len(sets) == 1 else "ambiguous"
     v = d.verdict
     v["whole_flight"] = {
         "label": v["label"],
@@ -548,23 +548,9 @@ def apply_in_flight_fault(d: Diagnosis, motor_names, unfit: list[str] = ()) -> N
         # as ``to_json`` gives them: the conformal set, else the moment balance's credible set
         "hypotheses": d.hypotheses if d.hypotheses is not None else (d.physics.hypotheses if d.physics else None),
     }
-    v.update(
-        label=label,
-        faulty_propellers=list(LABEL_TABLE[label]),
-        faulty_names=[motor_names[i - 1] for i in LABEL_TABLE[label]],
-        confidence=conf,
-        source="in-flight change",
-        change_boot_s=change["first_fault_boot_s"],
-    )
-    if d.label_probability is not None:  # the whole flight's probability of this label, as for any verdict
-        v["label_probability_of_verdict"] = round(float(d.label_probability[label - 1]), 4)
-    window_labels = d.timeline.get("label") or []
-    if window_labels:
-        v["agreeing_windows"] = round(sum(int(x) == label for x in window_labels) / len(window_labels), 4)
+    v.update(source="in-flight change", change_boot_s=change["first_fault_boot_s"])
+    name_verdict(d, label_for(sets[0]), "confident" if len(sets) == 1 else "ambiguous", motor_names)
     d.hypotheses = [{"faulty_propellers": list(s), "evidence": "in-flight change"} for s in sets]
-    for p in d.propellers:
-        bad = p["propeller"] in LABEL_TABLE[label]
-        p["faulty"], p["suspect"] = bad and conf == "confident", bad and conf != "confident"
 
 
 def predict_at(clf: Classifier, feats: np.ndarray, ends: np.ndarray, window: int, batch: int):

@@ -147,6 +147,13 @@ class RandomisedChunk:
     names: list[str]
     after: np.ndarray  # (n, 4) each rotor's signature after the switch
 
+    def hover_thrust_factors(self, b: int, motor_rpm: np.ndarray, vehicle: VehicleConfig, duration_s: float) -> np.ndarray:
+        """(4,) flight ``b``'s thrust factor of each rotor after the switch, at that rotor's own hover speed (the
+        median of ``motor_rpm`` (T, 4) before the switch)."""
+        n0 = max(int(min(self.onset_s[b], duration_s) * self.flog.log_rate_hz), 1)
+        s_hover = np.median(np.asarray(motor_rpm)[:n0], axis=0) / (vehicle.omega_max_rad_s * RPM_PER_RAD_S)
+        return np.array([self.after[b, r].thrust_factor(s_hover[r]) for r in range(4)])
+
 
 def randomised_chunks(vehicle: VehicleConfig, fs: FlightSet):
     """The set's flights, chunk by chunk, as the simulator logged them (``RandomisedChunk``).
@@ -223,10 +230,9 @@ def _simulate_randomised(vehicle: VehicleConfig, fs: FlightSet, clf: Classifier,
     for ch in randomised_chunks(vehicle, fs):
         degraded = degraded_signals(ch.flog, ch.phys)
         part = _classify(ch.flog, clf, ch.cond, ch.onset_s, "", signals=degraded, names=ch.names)
-        for b, f in enumerate(part):  # each damaged rotor's loss at its own hover speed (median before the onset)
-            n0 = max(int(min(ch.onset_s[b], fs.duration_s) * f.rate_hz), 1)
-            s_hover = np.median(f.motor_rpm[:n0], axis=0) / (vehicle.omega_max_rad_s * RPM_PER_RAD_S)
-            f.thrust_loss = tuple(round(float(1.0 - ch.after[b, p - 1].thrust_factor(s_hover[p - 1])), 4) for p in f.truth)
+        for b, f in enumerate(part):  # each damaged rotor's loss at its own hover speed
+            factor = ch.hover_thrust_factors(b, f.motor_rpm, vehicle, fs.duration_s)
+            f.thrust_loss = tuple(round(float(1.0 - factor[p - 1]), 4) for p in f.truth)
         out += part
         log(f"alerts: {fs.kind} seed {fs.seed} (randomised): {len(out)}/{fs.n_flights} flights")
     return out
