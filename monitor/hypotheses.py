@@ -46,6 +46,11 @@ class SetRule:
     # which the daemon scores in flight where the moment balance of whole flights is not at hand.
     thresholds: tuple[tuple[str, float], ...] = ()
     sparsity_prior: float = 1.0  # rho: a set of k damaged propellers is weighted rho**k before normalising
+    # tau: in the fused score the classifier's split within each yaw class (sets that only the unmeasured yaw torque
+    # separates, YAW_CLASS) enters as p**tau (1: as it is, older files). Below 1 that certainty, learned from the
+    # register's own torque distribution, counts for less against the balance, which states and marginalises its
+    # prior; the network's probability of the class itself stays at full weight.
+    classifier_weight: float = 1.0
     # The airframe check: a flight whose moment balance favours an unmeasured airframe over the vehicle file's
     # by more than this log Bayes factor (monitor.diagnose.physics) is scored with the balance under an
     # unmeasured airframe, at the threshold calibrated on such airframes. None: no check (older files).
@@ -70,6 +75,8 @@ class SetRule:
             raise ModelError(f"{self.source}: airframe_check.log_bayes_factor_max must be finite")
         if not (0.0 < self.sparsity_prior <= 1.0):
             raise ModelError(f"{self.source}: sparsity_prior must be in (0, 1], got {self.sparsity_prior}")
+        if not (0.0 < self.classifier_weight <= 1.0):
+            raise ModelError(f"{self.source}: classifier_weight must be in (0, 1], got {self.classifier_weight}")
 
 
 def rule_path(model_path: str | Path) -> Path:
@@ -105,6 +112,7 @@ def _parse_rule(path: Path, data: bytes) -> SetRule:
             source=str(path),
             thresholds=tuple((str(k), float(v["threshold"])) for k, v in (d.get("candidates") or {}).items()),
             sparsity_prior=float(r.get("sparsity_prior", 1.0)),
+            classifier_weight=float(r.get("classifier_weight", 1.0)),
             **_airframe_check(d.get("airframe_check")),
         )
     except (ValueError, KeyError, TypeError) as exc:
@@ -112,6 +120,37 @@ def _parse_rule(path: Path, data: bytes) -> SetRule:
 
 
 _SET_SIZE = np.array([len(LABEL_TABLE[k]) for k in range(1, N_LABELS + 1)], dtype=np.float64)
+SAME_SPIN_PAIRS = (frozenset((1, 2)), frozenset((3, 4)))  # PX4 quad-X: 1 and 2 spin CCW, 3 and 4 CW
+
+
+def _yaw_classes() -> np.ndarray:
+    """(16,) class index of each label (label order): two sets share a class when one is the other plus a same-spin
+    pair it does not touch. Roll and pitch balance cannot tell them apart (the pair's two thrusts stay equal); only
+    the yaw balance can, and that moves with the unmeasured torque per thrust of a damaged blade. Classes:
+    {healthy, 1+2, 3+4, all four}, {1, 1+3+4}, {2, 2+3+4}, {3, 1+2+3}, {4, 1+2+4}, and each cross pair alone."""
+    sets = [frozenset(LABEL_TABLE[k]) for k in range(1, N_LABELS + 1)]
+    cls = list(range(N_LABELS))
+    for i, a in enumerate(sets):  # union-find over the "add a disjoint same-spin pair" relation
+        for pair in SAME_SPIN_PAIRS:
+            if not a & pair:
+                j = sets.index(a | pair)
+                ri, rj = cls[i], cls[j]
+                while cls[ri] != ri:
+                    ri = cls[ri]
+                while cls[rj] != rj:
+                    rj = cls[rj]
+                cls[max(ri, rj)] = min(ri, rj)
+    roots = []
+    for i in range(N_LABELS):
+        r = i
+        while cls[r] != r:
+            r = cls[r]
+        roots.append(r)
+    _, idx = np.unique(roots, return_inverse=True)
+    return idx
+
+
+YAW_CLASS = _yaw_classes()
 
 
 def _airframe_check(block: dict | None) -> dict:
@@ -125,7 +164,11 @@ def _airframe_check(block: dict | None) -> dict:
 
 
 def flight_score(
-    label_probability: np.ndarray, physics_log_likelihood: np.ndarray | None, score: str, sparsity_prior: float = 1.0
+    label_probability: np.ndarray,
+    physics_log_likelihood: np.ndarray | None,
+    score: str,
+    sparsity_prior: float = 1.0,
+    classifier_weight: float = 1.0,
 ) -> np.ndarray:
     """(16,) score of each propeller set (label order), summing to 1.
 
@@ -133,6 +176,9 @@ def flight_score(
     ``physics_log_likelihood``: the moment balance's marginal log-likelihood per set, or None when the log
     gave no usable balance (then the classifier's probability alone is the score, whatever ``score`` says).
     ``sparsity_prior``: rho, each set weighted rho**(its number of damaged propellers).
+    ``classifier_weight``: tau, in ``classifier x moment balance`` the classifier's split WITHIN each yaw class
+    (``YAW_CLASS``: sets only the unmeasured yaw torque separates) enters as p**tau; its probability of the class
+    itself (which rotors roll and pitch say, healthy or not) stays at full weight.
     """
     p = np.asarray(label_probability, dtype=np.float64)
     if p.shape != (N_LABELS,) or not np.all(np.isfinite(p)):
@@ -141,11 +187,19 @@ def flight_score(
         ll = np.asarray(physics_log_likelihood, dtype=np.float64)
         logp = ll - ll.max()
         if score == "classifier x moment balance":
-            logp = logp + np.log(np.maximum(p, 1e-12))
+            logp = logp + _classifier_log_weight(p, float(classifier_weight))
         p = np.exp(logp - logp.max())
     if sparsity_prior != 1.0:
         p = p * np.power(float(sparsity_prior), _SET_SIZE)
     return p / p.sum()
+
+
+def _classifier_log_weight(p: np.ndarray, tau: float) -> np.ndarray:
+    """(16,) log of the classifier's weight of each set: log P(its yaw class) + tau * log P(set | class)."""
+    q = np.maximum(p, 1e-12)
+    per_class = np.bincount(YAW_CLASS, weights=q)
+    within = q / per_class[YAW_CLASS]
+    return np.log(per_class[YAW_CLASS]) + tau * np.log(within)
 
 
 def hypothesis_set(scores: np.ndarray, threshold: float) -> list[dict]:

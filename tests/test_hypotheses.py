@@ -62,6 +62,66 @@ def test_moment_balance_likelihood_moves_the_score():
         flight_score(np.full(16, np.nan), None, "classifier")
 
 
+def test_classifier_weight_lets_the_balance_outvote_a_network_sure_of_what_only_yaw_separates():
+    # the network is sure of {3} + the CCW pair {1, 2} (label 12), the balance mildly prefers {3} (label 4): as the
+    # network is, it wins; at tau = 0.25 its 0.999 : 0.001 (6.9 nats) counts as 1.7 nats, below the balance's 3
+    p = np.full(16, 1e-6)
+    p[11], p[3] = 0.999, 0.001
+    p /= p.sum()
+    ll = np.zeros(16)
+    ll[3], ll[11] = 3.0, 0.0
+    fused = "classifier x moment balance"
+    assert np.argmax(flight_score(p, ll, fused)) == 11
+    assert np.argmax(flight_score(p, ll, fused, classifier_weight=0.25)) == 3
+    # tau weighs only the split inside a yaw class: sure of {4} (label 5) against {3} (label 4), a different class
+    # (roll and pitch tell them apart), the network still outvotes the balance's 3 nats
+    q = np.full(16, 1e-6)
+    q[4], q[3] = 0.999, 0.001
+    q /= q.sum()
+    assert np.argmax(flight_score(q, ll, fused, classifier_weight=0.25)) == 4
+    # tau only weighs the fused score: the classifier alone and the balance alone are as they were
+    assert np.allclose(flight_score(p, ll, "classifier", classifier_weight=0.25), p)
+    assert np.allclose(flight_score(p, ll, "moment balance", classifier_weight=0.25), flight_score(p, ll, "moment balance"))
+    # a tau of 1 is the plain product
+    assert np.allclose(flight_score(p, ll, fused, classifier_weight=1.0), flight_score(p, ll, fused))
+
+
+def test_yaw_classes_join_exactly_the_sets_a_same_spin_pair_apart():
+    from monitor.hypotheses import YAW_CLASS
+
+    classes = {}
+    for k, c in enumerate(YAW_CLASS):
+        classes.setdefault(int(c), set()).add(LABEL_TABLE[k + 1])
+    got = sorted(sorted(v) for v in classes.values())
+    want = [
+        [()] + [(1, 2), (1, 2, 3, 4), (3, 4)],
+        [(1,), (1, 3, 4)],
+        [(1, 3)],
+        [(1, 4)],
+        [(2,), (2, 3, 4)],
+        [(2, 3)],
+        [(2, 4)],
+        [(3,), (1, 2, 3)],
+        [(4,), (1, 2, 4)],
+    ]
+    assert got == sorted(sorted(v) for v in want)
+
+
+def test_rule_file_carries_its_classifier_weight_and_refuses_an_impossible_one(tmp_path):
+    model = tmp_path / "classifier.onnx"
+    rule = {"rule": {"score": "classifier x moment balance", "threshold": 0.01, "coverage": 0.95, "calibration_flights": 9}}
+    rule_path(model).write_text(json.dumps(rule))
+    assert load_rule(model).classifier_weight == 1.0  # an older file: the network as it is
+    for bad, ok in ((0.25, True), (0.0, False), (1.5, False)):
+        rule["rule"]["classifier_weight"] = bad
+        rule_path(model).write_text(json.dumps(rule))
+        if ok:
+            assert load_rule(model).classifier_weight == bad
+        else:
+            with pytest.raises(ModelError, match="classifier_weight"):
+                load_rule(model)
+
+
 def test_rule_file_is_read_and_a_bad_one_is_named(tmp_path):
     model = tmp_path / "classifier.onnx"
     assert load_rule(model) is None  # no rule beside the model: none
@@ -198,16 +258,27 @@ def test_region_threshold_covers_every_region_not_only_their_mean():
     assert measure(hard.label_probability, hard.truth, thr)["truth_in_set"] < 0.9
 
 
-def test_choose_takes_the_weakest_prior_whose_singles_match_the_share_baseline():
+def test_choose_takes_the_smallest_sets_whose_singles_match_the_share_baseline_then_the_weakest_prior():
     from offline.classifier.conformal import choose
 
-    def c(score, rho, size, ok):
-        return {"score": score, "sparsity_prior": rho, "worst_set_size": size, "singles_never_below_share": ok}
+    def c(score, rho, size, ok, tau=1.0):
+        return {
+            "score": score,
+            "sparsity_prior": rho,
+            "worst_set_size": size,
+            "singles_never_below_share": ok,
+            "classifier_weight": tau,
+        }
 
     cands = [c("classifier", 1.0, 2.0, False), c("classifier", 0.3, 2.5, True), c("moment balance", 0.3, 2.2, True)]
-    cands.append(c("classifier", 0.1, 1.5, True))
     best = choose(cands)
-    assert (best["score"], best["sparsity_prior"]) == ("moment balance", 0.3)
+    assert (best["score"], best["sparsity_prior"]) == ("moment balance", 0.3)  # the smaller sets of the two that qualify
+    cands.append(c("classifier", 0.1, 1.5, True))
+    assert choose(cands)["sparsity_prior"] == 0.1  # smaller sets still, and singles as good as the share's
+    cands.append(c("classifier", 1.0, 1.5, True))
+    assert choose(cands)["sparsity_prior"] == 1.0  # equal sets: the weaker prior
+    fused = [c("classifier x moment balance", 0.1, 3.0, True, tau) for tau in (0.25, 1.0, 0.5)]
+    assert choose(fused)["classifier_weight"] == 1.0  # equal sets and prior: the network as it is
     none_ok = [c("classifier", 1.0, 2.0, False), c("classifier", 0.1, 3.0, False)]
     assert choose(none_ok)["sparsity_prior"] == 0.1  # nothing qualifies, no shortfall known: the strongest prior tried
     # nothing qualifies: the prior whose singles fall least below the share (then the weakest such prior), not the
@@ -219,6 +290,39 @@ def test_choose_takes_the_weakest_prior_whose_singles_match_the_share_baseline()
     assert choose(short)["sparsity_prior"] == 0.3
 
 
+def test_choose_keeps_only_rules_passing_the_torque_sign_check_when_any_does():
+    from offline.classifier.conformal import choose
+
+    def c(rho, size, move):
+        return {
+            "score": "classifier x moment balance",
+            "sparsity_prior": rho,
+            "worst_set_size": size,
+            "singles_never_below_share": True,
+            "classifier_weight": 1.0,
+            "torque_sign_move": move,
+        }
+
+    # the smallest sets move 5 points when the torque flips: not chosen while a rule within 2 points exists
+    assert choose([c(0.3, 2.0, 0.05), c(0.1, 2.5, 0.015), c(0.05, 3.0, 0.0)])["sparsity_prior"] == 0.1
+    # none passes: the check cannot choose, the rest of the order does
+    assert choose([c(0.3, 2.0, 0.05), c(0.1, 2.5, 0.03)])["sparsity_prior"] == 0.3
+
+
+def test_torque_sign_move_is_the_change_of_single_propeller_accuracy_between_the_two_sets():
+    from offline.classifier.conformal import Region, torque_sign_move
+
+    truth = np.array([1, 2, 3, 4, 0, 5])  # four singles ({1}..{4}), healthy, a pair
+    right = np.full((6, 16), 1e-3)
+    right[np.arange(6), truth] = 1.0
+    wrong = right.copy()
+    wrong[0], wrong[1] = wrong[1].copy(), wrong[0].copy()  # two singles swapped: 50 % of singles right
+    up = Region("up", truth, right / right.sum(1, keepdims=True), np.zeros((6, 16)), np.zeros(6, int))
+    down = Region("down", truth, wrong / wrong.sum(1, keepdims=True), np.zeros((6, 16)), np.zeros(6, int))
+    assert torque_sign_move(up, down, "classifier", 1.0, 1.0) == pytest.approx(0.5)
+    assert torque_sign_move(up, up, "classifier", 1.0, 1.0) == 0.0
+
+
 def test_conformal_cli_refuses_a_sparsity_prior_outside_0_1_before_reading_anything(tmp_path, capsys):
     from offline.classifier.conformal import main
 
@@ -226,6 +330,9 @@ def test_conformal_cli_refuses_a_sparsity_prior_outside_0_1_before_reading_anyth
         with pytest.raises(SystemExit) as exc:
             main(["--data", str(tmp_path / "missing.npz"), "--sparsity-prior", bad, "--dry-run"])
         assert exc.value.code == 2 and "--sparsity-prior must be in (0, 1]" in capsys.readouterr().err
+        with pytest.raises(SystemExit) as exc:
+            main(["--data", str(tmp_path / "missing.npz"), "--classifier-weight", bad, "--dry-run"])
+        assert exc.value.code == 2 and "--classifier-weight must be in (0, 1]" in capsys.readouterr().err
 
 
 def test_flight_sets_word_an_onset_from_the_recent_windows_not_the_healthy_minutes_before():

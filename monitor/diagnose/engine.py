@@ -428,12 +428,13 @@ def apply_rule(d: Diagnosis, rule: SetRule, mean_labels: np.ndarray) -> tuple[in
             "nominal looks like damage here, so the hypotheses are those of an unmeasured airframe; calibrate this "
             "vehicle with `propwatch adapt` on its healthy flights"
         )
-    scores = flight_score(mean_labels, ll, score, rule.sparsity_prior)
+    scores = flight_score(mean_labels, ll, score, rule.sparsity_prior, rule.classifier_weight)
     d.hypotheses = hypothesis_set(scores, threshold)
     d.hypothesis_rule = {
         "score": score,
         "threshold": threshold,
         "sparsity_prior": rule.sparsity_prior,
+        "classifier_weight": rule.classifier_weight,
         "airframe": airframe,
         "airframe_log_bayes_factor": bf,
         "airframe_log_bayes_factor_max": rule.airframe_log_bayes_factor_max,

@@ -202,9 +202,14 @@ def write_card(path: str | Path, manifest: dict, results: list[Result], tables: 
         )
         lines.append(
             "- Verdicts are sets (`classifier.sets.json`, `offline/classifier/conformal.py`): calibrated so the truth is "
-            "in the set for >= 95 % of flights in EACH torque region of our own stress sets (torque per thrust falling "
-            "-10..0 %, rising +15..+30 %, the whole range), with a sparsity prior (a set of k damaged propellers "
-            "weighed 0.1^k, the weakest prior whose singles never fall below the omega^2-share baseline in any region). "
+            "in the set for >= 95 % of flights in EACH region of our own stress sets (torque per thrust falling "
+            "-10..0 %, rising +15..+30 %, the whole range, and beyond the register: -25..-10 %, +30..+50 %, hover "
+            "losses of 12-25 %), with a sparsity prior (a set of k damaged propellers weighed rho^k) and the "
+            "network's split inside each yaw class (sets only the unmeasured yaw torque separates, e.g. 3 and 1+2+3) "
+            "weighed as p^tau against the moment balance (the rule file says which rho and tau: passing the "
+            "torque-sign check on flights of its own, then singles falling least below the omega^2-share baseline in "
+            "any region, then the smallest sets; at full weight, on flights with the torque change at -25..-10 %, "
+            "the network named 70 % of singles against the share's 100 %). "
             "An airframe check (moment balance, log Bayes factor unmeasured : nominal airframe) flags logs no damage on "
             "the nominal airframe explains; they get the wide sets of an unmeasured airframe and a warning. On a "
             "motor spread of 4-8 % and CG offsets of 1 cm (drawn airframes) nothing locates a 3-12 % loss, and a "
