@@ -126,27 +126,20 @@ SAME_SPIN_PAIRS = (frozenset((1, 2)), frozenset((3, 4)))  # PX4 quad-X: 1 and 2 
 def _yaw_classes() -> np.ndarray:
     """(16,) class index of each label (label order): two sets share a class when one is the other plus a same-spin
     pair it does not touch. Roll and pitch balance cannot tell them apart (the pair's two thrusts stay equal); only
-    the yaw balance can, and that moves with the unmeasured torque per thrust of a damaged blade. Classes:
-    {healthy, 1+2, 3+4, all four}, {1, 1+3+4}, {2, 2+3+4}, {3, 1+2+3}, {4, 1+2+4}, and each cross pair alone."""
-    sets = [frozenset(LABEL_TABLE[k]) for k in range(1, N_LABELS + 1)]
-    cls = list(range(N_LABELS))
-    for i, a in enumerate(sets):  # union-find over the "add a disjoint same-spin pair" relation
+    the yaw balance can, and that moves with the unmeasured torque per thrust of a damaged blade. A set's class is
+    the set without the same-spin pairs it holds whole: {healthy, 1+2, 3+4, all four}, {1, 1+3+4}, {2, 2+3+4},
+    {3, 1+2+3}, {4, 1+2+4}, and each cross pair alone."""
+
+    def core(k: int) -> frozenset:
+        s = frozenset(LABEL_TABLE[k])
         for pair in SAME_SPIN_PAIRS:
-            if not a & pair:
-                j = sets.index(a | pair)
-                ri, rj = cls[i], cls[j]
-                while cls[ri] != ri:
-                    ri = cls[ri]
-                while cls[rj] != rj:
-                    rj = cls[rj]
-                cls[max(ri, rj)] = min(ri, rj)
-    roots = []
-    for i in range(N_LABELS):
-        r = i
-        while cls[r] != r:
-            r = cls[r]
-        roots.append(r)
-    _, idx = np.unique(roots, return_inverse=True)
+            if pair <= s:
+                s = s - pair
+        return s
+
+    cores = [core(k) for k in range(1, N_LABELS + 1)]
+    first = {c: i for i, c in reversed(list(enumerate(cores)))}  # each class numbered by its first label
+    _, idx = np.unique([first[c] for c in cores], return_inverse=True)
     return idx
 
 
