@@ -46,10 +46,10 @@ class SetRule:
     # which the daemon scores in flight where the moment balance of whole flights is not at hand.
     thresholds: tuple[tuple[str, float], ...] = ()
     sparsity_prior: float = 1.0  # rho: a set of k damaged propellers is weighted rho**k before normalising
-    # tau: in the fused score the classifier's split within each yaw class (sets that only the unmeasured yaw torque
-    # separates, YAW_CLASS) enters as p**tau (1: as it is, older files). Below 1 that certainty, learned from the
-    # register's own torque distribution, counts for less against the balance, which states and marginalises its
-    # prior; the network's probability of the class itself stays at full weight.
+    # tau: the classifier's split within each yaw class (sets that only the unmeasured yaw torque separates,
+    # YAW_CLASS) enters every score it is in as p**tau (1: as it is, older files). Below 1 that certainty, learned
+    # from the register's own torque distribution, counts for less (against the balance, which states and
+    # marginalises its prior, where there is one); the network's probability of the class stays at full weight.
     classifier_weight: float = 1.0
     # The airframe check: a flight whose moment balance favours an unmeasured airframe over the vehicle file's
     # by more than this log Bayes factor (monitor.diagnose.physics) is scored with the balance under an
@@ -169,9 +169,10 @@ def flight_score(
     ``physics_log_likelihood``: the moment balance's marginal log-likelihood per set, or None when the log
     gave no usable balance (then the classifier's probability alone is the score, whatever ``score`` says).
     ``sparsity_prior``: rho, each set weighted rho**(its number of damaged propellers).
-    ``classifier_weight``: tau, in ``classifier x moment balance`` the classifier's split WITHIN each yaw class
-    (``YAW_CLASS``: sets only the unmeasured yaw torque separates) enters as p**tau; its probability of the class
-    itself (which rotors roll and pitch say, healthy or not) stays at full weight.
+    ``classifier_weight``: tau, wherever the classifier's probability enters (the classifier alone, or times the
+    balance) its split WITHIN each yaw class (``YAW_CLASS``: sets only the unmeasured yaw torque separates) enters as
+    p**tau; its probability of the class itself (which rotors roll and pitch say, healthy or not) stays at full
+    weight. Alone, the split is flattened toward equal (the sparsity prior then orders the class's members).
     """
     p = np.asarray(label_probability, dtype=np.float64)
     if p.shape != (N_LABELS,) or not np.all(np.isfinite(p)):
@@ -182,17 +183,21 @@ def flight_score(
         if score == "classifier x moment balance":
             logp = logp + _classifier_log_weight(p, float(classifier_weight))
         p = np.exp(logp - logp.max())
+    elif classifier_weight != 1.0:  # the classifier alone, or no balance to fuse
+        logp = _classifier_log_weight(p, float(classifier_weight))
+        p = np.exp(logp - logp.max())
     if sparsity_prior != 1.0:
         p = p * np.power(float(sparsity_prior), _SET_SIZE)
     return p / p.sum()
 
 
 def _classifier_log_weight(p: np.ndarray, tau: float) -> np.ndarray:
-    """(16,) log of the classifier's weight of each set: log P(its yaw class) + tau * log P(set | class)."""
+    """(16,) log of the classifier's weight of each set: its yaw class's probability, shared among the class's sets
+    in proportion to P(set | class)**tau (so each class keeps exactly the probability the classifier gave it)."""
     q = np.maximum(p, 1e-12)
     per_class = np.bincount(YAW_CLASS, weights=q)
-    within = q / per_class[YAW_CLASS]
-    return np.log(per_class[YAW_CLASS]) + tau * np.log(within)
+    tempered = np.power(q / per_class[YAW_CLASS], tau)
+    return np.log(per_class[YAW_CLASS]) + np.log(tempered / np.bincount(YAW_CLASS, weights=tempered)[YAW_CLASS])
 
 
 def hypothesis_set(scores: np.ndarray, threshold: float) -> list[dict]:
@@ -215,6 +220,7 @@ class FlightSets:
             raise ValueError("horizon must be >= 1 window")
         self.threshold = rule.threshold_for("classifier")
         self.sparsity_prior = rule.sparsity_prior
+        self.classifier_weight = rule.classifier_weight
         self._ring = np.zeros((int(horizon), N_LABELS))
         self.reset()
 
@@ -237,23 +243,24 @@ class FlightSets:
         self._ring[self._head] = p
         self._head = (self._head + 1) % len(self._ring)
         self._n = min(self._n + 1, len(self._ring))
-        return RecentSet(self._ring.copy(), self._n, self.threshold, self.sparsity_prior)
+        return RecentSet(self._ring.copy(), self._n, self.threshold, self.sparsity_prior, self.classifier_weight)
 
 
 class RecentSet(Sequence):
     """The hypothesis set of one ``FlightSets`` state, computed on first read; reads as the tuple ``add`` returns
     (((propellers), probability), ...), never empty (the most probable set is always in)."""
 
-    __slots__ = ("_ring", "_n", "_threshold", "_rho", "_pairs")
+    __slots__ = ("_ring", "_n", "_threshold", "_rho", "_tau", "_pairs")
 
-    def __init__(self, ring: np.ndarray, n: int, threshold: float, sparsity_prior: float):
+    def __init__(self, ring: np.ndarray, n: int, threshold: float, sparsity_prior: float, classifier_weight: float = 1.0):
         self._ring, self._n, self._threshold, self._rho = ring, n, threshold, sparsity_prior  # ring: a copy, as it was
+        self._tau = classifier_weight
         self._pairs: tuple[tuple[tuple[int, ...], float], ...] | None = None
 
     def _value(self) -> tuple[tuple[tuple[int, ...], float], ...]:
         if self._pairs is None:
             mean = self._ring.sum(axis=0) / self._n  # empty rows are zeros
-            hyps = hypothesis_set(flight_score(mean, None, "classifier", self._rho), self._threshold)
+            hyps = hypothesis_set(flight_score(mean, None, "classifier", self._rho, self._tau), self._threshold)
             self._pairs = tuple((tuple(h["faulty_propellers"]), h["probability"]) for h in hyps)
         return self._pairs
 

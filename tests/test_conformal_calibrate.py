@@ -70,8 +70,11 @@ def test_the_rule_written_is_the_one_choose_picks_from_every_candidate_it_record
 
     res, _ = calibrated
     rule, cands = res["rule"], res["all_candidates"]
-    # two priors x (classifier, balance, fused at two weights)
-    assert len(cands) == 2 * 4 and all("torque_sign_move" in c for c in cands)
+    # two priors x (classifier at two weights, balance, fused at two weights)
+    assert len(cands) == 2 * 5 and all("torque_sign_move" in c for c in cands)
+    # the classifier's own threshold (the daemon's wording) is the one at the chosen prior and weight
+    own = res["candidates"]["classifier"]
+    assert (own["sparsity_prior"], own["classifier_weight"]) == (rule["sparsity_prior"], rule["classifier_weight"])
     best = choose([dict(c) for c in cands])
     assert (rule["score"], rule["sparsity_prior"], rule["classifier_weight"]) == (
         best["score"],

@@ -79,8 +79,15 @@ def test_classifier_weight_lets_the_balance_outvote_a_network_sure_of_what_only_
     q[4], q[3] = 0.999, 0.001
     q /= q.sum()
     assert np.argmax(flight_score(q, ll, fused, classifier_weight=0.25)) == 4
-    # tau only weighs the fused score: the classifier alone and the balance alone are as they were
-    assert np.allclose(flight_score(p, ll, "classifier", classifier_weight=0.25), p)
+    # the classifier alone: its split inside the class flattened (0.999 : 0.001 -> about 5.6 : 1), the class kept
+    alone = flight_score(p, None, "classifier", classifier_weight=0.25)
+    assert alone[11] / alone[3] == pytest.approx(999.0**0.25, rel=1e-3)
+    assert alone[11] + alone[3] == pytest.approx(p[11] + p[3], rel=1e-9)  # exactly the class the network gave
+    q = np.full(16, 0.5 / 14)
+    q[0], q[5] = 0.25, 0.25  # healthy and 1+2 (one class of four) at 0.25 each: the class keeps its 0.5 + 2/28
+    flat = flight_score(q, None, "classifier", classifier_weight=0.25)
+    assert flat[[0, 5, 10, 15]].sum() == pytest.approx(q[[0, 5, 10, 15]].sum(), rel=1e-9)
+    # the balance alone knows nothing of the classifier
     assert np.allclose(flight_score(p, ll, "moment balance", classifier_weight=0.25), flight_score(p, ll, "moment balance"))
     # a tau of 1 is the plain product
     assert np.allclose(flight_score(p, ll, fused, classifier_weight=1.0), flight_score(p, ll, fused))

@@ -10,10 +10,10 @@ torque per thrust falling, -10..0 %, or rising, +15..+30 %), and regions BEYOND 
 change -25..-10 % or +30..+50 %, hover losses of 12-25 %): the register is a statement of ignorance that may itself
 be wrong, and a rule must not fall apart just outside it. For every flight the three candidate scores of
 ``monitor.hypotheses`` are computed (the classifier's mean label probability, that times the moment balance's
-likelihood, the balance alone), each under every sparsity prior rho of ``SPARSITY_GRID``; the fused one also
-under every classifier weight tau of ``CLASSIFIER_WEIGHT_GRID`` (the network's split within each yaw class, the
-sets only the unmeasured yaw torque separates, as p**tau: the network learned the register's own distribution of
-that torque, the balance states and marginalises its prior; ``monitor.hypotheses.YAW_CLASS``). A
+likelihood, the balance alone), each under every sparsity prior rho of ``SPARSITY_GRID``; the two with the
+classifier also under every classifier weight tau of ``CLASSIFIER_WEIGHT_GRID`` (the network's split within each
+yaw class, the sets only the unmeasured yaw torque separates, as p**tau: the network learned the register's own
+distribution of that torque, the balance states and marginalises its prior; ``monitor.hypotheses.YAW_CLASS``). A
 candidate's threshold is the smallest of its regions' own split-conformal thresholds (the score the truth reaches
 in all but ``1 - coverage`` of that region's flights), so the coverage holds in each region, not only on average
 over the register: whichever way the unmeasured torque goes. The rule chosen (``choose``) passes the torque-sign
@@ -112,8 +112,8 @@ def set_metrics(sets: list[list[dict]], truth: np.ndarray) -> dict:
 
 
 SPARSITY_GRID = (1.0, 0.5, 0.3, 0.2, 0.15, 0.1, 0.07, 0.05, 0.03)
-CLASSIFIER_WEIGHT_GRID = (1.0, 0.5, 0.25, 0.1)  # tau of the fused score (the other scores have none)
-FUSED = "classifier x moment balance"
+CLASSIFIER_WEIGHT_GRID = (1.0, 0.5, 0.25, 0.1)  # tau of the scores with the classifier in them
+BALANCE = "moment balance"
 
 
 @dataclass(frozen=True)
@@ -318,7 +318,7 @@ def calibrate(
         candidate(regions, s, rho, coverage, tau)
         for rho in sparsity_grid
         for s in SCORES
-        for tau in (classifier_weights if s == FUSED else (1.0,))
+        for tau in (classifier_weights if s != BALANCE else (1.0,))
     ]
     if signs:
         for c in cands:
@@ -335,10 +335,12 @@ def calibrate(
     for name, m in best["regions"].items():
         log(f"chosen on {name}: " + fmt(m))
     rho, tau = best["sparsity_prior"], best["classifier_weight"]
-    # each score at the chosen prior (the fused one at the chosen weight, or its own best where another won)
-    measured = {c["score"]: c for c in cands if c["sparsity_prior"] == rho and c["score"] != FUSED}
-    fused = [c for c in cands if c["sparsity_prior"] == rho and c["score"] == FUSED]
-    measured[FUSED] = next((c for c in fused if c["classifier_weight"] == tau), None) or choose(fused)
+    # every score at the chosen prior and weight: the daemon words its alerts with the classifier's own threshold
+    measured = {
+        c["score"]: c
+        for c in cands
+        if c["sparsity_prior"] == rho and c["classifier_weight"] == (1.0 if c["score"] == BALANCE else tau)
+    }
     checked = {}
     for path in checks:
         other = region_of(path, clf, vehicle)
