@@ -114,6 +114,20 @@ def test_yaw_classes_join_exactly_the_sets_a_same_spin_pair_apart():
     assert got == sorted(sorted(v) for v in want)
 
 
+def test_the_daemon_words_a_yaw_class_split_with_the_rules_weight():
+    from monitor.hypotheses import FlightSets, SetRule
+
+    p = np.full(16, 1e-6)
+    p[14], p[2] = 0.95, 0.05  # label 15 = {2, 3, 4}, label 3 = {2}: one yaw class, split by the network alone
+    p /= p.sum()
+    sure = FlightSets(SetRule("classifier", 0.1, 0.95, 160, thresholds=(("classifier", 0.1),)), horizon=1)
+    assert [s for s, _ in sure.add(p)] == [(2, 3, 4)]
+    weighed = FlightSets(
+        SetRule("classifier", 0.1, 0.95, 160, thresholds=(("classifier", 0.1),), classifier_weight=0.25), horizon=1
+    )
+    assert [s for s, _ in weighed.add(p)] == [(2, 3, 4), (2,)]  # worded `PROP 2+3+4 or 2?`, not one answer
+
+
 def test_rule_file_carries_its_classifier_weight_and_refuses_an_impossible_one(tmp_path):
     model = tmp_path / "classifier.onnx"
     rule = {"rule": {"score": "classifier x moment balance", "threshold": 0.01, "coverage": 0.95, "calibration_flights": 9}}
