@@ -2,7 +2,10 @@
 
     python -m offline.classifier.conformal --model models/classifier.onnx \\
         --data out/data-rncal/RNcal-varied.npz --data out/data-rnfall/RNfall-varied.npz \\
-        --data out/data-rnrise/RNrise-varied.npz [--check out/data-rrcal/RRcal-varied.npz] [--coverage 0.95]
+        --data out/data-rnrise/RNrise-varied.npz [--beyond out/data-rnbelow/RNbelow-varied.npz ...] \\
+        [--sign-check TSup-varied.npz TSdown-varied.npz] [--check out/data-rrcal/RRcal-varied.npz] [--coverage 0.95]
+
+(`make card` runs it with every region it builds.)
 
 Each ``--data`` set is a *region*: flights the classifier never trained on, every physics term drawn from the
 assumption register, some with one range moved (``propwatch dataset --assumption``; e.g. the damaged blade's
