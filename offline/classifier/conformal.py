@@ -131,6 +131,7 @@ class Region:
     share_rotor: np.ndarray  # (F,) the ω²-share baseline's rotor 1..4
     log_likelihood_unmeasured: np.ndarray | None = None  # (F, 16) the balance with an unmeasured airframe
     airframe_log_bayes_factor: np.ndarray | None = None  # (F,) the airframe check's statistic
+    manifest: dict | None = None  # the data set's manifest, as it was read (written beside the rule)
 
     def unmeasured(self, flagged_above: float) -> Region:
         """The flights of this region the airframe check flags, scored as an unmeasured airframe."""
@@ -164,6 +165,7 @@ def region_from_dataset(ds: FaultDataset, name: str, clf: Classifier, vehicle) -
         log_likelihood_unmeasured=ll_u,
         # the airframe check's statistic per flight, as monitor.diagnose.physics computes it for a log
         airframe_log_bayes_factor=np.array([airframe_log_bayes_factor(a, b) for a, b in zip(check_n, check_u, strict=True)]),
+        manifest=ds.manifest,
     )
 
 
@@ -218,10 +220,8 @@ def torque_sign_move(up: Region, down: Region, score: str, sparsity_prior: float
     """How far single-propeller accuracy (the most probable set) moves between flights whose damaged blades'
     torque per thrust rises and flights where it falls, everything else alike (the issue's torque-sign check)."""
 
-    def singles(r: Region) -> float:
-        sc = region_scores(r, score, sparsity_prior, classifier_weight)
-        single = [i for i, t in enumerate(r.truth) if len(LABEL_TABLE[t + 1]) == 1]
-        return float(np.mean([int(np.argmax(sc[i])) == r.truth[i] for i in single]))
+    def singles(r: Region) -> float:  # the most probable set is first whatever the threshold
+        return measure(region_scores(r, score, sparsity_prior, classifier_weight), r.truth, 1.0)["single_exact"]
 
     return abs(singles(up) - singles(down))
 
@@ -348,7 +348,7 @@ def calibrate(
     for path in checks:
         other = region_of(path, clf, vehicle)
         m = measure(region_scores(other, best["score"], rho, tau), other.truth, best["threshold"])
-        checked[path.name] = {"manifest": load_dataset(path).manifest.get("config"), **m}
+        checked[path.name] = {"manifest": other.manifest.get("config"), **m}
         log(f"check {path.name}  {best['score']:30s} threshold {best['threshold']:.5f}  " + fmt(m))
     check = None
     if unmeasured:
@@ -374,7 +374,9 @@ def calibrate(
             "largest tau; threshold: the smallest region threshold (each region covered)",
             "torque_sign_move": best.get("torque_sign_move"),
         },
-        "torque_sign_check": [{"path": str(p), "manifest": load_dataset(p).manifest.get("config")} for p in sign_check],
+        "torque_sign_check": [
+            {"path": str(p), "manifest": r.manifest.get("config")} for p, r in zip(sign_check, signs, strict=True)
+        ],
         "candidates": measured,
         "all_candidates": [
             {
@@ -393,7 +395,7 @@ def calibrate(
             }
             for c in cands
         ],
-        "calibration_data": [{"path": str(p), "manifest": load_dataset(p).manifest} for p in [*data, *beyond]],
+        "calibration_data": [{"path": str(p), "manifest": r.manifest} for p, r in zip([*data, *beyond], regions, strict=True)],
         "beyond_register": [str(p) for p in beyond],
         "checks": checked,
     }
@@ -462,7 +464,7 @@ def main(argv: list[str] | None = None) -> int:
         "--classifier-weight",
         type=float,
         default=None,
-        help="fix tau, the classifier's weight in the fused score, instead of choosing it from the grid",
+        help="fix tau, the weight of the classifier's split inside a yaw class, instead of choosing it from the grid",
     )
     a = p.parse_args(argv)
     if a.sparsity_prior is not None and not 0.0 < a.sparsity_prior <= 1.0:
