@@ -195,7 +195,7 @@ def test_nominal_airframe_fixes_the_airframe_terms_and_draws_everything_else():
         DatasetSpec("R", physics="randomised", propellers="quadratic", airframe="guessed")
 
 
-def test_dataset_cli_moves_a_register_range_by_glob_and_the_manifest_says_so(tmp_path):
+def test_dataset_cli_moves_a_register_range_by_glob_and_the_manifest_says_so(tmp_path, capsys):
     import json
 
     from offline.dataset import cli
@@ -208,6 +208,13 @@ def test_dataset_cli_moves_a_register_range_by_glob_and_the_manifest_says_so(tmp
     assert len(moved) == 4  # bent and cracked, low and high speed
     assert all((m[n]["low"], m[n]["high"]) == (-0.10, 0.0) for n in moved)
     assert m["motor_time_constant_s"]["low"] == REGISTER["motor_time_constant_s"].low  # the rest untouched
+    assert m["healthy_torque_per_thrust_spread_frac"]["high"] == REGISTER["healthy_torque_per_thrust_spread_frac"].high
+    # the names a glob moved are said: a looser one catches the healthy props' spread too
+    err = capsys.readouterr().err
+    assert all(n in err for n in moved)
+    args = cli.build_parser().parse_args([*argv, "--assumption", "*torque_per_thrust*=-0.10,0"])
+    assert cli.register_from_args(args)["healthy_torque_per_thrust_spread_frac"].low == -0.10
+    assert "healthy_torque_per_thrust_spread_frac" in capsys.readouterr().err
     for bad, why in [
         ("*torque*", "NAME=LOW,HIGH"),
         ("nothing_like_this=0,1", "no register entry"),

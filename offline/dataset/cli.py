@@ -13,6 +13,7 @@ import argparse
 import contextlib
 import fnmatch
 import math
+import sys
 from pathlib import Path
 
 from monitor.errors import ConfigError
@@ -87,8 +88,8 @@ def build_parser() -> argparse.ArgumentParser:
         default=[],
         metavar="NAME=LOW,HIGH",
         help="with --physics randomised: narrow or move one register range (NAME may be a glob, e.g. "
-        "'*torque_per_thrust*=-0.10,0'); a stress set for selection on our own simulator. Repeatable; the "
-        "manifest records the ranges used",
+        "'*_torque_per_thrust_change_*=-0.10,0'; the names it moves are printed, a glob can catch more than meant); "
+        "a stress set for selection on our own simulator. Repeatable; the manifest records the ranges used",
     )
     return p
 
@@ -115,6 +116,7 @@ def register_from_args(a: argparse.Namespace):
         names = fnmatch.filter(register.names, name.strip())
         if not names:
             raise ConfigError(f"--assumption {item!r}: no register entry matches {name.strip()!r}")
+        print(f"--assumption {item!r} moves {', '.join(names)}", file=sys.stderr)  # a glob can catch more than meant
         for n in names:
             register = register.with_range(n, low, high)
     return register
