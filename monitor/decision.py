@@ -797,6 +797,7 @@ class Decision:
         self.pair_level = "none"  # the yaw balance: a same-spin diagonal pair (1+2 or 3+4)
         self.pair_sign = 0  # +1: the CCW pair's shares rose (1+2 first), -1: the CW pair's (3+4 first)
         self._pair_sets: list[tuple[int, ...]] | None = None  # what the yaw balance alone named when it last rose
+        self._announced_rank = 0  # the highest level announced this flight (LEVELS index)
         self._last_window_t: float | None = None
         self._last_hypotheses: tuple | None = None
         self._last_p = np.full(N_PROPS, np.nan)
@@ -898,6 +899,7 @@ class Decision:
         self.vibe_level = "none"
         self.pair_level, self.pair_sign = "none", 0
         self._pair_sets = None
+        self._announced_rank = 0  # the highest level announced this flight (LEVELS index)
         self._last_window_t = None
         self._last_hypotheses = None
         self.vibration.reset()
@@ -941,6 +943,10 @@ class Decision:
                 self.pair_level, self.pair_sign = lvl, sign
                 self._pair_sets = self._yaw_alone_sets()  # as the evidence stood when it rose (baselines follow later)
             at = tuple(i + 1 for i in range(N_PROPS) if LEVELS.index(self.level[i]) >= rank)
+            if at and not rising and rank < self._announced_rank:
+                # the yaw balance rose to suspect after a fault was announced on these propellers: a NOTICE after
+                # the WARNING reads as a downgrade; its widening is told when it reaches fault (the status shows it)
+                break
             sets = self.hypothesis_sets(lvl, new)
             if not at:  # the pair statistic alone: both same-spin pairs are named, none is claimed
                 at = tuple(sorted(set().union(*sets)))
@@ -952,6 +958,7 @@ class Decision:
             hyps = tuple(self._last_hypotheses or ())
             text = statustext(lvl, sets, p)
             out.append(Announcement(t_s, lvl, at, text, sev, stat, "classifier", hyps, tuple(sets)))
+            self._announced_rank = max(self._announced_rank, rank)
             break  # one announcement per window: the highest level reached
         self.announcements += out
         return out
