@@ -80,12 +80,12 @@ card: $(STAMP)
 		--ablation $(CARD)/experiments --checkpoint "$(CARD)/experiments/randomised physics x60 +yaw robust dropout.pt"
 	$(MAKE) dataset-randomised RANDOMISED_OUT=$(CARD)/dataRNcal FLIGHTS=10 SEED=8 NAME=RNcal
 	$(MAKE) dataset-randomised RANDOMISED_OUT=$(CARD)/dataRRcal FLIGHTS=10 SEED=8 NAME=RRcal AIRFRAME=drawn
-	$(MAKE) dataset-randomised RANDOMISED_OUT=$(CARD)/dataRNfall FLIGHTS=10 SEED=9 NAME=RNfall ASSUME='*_torque_per_thrust_change_*=-0.10,0'
-	$(MAKE) dataset-randomised RANDOMISED_OUT=$(CARD)/dataRNrise FLIGHTS=10 SEED=9 NAME=RNrise ASSUME='*_torque_per_thrust_change_*=0.15,0.30'
-	$(MAKE) dataset-randomised RANDOMISED_OUT=$(CARD)/dataRRfall FLIGHTS=10 SEED=9 NAME=RRfall AIRFRAME=drawn ASSUME='*_torque_per_thrust_change_*=-0.10,0'
-	$(MAKE) dataset-randomised RANDOMISED_OUT=$(CARD)/dataRRrise FLIGHTS=10 SEED=9 NAME=RRrise AIRFRAME=drawn ASSUME='*_torque_per_thrust_change_*=0.15,0.30'
-	# beyond the register: the torque change past either end of its range, hover losses past its largest
-	$(MAKE) dataset-randomised RANDOMISED_OUT=$(CARD)/dataRNbelow FLIGHTS=10 SEED=10 NAME=RNbelow ASSUME='*_torque_per_thrust_change_*=-0.25,-0.10'
+	$(MAKE) dataset-randomised RANDOMISED_OUT=$(CARD)/dataRNfall FLIGHTS=10 SEED=9 NAME=RNfall ASSUME='*_torque_per_thrust_change_*=-0.30,0'
+	$(MAKE) dataset-randomised RANDOMISED_OUT=$(CARD)/dataRNrise FLIGHTS=10 SEED=9 NAME=RNrise ASSUME='*_torque_per_thrust_change_*=0,0.30'
+	$(MAKE) dataset-randomised RANDOMISED_OUT=$(CARD)/dataRRfall FLIGHTS=10 SEED=9 NAME=RRfall AIRFRAME=drawn ASSUME='*_torque_per_thrust_change_*=-0.30,0'
+	$(MAKE) dataset-randomised RANDOMISED_OUT=$(CARD)/dataRRrise FLIGHTS=10 SEED=9 NAME=RRrise AIRFRAME=drawn ASSUME='*_torque_per_thrust_change_*=0,0.30'
+	# beyond the register: hover losses past its largest (selection); the torque change past either end (measured only)
+	$(MAKE) dataset-randomised RANDOMISED_OUT=$(CARD)/dataRNbelow FLIGHTS=10 SEED=10 NAME=RNbelow ASSUME='*_torque_per_thrust_change_*=-0.50,-0.30'
 	$(MAKE) dataset-randomised RANDOMISED_OUT=$(CARD)/dataRNabove FLIGHTS=10 SEED=10 NAME=RNabove ASSUME='*_torque_per_thrust_change_*=0.30,0.50'
 	$(MAKE) dataset-randomised RANDOMISED_OUT=$(CARD)/dataRNsevere FLIGHTS=10 SEED=10 NAME=RNsevere ASSUME='*_thrust_loss_*_frac=0.12,0.25'
 	$(MAKE) dataset-randomised RANDOMISED_OUT=$(CARD)/dataTSup FLIGHTS=48 DURATION=60 SEED=24 NAME=TSup ASSUME='*_torque_per_thrust_change_*=0.02,0.10'
@@ -94,8 +94,8 @@ card: $(STAMP)
 		ASSUME='motor_efficiency_spread_frac=0.01,0.02 cg_offset_frd_m=-0.0025,0.0025 arm_position_error_m=-0.00075,0.00075 esc_offset_rpm=-37.5,37.5 healthy_torque_per_thrust_spread_frac=-0.0075,0.0075'
 	$(BIN)/python -m offline.classifier.conformal --model models/classifier.onnx --data $(CARD)/dataRNcal/RNcal-varied.npz \
 		--data $(CARD)/dataRNfall/RNfall-varied.npz --data $(CARD)/dataRNrise/RNrise-varied.npz \
-		--beyond $(CARD)/dataRNbelow/RNbelow-varied.npz --beyond $(CARD)/dataRNabove/RNabove-varied.npz \
 		--beyond $(CARD)/dataRNsevere/RNsevere-varied.npz \
+		--check $(CARD)/dataRNbelow/RNbelow-varied.npz --check $(CARD)/dataRNabove/RNabove-varied.npz \
 		--sign-check $(CARD)/dataTSup/TSup-varied.npz $(CARD)/dataTSdown/TSdown-varied.npz \
 		--check $(CARD)/dataRQcal/RQcal-varied.npz \
 		--check $(CARD)/dataRRcal/RRcal-varied.npz --unmeasured $(CARD)/dataRRcal/RRcal-varied.npz \

@@ -149,4 +149,4 @@ def test_max_seconds_bounds_the_log_span(tmp_path, capsys):
     rc, out, _ = diagnose(capsys, p, "--max-seconds", "5")
     assert rc == 2 and "--max-seconds" in out["error"]
     rc, out, _ = diagnose(capsys, p, "--max-seconds", "60")
-    assert rc in (0, 1) and "error" not in out
+    assert rc in (0, 1, 3) and "error" not in out  # a verdict: healthy, faulty or ambiguous, not an error

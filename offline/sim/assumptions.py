@@ -69,9 +69,13 @@ PX4_DOCS = "PX4 v1.14 parameter reference (mc_rate_control / mc_att_control / mc
 # Damaged blades: no public load-cell data exists for bent or cracked propellers
 # (../shared/data/README.md); the fixed signatures of offline/propellers/faults.py are one guess inside these ranges.
 _NO_DATA = "no public load-cell measurement of damaged blades exists (../shared/data/README.md)"
-# A damaged blade's torque per unit thrust, relative to healthy: from a 10 % fall (lost lift, less induced
-# drag) to a 30 % rise (offline/propellers/faults.py's fixed signatures imply +5..+25 %, the old training data).
-TORQUE_PER_THRUST_CHANGE = (-0.10, 0.30)
+# A damaged blade's torque per unit thrust, relative to healthy. Its sign is unknown: lost lift lowers the induced
+# drag per thrust (as sqrt(1 - loss)), while profile drag per thrust rises as 1/(1 - loss) and more with a rough
+# crack, and for a 10 % loss the two nearly cancel (README's hand calculation). So the range favours neither sign:
+# a 30 % fall to a 30 % rise, which holds every guess made so far (offline/propellers/faults.py's fixed signatures
+# +5..+25 %, the evaluation simulator's -12..-2 %). Until 2026-11 it was -10..+30 %, centred on a rise, and the
+# network learned that centre as the sign (the torque-sign check, bench/bench_torque_sign.py).
+TORQUE_PER_THRUST_CHANGE = (-0.30, 0.30)
 
 
 def _blade(kind: str, loss_lo, loss_hi, ripple, flutter, fixed: FaultSignature) -> list[Assumption]:
@@ -102,9 +106,9 @@ def _blade(kind: str, loss_lo, loss_hi, ripple, flutter, fixed: FaultSignature) 
             *TORQUE_PER_THRUST_CHANGE,
             fixed_c_lo,
             "change of drag torque per unit thrust at low speed, both signs: more profile drag raises it, lost lift "
-            "lowers induced drag and may lower it; nobody has measured which wins (issue 12). The range runs from a "
-            f"10 % fall to the fixed signature's rise ({100 * fixed_c_lo:+.0f} % here, up to +25 % at full speed): "
-            "every guess made so far lies inside it, none is favoured.",
+            "lowers induced drag and may lower it; nobody has measured which wins (issue 12). The range is "
+            f"symmetric, a 30 % fall to a 30 % rise: the fixed signature's rise ({100 * fixed_c_lo:+.0f} % here, up "
+            "to +25 % at full speed) and every other guess so far lie inside it, neither sign is favoured.",
             (4,),
             group=g,
         ),
