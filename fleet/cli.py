@@ -5,7 +5,7 @@
                            [--vehicle-from-dir N] [--export fleet.parquet] [--json]
     propwatch fleet report --db fleet.duckdb --out site/
 
-ingest --json prints {"db", "found", "already_known", "new", "ok", "no_verdict", "error",
+ingest --json prints {"db", "found", "already_known", "other_model", "new", "ok", "no_verdict", "error",
 "logs_per_s", "mb_per_s", "ray_start_s", "process_s", "total_s", ...}. Exit code 0 when every
 new log was read (with or without a verdict), 1 when some log became an error row, 2 on bad
 arguments, an unusable database or an unreachable cluster.
@@ -123,6 +123,8 @@ def _ingest(a: argparse.Namespace) -> int:
             f"{s.db}: {s.found} logs found, {s.already_known} already known, {s.new} new "
             f"({s.ok} verdicts, {s.no_verdict} no verdict, {s.error} errors){rate}"
         )
+        if s.other_model:
+            print(f"{s.other_model} known logs were diagnosed by another model than this run's: --rediagnose to refresh them")
         if s.export:
             print(f"exported {s.export}")
     return 1 if s.error else 0

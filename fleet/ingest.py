@@ -20,8 +20,17 @@ from pathlib import Path
 
 from fleet.discover import content_hash, find_logs
 from fleet.raycluster import cluster_cpus, ray_session
-from fleet.schema import export_parquet, forget_errors, insert_rows, known_files, known_hashes, open_db, update_mtimes
-from fleet.worker import IngestSettings, LogWorker, empty_row, process_log, utc_naive
+from fleet.schema import (
+    export_parquet,
+    forget_errors,
+    insert_rows,
+    known_files,
+    known_hashes,
+    model_versions,
+    open_db,
+    update_mtimes,
+)
+from fleet.worker import IngestSettings, LogWorker, empty_row, model_version, process_log, utc_naive
 
 TASK_MAX_RETRIES = 3  # a worker killed mid-log (OOM killer, preempted node) costs a re-run, not a row
 LOGS_PER_CALL = 4  # logs per actor call: ~0.1-3 s of work against Ray's ~1 ms per call, a short tail
@@ -34,6 +43,7 @@ class IngestSummary:
     found: int = 0
     hashed: int = 0  # files read to hash them (the others kept path, size and mtime since ingest)
     already_known: int = 0
+    other_model: int = 0  # of those, rows made by a model other than this run's (``--rediagnose`` refreshes them)
     duplicate_content: int = 0  # same bytes under two paths in this run: one row
     new: int = 0  # logs run this time (with rediagnose: known ones too)
     rediagnose: bool = False  # known logs were run again and their rows replaced
@@ -119,10 +129,13 @@ def ingest(
         if retry_errors:
             forget_errors(con, {h for _, h, _ in hashed})
         known = known_hashes(con)
+        made_by = model_versions(con)
+        current = {model_version(m) for m in settings.model_paths() if m.is_file()}
         todo, seen, touched = [], set(), []
         for p, h, size in hashed:
             if h in known and not rediagnose:
                 summary.already_known += 1
+                summary.other_model += made_by.get(h) is not None and made_by[h] not in current
                 if str(p) in seen_files and seen_files[str(p)][2] == h and seen_files[str(p)][1] != mtime_of[str(p)]:
                     touched.append((mtime_of[str(p)], h))  # same bytes, new mtime: remember it, skip re-reading next time
             elif h in seen:

@@ -114,6 +114,11 @@ def known_hashes(con) -> set[str]:
     return {r[0] for r in con.execute("SELECT log_hash FROM flights").fetchall()}
 
 
+def model_versions(con) -> dict[str, str | None]:
+    """log_hash -> the model_version that made its row (None: no model ran, e.g. an unreadable log)."""
+    return dict(con.execute("SELECT log_hash, model_version FROM flights").fetchall())
+
+
 def known_files(con) -> dict[str, tuple[int, int, str]]:
     """path -> (size_bytes, mtime_ns, log_hash) of the rows' files as they were at ingest."""
     rows = con.execute("SELECT path, size_bytes, mtime_ns, log_hash FROM flights WHERE mtime_ns IS NOT NULL").fetchall()

@@ -49,6 +49,11 @@ class IngestSettings:
 _MODELS: dict[tuple[str, str | None], tuple] = {}  # per worker process: (path, vehicle) -> (clf, esc, id, version)
 
 
+def model_version(path: Path) -> str:
+    """What a row's ``model_version`` holds: the first 12 hex digits of the model file's SHA-256."""
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()[:12]
+
+
 def _model(path: Path, vehicle_yaml: str | None):
     key = (str(path), vehicle_yaml)
     if key not in _MODELS:
@@ -57,7 +62,7 @@ def _model(path: Path, vehicle_yaml: str | None):
 
         clf = Classifier(path)
         esc = choose_esc(clf, vehicle_yaml or "")
-        version = hashlib.sha256(path.read_bytes()).hexdigest()[:12]
+        version = model_version(path)
         name = (clf.info.metadata.get("vehicle") or {}).get("name", "")
         vehicle = load_vehicle(vehicle_yaml or vehicle_for_model(path))  # geometry for diagnose's physics evidence
         _MODELS[key] = (clf, esc, f"{path.name}" + (f" ({name})" if name else ""), version, vehicle)

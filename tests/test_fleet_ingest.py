@@ -266,6 +266,7 @@ def test_rediagnose_replaces_stale_rows_each_log_still_once(serial_db, fleet_dir
     plain = ingest([str(fleet_dir / "sim")], db, ray_address="off", progress=False)
     still = {r["log_hash"]: r for r in rows(db)}[stale]
     assert plain.new == 0 and still["verdict_label"] == 16  # without the flag the stale verdict stays
+    assert plain.other_model == 1 and plain.to_json()["other_model"] == 1  # ... but the run says it is another model's
     s = ingest([str(fleet_dir / "sim")], db, ray_address="off", progress=False, rediagnose=True, batch_rows=4)
     assert s.rediagnose and s.new == 6 and s.already_known == 0
     after = {r["log_hash"]: r for r in rows(db)}
