@@ -81,3 +81,17 @@ def test_an_experiments_folder_with_one_row_adds_it_and_keeps_the_tracked_rows(t
     kept = [r for r in before.rows if r[0] != name]
     assert [r for r in after.rows if r[0] != name] == kept and len(kept) >= 5
     assert after.rows[-1] == (name, *("50.00",) * len(EVAL_SETS))
+
+
+def test_the_card_states_the_torque_range_its_manifest_records_for_the_training_data(tmp_path):
+    manifest, results = _copy_models(tmp_path)
+    torque = manifest["config"]["training_assumptions"]["bent_torque_per_thrust_change_low_frac"]
+    assert torque["low"] == -torque["high"] < 0  # the shipped model: either sign alike
+    card = write_card_from(tmp_path, manifest, results, None).read_text(encoding="utf-8")
+    assert f"drawn from {100 * torque['low']:+.0f}..{100 * torque['high']:+.0f} %, either sign alike" in card
+    manifest["config"]["training_assumptions"]["bent_torque_per_thrust_change_low_frac"] |= {"low": -0.10, "high": 0.30}
+    card = write_card_from(tmp_path, manifest, results, None).read_text(encoding="utf-8")
+    assert "drawn from -10..+30 % (nobody" in card  # a range centred on a rise is not called sign-neutral
+    del manifest["config"]["training_assumptions"]
+    card = write_card_from(tmp_path, manifest, results, None).read_text(encoding="utf-8")
+    assert "range not in this manifest" in card

@@ -246,6 +246,8 @@ def main(argv: list[str] | None = None) -> int:
             "propellers": m.training_manifest["propellers"],
             "evaluation_propellers": kind,
             "data_specs": [to_mapping(s) for s in specs],
+            # the register ranges the training flights were drawn from (None for fixed physics)
+            "training_assumptions": data[TRAIN_SET].manifest.get("assumptions"),
         },
         cfg.seed,
         model=str(onnx_path),

@@ -88,6 +88,16 @@ _FAULT_MODES = {
 }
 
 
+def _torque_range(cfg: dict) -> str:
+    """The training register's torque-per-thrust range of damaged blades, as the manifest records it."""
+    a = (cfg.get("training_assumptions") or {}).get("bent_torque_per_thrust_change_low_frac")
+    if a is None:
+        return "the register (range not in this manifest)"
+    lo, hi = 100 * a["low"], 100 * a["high"]
+    sign = ", either sign alike" if abs(lo + hi) < 1e-9 else ""
+    return f"{lo:+.0f}..{hi:+.0f} %{sign}"
+
+
 def write_card(path: str | Path, manifest: dict, results: list[Result], tables: list[CardTable] = ()) -> Path:
     """The card from the manifest's figures and ``tables`` (rendered in order after the onboard figures)."""
     cfg = manifest["config"]
@@ -194,7 +204,7 @@ def write_card(path: str | Path, manifest: dict, results: list[Result], tables: 
     ]
     if spec.get("physics") == "randomised":
         lines.append(
-            "- A damaged blade's torque per unit thrust was drawn from -30..+30 %, either sign alike (nobody has measured "
+            f"- A damaged blade's torque per unit thrust was drawn from {_torque_range(cfg)} (nobody has measured "
             "it; the previous model's -10..+30 % was centred on a rise, and it learned that centre as the sign). Roll and pitch "
             "balance locate a single damaged rotor whatever that torque does (a same-spin diagonal pair's thrusts stay "
             "equal); a same-spin pair, all four and healthy differ only through it, so they come out as one ambiguous "
