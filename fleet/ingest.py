@@ -25,7 +25,6 @@ from fleet.schema import (
     forget_errors,
     insert_rows,
     known_files,
-    known_hashes,
     model_versions,
     open_db,
     update_mtimes,
@@ -128,14 +127,13 @@ def ingest(
             hashed.append((p, h, st.st_size))
         if retry_errors:
             forget_errors(con, {h for _, h, _ in hashed})
-        known = known_hashes(con)
-        made_by = model_versions(con)
+        known = model_versions(con)  # every known log's hash -> the model that made its row
         current = {model_version(m) for m in settings.model_paths() if m.is_file()}
         todo, seen, touched = [], set(), []
         for p, h, size in hashed:
             if h in known and not rediagnose:
                 summary.already_known += 1
-                summary.other_model += made_by.get(h) is not None and made_by[h] not in current
+                summary.other_model += known[h] is not None and known[h] not in current
                 if str(p) in seen_files and seen_files[str(p)][2] == h and seen_files[str(p)][1] != mtime_of[str(p)]:
                     touched.append((mtime_of[str(p)], h))  # same bytes, new mtime: remember it, skip re-reading next time
             elif h in seen:

@@ -110,10 +110,6 @@ def check_version(con, path) -> int:
     return version
 
 
-def known_hashes(con) -> set[str]:
-    return {r[0] for r in con.execute("SELECT log_hash FROM flights").fetchall()}
-
-
 def model_versions(con) -> dict[str, str | None]:
     """log_hash -> the model_version that made its row (None: no model ran, e.g. an unreadable log)."""
     return dict(con.execute("SELECT log_hash, model_version FROM flights").fetchall())

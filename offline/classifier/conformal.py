@@ -2,16 +2,16 @@
 
     python -m offline.classifier.conformal --model models/classifier.onnx \\
         --data out/data-rncal/RNcal-varied.npz --data out/data-rnfall/RNfall-varied.npz \\
-        --data out/data-rnrise/RNrise-varied.npz [--beyond out/data-rnbelow/RNbelow-varied.npz ...] \\
+        --data out/data-rnrise/RNrise-varied.npz [--beyond out/data-rnsevere/RNsevere-varied.npz ...] \\
         [--sign-check TSup-varied.npz TSdown-varied.npz] [--check out/data-rrcal/RRcal-varied.npz] [--coverage 0.95]
 
 (`make card` runs it with every region it builds.)
 
 Each ``--data`` set is a *region*: flights the classifier never trained on, every physics term drawn from the
 assumption register, some with one range moved (``propwatch dataset --assumption``; e.g. the damaged blade's
-torque per thrust falling, -10..0 %, or rising, +15..+30 %), and regions BEYOND the register's ranges (the torque
-change -25..-10 % or +30..+50 %, hover losses of 12-25 %): the register is a statement of ignorance that may itself
-be wrong, and a rule must not fall apart just outside it. For every flight the three candidate scores of
+torque per thrust falling, -30..0 %, or rising, 0..+30 %), and ``--beyond`` regions past the register's ranges
+(``make card``: hover losses of 12-25 %): the register is a statement of ignorance that may itself be wrong, and a
+rule must not fall apart just outside it. For every flight the three candidate scores of
 ``monitor.hypotheses`` are computed (the classifier's mean label probability, that times the moment balance's
 likelihood, the balance alone), each under every sparsity prior rho of ``SPARSITY_GRID``; the two with the
 classifier also under every classifier weight tau of ``CLASSIFIER_WEIGHT_GRID`` (the network's split within each
@@ -430,7 +430,7 @@ def main(argv: list[str] | None = None) -> int:
         type=Path,
         action="append",
         default=[],
-        help="a region with a range moved past the register's (e.g. the torque change at -25..-10 %%): calibrated "
+        help="a region with a range moved past the register's (e.g. hover losses of 12-25 %%): calibrated "
         "like --data, but not used for the airframe check's threshold (repeatable)",
     )
     p.add_argument("--check", type=Path, action="append", default=[], help="data sets only measured (repeatable)")
