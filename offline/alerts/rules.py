@@ -93,6 +93,11 @@ def px4_rule(threshold: float = PX4_FD_IMB_PROP_THR):
 
 
 MIN_CALLED_LOSS = 0.08  # issue 13: single-propeller onsets of >= 8 % thrust loss must be alerted
+# Issue 13's onset set: "severities from 5 % to 20 % thrust loss". Our simulator draws each damaged blade's loss
+# from the register (0-15 % at hover), so some pairs hold a propeller below 5 %; they are scored among all pairs
+# and apart (``pair_*_each_5pct``), never dropped.
+MIN_PAIR_LOSS = 0.05
+SAME_SPIN = ({1, 2}, {3, 4})
 
 
 def _with_sets(alert: tuple) -> tuple:
@@ -113,7 +118,9 @@ def summarise(rule_alerts: dict[str, list], healthy: list[AlertFlight], onset: l
     that names several candidate sets (``PROP 1 or 1+2?``) is wrong only when no set lies within the truth;
     ``set_alerts`` counts the fault alerts after an onset that name more than one set. Pairs: ``overlaps``, a
     fault alert after the onset names a propeller of the pair; ``contains`` (issue 13's done-when), the alert
-    or one of its sets contains both.
+    or one of its sets contains both; ``contains`` again over the pairs whose propellers each lose at least
+    ``MIN_PAIR_LOSS`` (the issue's 5-20 %; all where a flight does not know its losses), over same-spin diagonal
+    pairs (1+2, 3+4: seen only in the yaw balance) and over adjacent ones.
     """
     h_alerts = [[_with_sets(a) for a in al] for al in rule_alerts["healthy"]]
     o_alerts = [[_with_sets(a) for a in al] for al in rule_alerts["onset"]]
@@ -122,6 +129,7 @@ def summarise(rule_alerts: dict[str, list], healthy: list[AlertFlight], onset: l
     fs = sum(1 for al in h_alerts for _, lvl, _, _ in al if lvl == "suspect")
     lat, hit, wrong, pair_ok, n_single, n_pair, early = [], 0, 0, 0, 0, 0, 0
     n_all, hit_all, wrong_suspect, pair_contains, set_alerts = 0, 0, 0, 0, 0
+    pair_by = {"each_5pct": [0, 0], "same_spin": [0, 0], "adjacent": [0, 0]}  # [flights, contains truth]
     for f, al in zip(onset, o_alerts):
         truth = set(f.truth)
         faults = [(t, p, sets) for t, lvl, p, sets in al if lvl == "fault"]
@@ -152,8 +160,14 @@ def summarise(rule_alerts: dict[str, list], healthy: list[AlertFlight], onset: l
             n_pair += 1
             if any(set(p) & truth for _, p in after):
                 pair_ok += 1
-            if any(t >= f.onset_s and any(truth <= set(s) for s in (p, *sets)) for t, p, sets in faults):
-                pair_contains += 1
+            contains = any(t >= f.onset_s and any(truth <= set(s) for s in (p, *sets)) for t, p, sets in faults)
+            pair_contains += contains
+            groups = ["same_spin" if truth in SAME_SPIN else "adjacent"]
+            if not f.thrust_loss or min(f.thrust_loss) >= MIN_PAIR_LOSS:  # unknown losses: the set's own range
+                groups.append("each_5pct")
+            for g in groups:
+                pair_by[g][0] += 1
+                pair_by[g][1] += contains
     lat_a = np.asarray(lat)
     return {
         "healthy_flights": len(healthy),
@@ -175,6 +189,8 @@ def summarise(rule_alerts: dict[str, list], healthy: list[AlertFlight], onset: l
         "pair_alert_overlaps_truth": round(pair_ok / n_pair, 4) if n_pair else None,
         "pair_alert_contains_truth": round(pair_contains / n_pair, 4) if n_pair else None,
         "set_alerts": set_alerts,
+        **{f"pair_onsets_{g}": n for g, (n, _) in pair_by.items()},
+        **{f"pair_contains_truth_{g}": round(k / n, 4) if n else None for g, (n, k) in pair_by.items()},
     }
 
 
