@@ -278,7 +278,7 @@ def flight_page(f: dict, v: Vehicle) -> str:
         ("start (UTC)", f"{_date(f)} ({f['start_time_source'] or 'unknown'})"),
         ("duration / airborne", f"{f['duration_s'] or 0:.1f} s / {f['airborne_s'] or 0:.1f} s" if f["duration_s"] else "?"),
         ("format", f["format"] or "?"),
-        ("model", f"{f['model_id'] or '?'} sha256 {f['model_version'] or '?'}"),
+        ("model", f"{f['model_id'] or '?'} version {f['model_version'] or '?'}"),
         ("propwatch", f["propwatch_version"] or "?"),
     ]
     body = (

@@ -50,8 +50,26 @@ _MODELS: dict[tuple[str, str | None], tuple] = {}  # per worker process: (path, 
 
 
 def model_version(path: Path) -> str:
-    """What a row's ``model_version`` holds: the first 12 hex digits of the model file's SHA-256."""
-    return hashlib.sha256(Path(path).read_bytes()).hexdigest()[:12]
+    """What a row's ``model_version`` holds: 12 hex digits of the SHA-256 of everything shipped that decides its
+    verdict: the model file, its set rule beside it (``<model>.sets.json``, when present) and the decision
+    calibration when it belongs to this model (``monitor.decision`` uses no other). A recalibrated set rule or
+    decision threshold beside the same model makes old rows another version (``fleet ingest``'s ``other_model``)."""
+    from monitor.decision import DEFAULT_CALIBRATION
+    from monitor.hypotheses import rule_path
+
+    model = Path(path).read_bytes()
+    h = hashlib.sha256(model)
+    sets = rule_path(path)
+    if sets.is_file():
+        h.update(b"\0sets\0" + sets.read_bytes())
+    try:
+        cal = DEFAULT_CALIBRATION.read_bytes()
+        belongs = json.loads(cal).get("model_sha256") == hashlib.sha256(model).hexdigest()
+    except (OSError, ValueError, AttributeError):
+        belongs = False  # none, or unreadable: the decision falls back to its analytic thresholds
+    if belongs:
+        h.update(b"\0decision-calibration\0" + cal)
+    return h.hexdigest()[:12]
 
 
 def _model(path: Path, vehicle_yaml: str | None):

@@ -287,3 +287,35 @@ def test_a_replacing_batch_is_whole_or_not_at_all(tmp_path):
         insert_rows(con, broken, replace=True)
     assert con.execute("SELECT status FROM flights WHERE log_hash = 'h1'").fetchone()[0] == "ok"  # old row kept
     con.close()
+
+
+def test_model_version_covers_the_set_rule_and_the_decision_calibration_beside_the_model(tmp_path):
+    # A stored verdict is stale when the set rule or the decision thresholds that made it changed, not only the
+    # model file: model_version digests all three (the calibration only when it is this model's).
+    import hashlib
+
+    from fleet.worker import SHIPPED_MODELS, model_version
+    from monitor.decision import DEFAULT_CALIBRATION
+    from monitor.hypotheses import rule_path
+
+    shipped = SHIPPED_MODELS[0]
+    if not rule_path(shipped).is_file():
+        pytest.skip("the shipped model has no set rule")
+    model = tmp_path / "classifier.onnx"
+    shutil.copy(shipped, model)
+    shutil.copy(rule_path(shipped), rule_path(model))
+    v = model_version(model)
+    assert v == model_version(model) and len(v) == 12 and v == model_version(shipped)
+    rule = json.loads(rule_path(model).read_text())
+    rule["threshold"] = 0.5 if rule.get("threshold") != 0.5 else 0.25
+    rule_path(model).write_text(json.dumps(rule))
+    recalibrated = model_version(model)
+    assert recalibrated != v  # the same model file, another set rule
+    rule_path(model).unlink()
+    assert model_version(model) not in (v, recalibrated)  # no set rule at all
+    cal = json.loads(DEFAULT_CALIBRATION.read_text())
+    other = tmp_path / "other.onnx"
+    other.write_bytes(model.read_bytes() + b"another model")  # not the calibration's model: it is left out
+    assert cal["model_sha256"] != hashlib.sha256(other.read_bytes()).hexdigest()
+    assert model_version(other) == hashlib.sha256(other.read_bytes()).hexdigest()[:12]
+    assert model_version(model) != hashlib.sha256(model.read_bytes()).hexdigest()[:12]  # the shipped one's is in
