@@ -73,7 +73,7 @@ def share_spread(flights) -> dict:
     """Yaw-free omega^2 share (mean over SHARE_AVERAGE_S) and the yaw balance y = (s1 + s2 - s3 - s4) / 2 (mean
     over YAW_AVERAGE_S) minus the flight's first 10 s: pooled std and tails of each; and the largest rise of one
     rotor's yaw-free share over YAW_AVERAGE_S (what words a yaw-balance alert: monitor.decision.YAW_FREE_RISE)."""
-    from monitor.decision import _Y, _YAW_FREE, BASELINE_S, SHARE_AVERAGE_S, YAW_AVERAGE_S
+    from monitor.rotor_share import _Y, _YAW_FREE, BASELINE_S, SHARE_AVERAGE_S, YAW_AVERAGE_S
 
     devs, ydevs, rises = [], [], []
     for f in flights:

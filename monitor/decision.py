@@ -82,269 +82,95 @@ negative, absurd (> ``VIBE_MAX_M_S2``) or frozen (the same value
 The wording: ``PROP 3 FAULT p=0.97`` only when one hypothesis remains; when
 the propellers at suspect level widen the set, or the evidence comes with
 several hypotheses, ``PROP 1 or 1+2?`` (<= 50 characters).
+
+Where the parts live (each name is re-exported here): the settings and levels in ``monitor.decision_config``;
+the omega^2 shares and the yaw balance in ``monitor.rotor_share``; thresholds and the calibration file in
+``monitor.decision_thresholds``; regimes in ``monitor.regime``; VIBRATION and ESC_STATUS validation in
+``monitor.stream_evidence``. This module combines them: the CUSUMs, the levels and the wording.
 """
 
 from __future__ import annotations
 
-import hashlib
-import json
 import math
-import statistics
-from collections import deque
-from dataclasses import dataclass, field
-from pathlib import Path
+from dataclasses import dataclass
 
 import numpy as np
 
-from monitor.errors import ConfigError
+from monitor.decision_config import FAULT_RANK, LEVELS, DecisionConfig
+from monitor.decision_thresholds import (
+    DEFAULT_CALIBRATION,
+    PHYSICS_STATISTICS,
+    ROTOR_STATISTICS,
+    STATISTICS,
+    Calibration,
+    Thresholds,
+    analytic_threshold,
+    fault_statistics,
+    file_sha256,
+    load_calibration,
+    pair_statistic,
+    physics_statistic,
+    suspect_statistics,
+    thresholds,
+)
 from monitor.labels import N_PROPS
-from monitor.resources import shipped
+from monitor.regime import RegimeTracker, StepInputs
+from monitor.rotor_share import (
+    BASELINE_S,
+    LLR_CLIP,
+    SAME_SPIN_PAIRS,
+    SHARE_AVERAGE_S,
+    SHARE_SIGMA,
+    YAW_AVERAGE_S,
+    YAW_FREE_RISE,
+    YAW_SIGMA,
+    RotorShare,
+)
+from monitor.stream_evidence import VIBE_MIN_RATIO, EscTelemetry, VibrationEvidence
 
-LEVELS = ("none", "suspect", "fault")
-FAULT_RANK = LEVELS.index("fault")
-LLR_CLIP = math.log(0.999 / 0.001)  # |logit P| beyond P = 0.999 is the network's over-confidence, not evidence
+# The rule's parts live in their own modules; their names are re-exported here, where callers have always found them.
+__all__ = [
+    "BASELINE_S",
+    "DEFAULT_CALIBRATION",
+    "FAULT_RANK",
+    "LEVELS",
+    "LLR_CLIP",
+    "PHYSICS_STATISTICS",
+    "ROTOR_STATISTICS",
+    "SAME_SPIN_PAIRS",
+    "SHARE_AVERAGE_S",
+    "SHARE_SIGMA",
+    "STATISTICS",
+    "STATUSTEXT_MAX_CHARS",
+    "YAW_AVERAGE_S",
+    "YAW_FREE_RISE",
+    "YAW_SIGMA",
+    "Announcement",
+    "Calibration",
+    "Decision",
+    "DecisionConfig",
+    "EscTelemetry",
+    "RegimeTracker",
+    "RotorShare",
+    "StepInputs",
+    "Thresholds",
+    "VibrationEvidence",
+    "WindowEvidence",
+    "analytic_threshold",
+    "fault_statistics",
+    "file_sha256",
+    "load_calibration",
+    "pair_statistic",
+    "physics_statistic",
+    "propeller_text",
+    "statustext",
+    "suspect_statistics",
+    "thresholds",
+    "window_llr",
+]
+
 STATUSTEXT_MAX_CHARS = 50
 MAV_SEVERITY_CRITICAL, MAV_SEVERITY_WARNING, MAV_SEVERITY_NOTICE = 2, 4, 5
-SECONDS_PER_HOUR = 3600.0
-VIBE_MAX_M_S2 = 100.0  # a vibration metric beyond this is a sensor fault, not a propeller
-FROZEN_REPEATS = 20  # identical float readings in a row: a stuck stream
-VIBE_BASELINE_S = 10.0  # airborne seconds that define the flight's own vibration level
-BASELINE_S = 10.0  # classified seconds that define the airframe's own baseline evidence
-COLLECTIVE_MEDIAN_S = 10.0  # a collective step compares the median mean RPM of two such spans (manoeuvres average out)
-VIBE_MIN_RATIO = 1.5  # CUSUM reference: the smallest rise over baseline worth calling (log-ratio drift)
-# The checkout's models/decision-calibration.json, or the installed package data (monitor/resources.py).
-DEFAULT_CALIBRATION = shipped("decision-calibration.json")
-
-
-def _check(cond: bool, key: str, msg: str) -> None:
-    if not cond:
-        raise ConfigError(f"{key}: {msg}")
-
-
-@dataclass(frozen=True)
-class DecisionConfig:
-    """The decision rule's settings (``alerts:`` in the monitor YAML; diagnose uses the defaults)."""
-
-    false_alarms_per_hour: float = 0.1  # fault level: the target rate on healthy flights
-    # Suspect level (a NOTICE): may be wrong more often. 1.0/h (was 2.0/h): fewer NOTICEs a pilot learns to ignore
-    # (models/decision-evaluation.md measures both).
-    suspect_false_alarms_per_hour: float = 1.0
-    faulty_probability: float = 0.9  # diagnose: FAULTY only when the chosen label's probability reaches this
-    aggressive_tilt_deg: float = 45.0  # beyond: outside the training envelope (diagnose warns at the same angle)
-    aggressive_rate_deg_s: float = 200.0
-    # Change of the 10-s median mean RPM between consecutive 10 s: a payload drop or pick-up. On 4.7 h of randomised
-    # healthy flights of our simulator manoeuvres moved it by at most 6.1 % (99 % of flights < 4.4 %); payload steps
-    # of >= 20 % of the mass by >= 10.6 % (bench/alerts_flights.py data; 0.07 ~ a 15 % mass step).
-    collective_step_fraction: float = 0.07
-    battery_sag_fraction: float = 0.04  # pack voltage lost within one window
-    # The smallest per-rotor thrust loss the omega^2-share evidence must call (issue 13: >= 8 % alerted): the
-    # CUSUM's reference is half of its share shift, so smaller excursions (manoeuvres, gusts) add nothing.
-    min_thrust_loss: float = 0.08
-    # Which statistics may raise FAULT: "physics" (the omega^2 shares alone; the network's statistics raise at most
-    # suspect) or "all". Default physics: on our own randomised flights the network adds one pair in 25 at fault
-    # level, while on airframes it never saw (drawn motor spread and CG) it flips to P ~ 1 mid-flight and is
-    # confidently wrong (docs/ALERTS.md).
-    fault_evidence: str = "physics"
-    # Which statistics may raise SUSPECT: "all" (the network's too) or "physics" (the omega^2 shares and the yaw
-    # balance alone; the network then only words). On 10 classified healthy hours per simulator the network's
-    # statistics raised every healthy NOTICE and no detection the shares did not make; but with the suspect rate
-    # shared by two statistics instead of four, the physics ones raise 4.2 NOTICEs/h on the evaluation-only
-    # simulator (0.0/h at a 0.5/h target): models/decision-evaluation.md. Default "all".
-    suspect_evidence: str = "all"
-    calibration_path: str = ""  # '' = models/decision-calibration.json
-
-    def __post_init__(self) -> None:
-        for key in ("false_alarms_per_hour", "suspect_false_alarms_per_hour"):
-            v = getattr(self, key)
-            _check(1e-4 <= v <= 1e3, f"alerts.{key}", f"must be in [0.0001, 1000] per flight-hour, got {v}")
-        _check(
-            self.suspect_false_alarms_per_hour >= self.false_alarms_per_hour,
-            "alerts.suspect_false_alarms_per_hour",
-            "must be >= alerts.false_alarms_per_hour (suspect comes before fault)",
-        )
-        _check(0.5 <= self.faulty_probability < 1.0, "alerts.faulty_probability", "must be in [0.5, 1)")
-        _check(0 < self.aggressive_tilt_deg <= 90, "alerts.aggressive_tilt_deg", "must be in (0, 90]")
-        _check(0 < self.aggressive_rate_deg_s <= 2000, "alerts.aggressive_rate_deg_s", "must be in (0, 2000]")
-        _check(0 < self.collective_step_fraction <= 1, "alerts.collective_step_fraction", "must be in (0, 1]")
-        _check(0 < self.battery_sag_fraction <= 1, "alerts.battery_sag_fraction", "must be in (0, 1]")
-        _check(0.01 <= self.min_thrust_loss <= 0.5, "alerts.min_thrust_loss", "must be in [0.01, 0.5]")
-        _check(self.fault_evidence in ("physics", "all"), "alerts.fault_evidence", "must be 'physics' or 'all'")
-        _check(self.suspect_evidence in ("physics", "all"), "alerts.suspect_evidence", "must be 'physics' or 'all'")
-        _check(
-            not (self.fault_evidence == "all" and self.suspect_evidence == "physics"),
-            "alerts.suspect_evidence",
-            "'physics' with fault_evidence 'all' would let the network fault but not suspect",
-        )
-
-
-# -- thresholds -----------------------------------------------------------------------------
-STATISTICS = ("absolute", "change", "physics", "pair")
-ROTOR_STATISTICS = ("absolute", "change", "physics")  # evidence about one propeller each
-# The pair statistic's vector is (CCW up, CCW up, CW up, CW up): index i holds the evidence for i's same-spin pair.
-SAME_SPIN_PAIRS = ((1, 2), (3, 4))  # PX4 quad-X: 1, 2 CCW (diagonal), 3, 4 CW (diagonal)
-
-
-@dataclass(frozen=True)
-class Calibration:
-    """Per statistic, the exceedance-rate tail ``ln(rate per flight-hour) = a - b * h`` on healthy flights;
-    ``None`` for a statistic the calibration disabled (its crossings do not fall off exponentially).
-
-    ``peaks``: per statistic, the highest value any calibration flight reached. A rate rarer than one per
-    calibrated flight-time cannot be shown by those flights, so its threshold is at least above all of them.
-    """
-
-    fits: dict  # statistic -> (a, b) | None
-    model_sha256: str
-    provenance: dict = field(default_factory=dict)
-    peaks: dict = field(default_factory=dict)  # statistic -> highest healthy value (nat-s or nats)
-
-    def threshold(self, statistic: str, rate_per_hour: float) -> float:
-        fit = self.fits.get(statistic)
-        if fit is None:
-            return math.inf
-        a, b = fit
-        h = max((a - math.log(rate_per_hour)) / b, 0.0)
-        hours = float(self.provenance.get("flight_hours") or 0.0)
-        peak = self.peaks.get(statistic)
-        if peak is not None and rate_per_hour * hours < 1.0:
-            h = max(h, peak * (1.0 + 1e-6))
-        return h
-
-
-def analytic_threshold(rate_per_hour: float, window_s: float, n_props: int = N_PROPS) -> float:
-    """Wald's bound with one independent sample per window length (see the module doc)."""
-    samples_per_hour = SECONDS_PER_HOUR / window_s
-    return window_s * math.log(n_props * samples_per_hour / rate_per_hour)
-
-
-def load_calibration(path: str | Path | None = None) -> Calibration | None:
-    """The stored calibration, or None when there is none; a malformed file is an error naming it."""
-    path = Path(path) if path else DEFAULT_CALIBRATION
-    if not path.is_file():
-        return None
-    try:
-        d = json.loads(path.read_text(encoding="utf-8"))
-        fits, peaks = {}, {}
-        for name in STATISTICS:
-            if name == "pair" and name not in d["fits"]:  # a file from before the pair statistic: Wald's bound for it
-                continue
-            f = d["fits"][name]
-            fits[name] = None if f is None else (float(f["a"]), float(f["b"]))
-            if f is not None and f.get("h_max_healthy") is not None:
-                peaks[name] = float(f["h_max_healthy"])
-        cal = Calibration(fits, str(d["model_sha256"]), d.get("provenance", {}), peaks)
-    except (OSError, ValueError, KeyError, TypeError, AttributeError) as exc:
-        raise ConfigError(f"{path}: not a decision calibration: {exc}") from exc
-    for name, fit in cal.fits.items():
-        if fit is not None and not (math.isfinite(fit[0]) and math.isfinite(fit[1]) and fit[1] > 0):
-            raise ConfigError(f"{path}: fit '{name}' needs finite a and b > 0, got {fit}")
-    return cal
-
-
-@dataclass(frozen=True)
-class Thresholds:
-    suspect: dict  # statistic -> nat-seconds (inf = disabled)
-    fault: dict
-    source: str
-
-    def as_dict(self) -> dict:
-        r = lambda v: None if math.isinf(v) else round(v, 3)  # noqa: E731
-        return {
-            "suspect": {k: r(v) for k, v in self.suspect.items()},
-            "fault": {k: r(v) for k, v in self.fault.items()},
-            "source": self.source,
-        }
-
-
-PHYSICS_STATISTICS = ("physics", "pair")  # the omega^2 shares and the yaw balance: no network
-
-
-def fault_statistics(cfg: DecisionConfig) -> tuple[str, ...]:
-    """The statistics that may raise FAULT (``alerts.fault_evidence``)."""
-    return STATISTICS if cfg.fault_evidence == "all" else PHYSICS_STATISTICS
-
-
-def suspect_statistics(cfg: DecisionConfig) -> tuple[str, ...]:
-    """The statistics that may raise SUSPECT (``alerts.suspect_evidence``)."""
-    return STATISTICS if cfg.suspect_evidence == "all" else PHYSICS_STATISTICS
-
-
-def thresholds(
-    cfg: DecisionConfig, window_s: float, model_sha256: str | None = None, calibration: Calibration | None = None
-) -> Thresholds:
-    """Thresholds for the configured rates: calibrated when the file is this model's.
-
-    A level's rate is shared equally by the statistics that may raise it (those of ``alerts.suspect_evidence``,
-    of ``alerts.fault_evidence``), so their false alarms add up to at most the configured rate. A statistic that
-    may not raise suspect has an infinite suspect threshold.
-    """
-    allowed = {"suspect": suspect_statistics(cfg), "fault": fault_statistics(cfg)}
-    rates = {
-        lvl: rate / len(allowed[lvl])
-        for lvl, rate in (("suspect", cfg.suspect_false_alarms_per_hour), ("fault", cfg.false_alarms_per_hour))
-    }
-    th = _thresholds(cfg, window_s, rates, model_sha256, calibration)
-    for st in STATISTICS:
-        if st not in allowed["suspect"]:
-            th.suspect[st] = math.inf  # (a fault statistic not allowed keeps its number: levels_now skips it)
-    return th
-
-
-def _thresholds(cfg: DecisionConfig, window_s: float, rates: dict, model_sha256, calibration) -> Thresholds:
-    """Every statistic's threshold at each level's per-statistic rate (``rates``): calibrated or Wald's bound."""
-
-    def wald(st: str, r: float) -> float:
-        # The share statistics count nats per independent sample (SHARE_AVERAGE_S of shares), the others nat-seconds;
-        # the pair statistic is two one-sided tests (CCW pair up, CW pair up).
-        if st == "physics":
-            return analytic_threshold(r, SHARE_AVERAGE_S) / SHARE_AVERAGE_S
-        if st == "pair":
-            return analytic_threshold(r, YAW_AVERAGE_S, n_props=len(SAME_SPIN_PAIRS)) / YAW_AVERAGE_S
-        return analytic_threshold(r, window_s)
-
-    analytic = {lvl: {st: wald(st, r) for st in STATISTICS} for lvl, r in rates.items()}
-    if calibration is not None and (model_sha256 is None or calibration.model_sha256 == model_sha256):
-        hours = calibration.provenance.get("flight_hours")
-        th = {lvl: {st: calibration.threshold(st, r) for st in STATISTICS} for lvl, r in rates.items()}
-        source = f"calibrated on {hours} healthy flight-hours (exponential tail)"
-        if calibration.provenance.get("physics_statistic") != physics_statistic(cfg):
-            for lvl in th:  # calibrated for another share statistic (reference, noise model): Wald's bound instead
-                th[lvl]["physics"] = analytic[lvl]["physics"]
-            source += "; physics: analytic (calibrated for another min_thrust_loss or share statistic)"
-        if "pair" not in calibration.fits or calibration.provenance.get("pair_statistic") != pair_statistic(cfg):
-            for lvl in th:
-                th[lvl]["pair"] = analytic[lvl]["pair"]
-            source += "; pair: analytic (not calibrated for this pair statistic)"
-        else:
-            # The yaw balance rests on what our simulator models least (yaw drag and rotor inflow with airspeed,
-            # blade flapping: not modelled, assumption register), and its calibrated tail on a handful of
-            # crossings: its thresholds never go below Wald's bound for the same rate.
-            for lvl in th:
-                th[lvl]["pair"] = max(th[lvl]["pair"], analytic[lvl]["pair"])
-            source += "; pair: not below Wald's bound"
-        return Thresholds(th["suspect"], th["fault"], source)
-    return Thresholds(analytic["suspect"], analytic["fault"], "analytic (Wald bound, one sample per window)")
-
-
-def physics_statistic(cfg: DecisionConfig) -> dict:
-    """What a physics-statistic calibration holds for: its thresholds mean nothing for another reference or noise model."""
-    return {
-        "form": "share-cusum-v3",  # v3: the baseline spans BASELINE_S of evidence windows, not of flight
-        "min_thrust_loss": cfg.min_thrust_loss,
-        "share_sigma": SHARE_SIGMA,
-        "share_average_s": SHARE_AVERAGE_S,
-    }
-
-
-def pair_statistic(cfg: DecisionConfig) -> dict:
-    """What a pair-statistic calibration holds for (reference and noise model of the yaw balance)."""
-    noise = {"yaw_sigma": YAW_SIGMA, "yaw_average_s": YAW_AVERAGE_S}
-    return {"form": "yaw-balance-cusum-v2", "min_thrust_loss": cfg.min_thrust_loss, **noise}  # v2: its baseline as the shares'
-
-
-def _clip_llr(llr: np.ndarray) -> np.ndarray:
-    """np.clip(llr, -LLR_CLIP, LLR_CLIP), NaN kept, without np.clip's Python-level wrappers (every window)."""
-    return np.minimum(np.maximum(llr, -LLR_CLIP), LLR_CLIP)
 
 
 def window_llr(fault_probability) -> np.ndarray:
@@ -371,18 +197,6 @@ class WindowEvidence:
     hypotheses: tuple[tuple[tuple[int, ...], float], ...] | None = None  # ((propellers 1..4), probability)
     rotor_effectiveness: np.ndarray | None = None  # (4,) fraction of nominal thrust
     rotor_effectiveness_std: np.ndarray | None = None
-
-
-@dataclass(frozen=True)
-class StepInputs:
-    """One grid step's flight state, for the regime tracker (NaN where unknown)."""
-
-    airborne: bool
-    mean_rpm: float = math.nan
-    tilt_rad: float = math.nan
-    rate_rad_s: float = math.nan  # largest |body rate|
-    battery_v: float = math.nan
-    motor_rpm: np.ndarray | None = None  # (4,) per-rotor RPM, PX4 order (commanded, or ESC telemetry)
 
 
 @dataclass(frozen=True)
@@ -418,328 +232,6 @@ class Announcement:
         }
 
 
-# -- regimes ----------------------------------------------------------------------------------
-class RegimeTracker:
-    """Per-step state -> (hold the next windows, discount what was gathered), see the module doc."""
-
-    def __init__(self, cfg: DecisionConfig, rate_hz: float, window: int):
-        self.cfg = cfg
-        self.window = window
-        self.rate_hz = rate_hz
-        self._median_n = max(int(round(COLLECTIVE_MEDIAN_S * rate_hz)), 1)
-        self._rpm: deque[float] = deque(maxlen=2 * self._median_n)  # the last 2 x 10 s of mean RPM (collective step)
-        self._volts: deque[float] = deque(maxlen=window)
-        self._n = 0
-        self.hold_until_step = 0
-        self.step = 0
-        self.counts = {"aggressive": 0, "collective_step": 0, "battery_sag": 0, "landed": 0}
-        self.last_reason = ""
-        self._tilt_max = math.radians(cfg.aggressive_tilt_deg)
-        self._rate_max = math.radians(cfg.aggressive_rate_deg_s)
-        self._check_every = max(window // 5, 1)
-
-    def reset(self) -> None:
-        self._rpm.clear()
-        self._volts.clear()
-        self._n = 0
-        self.hold_until_step = self.step + self.window  # a window must lie wholly after take-off
-
-    def update(self, s: StepInputs) -> str:
-        """'' or the event of this step: 'landed', 'aggressive', 'collective_step', 'battery_sag'."""
-        self.step += 1
-        if not s.airborne:
-            was_flying = self._n > 0
-            if was_flying:
-                self.counts["landed"] += 1
-            self.reset()
-            return "landed" if was_flying else ""
-        self._n += 1
-        if math.isfinite(s.mean_rpm):
-            self._rpm.append(s.mean_rpm)
-        if math.isfinite(s.battery_v):
-            self._volts.append(s.battery_v)
-        event = ""
-        c = self.cfg
-        if s.tilt_rad > self._tilt_max or s.rate_rad_s > self._rate_max:
-            event = "aggressive"
-        elif len(self._rpm) == 2 * self._median_n and self._n % self._check_every == 0:
-            rpm = list(self._rpm)
-            old, new = statistics.median(rpm[: self._median_n]), statistics.median(rpm[self._median_n :])
-            if old > 0 and abs(new - old) / old > c.collective_step_fraction:
-                event = "collective_step"
-                self._rpm.clear()  # measure the next step from the new level
-        if not event and len(self._volts) == self.window:
-            v0, v1 = self._volts[0], self._volts[-1]
-            if v0 > 0 and (v0 - v1) / v0 > c.battery_sag_fraction:
-                event = "battery_sag"
-                self._volts.clear()
-        if event:
-            self.counts[event] += 1
-            self.last_reason = event
-            self.hold_until_step = self.step + self.window
-        return event
-
-    @property
-    def holding(self) -> bool:
-        return self.step < self.hold_until_step
-
-
-# Projection that removes the collective (1,1,1,1)/2 and yaw (1,1,-1,-1)/2 directions (PX4 order: 1, 2 CCW; 3, 4 CW).
-_C, _Y = np.full(4, 0.5), np.array([0.5, 0.5, -0.5, -0.5])
-_YAW_FREE = np.eye(4) - np.outer(_C, _C) - np.outer(_Y, _Y)
-
-
-# -- physics: each rotor's share of omega^2 ---------------------------------------------------------
-# The healthy spread of the yaw-free share (mean over SHARE_AVERAGE_S) around the flight's own first 10 s, on
-# 4.7 h of randomised healthy flights of our simulator (register physics, drawn airframes, payload steps;
-# `bench/alerts_flights.py --share-spread`): rms 0.006, 99 % within 0.020, 99.9 % within 0.032 (manoeuvres,
-# gusts, motor lag). The Gaussian noise model takes the tail's scale, so a manoeuvre's excursion is not read as
-# decisive evidence; the calibrated thresholds absorb what the model gets wrong.
-SHARE_SIGMA = 0.01
-SHARE_BASELINE_TAU_S = 60.0  # slow drifts (battery sag, motor warm-up) enter the baseline over a minute
-# Seconds of shares averaged per sample. Shorter reacts sooner to an onset (the mean ramps over this time) but is
-# noisier; chosen on our simulator (calibration flights seed 100, onset flights seed 400: 5 s gave a median
-# latency of 7.7 s at >= 8 % loss, 2 s 4.2 s with the fault threshold 1.5x the highest healthy value, 1 s 3.8 s
-# at only 1.1x), never on the evaluation-only simulator.
-SHARE_AVERAGE_S = 2.0
-# The pair statistic: a same-spin diagonal pair (1+2 CCW or 3+4 CW) that loses thrust f on both rotors keeps roll
-# and pitch balanced (T1 = T2, T3 = T4 still hold), so the yaw-free shares do not move. What moves is the yaw
-# balance: the damaged pair's drag torque per omega^2 changes by g = 1 - (1 - f)(1 + c), c the unmeasured change
-# of torque per unit thrust, and the controller re-trims yaw: y = (s1 + s2 - s3 - s4) / 2 moves by +g for 1+2
-# and -g for 3+4. With c = 0 (torque scales with thrust) g = f, so the CUSUM reference is half of
-# alerts.min_thrust_loss; the sign of c is unknown (issue 12), so a shift names both pairs ("1+2 or 3+4?"), the
-# one it fits with c = 0 first. YAW_SIGMA: the healthy spread of y (mean over SHARE_AVERAGE_S) around the flight's
-# own first 10 s on the 4.7 calibration hours of our simulator (bench/alerts_flights.py --share-spread, seed 100):
-# over 2 s, rms 0.052 (99 % within 0.11: yaw manoeuvres re-trim it within seconds), over 10 s rms 0.017 (99 % within
-# 0.044). So the yaw balance is averaged over YAW_AVERAGE_S = 10 s (pairs have no latency target; singles keep
-# their 2 s), and YAW_SIGMA takes the tail's scale (99 % / 2) as SHARE_SIGMA does; the calibrated thresholds absorb
-# what the Gaussian model gets wrong.
-YAW_AVERAGE_S = 10.0
-YAW_SIGMA = 0.022
-# What a yaw-balance alert names. A single rotor i losing thrust f with a torque-per-thrust change c moves the yaw
-# balance by (f - c) / 2 and its yaw-free share by +f/2 (its same-spin partner's by -f/2); a same-spin pair moves
-# y by f - c and the yaw-free shares not at all (docs/ALERTS.md "The pair statistic"). So a yaw shift alone is
-# a same-spin pair, or a small single with a large torque change, and the single is the rotor whose yaw-free share
-# rose most over the same YAW_AVERAGE_S: it is always one of the alert's hypotheses, first when its rise exceeds
-# what healthy flights reach. YAW_FREE_RISE: the 99 % quantile of the largest rotor's rise (10-s mean against the
-# flight's first 10 s) on 96 randomised healthy flights of our simulator, the calibration seed
-# (`bench/alerts_flights.py --seed 100 --flights 96 --share-spread`: 0.0116; 99.9 %: 0.0159).
-YAW_FREE_RISE = 0.012
-
-
-class RotorShare:
-    """Window-mean share of omega^2 per rotor against the flight's own baseline: thrust-loss evidence.
-
-    A rotor that lost a fraction f of its thrust must spin faster for the
-    controller to hold roll and pitch: its omega^2 rises by ~f. The yaw
-    balance moves the shares too, along (+1, +1, -1, -1) (CCW against CW
-    rotors), by an amount that depends on how the damaged blade's torque per
-    thrust changed, which nobody has measured (issue 12): that direction and
-    the collective one are projected out (``_YAW_FREE``). What is left of a
-    thrust loss on rotor i is +f/2 on i and -f/2 on its same-spin diagonal
-    partner, whatever the torque change. The share needs no fault model and
-    no training; against the airframe's own baseline it is blind to CG
-    offsets and motor spread (issue 12's baseline names 24 of 24 that way).
-
-    Baseline: the mean over the first ``BASELINE_S`` of evidence windows (held ones do not count), then an
-    exponential average (time constant ``SHARE_BASELINE_TAU_S``) fed only while
-    no evidence is gathering (``quiet``), so slow drifts (battery sag) are
-    absorbed and a step is not.
-
-    Per window: the Gaussian mean-shift log-likelihood ratio of the mean share over the last ``average_s``
-    ``delta (x - b - delta/2) / sigma^2`` with ``delta = f_min / 2`` (the
-    smallest thrust loss worth an alert, ``alerts.min_thrust_loss``: the CUSUM
-    reference is half of it) and ``sigma = SHARE_SIGMA``, the healthy spread.
-    Windows that overlap by all but one step are not independent: the caller
-    weighs each by ``dt / average_s`` (one independent sample per averaging span).
-    """
-
-    def __init__(
-        self, window: int, rate_hz: float, min_thrust_loss: float, sigma: float = SHARE_SIGMA, average_s: float | None = None
-    ):
-        self.window = window if average_s is None else max(int(round(average_s * rate_hz)), 1)  # steps averaged
-        self.average_s = self.window / rate_hz
-        self.rate_hz = rate_hz
-        self.delta = 0.5 * min_thrust_loss
-        self.sigma = sigma
-        self._ring = np.full((self.window, N_PROPS), np.nan)
-        self._i = 0
-        self._n = 0
-        self._base: list[np.ndarray] = []
-        self._base_s = 0.0  # seconds of evidence windows the baseline has seen (held windows are not evidence)
-        self.baseline: np.ndarray | None = None
-        # The yaw balance (pair statistic): y = (s1 + s2 - s3 - s4) / 2, mean over YAW_AVERAGE_S, against its baseline.
-        self.yaw_delta = min_thrust_loss
-        self.yaw_sigma = YAW_SIGMA
-        self.yaw_window = max(int(round(YAW_AVERAGE_S * rate_hz)), 1)
-        self._yring = np.full(self.yaw_window, np.nan)
-        self._sring = np.full((self.yaw_window, N_PROPS), np.nan)  # the shares over YAW_AVERAGE_S (alert wording)
-        self._yi = 0
-        self._yn = 0
-        self.yaw_baseline: float | None = None
-        self.yaw_llr = np.zeros(len(SAME_SPIN_PAIRS))  # (CCW pair up, CW pair up) of the last window
-
-    def reset(self) -> None:
-        self._ring[:] = np.nan
-        self._yring[:] = np.nan
-        self._sring[:] = np.nan
-        self._n = self._yn = 0
-        self._base, self.baseline, self.yaw_baseline = [], None, None
-        self._base_s = 0.0
-
-    def push(self, rpm: np.ndarray | None) -> None:
-        if rpm is None:
-            return
-        w2 = np.asarray(rpm, dtype=np.float64) ** 2
-        m = w2.sum() / w2.size  # w2.mean() bit for bit, without its wrapper: this runs at every step
-        if not (np.isfinite(w2).all() and m > 0):
-            self._n = self._yn = 0  # a gap: the window starts again
-            return
-        share = w2 / m
-        self._ring[self._i] = share
-        self._i = (self._i + 1) % self.window
-        self._n += 1
-        s1, s2, s3, s4 = share.tolist()  # Python floats: the same double arithmetic as numpy scalars, cheaper
-        self._yring[self._yi] = 0.5 * (s1 + s2 - s3 - s4)
-        self._sring[self._yi] = share
-        self._yi = (self._yi + 1) % self.yaw_window
-        self._yn += 1
-
-    def yaw_free_rise(self) -> np.ndarray | None:
-        """(4,) each rotor's yaw-free share over the last YAW_AVERAGE_S less its baseline; None before both exist."""
-        if self.baseline is None or self._yn < self.yaw_window:
-            return None
-        return _YAW_FREE @ (self._sring.sum(axis=0) / self.yaw_window) - self.baseline
-
-    def llr(self, dt_s: float = 0.0, quiet: bool = False, yaw_quiet: bool | None = None) -> np.ndarray | None:
-        """Per-rotor evidence of the current window, or None (no full window, or baseline still being learnt).
-
-        ``quiet``: no physics evidence is gathering, so the baseline may follow the window for ``dt_s``
-        (``yaw_quiet``: the same for the yaw balance; default ``quiet``). The yaw balance's evidence of the
-        same window is left in ``yaw_llr`` (zeros when None is returned).
-        """
-        self.yaw_llr = np.zeros(len(SAME_SPIN_PAIRS))
-        if self._n < self.window:
-            return None
-        m = self._ring.sum(axis=0) / self.window  # the ring's mean, bit for bit (see push)
-        x = _YAW_FREE @ m
-        y = float(_Y @ m)  # the baseline's share of the yaw balance: over BASELINE_S like the shares'
-        if self.baseline is None:
-            self._base.append(np.append(x, y))
-            self._base_s += dt_s
-            # BASELINE_S of windows that were evidence, not of flight: windows held for a manoeuvre never reach
-            # here, and a baseline finalised on the half second after a hold took a transient for the airframe's
-            # trim (session 7: a false rotor-2 fault 14 s before an onset, from 10 windows after a 7-s hold).
-            if self._base_s >= BASELINE_S and len(self._base) >= 3:
-                self.baseline = np.mean(self._base, axis=0)[:N_PROPS]
-                # The yaw balance's own mean over the last YAW_AVERAGE_S (its 2-s means scatter by 0.05)
-                self.yaw_baseline = float(
-                    np.mean(self._yring if self._yn >= self.yaw_window else np.asarray(self._base)[:, N_PROPS])
-                )
-                self._base = []
-            return None
-        d = x - self.baseline
-        k = min(dt_s / SHARE_BASELINE_TAU_S, 1.0) if dt_s > 0 else 0.0
-        if quiet:
-            self.baseline = self.baseline + d * k
-        if self._yn >= self.yaw_window:
-            dy = float(self._yring.sum() / self.yaw_window) - self.yaw_baseline
-            if quiet if yaw_quiet is None else yaw_quiet:
-                self.yaw_baseline += dy * k
-            # Two one-sided tests of the yaw balance: the CCW pair's shares up (+dy) or the CW pair's (-dy).
-            yd, ys = self.yaw_delta, self.yaw_sigma
-            self.yaw_llr = _clip_llr(np.array([yd * (dy - yd / 2), yd * (-dy - yd / 2)]) / ys**2)
-        llr = self.delta * (d - self.delta / 2) / self.sigma**2
-        return _clip_llr(llr)
-
-
-# -- vibration --------------------------------------------------------------------------------
-class VibrationEvidence:
-    """VIBRATION samples -> validated log-ratio to the flight's baseline; bad values counted, never used."""
-
-    def __init__(self):
-        self.rejected = {"nan": 0, "negative": 0, "absurd": 0, "frozen": 0}
-        self.accepted = 0
-        self._last: tuple | None = None
-        self._repeats = 0
-        self._baseline: list[float] = []
-        self._baseline_t0: float | None = None
-        self.baseline: float | None = None
-        self.last_t_s: float | None = None
-
-    def reset(self) -> None:
-        self._baseline, self._baseline_t0, self.baseline = [], None, None
-
-    def validate(self, values: tuple[float, ...]) -> str:
-        """'' when usable, else the reason it is rejected (and counted)."""
-        if not all(math.isfinite(v) for v in values):
-            why = "nan"
-        elif any(v < 0 for v in values):
-            why = "negative"
-        elif any(v > VIBE_MAX_M_S2 for v in values):
-            why = "absurd"
-        else:
-            key = tuple(values)
-            self._repeats = self._repeats + 1 if key == self._last else 1
-            self._last = key
-            why = "frozen" if self._repeats >= FROZEN_REPEATS else ""
-        if why:
-            self.rejected[why] += 1
-        return why
-
-    def observe(self, t_s: float, accel_metric: float, airborne: bool) -> float | None:
-        """The log-ratio of the accel vibration metric to its baseline, or None (no baseline yet)."""
-        self.accepted += 1
-        self.last_t_s = t_s
-        if not airborne:
-            return None
-        if self.baseline is None:
-            if self._baseline_t0 is None:
-                self._baseline_t0 = t_s
-            self._baseline.append(accel_metric)
-            if t_s - self._baseline_t0 >= VIBE_BASELINE_S:
-                self.baseline = max(float(np.median(self._baseline)), 1e-6)
-            return None
-        return math.log(max(accel_metric, 1e-9) / self.baseline)
-
-
-class EscTelemetry:
-    """ESC_STATUS rpm validated like VIBRATION: NaN, negative, absurd or frozen readings are counted, never used."""
-
-    MAX_RPM = 100_000.0
-
-    def __init__(self):
-        self.rejected = {"nan": 0, "negative": 0, "absurd": 0, "frozen": 0}
-        self.accepted = 0
-        self._last: tuple | None = None
-        self._repeats = 0
-
-    def observe(self, rpm: tuple[float, ...]) -> str:
-        """'' when usable, else why not."""
-        vals = tuple(float(r) for r in rpm)
-        if not all(math.isfinite(v) for v in vals):
-            why = "nan"
-        elif any(v < 0 for v in vals):
-            why = "negative"
-        elif any(v > self.MAX_RPM for v in vals):
-            why = "absurd"
-        else:
-            self._repeats = self._repeats + 1 if vals == self._last and any(vals) else 1
-            self._last = vals
-            why = "frozen" if self._repeats >= FROZEN_REPEATS else ""
-        if why:
-            self.rejected[why] += 1
-        else:
-            self.accepted += 1
-        return why
-
-
-def file_sha256(path: str | Path) -> str:
-    """The model file's digest: a calibration belongs to exactly one model."""
-    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
-
-
-# -- the decision -----------------------------------------------------------------------------
 def propeller_text(props: tuple[int, ...]) -> str:
     return "+".join(map(str, props))
 

@@ -219,7 +219,7 @@ def test_statustext_wording():
 
 def test_the_per_window_clip_is_np_clip_bit_for_bit():
     # RotorShare clips with minimum/maximum (cheaper per window): the same values as np.clip, NaN and -0.0 included.
-    from monitor.decision import LLR_CLIP, _clip_llr
+    from monitor.rotor_share import LLR_CLIP, _clip_llr
 
     x = np.array([np.nan, -np.inf, np.inf, -0.0, 0.0, LLR_CLIP, -LLR_CLIP, 1e300, -1e300, 0.3, -7.25])
     expected = np.clip(x, -LLR_CLIP, LLR_CLIP)

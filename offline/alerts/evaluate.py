@@ -315,16 +315,40 @@ def _revision(checkout: str) -> str:
         return Path(checkout).name
 
 
-def previous_rule(checkout: str):
-    """Another checkout's decision module with its own calibration file, replayed like the shipped one."""
+# The decision rule's parts (monitor/decision.py imports them), in import order; a checkout before the split has none.
+DECISION_PARTS = ("decision_config", "rotor_share", "decision_thresholds", "regime", "stream_evidence")
+
+
+def _load(name: str, path: Path):
     import importlib.util
 
+    spec = importlib.util.spec_from_file_location(name, path)
+    mod = importlib.util.module_from_spec(spec)
+    sys.modules[name] = mod  # dataclasses look their module up
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def previous_rule(checkout: str):
+    """Another checkout's decision module with its own calibration file, replayed like the shipped one.
+
+    Its parts are loaded from the checkout too (under their own names while its decision module imports them,
+    then this tree's are put back), so the rule replayed is that checkout's, not a mix with this one's."""
     from offline.alerts.rules import replay_decision
 
-    spec = importlib.util.spec_from_file_location("previous_decision", Path(checkout) / "monitor" / "decision.py")
-    mod = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = mod  # dataclasses look their module up
-    spec.loader.exec_module(mod)
+    monitor_dir = Path(checkout) / "monitor"
+    saved = {f"monitor.{p}": sys.modules.get(f"monitor.{p}") for p in DECISION_PARTS}
+    try:
+        for part in DECISION_PARTS:
+            if (monitor_dir / f"{part}.py").is_file():
+                _load(f"monitor.{part}", monitor_dir / f"{part}.py")
+        mod = _load("previous_decision", monitor_dir / "decision.py")
+    finally:
+        for name, own in saved.items():
+            if own is None:
+                sys.modules.pop(name, None)
+            else:
+                sys.modules[name] = own
     old_cfg = mod.DecisionConfig()  # its own defaults: the rule as that checkout shipped it
     cal = mod.load_calibration(Path(checkout) / "models" / "decision-calibration.json")
 

@@ -1,0 +1,95 @@
+"""Regime changes for the decision rule: landing, take-off, aggressive manoeuvres, payload steps, battery sag.
+
+Part of the decision rule (``monitor.decision``): ``RegimeTracker`` reads each grid step's flight state
+(``StepInputs``) and says when windows must be held and evidence discounted.
+"""
+
+from __future__ import annotations
+
+import math
+import statistics
+from collections import deque
+from dataclasses import dataclass
+
+import numpy as np
+
+from monitor.decision_config import DecisionConfig
+
+COLLECTIVE_MEDIAN_S = 10.0  # a collective step compares the median mean RPM of two such spans (manoeuvres average out)
+
+
+@dataclass(frozen=True)
+class StepInputs:
+    """One grid step's flight state, for the regime tracker (NaN where unknown)."""
+
+    airborne: bool
+    mean_rpm: float = math.nan
+    tilt_rad: float = math.nan
+    rate_rad_s: float = math.nan  # largest |body rate|
+    battery_v: float = math.nan
+    motor_rpm: np.ndarray | None = None  # (4,) per-rotor RPM, PX4 order (commanded, or ESC telemetry)
+
+
+class RegimeTracker:
+    """Per-step state -> (hold the next windows, discount what was gathered), see the module doc."""
+
+    def __init__(self, cfg: DecisionConfig, rate_hz: float, window: int):
+        self.cfg = cfg
+        self.window = window
+        self.rate_hz = rate_hz
+        self._median_n = max(int(round(COLLECTIVE_MEDIAN_S * rate_hz)), 1)
+        self._rpm: deque[float] = deque(maxlen=2 * self._median_n)  # the last 2 x 10 s of mean RPM (collective step)
+        self._volts: deque[float] = deque(maxlen=window)
+        self._n = 0
+        self.hold_until_step = 0
+        self.step = 0
+        self.counts = {"aggressive": 0, "collective_step": 0, "battery_sag": 0, "landed": 0}
+        self.last_reason = ""
+        self._tilt_max = math.radians(cfg.aggressive_tilt_deg)
+        self._rate_max = math.radians(cfg.aggressive_rate_deg_s)
+        self._check_every = max(window // 5, 1)
+
+    def reset(self) -> None:
+        self._rpm.clear()
+        self._volts.clear()
+        self._n = 0
+        self.hold_until_step = self.step + self.window  # a window must lie wholly after take-off
+
+    def update(self, s: StepInputs) -> str:
+        """'' or the event of this step: 'landed', 'aggressive', 'collective_step', 'battery_sag'."""
+        self.step += 1
+        if not s.airborne:
+            was_flying = self._n > 0
+            if was_flying:
+                self.counts["landed"] += 1
+            self.reset()
+            return "landed" if was_flying else ""
+        self._n += 1
+        if math.isfinite(s.mean_rpm):
+            self._rpm.append(s.mean_rpm)
+        if math.isfinite(s.battery_v):
+            self._volts.append(s.battery_v)
+        event = ""
+        c = self.cfg
+        if s.tilt_rad > self._tilt_max or s.rate_rad_s > self._rate_max:
+            event = "aggressive"
+        elif len(self._rpm) == 2 * self._median_n and self._n % self._check_every == 0:
+            rpm = list(self._rpm)
+            old, new = statistics.median(rpm[: self._median_n]), statistics.median(rpm[self._median_n :])
+            if old > 0 and abs(new - old) / old > c.collective_step_fraction:
+                event = "collective_step"
+                self._rpm.clear()  # measure the next step from the new level
+        if not event and len(self._volts) == self.window:
+            v0, v1 = self._volts[0], self._volts[-1]
+            if v0 > 0 and (v0 - v1) / v0 > c.battery_sag_fraction:
+                event = "battery_sag"
+                self._volts.clear()
+        if event:
+            self.counts[event] += 1
+            self.last_reason = event
+            self.hold_until_step = self.step + self.window
+        return event
+
+    @property
+    def holding(self) -> bool:
+        return self.step < self.hold_until_step
