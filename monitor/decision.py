@@ -450,8 +450,10 @@ class Decision:
                 at = tuple(sorted(set().union(*sets)))
             sev = MAV_SEVERITY_NOTICE if lvl == "suspect" else (MAV_SEVERITY_CRITICAL if len(at) > 1 else MAV_SEVERITY_WARNING)
             quoted = self._last_p[[i - 1 for i in at]]
-            # the network's probability for a one-set fault; none where it classified no window (all NaN)
+            # the network's probability for a one-set fault, when it agrees (P >= 0.5): a FAULT the shares raised
+            # read "PROP 2 FAULT p=0.01" where the network disagreed; none where it classified no window (all NaN)
             p = float(np.nanmax(quoted)) if len(sets) == 1 and lvl == "fault" and np.isfinite(quoted).any() else None
+            p = p if p is not None and p >= 0.5 else None
             stat = tuple(float(max(self.S[k][i] / max(self.thresholds.fault[k], 1e-9) for k in STATISTICS)) for i in range(4))
             hyps = tuple(self._last_hypotheses or ())
             text = statustext(lvl, sets, p)
@@ -491,10 +493,13 @@ class Decision:
         core = tuple(i + 1 for i in range(N_PROPS) if LEVELS.index(self.level[i]) >= rank)
         if not core and LEVELS.index(self.pair_level) >= rank:  # physics raised it: physics words it
             return list(self._pair_sets)  # set in _levels whenever the pair level rises
-        # The network's recent set words a level the network may raise (alerts.suspect_evidence / fault_evidence
-        # "all"); a level only physics raises is worded by physics (the evaluation of issue 13 scores that wording).
-        network_raises = "absolute" in (self._fault_statistics if level == "fault" else self._suspect_statistics)
-        if self._last_hypotheses and network_raises:
+        # The network's recent set words a level the network raised: it may raise it (alerts.suspect_evidence /
+        # fault_evidence "all") and one of its statistics is at the level on a propeller called. A level physics
+        # raised is worded by physics, which is the wording the evaluation of issue 13 scores (it replays no set).
+        allowed = self._fault_statistics if level == "fault" else self._suspect_statistics
+        at_level = self.thresholds.fault if level == "fault" else self.thresholds.suspect
+        network_raised = any(self.S[k][i - 1] >= at_level[k] for k in ("absolute", "change") if k in allowed for i in core)
+        if self._last_hypotheses and network_raised:
             sets = [tuple(sorted(h)) for h, _ in sorted(self._last_hypotheses, key=lambda x: -x[1]) if h]
             sets = [s for s in sets if set(core) & set(s)] or sets
             return sets[:4] or [core]
