@@ -5,6 +5,7 @@ from __future__ import annotations
 import ast
 import json
 import math
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -86,19 +87,26 @@ def _derivative(af: Airframe, kf4=None, kt4=None):
     return mr, f
 
 
-def test_batched_derivative_equals_rotorpy_s_dot():
-    from rotorpy.vehicles.multirotor import Multirotor
-
-    af = Airframe.from_vehicle(V, cg_offset_frd_m=(0.01, -0.02, 0.005), rotor_drag_kg_per_rad=1e-4)
-    kf = V.kf_n_per_rad_s2 * np.array([1.0, 0.9, 1.05, 0.97])
-    kt = V.ktau_nm_per_rad_s2 * np.array([1.0, 0.8, 1.1, 0.9])
-    mr, f = _derivative(af, kf, kt)
-    rng = np.random.default_rng(3)
-    for _ in range(5):
+def _random_states(seed: int, n: int):
+    """n random (RotorPy state (20,), rotor speed command (4,)): unit quaternion, rotors at 300-900 rad/s."""
+    rng = np.random.default_rng(seed)
+    for _ in range(n):
         s = rng.normal(size=20)
         s[6:10] /= np.linalg.norm(s[6:10])
         s[16:20] = rng.uniform(300, 900, 4)
-        cmd = rng.uniform(300, 900, 4)
+        yield s, rng.uniform(300, 900, 4)
+
+
+def test_batched_derivative_equals_rotorpy_s_dot():
+    from rotorpy.vehicles.multirotor import Multirotor
+
+    af = Airframe.from_vehicle(
+        V, cg_offset_frd_m=(0.01, -0.02, 0.005), rotor_drag_kg_per_rad=1e-4, flapping_nm_per_rad_s_m_s=1e-5
+    )
+    kf = V.kf_n_per_rad_s2 * np.array([1.0, 0.9, 1.05, 0.97])
+    kt = V.ktau_nm_per_rad_s2 * np.array([1.0, 0.8, 1.1, 0.9])
+    mr, f = _derivative(af, kf, kt)
+    for s, cmd in _random_states(3, 5):
         assert np.allclose(f(s[None], cmd[None])[0], mr._s_dot_fn(0.0, s, cmd), rtol=1e-12, atol=1e-10)
     # Equal rotors: the extension reduces to RotorPy's own Multirotor.
     _, f_eq = _derivative(af)
@@ -122,7 +130,34 @@ def _params_of(af: Airframe) -> dict:
         af.omega_max_rad_s * 1.2,
         af.drag_quadratic_n_per_m2_s2,
         af.rotor_drag_kg_per_rad,
+        af.flapping_nm_per_rad_s_m_s,
     )
+
+
+def test_blade_flapping_is_rotorpys_term_with_blowbacks_sign():
+    from rotorpy.vehicles.multirotor import Multirotor
+
+    k = 1.8e-5
+    af = Airframe.from_vehicle(V, flapping_nm_per_rad_s_m_s=k)
+    _, f = _derivative(af)
+    # Equal rotors: the batched derivative equals RotorPy's own Multirotor with its k_flap (stored negated).
+    plain = Multirotor(_params_of(af), control_abstraction="cmd_motor_speeds", aero=True)
+    for s, cmd in _random_states(4, 3):
+        assert np.allclose(f(s[None], cmd[None])[0], plain._s_dot_fn(0.0, s, cmd), rtol=1e-12, atol=1e-10)
+    # By hand: level, at hover speed, 10 m/s forward through still air. Each rotor adds k w (v x e_z), so the
+    # pitch moment is -4 k w_h v about FLU y: 1.8e-5 * 4 * 584.7 * 10 = 0.421 N m, nose-up (blowback), and in
+    # FRD pitch acceleration +0.421 / Iyy. The same vehicle without flapping feels no moment.
+    w_h = math.sqrt(1.5 * 9.81 / (4 * 1.076e-5))
+    s = np.zeros(20)
+    s[9] = 1.0
+    s[3] = 10.0  # NWU velocity, x: forward for yaw 0
+    s[16:20] = w_h
+    w_dot_frd = frames.vec_to_ned(f(s[None], np.full((1, 4), w_h))[0, 10:13])
+    assert w_dot_frd[1] == pytest.approx(4 * k * w_h * 10.0 / V.inertia_diag_kg_m2[1], rel=1e-6)
+    assert w_dot_frd[1] * V.inertia_diag_kg_m2[1] == pytest.approx(0.421, abs=1e-3)
+    assert abs(w_dot_frd[0]) < 1e-9 and abs(w_dot_frd[2]) < 1e-9
+    _, f0 = _derivative(Airframe.from_vehicle(V))
+    assert np.allclose(f0(s[None], np.full((1, 4), w_h))[0, 10:13], 0.0, atol=1e-12)
 
 
 def test_symmetric_rotors_at_hover_speed_give_zero_moment_and_balance_weight():
@@ -374,3 +409,40 @@ def test_score_metrics_by_hand():
     assert s["mean_set_size"] == pytest.approx(4 / 3)
     assert s["healthy_mean_p_faulty"] == [0.1, 0.2, 0.0, 0.0]
     assert s["failed"] == [("d", "ValueError: no verdict")]
+
+
+def test_forward_flight_with_flapping_trims_the_front_rotors_down_by_the_hand_calculation():
+    # A straight 60-m leg north at up to 10 m/s, nose-up flapping moment k 4 w v countered by thrust: the yaw-free
+    # omega^2 share of the front rotors (1, 3) falls by s = k 4 w_h v / (m g a_x) and the rear's rises by as much
+    # (the pattern (-s, +s, -s, +s) is a pitch moment s m g a_x). At 8 m/s with k = 1.8e-5: s = 0.20. The same
+    # flight without flapping stays trimmed within a few hundredths.
+    from monitor.rotor_share import _YAW_FREE
+    from offline.evalsim.sets import FLAPPING_MAX, build_set
+
+    leg = ((60.0, 0.0, -10.0),) * 5
+    specs = [
+        replace(_spec(n, duration_s=14.0, route=leg, flapping_nm_per_rad_s_m_s=k), vel_xy_max_m_s=10.0)
+        for n, k in (("flap", FLAPPING_MAX), ("none", 0.0))
+    ]
+    trims = []
+    for lg in simulate_flights(specs):
+        w2 = lg.motor_omega_rad_s[0] ** 2
+        x = (w2 / w2.mean(axis=1, keepdims=True)) @ _YAW_FREE.T
+        speed = np.linalg.norm(lg.vel_ned_m_s[0, :, :2], axis=1)
+        cruise = (speed > 7.0) & (speed < 9.0)
+        assert cruise.sum() > 10
+        v = speed[cruise].mean()
+        front_minus_rear = (x[cruise][:, [0, 2]].mean() - x[cruise][:, [1, 3]].mean()) / 2
+        trims.append((front_minus_rear, v))
+    (flap, v), (none, _) = trims
+    s = FLAPPING_MAX * 4 * V.hover_omega_rad_s * v / (V.mass_kg * 9.81 * 0.113137)
+    assert 0.15 < s < 0.25
+    assert flap - none == pytest.approx(-s, rel=0.3)
+    assert abs(none) < 0.05
+    # The set draws its flapping within [0, FLAPPING_MAX] and flies at up to 10 m/s; its flights are healthy.
+    ff = build_set("forward_flight", 16, seed=0)
+    ks = [sp.airframe.flapping_nm_per_rad_s_m_s for sp in ff]
+    assert all(0.0 <= k <= FLAPPING_MAX for k in ks) and max(ks) > 0.5 * FLAPPING_MAX
+    assert all(sp.vel_xy_max_m_s == 10.0 and sp.faulty_propellers == () for sp in ff)
+    with pytest.raises(ValueError, match="vel_xy_max_m_s"):
+        simulate_flights([specs[0], replace(specs[1], vel_xy_max_m_s=3.0)])

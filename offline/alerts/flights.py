@@ -283,6 +283,17 @@ def evalsim_set(
     as diagnose and the daemon would see it (telemetry jitter and drops included). Flights ``start`` to
     ``start + n_flights - 1`` of the set (evalsim's flight i depends on (seed, i) only), so a larger set extends
     a smaller one."""
+    from offline.evalsim.sets import build_set
+
+    specs = build_set(kind, flights=start + n_flights, seed=seed, duration_s=duration_s)[start:]
+    out = [fl for fl, _ in evalsim_specs(specs, clf)]
+    log(f"alerts: evalsim {kind} seed {seed}: {len(out)}/{len(specs)} flights")
+    return out
+
+
+def evalsim_specs(specs: list, clf: Classifier, log=None) -> list[tuple[AlertFlight, object]]:
+    """(AlertFlight, the log reader's FlightTable) of each evalsim ``FlightSpec``, through its .tlog and the log
+    reader, 8 flights per batch (flights of a batch must share the nominal vehicle and speed limit)."""
     import tempfile
     from pathlib import Path
 
@@ -290,11 +301,9 @@ def evalsim_set(
     from monitor.model import choose_esc
     from offline.evalsim.flight import simulate_flights as evalsim_flights
     from offline.evalsim.flight import truth
-    from offline.evalsim.sets import build_set
     from offline.sim.io_tlog import write_tlog
     from offline.sim.log import BOOT_OFFSET_US
 
-    specs = build_set(kind, flights=start + n_flights, seed=seed, duration_s=duration_s)[start:]
     esc = choose_esc(clf, "")
     out = []
     with tempfile.TemporaryDirectory(prefix="propwatch-alerts-") as tmp:
@@ -307,8 +316,9 @@ def evalsim_set(
                 onset = tr["fault_onset_s"] if tr["faulty_propellers"] else math.inf
                 fl = _from_table(table, clf, tuple(tr["faulty_propellers"]), onset, BOOT_OFFSET_US, f"evalsim-{spec.name}")
                 fl.thrust_loss = tuple(round(1.0 - tr["thrust_factor_at_hover"][p - 1], 4) for p in fl.truth)
-                out.append(fl)
-            log(f"alerts: evalsim {kind} seed {seed}: {len(out)}/{len(specs)} flights")
+                out.append((fl, table))
+            if log is not None:
+                log(f"evalsim: {len(out)}/{len(specs)} flights")
     return out
 
 

@@ -65,6 +65,9 @@ class Airframe:
     cg_offset_frd_m: Vec3 = (0.0, 0.0, 0.0)
     drag_quadratic_n_per_m2_s2: Vec3 = (0.02, 0.02, 0.04)  # RotorPy c_Dx, c_Dy, c_Dz (body)
     rotor_drag_kg_per_rad: float = 2.0e-5  # RotorPy k_d: H-force, linear in airspeed and ω
+    # Blade flapping (RotorPy's k_flap, off in every RotorPy preset): each rotor adds a moment
+    # k * ω_i * (v_i x e_z) (FLU, v_i its hub's airspeed), nose-up when flying forward (blowback). 0 = none.
+    flapping_nm_per_rad_s_m_s: float = 0.0
     esc: EscCurve = PAPER_ESC  # the ESC's real curve (the controller assumes PAPER_ESC)
     esc_rpm_per_volt: float = 0.01  # fractional RPM loss per volt below esc_reference_v
     esc_reference_v: float = 16.0

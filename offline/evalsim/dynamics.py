@@ -43,8 +43,13 @@ def rotorpy_params(
     omega_max: float,
     c_d: tuple[float, float, float],
     k_d: float,
+    k_flap: float = 0.0,
 ) -> dict:
-    """A RotorPy ``quad_params`` dict (RotorPy order, FLU, CoM-relative rotor positions)."""
+    """A RotorPy ``quad_params`` dict (RotorPy order, FLU, CoM-relative rotor positions).
+
+    ``k_flap`` >= 0 is blade flapping with blowback's sign (``Airframe.flapping_nm_per_rad_s_m_s``): RotorPy's own
+    term is ``-k_flap * ω (v x e_z)``, nose-down when flying forward for a positive coefficient, so it is stored
+    negated; ``PerRotorMultirotor`` and ``BatchedDerivative`` add ``+k_flap * ω (v x e_z)`` themselves."""
     return {
         "mass": mass_kg,
         "Ixx": inertia_diag_kg_m2[0],
@@ -66,7 +71,7 @@ def rotorpy_params(
         "k_d": k_d,
         "k_z": 0.0,
         "k_h": 0.0,
-        "k_flap": 0.0,
+        "k_flap": -k_flap,
         "tau_m": np.asarray(tau_m_s, dtype=np.float64),
         "motor_noise_std": 0.0,
     }
@@ -90,7 +95,13 @@ class PerRotorMultirotor(Multirotor):
         M_force = -np.einsum("ijk, ik->j", Multirotor.hat_map(self.rotor_geometry), T + H)
         M_yaw = np.zeros((3, 4))
         M_yaw[2] = self.rotor_dir * ktau * self.thrust_multiplier * rotor_speeds**2
-        return np.sum(T + H, axis=1) + D, M_force + np.sum(M_yaw, axis=1)
+        # Blade flapping, blowback's sign: k ω (v x e_z) = k ω (v_y, -v_x, 0) per rotor (rotorpy_params stores -k).
+        k = -self.k_flap
+        M_flap = np.zeros(3)
+        if k:
+            M_flap[0] = k * np.sum(rotor_speeds * local_airspeeds[1])
+            M_flap[1] = -k * np.sum(rotor_speeds * local_airspeeds[0])
+        return np.sum(T + H, axis=1) + D, M_force + np.sum(M_yaw, axis=1) + M_flap
 
 
 class BatchedDerivative:
@@ -111,6 +122,7 @@ class BatchedDerivative:
         self.dirs = np.stack([np.asarray(m.rotor_dir, dtype=np.float64) for m in mrs])
         self.kd = np.array([[m.k_d] for m in mrs], dtype=np.float64)
         self.kz = np.array([[m.k_z] for m in mrs], dtype=np.float64)
+        self.kflap = np.array([[-m.k_flap] for m in mrs], dtype=np.float64)  # blowback's sign (rotorpy_params)
         self.cd = np.array([[m.c_Dx, m.c_Dy, m.c_Dz] for m in mrs], dtype=np.float64)
         for m in mrs:
             if np.any(np.asarray(m.inertia) != np.diag(np.diag(m.inertia))):
@@ -150,8 +162,8 @@ class BatchedDerivative:
         Fx = fx.sum(1) - speed * self.cd[:, 0] * bx
         Fy = fy.sum(1) - speed * self.cd[:, 1] * by
         Fz = fz.sum(1) - speed * self.cd[:, 2] * bz
-        Mx = (ry * fz - rz * fy).sum(1)
-        My = (rz * fx - rx * fz).sum(1)
+        Mx = (ry * fz - rz * fy).sum(1) + (self.kflap * omega * ly).sum(1)
+        My = (rz * fx - rx * fz).sum(1) - (self.kflap * omega * lx).sum(1)
         Mz = (rx * fy - ry * fx).sum(1) + (self.dirs * ktau * w2m).sum(1)
         out = np.empty_like(s)
         out[:, 0:3] = s[:, 3:6]

@@ -18,7 +18,7 @@ from monitor.labels import label_for
 from monitor.resample import US_PER_S
 from offline.evalsim import frames
 from offline.evalsim.airframe import Airframe, Damage, thrust_torque_factors
-from offline.evalsim.controller import CascadeController, qmul
+from offline.evalsim.controller import CascadeController, ControllerGains, qmul
 from offline.evalsim.dynamics import BatchedDerivative, PerRotorMultirotor, rk4_step, rotorpy_params
 from offline.evalsim.environment import Battery, Sensors, Telemetry, Wind, sample_times_s
 from offline.sim.log import BOOT_OFFSET_US, FlightLog
@@ -51,6 +51,9 @@ class FlightSpec:
     telemetry: Telemetry = field(default_factory=Telemetry)
     nuisance: str = ""  # the one hidden effect of a healthy/hidden-set flight
     airframe_id: str = ""  # flights of one airframe share it (hidden set)
+    # The position controller's horizontal speed limit (PX4 MPC_XY_VEL_MAX; evalsim's gentle routes: 3 m/s).
+    # Flights of one batch share it (one controller flies them).
+    vel_xy_max_m_s: float = ControllerGains.vel_xy_max_m_s
 
     @property
     def faulty_propellers(self) -> tuple[int, ...]:
@@ -80,6 +83,7 @@ def truth(spec: FlightSpec, file: str = "") -> dict:
         "airframe_id": spec.airframe_id,
         "duration_s": spec.duration_s,
         "waypoints_ned_m": [list(w) for w in spec.waypoints_ned_m],
+        "vel_xy_max_m_s": spec.vel_xy_max_m_s,
         "airframe": af.asdict(),
         "wind": asdict(spec.wind),
         "sensors": asdict(spec.sensors),
@@ -131,6 +135,7 @@ def multirotor_for(af: Airframe, coefficients) -> PerRotorMultirotor:
         af.omega_max_rad_s * 1.2,
         af.drag_quadratic_n_per_m2_s2,
         af.rotor_drag_kg_per_rad,
+        af.flapping_nm_per_rad_s_m_s,
     )
     return PerRotorMultirotor(params, coefficients)
 
@@ -158,6 +163,8 @@ def simulate_flights(specs: list[FlightSpec]) -> list[FlightLog]:
             v0.kf_n_per_rad_s2,
         ):
             raise ValueError("simulate_flights: flights of one batch must share the nominal vehicle")
+    if len({sp.vel_xy_max_m_s for sp in specs}) > 1:
+        raise ValueError("simulate_flights: flights of one batch must share vel_xy_max_m_s (one controller)")
     dt = 1.0 / PHYSICS_RATE_HZ
     pos_every = int(PHYSICS_RATE_HZ // POSITION_RATE_HZ)
 
@@ -180,6 +187,7 @@ def simulate_flights(specs: list[FlightSpec]) -> list[FlightLog]:
         v0.ktau_nm_per_rad_s2,
         v0.omega_min_rad_s,
         v0.omega_max_rad_s,
+        ControllerGains(vel_xy_max_m_s=specs[0].vel_xy_max_m_s),
     )
 
     # Per-flight randomness, drawn up front from the flight's own generator.

@@ -10,5 +10,6 @@ SET_NAMES = (
     "paper_torque_rising",
     "shift_half",
     "shift_quarter",
+    "forward_flight",
 )
 DEFAULT_DURATION_S = 80.0

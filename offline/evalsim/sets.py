@@ -11,6 +11,8 @@ NEVER used for training or model selection (see the package docstring).
 | onset | a fault (single propeller or pair, 5-20 % thrust loss) starting mid-flight at a recorded time |
 | hidden | per airframe one hidden effect (CG, weak motor, motor lag, linear drag, ESC curve): 2 healthy + 4 single faults |
 | effectiveness | one rotor losing exactly 5, 10 or 20 % thrust, torque per thrust unchanged or falling |
+| forward_flight | healthy flights at up to 10 m/s with blade flapping drawn from 0 to the forward-flight trim of a
+  real hard-flown quad (ArduPilot log171, ``FLAPPING_MAX``): the aerodynamic trim neither simulator had before |
 | paper_torque_rising | CONTROL: ``paper`` flight for flight (same seeds, routes, losses) but the damaged blade's
   drag torque at equal speed RISES by |δ| (training's ``torque_factor = 1 + gain``) instead of its torque per
   thrust falling by |δ| |
@@ -244,6 +246,23 @@ def _healthy(v, seed, i, duration_s) -> FlightSpec:
     return _spec("healthy", seed, i, af, rng, duration_s, wind=wind, nuisance=name, **kw)
 
 
+# Blade flapping, the largest coefficient drawn (N m per rad/s per m/s). No measurement of our vehicle; bounded by
+# the one real flight here flown fast: ArduPilot log171 trims its front rotors' yaw-free omega^2 share by up to
+# ~0.025 per m/s of forward speed (0.11-0.27 at 5-10 m/s; docs/ALERTS.md "On real flights"). On the paper quad a
+# share offset s is a pitch moment s m g a_x (a_x = 0.113 m), flapping's is k 4 w_h v, so
+# k = 0.025 * 1.5 * 9.81 * 0.113 / (4 * 584.7) = 1.78e-5.
+FLAPPING_MAX = 1.8e-5
+FORWARD_FLIGHT_VEL_XY_MAX_M_S = 10.0  # log171's fastest legs; PX4's MPC_XY_VEL_MAX default is 12
+
+
+def _forward_flight(v, seed, i, duration_s) -> FlightSpec:
+    rng = _rng("forward_flight", seed, i)
+    af = _base(v, rng).with_(flapping_nm_per_rad_s_m_s=float(rng.uniform(0.0, FLAPPING_MAX)))
+    return _spec(
+        "forward_flight", seed, i, af, rng, duration_s, nuisance="forward_flight", vel_xy_max_m_s=FORWARD_FLIGHT_VEL_XY_MAX_M_S
+    )
+
+
 def _onset(v, seed, i, duration_s) -> FlightSpec:
     rng = _rng("onset", seed, i)
     faulty = ONSET_PATTERNS[i % len(ONSET_PATTERNS)]
@@ -318,6 +337,7 @@ _BUILDERS: dict[str, tuple[Callable, int]] = {
     "hidden": (_hidden, 6 * len(HIDDEN_EFFECTS)),
     "effectiveness": (_effectiveness, 12),
     "paper_torque_rising": (_paper_torque_rising, 16),
+    "forward_flight": (_forward_flight, 16),
 }
 
 
