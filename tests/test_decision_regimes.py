@@ -216,3 +216,6 @@ def test_after_a_fault_the_network_raises_no_notice_on_other_propellers_but_the_
     second_loss = True  # the omega^2 shares of rotor 1 rise: that is physics, and it is told
     ann = run()
     assert any(1 in a.propellers and a.t_s > 60.0 for a in ann), [(a.t_s, a.text) for a in ann]
+    # its NOTICE names rotor 1 alone: "PROP 1+3 SUSPECT" after "PROP 3 FAULT" would read as a downgrade of rotor 3
+    later = [a for a in ann if a.t_s > 60.0 and a.level == "suspect"]
+    assert later and later[0].text == "PROP 1 SUSPECT" and later[0].propellers == (1,), [(a.t_s, a.text) for a in ann]
