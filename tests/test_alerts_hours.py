@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from offline.alerts.evaluate import classified_s, healthy_flight_count, healthy_sets, set_key
-from offline.alerts.flights import AlertFlight, FlightSet
+from offline.alerts.flights import ALERT_FLIGHT_FIELDS, AlertFlight, FlightSet, heading_velocity
 
 
 def _flight(samples: int, window: int, rate_hz: float) -> AlertFlight:
@@ -55,10 +55,11 @@ def test_a_flight_shorter_than_one_window_is_an_error():
 def test_the_flown_hours_set_stays_and_the_extra_flights_are_appended():
     sets = healthy_sets(10.0, 75.05, seed=200, pickup_fraction=0.25, physics="randomised")
     assert [(s.n_flights, s.first_flight, s.seed) for s in sets] == [(450, 0, 200), (30, 450, 200)]
-    # The first set is the one earlier runs cached: its key is the key it had before first_flight existed.
+    # The first set is the one earlier runs drew: its key is the key it had before first_flight existed, with what
+    # its flights hold (ALERT_FLIGHT_FIELDS: flights cached without the heading velocity are simulated again).
     old = {**FlightSet("healthy", 450, seed=200, pickup_fraction=0.25, physics="randomised").__dict__, "model": "m"}
     del old["first_flight"]
-    assert set_key(sets[0], "m") == old
+    assert set_key(sets[0], "m") == {**old, "fields": ALERT_FLIGHT_FIELDS}
     assert set_key(sets[1], "m")["first_flight"] == 450
     digest = [hashlib.sha256(json.dumps(set_key(s, "m"), sort_keys=True).encode()).hexdigest() for s in sets]
     assert digest[0] != digest[1]
@@ -70,3 +71,11 @@ def test_an_appended_set_draws_from_its_own_stream():
     base, extra = FlightSet("healthy", 450, seed=200), FlightSet("healthy", 30, seed=200, first_flight=450)
     assert np.array_equal(base.rng().random(5), np.random.default_rng([200, 13]).random(5))  # the stream as before
     assert not np.array_equal(base.rng().random(5), extra.rng().random(5))
+
+
+def test_heading_velocity_is_ned_velocity_turned_by_the_yaw():
+    # Flying east (NED v_e = 5 m/s) with the nose east (yaw 90 deg): 5 m/s forward; nose north: 5 m/s to the right.
+    v = np.array([[0.0, 5.0, -1.0], [0.0, 5.0, 0.0], [3.0, 4.0, 0.0]])
+    yaw = np.array([np.pi / 2, 0.0, np.arctan2(4.0, 3.0)])
+    np.testing.assert_allclose(heading_velocity(v, yaw), [[5.0, 0.0], [0.0, 5.0], [5.0, 0.0]], atol=1e-12)
+    assert heading_velocity(None, yaw) is None

@@ -146,6 +146,8 @@ def test_replayed_onset_raises_suspect_then_fault_on_the_right_propeller():
 
     f = _flight("single", 2, duration_s=50.0, onset_s=(20.0, 25.0))
     assert f.truth == (4,) and f.thrust_loss[0] >= 0.08  # 8.2 % thrust lost at hover, drawn from the register
+    speed = np.linalg.norm(f.vel_heading_m_s, axis=1)  # kept for a speed-aware baseline: a route at cruise speed
+    assert f.vel_heading_m_s.shape == (len(f.motor_rpm), 2) and 1.0 < np.nanmax(speed) < 12.0
     alerts = replay_decision(f, Decision(DecisionConfig(), f.rate_hz, f.window), with_sets=True)
     assert [lvl for _, lvl, _, _ in alerts[:2]] == ["suspect", "fault"] and all(p == (4,) for _, _, p, _ in alerts), alerts
     assert f.onset_s < alerts[0][0] and alerts[1][0] - f.onset_s <= 10.0

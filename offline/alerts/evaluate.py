@@ -36,7 +36,7 @@ from monitor.decision import DEFAULT_CALIBRATION, Calibration, DecisionConfig, f
 from monitor.model import Classifier
 from monitor.vehicle import REPO_ROOT, load_vehicle
 from offline.alerts.calibrate import calibrate, write_calibration
-from offline.alerts.flights import FlightSet, evalsim_set, simulate_set
+from offline.alerts.flights import ALERT_FLIGHT_FIELDS, FlightSet, evalsim_set, simulate_set
 from offline.alerts.rules import consecutive_rule, decision_rule, px4_rule, summarise
 from offline.manifest import make_manifest
 
@@ -118,8 +118,9 @@ def healthy_sets(hours: float, per_flight_s: float, **kw) -> list[FlightSet]:
 
 def set_key(fs: FlightSet, model_sha: str) -> dict:
     """The cache key of one of our flight sets; ``first_flight`` joins it only when set, so sets cached before
-    the field existed keep their key."""
-    key = {**fs.__dict__, "model": model_sha}
+    the field existed keep their key. ``fields``: what an ``AlertFlight`` holds (a set cached without a field
+    is simulated again)."""
+    key = {**fs.__dict__, "model": model_sha, "fields": ALERT_FLIGHT_FIELDS}
     if fs.first_flight == 0:
         del key["first_flight"]
     return key
@@ -147,6 +148,7 @@ def evalsim_cached(cache: str, kind: str, n: int, seed: int, clf, sha: str, log)
     for start in range(0, n, EVALSIM_BLOCK):
         m = min(EVALSIM_BLOCK, n - start)
         key = {"kind": f"evalsim-{kind}", "start": start, "n": m, "seed": seed, "duration_s": FLIGHT_S, "model": sha}
+        key["fields"] = ALERT_FLIGHT_FIELDS
         out += cached(cache, key, lambda s=start, m=m: evalsim_set(kind, m, seed, clf, FLIGHT_S, log=log, start=s))
     return out
 

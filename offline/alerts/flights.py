@@ -83,10 +83,26 @@ class AlertFlight:
     truth: tuple[int, ...]  # faulty propellers after onset (1..4)
     onset_s: float  # inf for healthy; time of the first faulty sample (step index / rate)
     thrust_loss: tuple[float, ...] = ()  # per faulty propeller (truth order), fraction of thrust lost at hover; () unknown
+    # (T, 2) velocity over ground in the heading frame (forward, right; NED rotated by the logged yaw), m/s; None in
+    # flights cached before it was kept (ALERT_FLIGHT_FIELDS). What a speed-aware share baseline would read.
+    vel_heading_m_s: np.ndarray | None = None
 
     @property
     def hours(self) -> float:
         return len(self.fault_probability) / self.rate_hz / 3600.0
+
+
+# What an AlertFlight holds (cache keys carry it, so flights cached without a field are simulated again).
+ALERT_FLIGHT_FIELDS = "v2: vel_heading_m_s"
+
+
+def heading_velocity(vel_ned_m_s, yaw_rad) -> np.ndarray | None:
+    """(T, 2) horizontal velocity in the heading frame (forward, right) from NED velocity and yaw; None without."""
+    if vel_ned_m_s is None or yaw_rad is None:
+        return None
+    v = np.asarray(vel_ned_m_s, dtype=np.float64)
+    c, s = np.cos(np.asarray(yaw_rad, dtype=np.float64)), np.sin(np.asarray(yaw_rad, dtype=np.float64))
+    return np.stack([c * v[:, 0] + s * v[:, 1], -s * v[:, 0] + c * v[:, 1]], axis=1)
 
 
 def _conditions(kind: str, n: int, rng: np.random.Generator) -> np.ndarray:
@@ -269,6 +285,7 @@ def _classify(
                 flog.accel_frd_m_s2[b].astype(np.float64),
                 tuple(int(i) + 1 for i in np.flatnonzero(cond[b])),
                 onset_s,
+                vel_heading_m_s=heading_velocity(flog.vel_ned_m_s[b], sig["yaw_rad"][b]),
             )
         )
     return flights
@@ -355,4 +372,5 @@ def _from_table(table, clf: Classifier, truth_props, onset_log_s: float, boot_of
         np.asarray(acc, dtype=np.float64),
         truth_props,
         float(onset_s),
+        vel_heading_m_s=heading_velocity(table.vel_ned_m_s, table.yaw_rad),
     )
