@@ -41,6 +41,10 @@ ASSUMPTIONS: dict[str, dict[str, str]] = {
         "value": "RotorPy parasitic c_D (0.02, 0.02, 0.04) N/(m/s)²; rotor H-force k_d 2e-5 (body-drag nuisance x4-6)",
         "why": "RotorPy's aerodynamic model; training has none by default",
     },
+    "blade_flapping": {
+        "value": "off (k_flap = 0) except the forward_flight set: uniform 0..1.8e-5 N m per rad/s per m/s, routes at up to 10 m/s",
+        "why": "unmeasured for this quad; the upper end is the forward-flight trim of the one real quad here flown fast (ArduPilot log171, front rotors' yaw-free share -0.025 per m/s), carried to the paper quad; blowback's sign (nose-up forward)",
+    },
     "esc_curve": {
         "value": "paper fit; hidden set scales it by 0.96-0.98 or 1.02-1.04",
         "why": "the fit is from one load-cell session",
