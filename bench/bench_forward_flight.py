@@ -133,7 +133,7 @@ def main(argv=None) -> int:
     specs = build_set("forward_flight", flights=a.flights, seed=a.seed, duration_s=a.duration)
     twins = [replace(s, airframe=s.airframe.with_(flapping_nm_per_rad_s_m_s=0.0)) for s in specs]
     run = decision_rule(DecisionConfig(), load_calibration(), use_stored=False)
-    log = lambda m: print(m, file=sys.stderr)  # noqa: E731
+    log = lambda m: print(f"evalsim forward_flight: {m}", file=sys.stderr)  # noqa: E731
     rows = {}
     for name, ss in (("10 m/s, flapping 0..log171's trim", specs), ("10 m/s, no flapping (same flights)", twins)):
         pairs = evalsim_specs(ss, clf, log=log)

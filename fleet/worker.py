@@ -54,21 +54,21 @@ def model_version(path: Path) -> str:
     verdict: the model file, its set rule beside it (``<model>.sets.json``, when present) and the decision
     calibration when it belongs to this model (``monitor.decision`` uses no other). A recalibrated set rule or
     decision threshold beside the same model makes old rows another version (``fleet ingest``'s ``other_model``)."""
-    from monitor.decision import DEFAULT_CALIBRATION
+    from monitor.decision import DEFAULT_CALIBRATION, load_calibration
+    from monitor.errors import ConfigError
     from monitor.hypotheses import rule_path
 
-    model = Path(path).read_bytes()
-    h = hashlib.sha256(model)
+    h = hashlib.sha256(Path(path).read_bytes())
+    model_sha256 = h.hexdigest()  # the model's own digest; h goes on to take its rule and calibration
     sets = rule_path(path)
     if sets.is_file():
         h.update(b"\0sets\0" + sets.read_bytes())
     try:
-        cal = DEFAULT_CALIBRATION.read_bytes()
-        belongs = json.loads(cal).get("model_sha256") == hashlib.sha256(model).hexdigest()
-    except (OSError, ValueError, AttributeError):
-        belongs = False  # none, or unreadable: the decision falls back to its analytic thresholds
-    if belongs:
-        h.update(b"\0decision-calibration\0" + cal)
+        cal = load_calibration()
+    except ConfigError:
+        cal = None  # unreadable: the decision cannot use it either
+    if cal is not None and cal.model_sha256 == model_sha256:
+        h.update(b"\0decision-calibration\0" + DEFAULT_CALIBRATION.read_bytes())
     return h.hexdigest()[:12]
 
 

@@ -445,12 +445,13 @@ class Decision:
                 # the yaw balance rose to suspect after a fault was announced on these propellers: a NOTICE after
                 # the WARNING reads as a downgrade; its widening is told when it reaches fault (the status shows it)
                 break
-            sets = self.hypothesis_sets(lvl, new)
             if rising and rank < self._announced_rank:
                 # a new propeller at suspect after a FAULT: the NOTICE names it alone ("PROP 4 SUSPECT" after
                 # "PROP 2 FAULT", not "PROP 2+4 SUSPECT", which reads as a downgrade of rotor 2)
                 at = tuple(i + 1 for i in rising)
                 sets = [at]
+            else:
+                sets = self.hypothesis_sets(lvl, new)
             if not at:  # the pair statistic alone: both same-spin pairs are named, none is claimed
                 at = tuple(sorted(set().union(*sets)))
             sev = MAV_SEVERITY_NOTICE if lvl == "suspect" else (MAV_SEVERITY_CRITICAL if len(at) > 1 else MAV_SEVERITY_WARNING)

@@ -192,30 +192,45 @@ def test_flight_sets_word_the_daemons_alerts_as_the_flights_hypotheses():
     assert [h for h, _ in sets.add(q / q.sum())] == [()]
 
 
+def _fly_with_a_network_set(label_p, network_p, share_rotor: int | None, seed: int = 0) -> list:
+    """80 s at 20 Hz through the shipped rule (analytic thresholds). From 40 s: rotor ``share_rotor``'s omega^2
+    share rises by 10 % (None: the shares stay put), the network's P(faulty) per propeller is ``network_p`` (0.01
+    before), and its recent set (a classifier-only conformal rule) is worded from ``label_p``. The announcements."""
+    from monitor.decision import Decision, DecisionConfig, StepInputs, WindowEvidence
+    from monitor.hypotheses import FlightSets, SetRule
+
+    sets = FlightSets(SetRule("classifier", 0.3, 0.95, 160, thresholds=(("classifier", 0.3),)))
+    d = Decision(DecisionConfig(), 20.0, 100, use_stored_calibration=False)
+    rng = np.random.default_rng(seed)
+    ann = []
+    for j in range(1600):
+        t = (j + 1) / 20.0
+        w2 = np.ones(4)
+        if share_rotor is not None and t >= 40.0:
+            w2 = w2 + 0.10 * (np.eye(4)[share_rotor - 1] - 0.25)
+        rpm = 6500.0 * np.sqrt(w2 * (1.0 + 0.01 * rng.standard_normal(4)))
+        d.step(t, StepInputs(True, float(rpm.mean()), 0.02, 0.05, 15.5, rpm))
+        if j >= 99:
+            after = t >= 40.0
+            fp = np.asarray(network_p, dtype=np.float64) if after else np.full(4, 0.01)
+            ann += d.window_evidence(t, WindowEvidence(fp, label_p, hypotheses=sets.add(label_p) if after else None))
+    return ann
+
+
+def _labels(weights: dict[int, float]) -> np.ndarray:
+    """A 16-label probability vector: ``{9: 1.0}`` puts weight 1 on label 9, the rest 0.001 (normalised)."""
+    p = np.full(16, 0.001)
+    for label, v in weights.items():
+        p[label - 1] = v
+    return p / p.sum()
+
+
 def test_a_fault_raised_by_physics_is_worded_by_physics_not_by_the_networks_set():
     # The default (fault_evidence "physics"): rotor 2's omega^2 share rises by 10 % (a thrust loss) while the network,
     # confidently wrong on an airframe it never saw, words the flight {2, 3}. The FAULT, raised by the shares, says
     # PROP 2 (the shares' rotor); the network's set stays in the event's hypotheses. The shares reach suspect first
     # (44.1 s), so the NOTICE is theirs too; after the FAULT the network raises no NOTICE on rotor 3.
-    from monitor.decision import Decision, DecisionConfig, StepInputs, WindowEvidence
-    from monitor.hypotheses import FlightSets, SetRule
-
-    sets = FlightSets(SetRule("classifier", 0.3, 0.95, 160, thresholds=(("classifier", 0.3),)))
-    p = np.full(16, 0.001)
-    p[8] = 1.0  # label 9 = {2, 3}
-    p /= p.sum()
-    d = Decision(DecisionConfig(), 20.0, 100, use_stored_calibration=False)
-    rng = np.random.default_rng(0)
-    ann = []
-    for j in range(1600):
-        t = (j + 1) / 20.0
-        w2 = np.ones(4) + (0.10 * (np.eye(4)[1] - 0.25) if t >= 40.0 else 0.0)
-        rpm = 6500.0 * np.sqrt(w2 * (1.0 + 0.01 * rng.standard_normal(4)))
-        d.step(t, StepInputs(True, float(rpm.mean()), 0.02, 0.05, 15.5, rpm))
-        if j >= 99:
-            fp = np.array([0.01, 0.999, 0.999, 0.01]) if t >= 40.0 else np.full(4, 0.01)
-            hyps = sets.add(p) if t >= 40.0 else None
-            ann += d.window_evidence(t, WindowEvidence(fp, p, hypotheses=hyps))
+    ann = _fly_with_a_network_set(_labels({9: 1.0}), [0.01, 0.999, 0.999, 0.01], share_rotor=2)  # label 9 = {2, 3}
     fault = [a for a in ann if a.level == "fault"]
     assert fault and fault[0].propellers == (2,) and fault[0].text.startswith("PROP 2 FAULT"), [a.text for a in ann]
     assert [h["faulty_propellers"] for h in fault[0].event()["hypotheses"]] == [[2, 3]]
@@ -402,39 +417,12 @@ def test_a_suspect_raised_by_physics_is_worded_by_physics_too():
     # Rotor 2's omega^2 share rises by 10 % while the network's P stays low (it raises nothing) but its recent set
     # says {2, 3}. The NOTICE, raised by the shares alone, names rotor 2 as the FAULT does: the network words only
     # what its own statistics raised (before, the daemon's NOTICE read "PROP 2+3 SUSPECT", naming a healthy rotor).
-    from monitor.decision import Decision, DecisionConfig, StepInputs, WindowEvidence
-    from monitor.hypotheses import FlightSets, SetRule
-
-    sets = FlightSets(SetRule("classifier", 0.3, 0.95, 160, thresholds=(("classifier", 0.3),)))
-    p = np.full(16, 0.001)
-    p[8] = 1.0  # label 9 = {2, 3}
-    p /= p.sum()
-    d = Decision(DecisionConfig(), 20.0, 100, use_stored_calibration=False)
-    rng = np.random.default_rng(0)
-    ann = []
-    for j in range(1600):
-        t = (j + 1) / 20.0
-        w2 = np.ones(4) + (0.10 * (np.eye(4)[1] - 0.25) if t >= 40.0 else 0.0)
-        rpm = 6500.0 * np.sqrt(w2 * (1.0 + 0.01 * rng.standard_normal(4)))
-        d.step(t, StepInputs(True, float(rpm.mean()), 0.02, 0.05, 15.5, rpm))
-        if j >= 99:
-            hyps = sets.add(p) if t >= 40.0 else None
-            ann += d.window_evidence(t, WindowEvidence(np.full(4, 0.01), p, hypotheses=hyps))
+    ann = _fly_with_a_network_set(_labels({9: 1.0}), np.full(4, 0.01), share_rotor=2)  # label 9 = {2, 3}
     # (and the network's P of 0.01 for rotor 2 is not quoted on the FAULT: it disagrees)
     assert [(a.level, a.text) for a in ann][:2] == [("suspect", "PROP 2 SUSPECT"), ("fault", "PROP 2 FAULT")], ann
     assert all(a.propellers == (2,) for a in ann)
     # A NOTICE the network raised (its P for rotor 1 at 0.999, the shares quiet) is worded by its set: {1} or {1, 2}.
     q = np.full(16, 0.01)
     q[1], q[5] = 0.5, 0.35
-    q /= q.sum()
-    sets.reset()
-    d = Decision(DecisionConfig(), 20.0, 100, use_stored_calibration=False)
-    ann = []
-    for j in range(1600):
-        t = (j + 1) / 20.0
-        rpm = 6500.0 * np.sqrt(1.0 + 0.01 * rng.standard_normal(4))
-        d.step(t, StepInputs(True, float(rpm.mean()), 0.02, 0.05, 15.5, rpm))
-        if j >= 99:
-            fp = np.array([0.999, 0.01, 0.01, 0.01]) if t >= 40.0 else np.full(4, 0.01)
-            ann += d.window_evidence(t, WindowEvidence(fp, q, hypotheses=sets.add(q) if t >= 40.0 else None))
+    ann = _fly_with_a_network_set(q / q.sum(), [0.999, 0.01, 0.01, 0.01], share_rotor=None, seed=1)
     assert [(a.level, a.text) for a in ann] == [("suspect", "PROP 1 or 1+2?")], ann

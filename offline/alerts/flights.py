@@ -303,9 +303,7 @@ def evalsim_set(
     from offline.evalsim.sets import build_set
 
     specs = build_set(kind, flights=start + n_flights, seed=seed, duration_s=duration_s)[start:]
-    out = [fl for fl, _ in evalsim_specs(specs, clf)]
-    log(f"alerts: evalsim {kind} seed {seed}: {len(out)}/{len(specs)} flights")
-    return out
+    return [fl for fl, _ in evalsim_specs(specs, clf, log=lambda m: log(f"alerts: evalsim {kind} seed {seed}: {m}"))]
 
 
 def evalsim_specs(specs: list, clf: Classifier, log=None) -> list[tuple[AlertFlight, object]]:
@@ -335,7 +333,7 @@ def evalsim_specs(specs: list, clf: Classifier, log=None) -> list[tuple[AlertFli
                 fl.thrust_loss = tuple(round(1.0 - tr["thrust_factor_at_hover"][p - 1], 4) for p in fl.truth)
                 out.append((fl, table))
             if log is not None:
-                log(f"evalsim: {len(out)}/{len(specs)} flights")
+                log(f"{len(out)}/{len(specs)} flights")
     return out
 
 
