@@ -28,6 +28,20 @@ class StepInputs:
     rate_rad_s: float = math.nan  # largest |body rate|
     battery_v: float = math.nan
     motor_rpm: np.ndarray | None = None  # (4,) per-rotor RPM, PX4 order (commanded, or ESC telemetry)
+    # (2,) horizontal ground velocity in the heading frame (forward, right), m/s; None where the autopilot streams
+    # no velocity. The omega^2 shares' baseline follows it (blade flapping trims the rotors with airspeed).
+    vel_heading_m_s: np.ndarray | None = None
+
+
+def heading_velocity(vel_ned_m_s, yaw_rad) -> np.ndarray | None:
+    """(T, 2) (or (2,)) horizontal velocity in the heading frame (forward, right) from NED velocity and yaw (rad);
+    None without either. NED/FRD: forward = north cos(yaw) + east sin(yaw), right = -north sin(yaw) + east cos(yaw)."""
+    if vel_ned_m_s is None or yaw_rad is None:
+        return None
+    v = np.asarray(vel_ned_m_s, dtype=np.float64)
+    yaw = np.asarray(yaw_rad, dtype=np.float64)
+    c, s = np.cos(yaw), np.sin(yaw)
+    return np.stack([c * v[..., 0] + s * v[..., 1], -s * v[..., 0] + c * v[..., 1]], axis=-1)
 
 
 class RegimeTracker:

@@ -34,6 +34,7 @@ import numpy as np
 from monitor.esc import RPM_PER_RAD_S
 from monitor.labels import LABEL_MASKS
 from monitor.model import Classifier
+from monitor.regime import heading_velocity
 from monitor.resample import US_PER_S
 from monitor.vehicle import VehicleConfig
 from offline.dataset.generate import DatasetSpec, degraded_signals, routes, simulate_flights, vehicle_variant
@@ -94,15 +95,6 @@ class AlertFlight:
 
 # What an AlertFlight holds (cache keys carry it, so flights cached without a field are simulated again).
 ALERT_FLIGHT_FIELDS = "v2: vel_heading_m_s"
-
-
-def heading_velocity(vel_ned_m_s, yaw_rad) -> np.ndarray | None:
-    """(T, 2) horizontal velocity in the heading frame (forward, right) from NED velocity and yaw; None without."""
-    if vel_ned_m_s is None or yaw_rad is None:
-        return None
-    v = np.asarray(vel_ned_m_s, dtype=np.float64)
-    c, s = np.cos(np.asarray(yaw_rad, dtype=np.float64)), np.sin(np.asarray(yaw_rad, dtype=np.float64))
-    return np.stack([c * v[:, 0] + s * v[:, 1], -s * v[:, 0] + c * v[:, 1]], axis=1)
 
 
 def _conditions(kind: str, n: int, rng: np.random.Generator) -> np.ndarray:
