@@ -34,7 +34,8 @@ this script with PYTHONPATH pointing at either tree).
 
 The flight is the synthetic PX4 stream of ``tests/test_daemon_helpers.py``
 (HEARTBEAT, EXTENDED_SYS_STATE, ATTITUDE 50 Hz, SERVO_OUTPUT_RAW and
-ESC_STATUS 25 Hz, battery, a GCS on system 255), or ``--tlog`` any recorded
+ESC_STATUS 25 Hz, LOCAL_POSITION_NED 30 Hz as PX4 streams it on an onboard
+link, battery, a GCS on system 255), or ``--tlog`` any recorded
 or simulated flight. The model is ``models/classifier.onnx`` when present,
 else the tests' toy model (same input shape, 100 x 10); ``--model`` picks one.
 """
@@ -57,6 +58,7 @@ REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO / "tests"))
 TARGETS = {"latency_p99_ms": 5.0, "cpu_percent": 5.0, "rss_mb": 150.0, "startup_s": 2.0}
 CLK_TCK = os.sysconf("SC_CLK_TCK")
+POSITION_RATE_HZ = 30.0  # LOCAL_POSITION_NED: PX4's rate on an onboard (companion) link, what the daemon requests
 
 
 def free_udp_port() -> int:
@@ -101,7 +103,8 @@ def build_inputs(args, work: Path) -> tuple[Path, Path]:
         return model, Path(args.tlog)
     from test_daemon_helpers import synth_flight, write_tlog
 
-    return model, write_tlog(work / "flight.tlog", synth_flight(args.minutes * 60.0, faulty=(3,), seed=args.seed))
+    frames = synth_flight(args.minutes * 60.0, faulty=(3,), seed=args.seed, pos_hz=POSITION_RATE_HZ)
+    return model, write_tlog(work / "flight.tlog", frames)
 
 
 def rule_config(work: Path, rule: str, pace_reads: bool = True) -> Path:
@@ -187,6 +190,7 @@ def run(args) -> dict:
             "tlog": str(args.tlog or "synthetic"),
             "messages": rep["messages"],
             "classified_steps": rep["pipeline"]["classified"],
+            "velocity_steps": rep["pipeline"].get("velocity_steps"),  # steps the decision got a velocity (None: older tree)
             "rule": args.rule,
             "pace_reads": not args.no_pace_reads,
             "load_average": os.getloadavg(),

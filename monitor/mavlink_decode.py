@@ -12,7 +12,7 @@ What the decoder owns, because it needs state across messages:
 - **the boot clock.** ATTITUDE carries ``time_boot_ms``; SERVO_OUTPUT_RAW a
   32-bit ``time_usec`` that wraps every 71.6 min (unwrapped to the candidate
   nearest the current clock); ACTUATOR_OUTPUT_STATUS and ESC_STATUS a 64-bit
-  ``time_usec``. Messages without a time (HEARTBEAT, BATTERY_STATUS,
+  ``time_usec``; LOCAL_POSITION_NED ``time_boot_ms`` as ATTITUDE. Messages without a time (HEARTBEAT, BATTERY_STATUS,
   SYS_STATUS, EXTENDED_SYS_STATE) are stamped with the latest boot time seen
   (``None`` before any). A timestamp that goes back by more than
   ``reboot_jump_us`` means the autopilot rebooted: a ``ClockReset`` is emitted
@@ -97,6 +97,14 @@ class Vibration:
 
 
 @dataclass(frozen=True)
+class LocalVelocity:
+    """LOCAL_POSITION_NED (#32): the estimator's ground velocity in the local NED frame (position unused)."""
+
+    timestamp_us: int
+    vel_ned_m_s: tuple[float, float, float]  # (vx north, vy east, vz down) as sent
+
+
+@dataclass(frozen=True)
 class Battery:
     timestamp_us: int | None
     voltage_v: float
@@ -126,7 +134,7 @@ class ClockReset:
     previous_us: int
 
 
-Sample = Attitude | ActuatorOutputs | EscRpm | Vibration | Battery | Heartbeat | LandedState | ClockReset
+Sample = Attitude | ActuatorOutputs | EscRpm | Vibration | LocalVelocity | Battery | Heartbeat | LandedState | ClockReset
 
 
 def _register_esc_in_loaded_dialects() -> None:
@@ -282,6 +290,10 @@ class MavlinkDecoder:
         vib = (_float(m.vibration_x), _float(m.vibration_y), _float(m.vibration_z))
         out.append(Vibration(t, vib, (int(m.clipping_0), int(m.clipping_1), int(m.clipping_2))))
 
+    def _local_position(self, m: Any, out: list[Sample]) -> None:
+        t = self._stamp(int(m.time_boot_ms) * US_PER_MS, out)
+        out.append(LocalVelocity(t, (_float(m.vx), _float(m.vy), _float(m.vz))))
+
     def _battery(self, m: Any, out: list[Sample]) -> None:
         if int(m.id) != self.battery_id:
             return
@@ -308,6 +320,7 @@ _HANDLERS = {
     "ACTUATOR_OUTPUT_STATUS": MavlinkDecoder._actuator,
     "ESC_STATUS": MavlinkDecoder._esc,
     "VIBRATION": MavlinkDecoder._vibration,
+    "LOCAL_POSITION_NED": MavlinkDecoder._local_position,
     "BATTERY_STATUS": MavlinkDecoder._battery,
     "SYS_STATUS": MavlinkDecoder._sys_status,
     "HEARTBEAT": MavlinkDecoder._heartbeat,
@@ -321,6 +334,7 @@ STREAM_IDS = {
     "ACTUATOR_OUTPUT_STATUS": 375,
     "ESC_STATUS": ESC_STATUS_ID,
     "VIBRATION": 241,
+    "LOCAL_POSITION_NED": 32,
     "BATTERY_STATUS": 147,
     "SYS_STATUS": 1,
     "EXTENDED_SYS_STATE": 245,

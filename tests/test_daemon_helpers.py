@@ -6,7 +6,8 @@ window sits above the four-rotor mean (a bent or cracked propeller needs more
 RPM for the same thrust); label probabilities are the product distribution
 of the four. The synthetic flight is what PX4 streams to a companion:
 HEARTBEAT, EXTENDED_SYS_STATE, ATTITUDE, SERVO_OUTPUT_RAW, ESC_STATUS,
-BATTERY_STATUS, SYS_STATUS, plus a ground station's HEARTBEAT on system 255.
+BATTERY_STATUS, SYS_STATUS, plus a ground station's HEARTBEAT on system 255;
+LOCAL_POSITION_NED when asked for (``pos_hz``).
 """
 
 from __future__ import annotations
@@ -120,11 +121,16 @@ def synth_flight(
     hole_s=None,
     esc_index_offset: int = 0,
     servo_port: int = 0,
+    pos_hz: float = 0.0,
+    vel_of_t=None,
+    yaw_of_t=None,
 ) -> list[tuple[float, bytes]]:
     """(arrival wall time s, frame) in arrival order: PX4-like streams with jitter; armed, IN_AIR after takeoff_s.
 
     ``nan_window_s=(a, b)`` writes NaN attitude between flight times a and b; ``hole_s=(a, b)``
-    drops every message in that span (a link outage).
+    drops every message in that span (a link outage). ``pos_hz`` > 0 adds LOCAL_POSITION_NED at that rate with
+    the NED velocity ``vel_of_t(t)`` (m/s; default a slow 2 m/s circle); ``yaw_of_t(t)`` (rad) replaces the
+    default slow yaw drift. Neither changes the other streams' values.
     """
     rng = np.random.default_rng(seed)
     ap = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
@@ -160,7 +166,7 @@ def synth_flight(
         if nan_window_s and nan_window_s[0] <= t < nan_window_s[1]:
             roll = float("nan")
         tb = boot0_s + t
-        yaw = math.remainder(0.3 + 0.01 * t, 2.0 * math.pi)  # ATTITUDE.yaw is in [-pi, pi], as PX4 sends it
+        yaw = math.remainder(0.3 + 0.01 * t if yaw_of_t is None else yaw_of_t(t), 2.0 * math.pi)  # in [-pi, pi], as PX4
         add(t, mavlink.MAVLink_attitude_message(int(tb * 1000), roll, pitch, yaw, *rates).pack(ap))
     n_srv = int(duration_s * servo_hz)
     for k in range(n_srv):
@@ -173,6 +179,13 @@ def synth_flight(
         add(t + 0.001, mavlink.MAVLink_servo_output_raw_message(tb_us & 0xFFFFFFFF, servo_port, *ch).pack(ap))
         rpm = [int(r) for r in PAPER_ESC.cmd_to_rpm(u)]
         add(t + 0.002, mavlink_esc.encode_esc_status(ap, tb_us, rpm, index=esc_index_offset))
+    vel_of_t = vel_of_t or (lambda t: (2.0 * math.cos(0.1 * t), 2.0 * math.sin(0.1 * t), 0.0))
+    pos_jitter = np.random.default_rng(seed + 1000)  # its own draws: the other streams stay as without it
+    for k in range(int(duration_s * pos_hz)):
+        t = k / pos_hz + pos_jitter.uniform(0, 0.002)
+        vn, ve, vd = vel_of_t(t)
+        tb_ms = int((boot0_s + t) * 1000)
+        add(t + 0.0005, mavlink.MAVLink_local_position_ned_message(tb_ms, vn * t, ve * t, vd * t, vn, ve, vd).pack(ap))
     events.sort(key=lambda e: (e[0], e[1]))
     out = []
     for t, _, frame in events:

@@ -16,6 +16,12 @@ steps that are all airborne (armed, and IN_AIR when the landed state is used)
 and all finite. Anything else (a gap, NaN, disarm, reboot) empties the ring:
 no window ever spans invented or missing data. The first classification comes
 at the first full window, then every ``every_k_steps``.
+
+LOCAL_POSITION_NED's horizontal velocity is held on the same grid (stale after
+``resample.max_gap_s``, like the fast streams it is sampled beside) and turned
+into the heading frame with the step's own yaw: ``StepInputs.vel_heading_m_s``,
+None where it is missing, stale or implausible. It is optional context for the
+decision, never a reason for a step to be invalid.
 """
 
 from __future__ import annotations
@@ -37,6 +43,7 @@ from monitor.decision import StepInputs
 from monitor.esc import EscCurve
 from monitor.features import step_feature_function
 from monitor.model import Classifier
+from monitor.regime import heading_velocity
 from monitor.resample import US_PER_S, period_us
 
 
@@ -70,6 +77,7 @@ CLOCK_BACK_US = 1_000_000
 REBOOT_BACK_US = 10_000_000
 REBOOT_BOOT_US = 30_000_000
 NAN6 = (math.nan,) * 6
+NAN2 = (math.nan,) * 2
 PACING_STREAMS = ("attitude", "motor")  # the hold's fast streams: a step is final once both passed it
 
 
@@ -101,6 +109,8 @@ class Pipeline:
                 "armed": StreamSpec(1, state, False),
                 "landed": StreamSpec(1, state, False),
                 "battery": StreamSpec(1, _us(r.battery_max_age_s), False),
+                # (north, east) m/s: optional context, so it neither paces nor moves the grid (steps as without it)
+                "velocity": StreamSpec(2, fast, False, moves_clock=False),
             },
             reorder_us=_us(r.reorder_s),
         )
@@ -119,6 +129,8 @@ class Pipeline:
             "motor_msgs_unmapped": 0,
             "clock_steps_back": 0,
             "implausible_samples": 0,
+            "velocity_steps": 0,  # grid steps with a heading-frame velocity
+            "velocity_late": 0,  # LOCAL_POSITION_NED at or before an instant already emitted (dropped)
         }
         self._max_gap_us = fast
         self._period_us = period_us(r.rate_hz)
@@ -177,6 +189,8 @@ class Pipeline:
         if isinstance(s, md.EscRpm) and self.config.input.motor_source == "esc":
             rpm = self._map(s.first_index + 1, s.rpm)
             return [] if rpm is None else self._push_motor(s.timestamp_us, rpm, False, received_s)
+        if isinstance(s, md.LocalVelocity):
+            return self._push_velocity(s.timestamp_us, s.vel_ned_m_s, received_s)
         if isinstance(s, md.Heartbeat):
             return self._push("armed", s.timestamp_us, (1.0 if s.armed else 0.0,), received_s)
         if isinstance(s, md.LandedState):
@@ -194,6 +208,15 @@ class Pipeline:
             self._bad_times.append(t_us)
             return self._push("motor", t_us, np.full(4, np.nan), received_s)
         return self._push("motor", t_us, self.esc.cmd_to_rpm(values) if is_cmd else values, received_s)
+
+    def _push_velocity(self, t_us: int, vel_ned_m_s: tuple[float, float, float], received_s: float) -> list[StepResult]:
+        # An unusable velocity only makes the instants it would hold unknown (NaN); the step stays valid.
+        vel = NAN2 if self.plausible.velocity(t_us, vel_ned_m_s) is not None else vel_ned_m_s[:2]
+        last = self.hold.last_emitted
+        if last is not None and t_us <= last:  # PX4 may stamp it a little behind ATTITUDE: counted apart from `late`
+            self.stats["velocity_late"] += 1
+            return []
+        return self._push("velocity", t_us, vel, received_s)
 
     def reset(self) -> None:
         """Drop everything held (grid and ring); decoding state (autopilot, clock) is kept."""
@@ -270,6 +293,11 @@ class Pipeline:
         valid = airborne and not tainted and bool(np.isfinite(feats).all())
         battery_v = float(v["battery"][0])
         motor = v["motor"]
+        vel = v["velocity"]
+        vel_heading = None
+        if math.isfinite(vel[0]) and math.isfinite(vel[1]) and math.isfinite(att[2]):
+            vel_heading = heading_velocity(vel, att[2])  # with this step's yaw
+            self.stats["velocity_steps"] += 1
         inputs = StepInputs(  # sum / size and .max(): np.mean and np.max bit for bit, without their wrappers
             airborne,
             float(motor.sum() / motor.size),
@@ -277,6 +305,7 @@ class Pipeline:
             float(np.abs(att[3:6]).max()),
             battery_v,
             motor,
+            vel_heading_m_s=vel_heading,
         )
         if not valid:
             self._clear()

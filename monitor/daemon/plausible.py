@@ -15,6 +15,11 @@ range when its unit is not µs); ESC rpm in [0, rpm_max]; and no frozen
 channel: a fast stream whose values stay bit-identical for ``frozen_s`` of
 boot time while armed-looking (motor values at the disarmed command or 0 rpm
 are allowed to stand still).
+
+LOCAL_POSITION_NED's velocity is optional context (the omega^2 shares' baseline
+follows it), not a signal the classifier needs: a NaN, absurd (|v| beyond
+``VELOCITY_MAX_M_S``) or frozen sample is dropped and counted like the others,
+but it only makes the step's velocity unknown; it never invalidates a step.
 """
 
 from __future__ import annotations
@@ -28,6 +33,9 @@ from monitor.resample import US_PER_S
 
 HALF_PI = math.pi / 2
 PITCH_SLACK_RAD = 1e-3  # float32 rounding of +-pi/2
+# Ground speed no multirotor reaches (PX4 MPC_XY_VEL_MAX defaults to 12 m/s; racing quadrotors stay below ~50 m/s):
+# beyond it the estimator has diverged or the field is garbage.
+VELOCITY_MAX_M_S = 60.0
 
 
 class Plausibility:
@@ -79,6 +87,22 @@ class Plausibility:
         if bad is None:
             bad = self._frozen("motor", t_us, vals, rest)
         return self._count("motor", t_us, bad, vals)
+
+    def velocity(self, t_us: int, vel_ned_m_s: tuple[float, float, float]) -> str | None:
+        """Why a LOCAL_POSITION_NED velocity is not usable (counted in ``dropped``), else None. Unlike attitude and
+        motor data it never goes into ``last``: an unusable velocity is no reason for a step not to be classified."""
+        bad = None
+        if not all(math.isfinite(v) for v in vel_ned_m_s):
+            bad = "not finite"
+        elif math.hypot(*vel_ned_m_s) > VELOCITY_MAX_M_S:
+            bad = f"beyond {VELOCITY_MAX_M_S:g} m/s"
+        # Exactly zero may stand still (a simulator's vehicle on the ground); as evidence it says "hover", the
+        # baseline the shares have without any velocity.
+        elif self._frozen("velocity", t_us, tuple(vel_ned_m_s), rest=not any(vel_ned_m_s)) is not None:
+            bad = "frozen"
+        if bad is not None:
+            self.dropped[f"velocity: {bad}"] += 1
+        return bad
 
     def battery(self, t_us: int | None, voltage_v: float) -> bool:
         ok = not math.isfinite(voltage_v) or 0.0 <= voltage_v <= self.cfg.battery_max_v

@@ -13,6 +13,12 @@ A sample at or before an instant already emitted cannot change it any more:
 it is dropped and counted in ``late`` (the batch path would still use it;
 PX4 sends each stream in order, so this needs reordering beyond
 ``reorder_us`` within one stream).
+
+A stream with ``moves_clock=False`` (optional context such as velocity) is held
+the same way but never starts the grid or moves the boot clock: which
+instants are emitted, and when, is exactly what it would be without it. It
+keeps only the samples within its ``max_age_us`` of its newest one (and the one
+before), so it stays small while no grid runs.
 """
 
 from __future__ import annotations
@@ -37,6 +43,7 @@ class StreamSpec:
     width: int
     max_age_us: int
     paces: bool  # a pacing stream gates when an instant is final (the fast ones)
+    moves_clock: bool = True  # False: held, but its samples neither start the grid nor make instants final
 
 
 @dataclass(frozen=True)
@@ -107,6 +114,10 @@ class StreamingHold:
             del s.times[0], s.values[0]
             self.overflow += 1
         s.last_t = t_us if s.last_t is None else max(s.last_t, t_us)
+        if not s.spec.moves_clock:
+            # Bounded even while no grid runs: older samples only hold instants more than max_age behind its newest.
+            s.prune(s.last_t - s.spec.max_age_us)
+            return []  # nothing it holds can make an instant final
         self.clock_us = t_us if self.clock_us is None else max(self.clock_us, t_us)
         if self.next_g is None:
             self.next_g = -(-t_us // self.period_us) * self.period_us  # ceil to the grid, as grid_us()

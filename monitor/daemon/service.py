@@ -46,7 +46,10 @@ BAD_DATA_LOG_PERIOD_S = 5.0
 MOTOR_STREAM = {"servo": "SERVO_OUTPUT_RAW", "actuator": "ACTUATOR_OUTPUT_STATUS", "esc": "ESC_STATUS"}
 LANDED_RATE_HZ = 2.0  # EXTENDED_SYS_STATE: a state, not a signal
 VIBRATION_RATE_HZ = 10.0  # imbalance evidence beside the classifier (PX4's default stream rate is lower)
-EVIDENCE_FRESH_S = 2.0  # a VIBRATION / ESC_STATUS stream silent for longer is not live evidence
+# LOCAL_POSITION_NED: the velocity the shares' baseline follows, held on the 20 Hz grid. PX4's own rate on an onboard
+# (companion) link, so the request never slows it for another consumer there; a radio link's 1 Hz gets raised.
+VELOCITY_RATE_HZ = 30.0
+EVIDENCE_FRESH_S = 2.0  # a VIBRATION / ESC_STATUS stream (or the grid's velocity) silent for longer is not live
 SINK_REPORT_PERIOD_S = 60.0  # a failing events file is told to the ground station once a minute
 MAV_SEVERITY_WARNING = 4
 REPORT_TOP_N = 20  # the report lists at most this many ignored sources / undecodable kinds
@@ -265,7 +268,8 @@ class Daemon:
                 self._evidence_t["esc_rpm"] = e.timestamp_us / US_PER_S
 
     def live_evidence(self, t_s: float) -> list[str]:
-        """Which evidence is flowing now: classifier (motor stream + attitude), vibration, esc_rpm."""
+        """Which evidence is flowing now: classifier (motor stream + attitude), vibration, esc_rpm, and velocity
+        (LOCAL_POSITION_NED on the grid: not evidence itself, the context the shares' baseline follows)."""
         return [k for k, last in sorted(self._evidence_t.items()) if t_s - last <= EVIDENCE_FRESH_S]
 
     def _decide(self, step) -> None:
@@ -277,6 +281,8 @@ class Daemon:
         self.decision.step(t, step.inputs or StepInputs(step.airborne))
         if step.valid:
             self._evidence_t["classifier"] = t
+        if step.inputs is not None and step.inputs.vel_heading_m_s is not None:
+            self._evidence_t["velocity"] = t
         live = self._live = self.live_evidence(t)
         if step.airborne and not step.valid:
             self._paused = step.reason
@@ -546,7 +552,8 @@ class Daemon:
             self.counters.stream_requests += 1
         if self.sequential and "ATTITUDE" in names:
             self.link.request_message_interval(sysid, comp, md.STREAM_IDS["VIBRATION"], VIBRATION_RATE_HZ)
-            self.counters.stream_requests += 1
+            self.link.request_message_interval(sysid, comp, md.STREAM_IDS["LOCAL_POSITION_NED"], VELOCITY_RATE_HZ)
+            self.counters.stream_requests += 2
         log.info("requested %s at %.0f Hz (MAV_CMD_SET_MESSAGE_INTERVAL)", ", ".join(names), self.cfg.link.stream_rate_hz)
 
     def _check_rates(self, now: float) -> None:
