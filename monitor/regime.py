@@ -31,6 +31,9 @@ class StepInputs:
     # (2,) horizontal ground velocity in the heading frame (forward, right), m/s; None where the autopilot streams
     # no velocity. The omega^2 shares' baseline follows it (blade flapping trims the rotors with airspeed).
     vel_heading_m_s: np.ndarray | None = None
+    # (2,) horizontal specific force in the body frame (IMU accelerometer x, y; FRD), m/s^2; None where not streamed.
+    # Thrust is along body z, so this is the air's drag on the body: a measure of the airspeed, wind included.
+    accel_xy_frd_m_s2: np.ndarray | None = None
 
 
 def heading_velocity(vel_ned_m_s, yaw_rad) -> np.ndarray | None:
