@@ -49,6 +49,7 @@ REQUIRED = [
     "turbulence_sigma_w_m_s",
     "esc_voltage_exponent",
     "battery_internal_resistance_ohm",
+    "blade_flapping_trim_per_m_s",
 ]
 
 
@@ -59,7 +60,7 @@ def test_register_covers_the_listed_quantities_with_reasons_and_real_ranges():
         assert a.high > a.low, f"{name}: degenerate range"
         assert len(a.reason) > 30, f"{name}: give the reason for the range"
     # Whatever is left out is said to be left out.
-    assert {a.name for a in REGISTER.assumptions if not a.modelled} >= {"blade_flapping", "ekf_dynamics"}
+    assert {a.name for a in REGISTER.assumptions if not a.modelled} >= {"ground_effect", "ekf_dynamics"}
     # Controller gains stay within the PX4-documented ranges quoted in their reasons.
     assert 0.01 <= REGISTER["mc_rollrate_p"].low and REGISTER["mc_rollrate_p"].high <= 0.5
     assert REGISTER["mc_roll_p"].high <= 8.0
@@ -225,3 +226,34 @@ def test_dataset_cli_moves_a_register_range_by_glob_and_the_manifest_says_so(tmp
             cli.main([*argv, "--assumption", bad])
     with pytest.raises(ConfigError, match="randomised"):
         cli.main(["--name", "S", "--assumption", "*torque*=0,0", "--out", str(tmp_path)])
+
+
+def test_blade_flapping_trims_the_front_rotors_by_the_drawn_share_per_m_s():
+    """Hand calculation: flying forward at v with a drawn flapping trim t, each front rotor's yaw-free omega^2
+    share falls by t v against the same flight without flapping (rear rotors rise by as much), and a flight
+    without flapping does not see it."""
+    from offline.sim.perflight import PerFlightTerms
+    from offline.sim.propeller import QuadraticPropeller
+    from offline.sim.simulator import SimConfig, simulate
+
+    still = REGISTER.with_range("wind_mean_m_s", 0.0, 0.0).with_range("turbulence_sigma_w_m_s", 0.0, 0.0)
+    trim = 0.02
+    phys = [
+        draw_flights(still.with_range("blade_flapping_trim_per_m_s", t, t), 4, range(1))[0] for t in (0.0, trim)
+    ]  # the same flight (seed, index) but for its flapping
+    terms = PerFlightTerms.from_flights(phys, VEHICLE)
+    assert terms.flapping_nm_per_rad_s_m_s[0] == 0.0 and terms.flapping_nm_per_rad_s_m_s[1] > 0.0
+    sim = dataclasses.replace(SimConfig(), duration_s=32.0)
+    start = np.array(sim.start_ned_m)
+    north = np.broadcast_to(np.stack([start, start + [400.0, 0.0, 0.0]]), (2, 2, 3))  # heading north at cruise
+    log = simulate(VEHICLE, north, QuadraticPropeller.for_vehicle(VEHICLE), sim, seed=[1, 1], per_flight=terms)
+    om2 = log.motor_omega_rad_s**2
+    share = om2 / om2.mean(axis=2, keepdims=True)
+    c, y = np.full(4, 0.5), np.array([0.5, 0.5, -0.5, -0.5])
+    yaw_free = share @ (np.eye(4) - np.outer(c, c) - np.outer(y, y))
+    late = slice(-200, -40)  # 8 s of steady cruise (20 Hz log)
+    v = log.vel_ned_m_s[:, late, 0].mean(axis=1)
+    assert np.all(np.abs(v - 5.0) < 0.2)  # MPC_XY_CRUISE
+    d = yaw_free[1, late].mean(axis=0) - yaw_free[0, late].mean(axis=0)
+    # PX4 order: 1 front-right, 2 rear-left, 3 front-left, 4 rear-right
+    np.testing.assert_allclose(d, [-trim * v[1], trim * v[1], -trim * v[1], trim * v[1]], atol=0.006)

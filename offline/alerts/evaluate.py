@@ -39,6 +39,7 @@ from offline.alerts.calibrate import calibrate, write_calibration
 from offline.alerts.flights import ALERT_FLIGHT_FIELDS, FlightSet, evalsim_set, simulate_set
 from offline.alerts.rules import consecutive_rule, decision_rule, px4_rule, summarise
 from offline.manifest import make_manifest
+from offline.sim.assumptions import REGISTER
 
 FLIGHT_S = 80.0
 EVALSIM_BLOCK = 8  # evalsim simulates 8 flights per batch
@@ -119,8 +120,10 @@ def healthy_sets(hours: float, per_flight_s: float, **kw) -> list[FlightSet]:
 def set_key(fs: FlightSet, model_sha: str) -> dict:
     """The cache key of one of our flight sets; ``first_flight`` joins it only when set, so sets cached before
     the field existed keep their key. ``fields``: what an ``AlertFlight`` holds (a set cached without a field
-    is simulated again)."""
+    is simulated again); ``register``: randomised physics' assumption ranges."""
     key = {**fs.__dict__, "model": model_sha, "fields": ALERT_FLIGHT_FIELDS}
+    if fs.physics == "randomised":  # the register's ranges make the flights (a new assumption makes new ones)
+        key["register"] = hashlib.sha256(json.dumps(REGISTER.to_mapping(), sort_keys=True).encode()).hexdigest()[:16]
     if fs.first_flight == 0:
         del key["first_flight"]
     return key
@@ -181,8 +184,6 @@ def main(argv=None) -> int:
         cal = calibrate(healthy, args.model, cfg, {"flight_set": fs.__dict__, "simulator": "offline.sim (ours)"})
         config = {"flight_set": fs.__dict__}
         if args.physics == "randomised":
-            from offline.sim.assumptions import REGISTER
-
             config["assumptions"] = REGISTER.to_mapping()
         path = write_calibration(cal, args.calibration_out, config, args.calibration_seed)
         print(f"calibration: {path} {cal['fits']}", file=sys.stderr)

@@ -415,10 +415,22 @@ def _default_register() -> tuple[Assumption, ...]:
             "moderate W20 = 3-6 m/s); horizontal sigma = sigma_w / (0.177 + 0.000823 h)^0.4.",
             group="wind",
         ),
-        # Not modelled (recorded so the list is complete).
+        # Blade flapping: in edgewise flow each rotor's disc tilts back (blowback) and pitches the vehicle nose-up
+        # in forward flight (rolls it away from a side flow), linear in airspeed; the controller trims it with the
+        # rotors, so the front rotors' omega^2 share falls with forward speed. Drawn as that trim, which a log shows
+        # (the share of the front rotors at speed against hover), not as a rotor coefficient nobody measured here.
         Assumption(
-            "blade_flapping", 0.0, 0.0, 0.0, "not modelled: thrust tilt with airspeed.", group="not modelled", modelled=False
+            "blade_flapping_trim_per_m_s",
+            0.0,
+            0.025,
+            0.0,
+            "fall of each front rotor's yaw-free omega^2 share per m/s of forward airspeed at hover thrust (blade "
+            "flapping, blowback's sign). No measurement of this vehicle; bounded by the one real quad here flown "
+            "fast, ArduPilot log171, whose front rotors' share falls ~0.025 per m/s (0.11-0.27 at 5-10 m/s). "
+            "Zero (no flapping) is inside the range.",
+            group="aerodynamics",
         ),
+        # Not modelled (recorded so the list is complete).
         Assumption("ground_effect", 0.0, 0.0, 0.0, "not modelled: flights stay at ~10 m.", group="not modelled", modelled=False),
         Assumption(
             "rotor_inflow_vs_airspeed",

@@ -143,6 +143,7 @@ class Dynamics:
         self.last_total_thrust_n = np.zeros(n)
         self.esc_offset_rad_s = None
         self.spin_up = None  # rotor inertia / dt, (B, 1): the spin-up yaw reaction J dω/dt
+        self.flap_dt_over_inertia = None  # (B, 2) k dt / (Ixx, Iyy): blade flapping (per-flight physics only)
         if per_flight is not None:
             pf = per_flight
             self.motor_alpha = 1.0 - np.exp(-dt / (pf.motor_time_constant_s[:, None] * (ratio if np.any(ratio != 1.0) else 1.0)))
@@ -155,6 +156,11 @@ class Dynamics:
             self.voltage_scale = np.ones((n, 1))  # (V / V_full)^k, rewritten by the simulator
             if np.any(pf.rotor_inertia_kg_m2 > 0):
                 self.spin_up = (pf.rotor_inertia_kg_m2 / dt)[:, None]
+            k = pf.flapping_nm_per_rad_s_m_s
+            if k is not None and np.any(k > 0):
+                # Blade flapping's moment k sum(omega) (-v_right, +v_forward, 0) (body FRD airspeed) turned into
+                # a rate increment per step: dt / I per axis.
+                self.flap_dt_over_inertia = (np.asarray(k, dtype=np.float64) * dt)[:, None] / pf.inertia_diag_kg_m2[:, :2]
             self._out3 = np.empty((n, 1, 11))
             self._out = self._out3[:, 0, :]
             self._d_att, self._d_zdt, self._d_total = self._out[:, :7], self._out[:, 7:10], self._out[:, 10:11]
@@ -225,6 +231,12 @@ class Dynamics:
             dv = np.multiply(self._d_zdt, np.multiply(self._d_total, self.inv_mass, self._t1), self._dv)
         dv += self.gravity_dt
 
+        if self.flap_dt_over_inertia is not None:
+            # Blowback: nose-up flying forward, rolled away from a side flow (left for flow from the right).
+            v_air = np.matmul((s.vel_ned_m_s - self.wind_ned_m_s)[:, None, :], rotation_matrices(s.q_world_body))[:, 0]
+            sum_om = om.sum(axis=1)
+            self._d_att[:, 4] -= self.flap_dt_over_inertia[:, 0] * sum_om * v_air[:, 1]
+            self._d_att[:, 5] += self.flap_dt_over_inertia[:, 1] * sum_om * v_air[:, 0]
         x += self._d_att  # attitude and rates, explicit Euler from the start-of-step values
         v = s.vel_ned_m_s
         v += dv

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from monitor.esc import RAD_S_PER_RPM
-from monitor.vehicle import VehicleConfig
+from monitor.vehicle import GRAVITY_M_S2, VehicleConfig
 from offline.sim.assumptions import FlightPhysics
 from offline.sim.wind import mean_wind_ned
 
@@ -31,6 +31,18 @@ GAIN_FIELDS = {
     "mpc_z_vel_p_acc": ("mpc_z_vel_p_acc",),
     "mpc_z_vel_i_acc": ("mpc_z_vel_i_acc",),
 }
+
+
+def flapping_coefficient(flight: FlightPhysics, vehicle: VehicleConfig) -> float:
+    """The flapping coefficient k (N m per rad/s per m/s) that makes the drawn trim on ``vehicle``.
+
+    A yaw-free share offset s on each front rotor (and +s on each rear one) is a pitch moment
+    4 s (m g / 4) a_x = s m g a_x (a_x: the rotors' mean |x| arm); flapping's is k 4 omega_h v at hover speed
+    omega_h. Equal for a trim s = t v: k = t m g a_x / (4 omega_h).
+    """
+    trim = float(flight.values.get("blade_flapping_trim_per_m_s", 0.0))
+    a_x = float(np.mean(np.abs(np.array(vehicle.rotor_positions_frd_m, dtype=np.float64)[:, 0])))
+    return trim * vehicle.mass_kg * GRAVITY_M_S2 * a_x / (4.0 * vehicle.hover_omega_rad_s)
 
 
 @dataclass(frozen=True)
@@ -52,6 +64,9 @@ class PerFlightTerms:
     wind_mean_ned_m_s: np.ndarray  # (B, 3)
     turbulence_sigma_w_m_s: np.ndarray  # (B,)
     noise_seeds: np.ndarray  # (B,) uint64, the flights' own gust noise
+    # (B,) blade flapping, N m per (rad/s of rotor speed) per (m/s of airspeed): each rotor adds
+    # k omega (-v_right, +v_forward, 0) in body FRD (blowback: nose-up flying forward). 0 = none.
+    flapping_nm_per_rad_s_m_s: np.ndarray | None = None
 
     @property
     def n(self) -> int:
@@ -90,4 +105,5 @@ class PerFlightTerms:
             + np.array([mean_wind_ned(f["wind_mean_m_s"], f["wind_heading_rad"]) for f in flights]),
             turbulence_sigma_w_m_s=col("turbulence_sigma_w_m_s"),
             noise_seeds=np.array([f["noise_seed"] for f in flights], dtype=np.uint64),
+            flapping_nm_per_rad_s_m_s=np.array([flapping_coefficient(f, vehicle) for f in flights]),
         )
