@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from monitor.decision import STATISTICS, Decision, DecisionConfig, StepInputs, WindowEvidence, load_calibration
+from monitor.decision import STATISTICS, Decision, DecisionConfig, WindowEvidence, load_calibration
 from monitor.model import Classifier
 from monitor.vehicle import REPO_ROOT, load_vehicle
 
@@ -47,7 +47,7 @@ def replay_listing(f, d: Decision) -> list[dict]:
     for j in range(len(f.mean_rpm)):
         t = (j + 1) / f.rate_hz
         before = dict(d.regime.counts)
-        d.step(t, StepInputs(True, f.mean_rpm[j], f.tilt_rad[j], f.rate_rad_s[j], f.battery_v[j], f.motor_rpm[j]))
+        d.step(t, f.inputs(j))
         for k, v in d.regime.counts.items():
             if v > before[k]:
                 events.append((round(t, 1), k))

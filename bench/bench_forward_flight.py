@@ -23,11 +23,12 @@ from dataclasses import replace
 
 import numpy as np
 
-from monitor.decision import DecisionConfig, load_calibration
+from monitor.decision import DecisionConfig, file_sha256, load_calibration
 from monitor.model import Classifier
 from monitor.rotor_share import _YAW_FREE, BASELINE_S, SHARE_AVERAGE_S
 from monitor.vehicle import REPO_ROOT
-from offline.alerts.flights import evalsim_specs
+from offline.alerts.evaluate import _revision, cached, previous_rule
+from offline.alerts.flights import ALERT_FLIGHT_FIELDS, evalsim_specs
 from offline.alerts.rules import decision_rule
 from offline.evalsim.sets import FLAPPING_MAX, build_set
 
@@ -127,17 +128,30 @@ def main(argv=None) -> int:
     p.add_argument("--model", default=str(REPO_ROOT / "models" / "classifier.onnx"))
     p.add_argument("--json", action="store_true")
     p.add_argument("--card", action="store_true", help="upsert the table into models/classifier.card-tables.json")
+    p.add_argument("--cache", default="", help="keep the simulated flights here (pickles keyed by set and model)")
+    p.add_argument(
+        "--compare-with", default="", help="a checkout whose decision rule and calibration give rows of their own (previous)"
+    )
     a = p.parse_args(argv)
     t0 = time.monotonic()
     clf = Classifier(a.model)
     specs = build_set("forward_flight", flights=a.flights, seed=a.seed, duration_s=a.duration)
     twins = [replace(s, airframe=s.airframe.with_(flapping_nm_per_rad_s_m_s=0.0)) for s in specs]
-    run = decision_rule(DecisionConfig(), load_calibration(), use_stored=False)
+    runs = {"": decision_rule(DecisionConfig(), load_calibration(), use_stored=False)}
+    if a.compare_with:
+        runs[f"previous ({_revision(a.compare_with)}): "] = previous_rule(a.compare_with)
     log = lambda m: print(f"evalsim forward_flight: {m}", file=sys.stderr)  # noqa: E731
+    sha = file_sha256(a.model)
     rows = {}
-    for name, ss in (("10 m/s, flapping 0..log171's trim", specs), ("10 m/s, no flapping (same flights)", twins)):
-        pairs = evalsim_specs(ss, clf, log=log)
-        rows[name] = score([fl for fl, _ in pairs], [t for _, t in pairs], run)
+    for name, ss, twin in (
+        ("10 m/s, flapping 0..log171's trim", specs, False),
+        ("10 m/s, no flapping (same flights)", twins, True),
+    ):
+        key = {"kind": "forward-flight", "n": a.flights, "seed": a.seed, "duration_s": a.duration, "twin": twin}
+        key.update(model=sha, fields=ALERT_FLIGHT_FIELDS)
+        pairs = cached(a.cache, key, lambda ss=ss: evalsim_specs(ss, clf, log=log))
+        for prefix, run in runs.items():
+            rows[prefix + name] = score([fl for fl, _ in pairs], [t for _, t in pairs], run)
     result = {"set": "evalsim forward_flight", "seed": a.seed, "flapping_max": FLAPPING_MAX, "rows": rows}
     result["wall_s"] = round(time.monotonic() - t0, 1)
     if a.card:

@@ -306,7 +306,7 @@ class Decision:
         if not s.airborne:
             self._new_flight()
             return
-        self.share.push(s.motor_rpm)
+        self.share.push(s.motor_rpm, s.vel_heading_m_s, s.accel_xy_frd_m_s2)
         if event in ("collective_step", "battery_sag"):
             for v in self.S.values():
                 v *= 0.5  # gathered about another vehicle state: keep half; the hold stops new evidence
@@ -337,7 +337,13 @@ class Decision:
         llr = window_llr(ev.fault_probability)
         self._last_p = np.asarray(ev.fault_probability, dtype=np.float64)
         # Evidence per independent sample (one share-averaging span), spread over the seconds this window covers.
-        phys = self.share.llr(dt, quiet=not self.S["physics"].any(), yaw_quiet=not self.S["pair"].any())
+        physics = self.S["physics"]
+        phys = self.share.llr(
+            dt,
+            quiet=not physics.any(),
+            yaw_quiet=not self.S["pair"].any(),
+            calm=float(physics.max()) < self.share.slope_learn_nats,
+        )
         inc = {"absolute": llr * dt}
         if self.baseline is None:
             self._baseline_llr.append(llr)

@@ -27,6 +27,12 @@ def _clip_llr(llr: np.ndarray) -> np.ndarray:
 # Projection that removes the collective (1,1,1,1)/2 and yaw (1,1,-1,-1)/2 directions (PX4 order: 1, 2 CCW; 3, 4 CW).
 _C, _Y = np.full(4, 0.5), np.array([0.5, 0.5, -0.5, -0.5])
 _YAW_FREE = np.eye(4) - np.outer(_C, _C) - np.outer(_Y, _Y)
+# What is left is two-dimensional: the pitch and roll trims. PX4 quad-X order 1 front-right, 2 rear-left,
+# 3 front-left, 4 rear-right: pitch (-1, +1, -1, +1)/2 (rear rotors up: a nose-down moment), roll (-1, +1, +1, -1)/2
+# (left rotors up: a right-wing-down moment). Orthonormal; yaw-free x = a_pitch * pitch + a_roll * roll.
+_PITCH, _ROLL = np.array([-0.5, 0.5, -0.5, 0.5]), np.array([-0.5, 0.5, 0.5, -0.5])
+_AXES = np.stack([_PITCH, _ROLL])  # (2, 4): x -> (a_pitch, a_roll)
+_U = _AXES.T.copy()  # (4, 2): rotor i's direction in (pitch, roll); a loss f on rotor i moves (a_pitch, a_roll) by f U[i]
 
 
 # -- physics: each rotor's share of omega^2 ---------------------------------------------------------
@@ -65,6 +71,28 @@ YAW_SIGMA = 0.022
 # flight's first 10 s) on 96 randomised healthy flights of our simulator, the calibration seed
 # (`bench/alerts_flights.py --seed 100 --flights 96 --share-spread`: 0.0116; 99.9 %: 0.0159).
 YAW_FREE_RISE = 0.012
+# The trims follow the airspeed. Blade flapping tilts each disc back in edgewise flow (blowback) and the rotors
+# trim it: flying forward at airspeed u the front rotors' yaw-free share falls by t u, the rear ones' rises as much
+# (a_pitch = 2 t u), and a side flow does the same in roll. t is the airframe's own: 0 to ~0.025 per m/s (our
+# register's blade_flapping_trim_per_m_s, bounded by ArduPilot log171; docs/ALERTS.md). Airspeed is not streamed,
+# but two things that follow it are: the ground velocity in the heading frame (airspeed less the wind) and the
+# body's horizontal specific force (the IMU's x, y: thrust is along body z, so this is the air's drag, which
+# grows with airspeed, wind included: what PX4's EKF2 multirotor drag fusion reads). So the baseline is, per
+# axis, a plane a = b + k_v v + k_a f (forward velocity and f_x for pitch, right and f_y for roll), learnt by a
+# Kalman filter over (b, k_v, k_a) from the flight itself while no evidence gathers, and the evidence is weighed
+# by what the plane does not yet know (its variance at this v, f): an airframe whose slopes are not yet learnt
+# is heard through the other axis, not read as a fault. On our simulator (heading towards the waypoint, wind up
+# to 5 m/s) the velocity alone leaves 0.1 of the trims unexplained and the specific force 0.007; on evalsim's
+# forward flights either leaves ~0.015, both 0.013; on log171 (real) 0.087 / 0.096 / 0.085 (a hard-flown flight).
+# The slopes' priors: mean 0 (flapping's sign is blowback's, but other speed-linear trims, e.g. body drag above
+# the CG, take either); sd FLAP_SLOPE_PRIOR_SD per m/s puts the register's largest (0.05 per m/s in a_pitch) at
+# 1.7 sd; DRAG_SLOPE_PRIOR_SD per m/s^2 covers our simulator's fitted -0.1..-0.26 at 1 sd. FLAP_SLOPE_Q: a slope
+# may drift by ~0.005 per m/s a minute (the flapping moment grows with rotor speed: a payload).
+# SHARE_BASELINE_TAU_S sets the intercept's drift.
+FLAP_SLOPE_PRIOR_SD = 0.03  # a_pitch / a_roll per m/s
+DRAG_SLOPE_PRIOR_SD = 0.3  # a_pitch / a_roll per m/s^2 of specific force
+FLAP_SLOPE_Q = 0.005**2 / 60.0  # per s (the specific-force slope drifts in proportion: x DRAG/FLAP prior sd)
+BASELINE_PRIOR_VAR = 1.0  # the intercept before any window (diffuse)
 
 
 class RotorShare:
@@ -81,17 +109,22 @@ class RotorShare:
     no training; against the airframe's own baseline it is blind to CG
     offsets and motor spread (issue 12's baseline names 24 of 24 that way).
 
-    Baseline: the mean over the first ``BASELINE_S`` of evidence windows (held ones do not count), then an
-    exponential average (time constant ``SHARE_BASELINE_TAU_S``) fed only while
-    no evidence is gathering (``quiet``), so slow drifts (battery sag) are
-    absorbed and a step is not.
+    What is left lives in two dimensions, the pitch and roll trims (``_AXES``). Baseline: per axis a plane
+    ``b + k_v v + k_a f`` in the heading-frame velocity and the body's horizontal specific force (blade flapping
+    follows airspeed, see FLAP_SLOPE_PRIOR_SD), a Kalman filter over (b, k_v, k_a) fed by every evidence window of
+    the first ``BASELINE_S`` (held ones do not count: a least-squares fit of those windows), then the intercept only
+    while no evidence is gathering (``quiet``), so slow drifts (battery sag) are absorbed, at the rate of an
+    exponential average over ``SHARE_BASELINE_TAU_S``, and a step is not; the slopes also while the evidence is
+    small (``calm``). Without those streams the regressors are 0 and the plane is its intercept: the flight's own
+    mean, as before flapping was modelled.
 
-    Per window: the Gaussian mean-shift log-likelihood ratio of the mean share over the last ``average_s``
-    ``delta (x - b - delta/2) / sigma^2`` with ``delta = f_min / 2`` (the
-    smallest thrust loss worth an alert, ``alerts.min_thrust_loss``: the CUSUM
-    reference is half of it) and ``sigma = SHARE_SIGMA``, the healthy spread.
-    Windows that overlap by all but one step are not independent: the caller
-    weighs each by ``dt / average_s`` (one independent sample per averaging span).
+    Per window: the Gaussian mean-shift log-likelihood ratio, for each rotor i, of the window-mean trims e
+    (less the plane at this window's mean regressors) shifted by f U_i (a loss ``f = alerts.min_thrust_loss``, the
+    smallest worth an alert: the reference is half of it): ``f U_i' S^-1 (e - f U_i / 2)``, S per axis the healthy
+    spread 2 sigma^2 (``sigma = SHARE_SIGMA`` per rotor) plus what the plane does not know there. With
+    S = 2 sigma^2 on both axes it is ``delta (x_i - b_i - delta/2) / sigma^2``, delta = f/2, the per-rotor test.
+    Windows that overlap by all but one step are not independent: the caller weighs each by ``dt / average_s``
+    (one independent sample per averaging span), and the filter counts each window as 1/``window`` of a sample.
     """
 
     def __init__(
@@ -103,31 +136,58 @@ class RotorShare:
         self.delta = 0.5 * min_thrust_loss
         self.sigma = sigma
         self._ring = np.full((self.window, N_PROPS), np.nan)
+        # (v_forward, v_right, f_x, f_y): heading-frame velocity and body specific force; NaN where not streamed
+        self._vring = np.full((self.window, 4), np.nan)
         self._i = 0
         self._n = 0
-        self._base: list[np.ndarray] = []
         self._base_s = 0.0  # seconds of evidence windows the baseline has seen (held windows are not evidence)
-        self.baseline: np.ndarray | None = None
+        self.baseline: np.ndarray | None = None  # (4,) the plane's intercept as yaw-free shares (regressors 0)
+        # The plane per axis (pitch, roll): theta[axis] = (b, k_v, k_a), P[axis] its covariance.
+        self._theta = np.zeros((2, 3))
+        self._P = np.zeros((2, 3, 3))
+        self._r = 2.0 * sigma**2  # one independent sample's variance per axis
+        # Intercept drift per second that makes the filter's steady gain per window dt / SHARE_BASELINE_TAU_S
+        # (a random walk with gain K << 1 has K^2 = q dt / R per update; R = r * window per overlapping window).
+        self._q_b = self._r * self.window / (SHARE_BASELINE_TAU_S**2 * rate_hz)
+        # One independent sample of the smallest loss worth an alert adds f^2 / (8 sigma^2) nats on its rotor
+        # (f U_i' S^-1 f U_i / 2 at S = 2 sigma^2); the slopes learn while the largest statistic holds less than
+        # a quarter of it (8 % and sigma 0.01: 2 nats): evidence no fault this small has yet made.
+        self.slope_learn_nats = 0.25 * min_thrust_loss**2 / (8.0 * sigma**2)
+        self._base = []  # the yaw balance's windows while the baseline is learnt
+        self._restart_line()
         # The yaw balance (pair statistic): y = (s1 + s2 - s3 - s4) / 2, mean over YAW_AVERAGE_S, against its baseline.
         self.yaw_delta = min_thrust_loss
         self.yaw_sigma = YAW_SIGMA
         self.yaw_window = max(int(round(YAW_AVERAGE_S * rate_hz)), 1)
         self._yring = np.full(self.yaw_window, np.nan)
         self._sring = np.full((self.yaw_window, N_PROPS), np.nan)  # the shares over YAW_AVERAGE_S (alert wording)
+        self._svring = np.full((self.yaw_window, 4), np.nan)  # and the velocity and specific force over it
         self._yi = 0
         self._yn = 0
         self.yaw_baseline: float | None = None
         self.yaw_llr = np.zeros(len(SAME_SPIN_PAIRS))  # (CCW pair up, CW pair up) of the last window
 
+    def _restart_line(self) -> None:
+        self._theta[:] = 0.0
+        self._P[:] = 0.0
+        self._P[:, 0, 0] = BASELINE_PRIOR_VAR
+        self._P[:, 1, 1] = FLAP_SLOPE_PRIOR_SD**2
+        self._P[:, 2, 2] = DRAG_SLOPE_PRIOR_SD**2
+
     def reset(self) -> None:
         self._ring[:] = np.nan
+        self._vring[:] = np.nan
         self._yring[:] = np.nan
         self._sring[:] = np.nan
+        self._svring[:] = np.nan
         self._n = self._yn = 0
         self._base, self.baseline, self.yaw_baseline = [], None, None
         self._base_s = 0.0
+        self._restart_line()
 
-    def push(self, rpm: np.ndarray | None) -> None:
+    def push(
+        self, rpm: np.ndarray | None, vel_heading_m_s: np.ndarray | None = None, accel_xy_frd_m_s2: np.ndarray | None = None
+    ) -> None:
         if rpm is None:
             return
         w2 = np.asarray(rpm, dtype=np.float64) ** 2
@@ -137,24 +197,83 @@ class RotorShare:
             return
         share = w2 / m
         self._ring[self._i] = share
+        v = self._vring[self._i]
+        if vel_heading_m_s is None:
+            v[:2] = np.nan
+        else:
+            v[:2] = vel_heading_m_s
+        if accel_xy_frd_m_s2 is None:
+            v[2:] = np.nan
+        else:
+            v[2:] = accel_xy_frd_m_s2
         self._i = (self._i + 1) % self.window
         self._n += 1
         s1, s2, s3, s4 = share.tolist()  # Python floats: the same double arithmetic as numpy scalars, cheaper
         self._yring[self._yi] = 0.5 * (s1 + s2 - s3 - s4)
         self._sring[self._yi] = share
+        self._svring[self._yi] = v
         self._yi = (self._yi + 1) % self.yaw_window
         self._yn += 1
 
+    @staticmethod
+    def _mean_regressors(ring: np.ndarray) -> np.ndarray:
+        """(v_forward, v_right, f_x, f_y) means over the known entries of ``ring``; 0 where none is known (no
+        stream: the plane is its intercept in that regressor)."""
+        ok = ~np.isnan(ring)
+        n = ok.sum(axis=0)
+        return np.where(n > 0, np.where(ok, ring, 0.0).sum(axis=0) / np.maximum(n, 1), 0.0)
+
+    def line(self, regressors: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The baseline's (pitch, roll) trims at these (v_forward, v_right, f_x, f_y) and their variances (what the
+        plane does not know there)."""
+        pred = np.empty(2)
+        var = np.empty(2)
+        for a in range(2):
+            h = np.array([1.0, regressors[a], regressors[2 + a]])
+            pred[a] = float(self._theta[a] @ h)
+            var[a] = float(h @ self._P[a] @ h)
+        return pred, var
+
+    def _update_line(self, trims: np.ndarray, regressors: np.ndarray, dt_s: float, learn: bool, slopes: bool = False) -> None:
+        """Predict the plane over ``dt_s`` (drift), then fold in the window's trims when ``learn`` (all of the
+        plane) or ``slopes`` (the slopes only, the intercept held: a Schmidt update, the intercept's uncertainty
+        kept as noise)."""
+        if dt_s > 0:
+            self._P[:, 0, 0] += self._q_b * dt_s
+            self._P[:, 1, 1] += FLAP_SLOPE_Q * dt_s
+            self._P[:, 2, 2] += FLAP_SLOPE_Q * (DRAG_SLOPE_PRIOR_SD / FLAP_SLOPE_PRIOR_SD) ** 2 * dt_s
+        if not (learn or slopes):
+            return
+        r = self._r * self.window  # overlapping windows: one independent sample per ``window`` of them
+        for a in range(2):
+            h = np.array([1.0, regressors[a], regressors[2 + a]])
+            P = self._P[a]
+            ph = P @ h
+            gain = ph / (float(h @ ph) + r)
+            if not learn:
+                gain[0] = 0.0
+            self._theta[a] += gain * (float(trims[a]) - float(h @ self._theta[a]))
+            # Joseph form: right for any gain, the optimal one included
+            i_kh = np.eye(3) - np.outer(gain, h)
+            P = i_kh @ P @ i_kh.T + r * np.outer(gain, gain)
+            self._P[a] = 0.5 * (P + P.T)
+
     def yaw_free_rise(self) -> np.ndarray | None:
-        """(4,) each rotor's yaw-free share over the last YAW_AVERAGE_S less its baseline; None before both exist."""
+        """(4,) each rotor's yaw-free share over the last YAW_AVERAGE_S less the baseline's at that span's mean
+        velocity; None before both exist."""
         if self.baseline is None or self._yn < self.yaw_window:
             return None
-        return _YAW_FREE @ (self._sring.sum(axis=0) / self.yaw_window) - self.baseline
+        pred, _ = self.line(self._mean_regressors(self._svring))
+        return _YAW_FREE @ (self._sring.sum(axis=0) / self.yaw_window) - _U @ pred
 
-    def llr(self, dt_s: float = 0.0, quiet: bool = False, yaw_quiet: bool | None = None) -> np.ndarray | None:
+    def llr(
+        self, dt_s: float = 0.0, quiet: bool = False, yaw_quiet: bool | None = None, calm: bool | None = None
+    ) -> np.ndarray | None:
         """Per-rotor evidence of the current window, or None (no full window, or baseline still being learnt).
 
-        ``quiet``: no physics evidence is gathering, so the baseline may follow the window for ``dt_s``
+        ``quiet``: no physics evidence is gathering, so the baseline may follow the window for ``dt_s``;
+        ``calm`` (default ``quiet``): less evidence gathered than ``slope_learn_nats``, so the plane's slopes
+        may still learn (the intercept, where a step fault would go, does not)
         (``yaw_quiet``: the same for the yaw balance; default ``quiet``). The yaw balance's evidence of the
         same window is left in ``yaw_llr`` (zeros when None is returned).
         """
@@ -162,26 +281,29 @@ class RotorShare:
         if self._n < self.window:
             return None
         m = self._ring.sum(axis=0) / self.window  # the ring's mean, bit for bit (see push)
-        x = _YAW_FREE @ m
+        trims = _AXES @ m  # (pitch, roll): the collective and yaw directions are orthogonal to both
+        v = self._mean_regressors(self._vring)
         y = float(_Y @ m)  # the baseline's share of the yaw balance: over BASELINE_S like the shares'
         if self.baseline is None:
-            self._base.append(np.append(x, y))
+            self._update_line(trims, v, dt_s, learn=True)
+            self._base.append(y)
             self._base_s += dt_s
             # BASELINE_S of windows that were evidence, not of flight: windows held for a manoeuvre never reach
             # here, and a baseline finalised on the half second after a hold took a transient for the airframe's
             # trim (session 7: a false rotor-2 fault 14 s before an onset, from 10 windows after a 7-s hold).
             if self._base_s >= BASELINE_S and len(self._base) >= 3:
-                self.baseline = np.mean(self._base, axis=0)[:N_PROPS]
+                self.baseline = _U @ self._theta[:, 0]
                 # The yaw balance's own mean over the last YAW_AVERAGE_S (its 2-s means scatter by 0.05)
-                self.yaw_baseline = float(
-                    np.mean(self._yring if self._yn >= self.yaw_window else np.asarray(self._base)[:, N_PROPS])
-                )
+                self.yaw_baseline = float(np.mean(self._yring if self._yn >= self.yaw_window else np.asarray(self._base)))
                 self._base = []
             return None
-        d = x - self.baseline
-        k = min(dt_s / SHARE_BASELINE_TAU_S, 1.0) if dt_s > 0 else 0.0
+        pred, var = self.line(v)
+        e = trims - pred
+        inv_s = 1.0 / (self._r + var)  # per axis
+        self._update_line(trims, v, dt_s, learn=quiet, slopes=quiet if calm is None else calm)
         if quiet:
-            self.baseline = self.baseline + d * k
+            self.baseline = _U @ self._theta[:, 0]
+        k = min(dt_s / SHARE_BASELINE_TAU_S, 1.0) if dt_s > 0 else 0.0
         if self._yn >= self.yaw_window:
             dy = float(self._yring.sum() / self.yaw_window) - self.yaw_baseline
             if quiet if yaw_quiet is None else yaw_quiet:
@@ -189,5 +311,7 @@ class RotorShare:
             # Two one-sided tests of the yaw balance: the CCW pair's shares up (+dy) or the CW pair's (-dy).
             yd, ys = self.yaw_delta, self.yaw_sigma
             self.yaw_llr = _clip_llr(np.array([yd * (dy - yd / 2), yd * (-dy - yd / 2)]) / ys**2)
-        llr = self.delta * (d - self.delta / 2) / self.sigma**2
+        f = 2.0 * self.delta
+        # f U_i' S^-1 (e - f U_i / 2), every U_i entry +-1/2 so U_i' S^-1 U_i = (1/S_pitch + 1/S_roll) / 4
+        llr = f * (_U @ (e * inv_s)) - (f * f / 8.0) * float(inv_s.sum())
         return _clip_llr(llr)

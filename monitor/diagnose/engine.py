@@ -45,6 +45,7 @@ from monitor.flight import FlightTable
 from monitor.hypotheses import SetRule, flight_score, hypothesis_set, load_rule
 from monitor.labels import LABEL_TABLE, fault_probability_from_label_probs, label_for
 from monitor.model import Classifier
+from monitor.regime import heading_velocity
 from monitor.resample import US_PER_S
 
 # Airborne RPM against what the model saw in training (its normaliser's mean and
@@ -463,12 +464,26 @@ def replay_decision(
     tilt = np.maximum(np.abs(table.roll_rad), np.abs(table.pitch_rad))
     rates = np.abs(np.stack([table.roll_rate_rad_s, table.pitch_rate_rad_s, table.yaw_rate_rad_s], axis=1)).max(axis=1)
     battery = np.asarray(table.battery_v, dtype=np.float64)
+    vel = heading_velocity(table.vel_ned_m_s, table.yaw_rad)  # None in a log without velocity
+    acc = None if table.accel_frd_m_s2 is None else np.asarray(table.accel_frd_m_s2, dtype=np.float64)[:, :2]
     at = {int(e): k for k, e in enumerate(ends)}
     alerts = []
     fault = None  # the last window at fault level: {"t_boot_s", "hypothesis_sets"} (a landing later resets the levels)
     for j in range(len(t_s)):
         air = bool(table.airborne[j])
-        dec.step(float(t_s[j]), StepInputs(air, mean_rpm[j], tilt[j], rates[j], battery[j], rpm[j]))
+        dec.step(
+            float(t_s[j]),
+            StepInputs(
+                air,
+                mean_rpm[j],
+                tilt[j],
+                rates[j],
+                battery[j],
+                rpm[j],
+                None if vel is None else vel[j],
+                None if acc is None else acc[j],
+            ),
+        )
         k = at.get(j)
         if k is not None:
             for a in dec.window_evidence(float(t_s[j]), WindowEvidence(faults[k], labels[k])):

@@ -34,7 +34,7 @@ import numpy as np
 from monitor.esc import RPM_PER_RAD_S
 from monitor.labels import LABEL_MASKS
 from monitor.model import Classifier
-from monitor.regime import heading_velocity
+from monitor.regime import StepInputs, heading_velocity
 from monitor.resample import US_PER_S
 from monitor.vehicle import VehicleConfig
 from offline.dataset.generate import DatasetSpec, degraded_signals, routes, simulate_flights, vehicle_variant
@@ -85,8 +85,16 @@ class AlertFlight:
     onset_s: float  # inf for healthy; time of the first faulty sample (step index / rate)
     thrust_loss: tuple[float, ...] = ()  # per faulty propeller (truth order), fraction of thrust lost at hover; () unknown
     # (T, 2) velocity over ground in the heading frame (forward, right; NED rotated by the logged yaw), m/s; None in
-    # flights cached before it was kept (ALERT_FLIGHT_FIELDS). What a speed-aware share baseline would read.
+    # flights cached before it was kept (ALERT_FLIGHT_FIELDS). The share baseline's line follows it.
     vel_heading_m_s: np.ndarray | None = None
+
+    def inputs(self, j: int) -> StepInputs:
+        """Step ``j``'s flight state as the decision reads it (airborne: every step of these flights is)."""
+        v = None if self.vel_heading_m_s is None else self.vel_heading_m_s[j]
+        f = None if self.accel_frd_m_s2 is None else self.accel_frd_m_s2[j, :2]
+        return StepInputs(
+            True, self.mean_rpm[j], self.tilt_rad[j], self.rate_rad_s[j], self.battery_v[j], self.motor_rpm[j], v, f
+        )
 
     @property
     def hours(self) -> float:

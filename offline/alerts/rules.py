@@ -23,7 +23,7 @@ import numpy as np
 
 from monitor.daemon.alerts import AlertRule
 from monitor.daemon.config import AlertConfig
-from monitor.decision import Decision, DecisionConfig, StepInputs, WindowEvidence
+from monitor.decision import Decision, DecisionConfig, WindowEvidence
 from offline.alerts.flights import AlertFlight
 
 PX4_FD_IMB_PROP_THR = 30.0  # PX4 parameter FD_IMB_PROP_THR default
@@ -36,7 +36,7 @@ def replay_decision(f: AlertFlight, decision: Decision, with_sets: bool = False)
     w = f.window
     for j in range(len(f.mean_rpm)):
         t = (j + 1) / f.rate_hz
-        decision.step(t, StepInputs(True, f.mean_rpm[j], f.tilt_rad[j], f.rate_rad_s[j], f.battery_v[j], f.motor_rpm[j]))
+        decision.step(t, f.inputs(j))
         k = j - w + 1
         if k >= 0:
             for a in decision.window_evidence(t, WindowEvidence(f.fault_probability[k])):
