@@ -337,13 +337,7 @@ class Decision:
         llr = window_llr(ev.fault_probability)
         self._last_p = np.asarray(ev.fault_probability, dtype=np.float64)
         # Evidence per independent sample (one share-averaging span), spread over the seconds this window covers.
-        physics = self.S["physics"]
-        phys = self.share.llr(
-            dt,
-            quiet=not physics.any(),
-            yaw_quiet=not self.S["pair"].any(),
-            calm=float(physics.max()) < self.share.slope_learn_nats,
-        )
+        phys = self.share.llr(dt, quiet=not self.S["physics"].any(), yaw_quiet=not self.S["pair"].any())
         inc = {"absolute": llr * dt}
         if self.baseline is None:
             self._baseline_llr.append(llr)

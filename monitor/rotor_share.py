@@ -80,8 +80,8 @@ YAW_FREE_RISE = 0.012
 # grows with airspeed, wind included: what PX4's EKF2 multirotor drag fusion reads). So the baseline is, per
 # axis, a plane a = b + k_v v + k_a f (forward velocity and f_x for pitch, right and f_y for roll), learnt by a
 # Kalman filter over (b, k_v, k_a) from the flight itself while no evidence gathers, and the evidence is weighed
-# by what the plane does not yet know (its variance at this v, f): an airframe whose slopes are not yet learnt
-# is heard through the other axis, not read as a fault. On our simulator (heading towards the waypoint, wind up
+# by what the plane does not yet know (the larger of the two axes' variances at this v, f): an airframe whose
+# slopes are not yet learnt is heard less at speed, not read as a fault. On our simulator (heading towards the waypoint, wind up
 # to 5 m/s) the velocity alone leaves 0.1 of the trims unexplained and the specific force 0.007; on evalsim's
 # forward flights either leaves ~0.015, both 0.013; on log171 (real) 0.087 / 0.096 / 0.085 (a hard-flown flight).
 # The slopes' priors: mean 0 (flapping's sign is blowback's, but other speed-linear trims, e.g. body drag above
@@ -114,8 +114,7 @@ class RotorShare:
     follows airspeed, see FLAP_SLOPE_PRIOR_SD), a Kalman filter over (b, k_v, k_a) fed by every evidence window of
     the first ``BASELINE_S`` (held ones do not count: a least-squares fit of those windows), then the intercept only
     while no evidence is gathering (``quiet``), so slow drifts (battery sag) are absorbed, at the rate of an
-    exponential average over ``SHARE_BASELINE_TAU_S``, and a step is not; the slopes also while the evidence is
-    small (``calm``). Without those streams the regressors are 0 and the plane is its intercept: the flight's own
+    exponential average over ``SHARE_BASELINE_TAU_S``, and a step is not. Without those streams the regressors are 0 and the plane is its intercept: the flight's own
     mean, as before flapping was modelled.
 
     Per window: the Gaussian mean-shift log-likelihood ratio, for each rotor i, of the window-mean trims e
@@ -149,10 +148,6 @@ class RotorShare:
         # Intercept drift per second that makes the filter's steady gain per window dt / SHARE_BASELINE_TAU_S
         # (a random walk with gain K << 1 has K^2 = q dt / R per update; R = r * window per overlapping window).
         self._q_b = self._r * self.window / (SHARE_BASELINE_TAU_S**2 * rate_hz)
-        # One independent sample of the smallest loss worth an alert adds f^2 / (8 sigma^2) nats on its rotor
-        # (f U_i' S^-1 f U_i / 2 at S = 2 sigma^2); the slopes learn while the largest statistic holds less than
-        # a quarter of it (8 % and sigma 0.01: 2 nats): evidence no fault this small has yet made.
-        self.slope_learn_nats = 0.25 * min_thrust_loss**2 / (8.0 * sigma**2)
         self._base = []  # the yaw balance's windows while the baseline is learnt
         self._restart_line()
         # The yaw balance (pair statistic): y = (s1 + s2 - s3 - s4) / 2, mean over YAW_AVERAGE_S, against its baseline.
@@ -234,15 +229,13 @@ class RotorShare:
             var[a] = float(h @ self._P[a] @ h)
         return pred, var
 
-    def _update_line(self, trims: np.ndarray, regressors: np.ndarray, dt_s: float, learn: bool, slopes: bool = False) -> None:
-        """Predict the plane over ``dt_s`` (drift), then fold in the window's trims when ``learn`` (all of the
-        plane) or ``slopes`` (the slopes only, the intercept held: a Schmidt update, the intercept's uncertainty
-        kept as noise)."""
+    def _update_line(self, trims: np.ndarray, regressors: np.ndarray, dt_s: float, learn: bool) -> None:
+        """Predict the plane over ``dt_s`` (drift), then fold in the window's trims when ``learn``."""
         if dt_s > 0:
             self._P[:, 0, 0] += self._q_b * dt_s
             self._P[:, 1, 1] += FLAP_SLOPE_Q * dt_s
             self._P[:, 2, 2] += FLAP_SLOPE_Q * (DRAG_SLOPE_PRIOR_SD / FLAP_SLOPE_PRIOR_SD) ** 2 * dt_s
-        if not (learn or slopes):
+        if not learn:
             return
         r = self._r * self.window  # overlapping windows: one independent sample per ``window`` of them
         for a in range(2):
@@ -250,12 +243,8 @@ class RotorShare:
             P = self._P[a]
             ph = P @ h
             gain = ph / (float(h @ ph) + r)
-            if not learn:
-                gain[0] = 0.0
             self._theta[a] += gain * (float(trims[a]) - float(h @ self._theta[a]))
-            # Joseph form: right for any gain, the optimal one included
-            i_kh = np.eye(3) - np.outer(gain, h)
-            P = i_kh @ P @ i_kh.T + r * np.outer(gain, gain)
+            P = P - np.outer(gain, ph)
             self._P[a] = 0.5 * (P + P.T)
 
     def yaw_free_rise(self) -> np.ndarray | None:
@@ -266,14 +255,11 @@ class RotorShare:
         pred, _ = self.line(self._mean_regressors(self._svring))
         return _YAW_FREE @ (self._sring.sum(axis=0) / self.yaw_window) - _U @ pred
 
-    def llr(
-        self, dt_s: float = 0.0, quiet: bool = False, yaw_quiet: bool | None = None, calm: bool | None = None
-    ) -> np.ndarray | None:
+    def llr(self, dt_s: float = 0.0, quiet: bool = False, yaw_quiet: bool | None = None) -> np.ndarray | None:
         """Per-rotor evidence of the current window, or None (no full window, or baseline still being learnt).
 
-        ``quiet``: no physics evidence is gathering, so the baseline may follow the window for ``dt_s``;
-        ``calm`` (default ``quiet``): less evidence gathered than ``slope_learn_nats``, so the plane's slopes
-        may still learn (the intercept, where a step fault would go, does not)
+        ``quiet``: no physics evidence is gathering, so the baseline (the plane: intercept and slopes) may follow
+        the window for ``dt_s``
         (``yaw_quiet``: the same for the yaw balance; default ``quiet``). The yaw balance's evidence of the
         same window is left in ``yaw_llr`` (zeros when None is returned).
         """
@@ -299,8 +285,11 @@ class RotorShare:
             return None
         pred, var = self.line(v)
         e = trims - pred
-        inv_s = 1.0 / (self._r + var)  # per axis
-        self._update_line(trims, v, dt_s, learn=quiet, slopes=quiet if calm is None else calm)
+        # One variance for both axes, the larger: with a variance per axis, a shift along one rotor's direction
+        # leaks into its neighbours' tests (U_i' S^-1 U_j != 0 for rotors sharing a side): rotor 4's loss, with
+        # the pitch plane less certain than the roll one, read as rotor 1 too (44 such alerts in 150 onsets).
+        inv_s = np.full(2, 1.0 / (self._r + float(var.max())))
+        self._update_line(trims, v, dt_s, learn=quiet)
         if quiet:
             self.baseline = _U @ self._theta[:, 0]
         k = min(dt_s / SHARE_BASELINE_TAU_S, 1.0) if dt_s > 0 else 0.0
