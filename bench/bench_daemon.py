@@ -34,8 +34,8 @@ this script with PYTHONPATH pointing at either tree).
 
 The flight is the synthetic PX4 stream of ``tests/test_daemon_helpers.py``
 (HEARTBEAT, EXTENDED_SYS_STATE, ATTITUDE 50 Hz, SERVO_OUTPUT_RAW and
-ESC_STATUS 25 Hz, LOCAL_POSITION_NED 30 Hz as PX4 streams it on an onboard
-link, battery, a GCS on system 255), or ``--tlog`` any recorded
+ESC_STATUS 25 Hz, LOCAL_POSITION_NED 30 Hz and HIGHRES_IMU 50 Hz as PX4 streams
+them on an onboard link, battery, a GCS on system 255), or ``--tlog`` any recorded
 or simulated flight. The model is ``models/classifier.onnx`` when present,
 else the tests' toy model (same input shape, 100 x 10); ``--model`` picks one.
 """
@@ -59,6 +59,7 @@ sys.path.insert(0, str(REPO / "tests"))
 TARGETS = {"latency_p99_ms": 5.0, "cpu_percent": 5.0, "rss_mb": 150.0, "startup_s": 2.0}
 CLK_TCK = os.sysconf("SC_CLK_TCK")
 POSITION_RATE_HZ = 30.0  # LOCAL_POSITION_NED: PX4's rate on an onboard (companion) link, what the daemon requests
+IMU_RATE_HZ = 50.0  # HIGHRES_IMU: the same, for the accelerometer
 
 
 def free_udp_port() -> int:
@@ -103,7 +104,7 @@ def build_inputs(args, work: Path) -> tuple[Path, Path]:
         return model, Path(args.tlog)
     from test_daemon_helpers import synth_flight, write_tlog
 
-    frames = synth_flight(args.minutes * 60.0, faulty=(3,), seed=args.seed, pos_hz=POSITION_RATE_HZ)
+    frames = synth_flight(args.minutes * 60.0, faulty=(3,), seed=args.seed, pos_hz=POSITION_RATE_HZ, imu_hz=IMU_RATE_HZ)
     return model, write_tlog(work / "flight.tlog", frames)
 
 
@@ -191,6 +192,7 @@ def run(args) -> dict:
             "messages": rep["messages"],
             "classified_steps": rep["pipeline"]["classified"],
             "velocity_steps": rep["pipeline"].get("velocity_steps"),  # steps the decision got a velocity (None: older tree)
+            "imu_steps": rep["pipeline"].get("imu_steps"),  # steps it got a specific force (None: older tree)
             "rule": args.rule,
             "pace_reads": not args.no_pace_reads,
             "load_average": os.getloadavg(),

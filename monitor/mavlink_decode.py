@@ -12,7 +12,8 @@ What the decoder owns, because it needs state across messages:
 - **the boot clock.** ATTITUDE carries ``time_boot_ms``; SERVO_OUTPUT_RAW a
   32-bit ``time_usec`` that wraps every 71.6 min (unwrapped to the candidate
   nearest the current clock); ACTUATOR_OUTPUT_STATUS and ESC_STATUS a 64-bit
-  ``time_usec``; LOCAL_POSITION_NED ``time_boot_ms`` as ATTITUDE. Messages without a time (HEARTBEAT, BATTERY_STATUS,
+  ``time_usec``; LOCAL_POSITION_NED ``time_boot_ms`` as ATTITUDE; HIGHRES_IMU a
+  64-bit ``time_usec`` and SCALED_IMU ``time_boot_ms``. Messages without a time (HEARTBEAT, BATTERY_STATUS,
   SYS_STATUS, EXTENDED_SYS_STATE) are stamped with the latest boot time seen
   (``None`` before any). A timestamp that goes back by more than
   ``reboot_jump_us`` means the autopilot rebooted: a ``ClockReset`` is emitted
@@ -33,6 +34,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from monitor import mavlink_esc
+from monitor.vehicle import GRAVITY_M_S2
 
 # MAVLink constants (common.xml), named here so the module needs no dialect import.
 MAV_AUTOPILOT_INVALID = 8
@@ -47,10 +49,14 @@ MAV_LANDED_STATE_TAKEOFF = 3
 MAV_LANDED_STATE_LANDING = 4
 UINT16_UNKNOWN = 65535
 ESC_STATUS_ID = 291
+# The accelerometer, optional context for the decision (not in STREAM_IDS: a diagnosis's tlog read does not unpack them).
+HIGHRES_IMU_ID = 105
+SCALED_IMU_ID = 26
 
 _WRAP_US = 1 << 32
 US_PER_MS = 1000
 MV_PER_V = 1000.0
+M_S2_PER_MG = GRAVITY_M_S2 / 1000.0  # SCALED_IMU's accelerometer unit, milli-g
 # Types of a vehicle's own flight stack never include these: their heartbeats
 # are other components (ground station, companion computers such as us).
 _NOT_AUTOPILOT_TYPES = {MAV_TYPE_GCS, MAV_TYPE_ONBOARD_CONTROLLER}
@@ -105,6 +111,16 @@ class LocalVelocity:
 
 
 @dataclass(frozen=True)
+class ImuAccel:
+    """The accelerometer's specific force in the body frame: HIGHRES_IMU (#105, m/s^2) of the first IMU (id 0,
+    PX4's selected one, bias-corrected), or SCALED_IMU (#26, IMU 1, milli-g converted here)."""
+
+    timestamp_us: int
+    accel_frd_m_s2: tuple[float, float, float]  # (x forward, y right, z down) specific force
+    source: str  # "HIGHRES_IMU" or "SCALED_IMU"
+
+
+@dataclass(frozen=True)
 class Battery:
     timestamp_us: int | None
     voltage_v: float
@@ -134,7 +150,9 @@ class ClockReset:
     previous_us: int
 
 
-Sample = Attitude | ActuatorOutputs | EscRpm | Vibration | LocalVelocity | Battery | Heartbeat | LandedState | ClockReset
+Sample = (
+    Attitude | ActuatorOutputs | EscRpm | Vibration | LocalVelocity | ImuAccel | Battery | Heartbeat | LandedState | ClockReset
+)
 
 
 def _register_esc_in_loaded_dialects() -> None:
@@ -294,6 +312,17 @@ class MavlinkDecoder:
         t = self._stamp(int(m.time_boot_ms) * US_PER_MS, out)
         out.append(LocalVelocity(t, (_float(m.vx), _float(m.vy), _float(m.vz))))
 
+    def _highres_imu(self, m: Any, out: list[Sample]) -> None:
+        if int(getattr(m, "id", 0)) != 0:  # a MAVLink 2 extension: absent (v1) means the first IMU
+            return
+        t = self._stamp(int(m.time_usec), out)
+        out.append(ImuAccel(t, (_float(m.xacc), _float(m.yacc), _float(m.zacc)), "HIGHRES_IMU"))
+
+    def _scaled_imu(self, m: Any, out: list[Sample]) -> None:
+        t = self._stamp(int(m.time_boot_ms) * US_PER_MS, out)
+        acc = (_float(m.xacc) * M_S2_PER_MG, _float(m.yacc) * M_S2_PER_MG, _float(m.zacc) * M_S2_PER_MG)
+        out.append(ImuAccel(t, acc, "SCALED_IMU"))
+
     def _battery(self, m: Any, out: list[Sample]) -> None:
         if int(m.id) != self.battery_id:
             return
@@ -321,6 +350,8 @@ _HANDLERS = {
     "ESC_STATUS": MavlinkDecoder._esc,
     "VIBRATION": MavlinkDecoder._vibration,
     "LOCAL_POSITION_NED": MavlinkDecoder._local_position,
+    "HIGHRES_IMU": MavlinkDecoder._highres_imu,
+    "SCALED_IMU": MavlinkDecoder._scaled_imu,
     "BATTERY_STATUS": MavlinkDecoder._battery,
     "SYS_STATUS": MavlinkDecoder._sys_status,
     "HEARTBEAT": MavlinkDecoder._heartbeat,

@@ -7,7 +7,7 @@ RPM for the same thrust); label probabilities are the product distribution
 of the four. The synthetic flight is what PX4 streams to a companion:
 HEARTBEAT, EXTENDED_SYS_STATE, ATTITUDE, SERVO_OUTPUT_RAW, ESC_STATUS,
 BATTERY_STATUS, SYS_STATUS, plus a ground station's HEARTBEAT on system 255;
-LOCAL_POSITION_NED when asked for (``pos_hz``).
+LOCAL_POSITION_NED (``pos_hz``) and HIGHRES_IMU or SCALED_IMU (``imu_hz``) when asked for.
 """
 
 from __future__ import annotations
@@ -31,6 +31,7 @@ from monitor.esc import PAPER_ESC  # noqa: E402
 from monitor.features import PAPER_FEATURES  # noqa: E402
 from monitor.labels import LABEL_MASKS, LABEL_TABLE, class_names  # noqa: E402
 from monitor.model import Classifier  # noqa: E402
+from monitor.vehicle import GRAVITY_M_S2  # noqa: E402
 
 HOVER_PWM_US = 1450.0
 FAULT_PWM_US = 60.0  # the faulty rotor's extra command
@@ -124,13 +125,18 @@ def synth_flight(
     pos_hz: float = 0.0,
     vel_of_t=None,
     yaw_of_t=None,
+    imu_hz: float = 0.0,
+    accel_of_t=None,
+    imu_msg: str = "HIGHRES_IMU",
 ) -> list[tuple[float, bytes]]:
     """(arrival wall time s, frame) in arrival order: PX4-like streams with jitter; armed, IN_AIR after takeoff_s.
 
     ``nan_window_s=(a, b)`` writes NaN attitude between flight times a and b; ``hole_s=(a, b)``
     drops every message in that span (a link outage). ``pos_hz`` > 0 adds LOCAL_POSITION_NED at that rate with
     the NED velocity ``vel_of_t(t)`` (m/s; default a slow 2 m/s circle); ``yaw_of_t(t)`` (rad) replaces the
-    default slow yaw drift. Neither changes the other streams' values.
+    default slow yaw drift. ``imu_hz`` > 0 adds ``imu_msg`` (HIGHRES_IMU, or SCALED_IMU in milli-g) at that rate
+    with the body specific force ``accel_of_t(t)`` (FRD m/s^2; default a slow drag of 0.5 m/s^2 turning under
+    0.4 m/s^2 rms vibration, z about -g). None of these changes the other streams' values.
     """
     rng = np.random.default_rng(seed)
     ap = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
@@ -186,6 +192,23 @@ def synth_flight(
         vn, ve, vd = vel_of_t(t)
         tb_ms = int((boot0_s + t) * 1000)
         add(t + 0.0005, mavlink.MAVLink_local_position_ned_message(tb_ms, vn * t, ve * t, vd * t, vn, ve, vd).pack(ap))
+    imu_rng = np.random.default_rng(seed + 2000)  # its own draws too
+    if accel_of_t is None:
+
+        def accel_of_t(t):
+            vib = imu_rng.normal(0.0, 0.4, 3)
+            return (-0.5 * math.cos(0.1 * t) + vib[0], 0.5 * math.sin(0.1 * t) + vib[1], -GRAVITY_M_S2 + vib[2])
+
+    for k in range(int(duration_s * imu_hz)):
+        t = k / imu_hz + imu_rng.uniform(0, 0.002)
+        ax, ay, az = accel_of_t(t)
+        if imu_msg == "HIGHRES_IMU":
+            tb_us = int(round((boot0_s + t) * 1e6))
+            msg = mavlink.MAVLink_highres_imu_message(tb_us, ax, ay, az, *[0.0] * 10, fields_updated=0x1FFF, id=0)
+        else:  # SCALED_IMU: int16 milli-g
+            mg = [int(round(a / (GRAVITY_M_S2 * 1e-3))) for a in (ax, ay, az)]
+            msg = mavlink.MAVLink_scaled_imu_message(int((boot0_s + t) * 1000), *mg, 0, 0, 0, 0, 0, 0)
+        add(t + 0.0007, msg.pack(ap))
     events.sort(key=lambda e: (e[0], e[1]))
     out = []
     for t, _, frame in events:

@@ -92,14 +92,45 @@ def test_local_position_becomes_each_steps_heading_frame_velocity(toy, vel_ned, 
     assert not [k for k in p.plausible.dropped if k.startswith("velocity")]
 
 
-def test_without_local_position_velocity_is_none_and_the_classifier_steps_are_the_same(toy):
+def check_context_is_optional(toy, field: str, least_steps: int, **stream):
+    """Without the context ``stream`` (synth_flight keywords) every ``StepInputs.<field>`` is None; with it at least
+    ``least_steps`` carry one and the classifier's steps are the same. Returns the pipeline that had it."""
     _, plain = run_pipeline(toy, parse_all(synth_flight(9.0, faulty=(2,), seed=3)))
-    p, with_vel = run_pipeline(toy, parse_all(synth_flight(9.0, faulty=(2,), seed=3, pos_hz=30.0)))
-    assert plain and all(s.inputs.vel_heading_m_s is None for s in plain)
-    assert sum(s.inputs.vel_heading_m_s is not None for s in with_vel) > 150
-    assert classifier_view(with_vel) == classifier_view(plain)  # same grid, same windows, same probabilities
+    p, with_it = run_pipeline(toy, parse_all(synth_flight(9.0, faulty=(2,), seed=3, **stream)))
+    assert plain and all(getattr(s.inputs, field) is None for s in plain)
+    assert sum(getattr(s.inputs, field) is not None for s in with_it) > least_steps
+    assert classifier_view(with_it) == classifier_view(plain)  # same grid, same windows, same probabilities
     assert any(s.fault_probability is not None for s in plain)
     assert p.hold.late == 0
+    return p
+
+
+def test_without_local_position_velocity_is_none_and_the_classifier_steps_are_the_same(toy):
+    check_context_is_optional(toy, "vel_heading_m_s", 150, pos_hz=30.0)
+
+
+def run_bad_context_flight(toy, field: str, **stream):
+    """The flight of the NaN / absurd / frozen tests (here and ``test_daemon_imu``): the context ``stream`` (synth_flight
+    keywords) is NaN 3-5 s into it, absurd 5-7 s, bit-identical 7-10 s (frozen after plausible.frozen_s, 1 s), good
+    otherwise. Checks which steps carry ``StepInputs.<field>`` and that the classifier's steps are those of the
+    flight without the stream; returns the pipeline for its counts."""
+    flight = dict(duration_s=13.0, faulty=(3,), seed=4)
+    _, plain = run_pipeline(toy, parse_all(synth_flight(**flight)))
+    p, steps = run_pipeline(toy, parse_all(synth_flight(**flight, **stream)))
+
+    def has(a, b):
+        return {getattr(s.inputs, field) is not None for s in steps if a <= flight_s(s) < b}
+
+    assert has(0.5, 3.0) == {True}
+    assert has(3.3, 5.0) == {False}  # NaN
+    assert has(5.3, 7.0) == {False}  # absurd
+    assert has(7.3, 7.9) == {True}  # not frozen yet
+    assert has(8.3, 10.0) == {False}  # frozen
+    assert has(10.3, 13.0) == {True}  # moving again
+    # Never evidence, and never a reason to stop the classifier: its steps are those of the flight without the stream.
+    assert p.stats["implausible_samples"] == 0 and not p.plausible.last
+    assert classifier_view(steps) == classifier_view(plain)
+    return p
 
 
 def test_nan_absurd_and_frozen_velocity_is_ignored_and_counted_never_a_pause(toy):
@@ -112,39 +143,31 @@ def test_nan_absurd_and_frozen_velocity_is_ignored_and_counted_never_a_pause(toy
             return (1.0, 2.0, 0.0)  # stuck: bit-identical from 7 s, frozen after plausible.frozen_s (1 s)
         return (1.0 + 0.3 * math.sin(t), 2.0, 0.0)
 
-    frames = dict(duration_s=13.0, faulty=(3,), seed=4)
-    _, plain = run_pipeline(toy, parse_all(synth_flight(**frames)))
-    p, steps = run_pipeline(toy, parse_all(synth_flight(**frames, pos_hz=30.0, vel_of_t=vel)))
-
-    def has_vel(a, b):
-        return {s.inputs.vel_heading_m_s is not None for s in steps if a <= flight_s(s) < b}
-
-    assert has_vel(0.5, 3.0) == {True}
-    assert has_vel(3.3, 5.0) == {False}  # NaN
-    assert has_vel(5.3, 7.0) == {False}  # absurd
-    assert has_vel(7.3, 7.9) == {True}  # not frozen yet
-    assert has_vel(8.3, 10.0) == {False}  # frozen
-    assert has_vel(10.3, 13.0) == {True}  # moving again
+    p = run_bad_context_flight(toy, "vel_heading_m_s", pos_hz=30.0, vel_of_t=vel)
     dropped = p.plausible.dropped
     assert dropped["velocity: not finite"] >= 55 and dropped["velocity: beyond 60 m/s"] >= 55, dropped
     assert dropped["velocity: frozen"] >= 55, dropped
-    # Never evidence, and never a reason to stop the classifier: its steps are those of the flight without velocity.
-    assert p.stats["implausible_samples"] == 0 and not p.plausible.last
-    assert classifier_view(steps) == classifier_view(plain)
+
+
+def run_daemon(toy, msgs, field: str):
+    """The daemon (decision rule) over ``msgs``; returns it and (flight time s, StepInputs.<field>) of each step."""
+    d, _ = make_daemon(toy)
+    seen = []
+    real_step = d.decision.step
+    d.decision.step = lambda t, inputs: (seen.append((t - BOOT0_S, getattr(inputs, field))), real_step(t, inputs))[1]
+    for m in msgs:
+        d.handle(m, time.perf_counter())
+    return d, seen
 
 
 def test_status_says_whether_velocity_is_live_and_a_stopped_stream_gives_none(toy):
     msgs = parse_all(synth_flight(16.0, seed=7, pos_hz=30.0))
     stop_ms = (BOOT0_S + 8.0) * 1000  # LOCAL_POSITION_NED stops 8 s into the flight, the rest flows on
     msgs = [m for m in msgs if not (m.get_type() == "LOCAL_POSITION_NED" and m.time_boot_ms > stop_ms)]
-    d, _ = make_daemon(toy)
-    seen = []
-    real_step = d.decision.step
-    d.decision.step = lambda t, inputs: (seen.append((t - BOOT0_S, inputs.vel_heading_m_s)), real_step(t, inputs))[1]
-    for m in msgs:
-        d.handle(m, time.perf_counter())
+    d, seen = run_daemon(toy, msgs, "vel_heading_m_s")
     statuses = d.notifier.statuses()
-    assert "airborne: deciding; evidence live: classifier, esc_rpm, velocity" in statuses, statuses
+    # Context, not evidence of a fault: listed apart.
+    assert "airborne: deciding; evidence live: classifier, esc_rpm; context live: velocity" in statuses, statuses
     assert statuses[-1] == "airborne: deciding; evidence live: classifier, esc_rpm", statuses  # 2 s after it stopped
     assert not [s for s in statuses if "paused" in s or "BLIND" in s], statuses
     assert all(v is not None for t, v in seen if 0.5 <= t <= 8.0)
@@ -152,12 +175,17 @@ def test_status_says_whether_velocity_is_live_and_a_stopped_stream_gives_none(to
     assert d.report()["pipeline"]["velocity_steps"] > 140
 
 
-@pytest.mark.parametrize("rule", ["sequential", "consecutive"])
-def test_local_position_ned_is_requested_beside_attitude_for_the_decision(toy, rule):
+def requested_rates(toy, rule: str) -> dict[int, float]:
+    """Message id -> rate (Hz) the daemon asks of the autopilot once it hears its heartbeat, under alert rule ``rule``."""
     d, link = make_daemon(toy, config={"alerts": {"rule": rule}})
     d.handle(decoded(mavlink.MAVLink_heartbeat_message(2, 12, 128 | 1, 0, 4, 3)), time.perf_counter())
     d.tick(time.monotonic())
-    rates = {s[3]: s[4] for s in link.sent if s[0] == "COMMAND_LONG"}
+    return {s[3]: s[4] for s in link.sent if s[0] == "COMMAND_LONG"}
+
+
+@pytest.mark.parametrize("rule", ["sequential", "consecutive"])
+def test_local_position_ned_is_requested_beside_attitude_for_the_decision(toy, rule):
+    rates = requested_rates(toy, rule)
     assert rates[30] >= 20.0  # ATTITUDE, as before
     if rule == "sequential":
         assert rates[LOCAL_POSITION_NED_ID] == 30.0  # PX4's onboard-link rate, >= the 20 Hz grid

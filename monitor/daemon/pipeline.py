@@ -22,6 +22,13 @@ LOCAL_POSITION_NED's horizontal velocity is held on the same grid (stale after
 into the heading frame with the step's own yaw: ``StepInputs.vel_heading_m_s``,
 None where it is missing, stale or implausible. It is optional context for the
 decision, never a reason for a step to be invalid.
+
+The accelerometer's horizontal specific force (body x, y; FRD) is context the
+same way: ``StepInputs.accel_xy_frd_m_s2`` is the mean of the IMU samples in
+the step's own period ``(g - period, g]`` (a 50-250 Hz stream that vibrates:
+one sample held would be noise), stale after ``resample.max_gap_s``. The
+source is HIGHRES_IMU; SCALED_IMU stands in only while no HIGHRES_IMU came
+within ``max_gap_s`` of it, so the two never mix in one period.
 """
 
 from __future__ import annotations
@@ -111,6 +118,8 @@ class Pipeline:
                 "battery": StreamSpec(1, _us(r.battery_max_age_s), False),
                 # (north, east) m/s: optional context, so it neither paces nor moves the grid (steps as without it)
                 "velocity": StreamSpec(2, fast, False, moves_clock=False),
+                # (x, y) FRD m/s^2: context as velocity, averaged over each step's period
+                "imu": StreamSpec(2, fast, False, moves_clock=False, mean_us=period_us(r.rate_hz)),
             },
             reorder_us=_us(r.reorder_s),
         )
@@ -131,8 +140,11 @@ class Pipeline:
             "implausible_samples": 0,
             "velocity_steps": 0,  # grid steps with a heading-frame velocity
             "velocity_late": 0,  # LOCAL_POSITION_NED at or before an instant already emitted (dropped)
+            "imu_steps": 0,  # grid steps with a horizontal specific force
+            "imu_late": 0,  # IMU samples at or before an instant already emitted (dropped)
         }
         self._max_gap_us = fast
+        self._highres_us: int | None = None  # boot time of the latest HIGHRES_IMU (SCALED_IMU is used without one)
         self._period_us = period_us(r.rate_hz)
         # Boot times of implausible samples: the grid step whose period holds one is invalid even when
         # the sample falls between two instants (a 50 Hz stream on the 20 Hz grid), so no window spans it.
@@ -191,6 +203,8 @@ class Pipeline:
             return [] if rpm is None else self._push_motor(s.timestamp_us, rpm, False, received_s)
         if isinstance(s, md.LocalVelocity):
             return self._push_velocity(s.timestamp_us, s.vel_ned_m_s, received_s)
+        if isinstance(s, md.ImuAccel):
+            return self._push_imu(s, received_s)
         if isinstance(s, md.Heartbeat):
             return self._push("armed", s.timestamp_us, (1.0 if s.armed else 0.0,), received_s)
         if isinstance(s, md.LandedState):
@@ -212,17 +226,31 @@ class Pipeline:
     def _push_velocity(self, t_us: int, vel_ned_m_s: tuple[float, float, float], received_s: float) -> list[StepResult]:
         # An unusable velocity only makes the instants it would hold unknown (NaN); the step stays valid.
         vel = NAN2 if self.plausible.velocity(t_us, vel_ned_m_s) is not None else vel_ned_m_s[:2]
+        return self._push_context("velocity", t_us, vel, received_s)
+
+    def _push_imu(self, s: md.ImuAccel, received_s: float) -> list[StepResult]:
+        t_us = s.timestamp_us
+        if s.source == "HIGHRES_IMU":
+            self._highres_us = t_us
+        elif self._highres_us is not None and t_us - self._highres_us <= self._max_gap_us:
+            return []  # SCALED_IMU beside a live HIGHRES_IMU: the coarser copy of the same sensor
+        # As velocity: an unusable sample is NaN, left out of its period's mean; the step stays valid.
+        acc = NAN2 if self.plausible.imu(t_us, s.accel_frd_m_s2) is not None else s.accel_frd_m_s2[:2]
+        return self._push_context("imu", t_us, acc, received_s)
+
+    def _push_context(self, stream: str, t_us: int, values, received_s: float) -> list[StepResult]:
         last = self.hold.last_emitted
         if last is not None and t_us <= last:  # PX4 may stamp it a little behind ATTITUDE: counted apart from `late`
-            self.stats["velocity_late"] += 1
+            self.stats[f"{stream}_late"] += 1
             return []
-        return self._push("velocity", t_us, vel, received_s)
+        return self._push(stream, t_us, values, received_s)
 
     def reset(self) -> None:
         """Drop everything held (grid and ring); decoding state (autopilot, clock) is kept."""
         self.hold.reset()
         self.pacer.reset()
         self.plausible.reset()
+        self._highres_us = None
         self._bad_times.clear()
         self._clear()
 
@@ -298,6 +326,11 @@ class Pipeline:
         if math.isfinite(vel[0]) and math.isfinite(vel[1]) and math.isfinite(att[2]):
             vel_heading = heading_velocity(vel, att[2])  # with this step's yaw
             self.stats["velocity_steps"] += 1
+        acc = v["imu"]  # a fresh array (the period's mean) or the sample held: the hold never writes into either
+        accel_xy = None
+        if math.isfinite(acc[0]) and math.isfinite(acc[1]):
+            accel_xy = acc
+            self.stats["imu_steps"] += 1
         inputs = StepInputs(  # sum / size and .max(): np.mean and np.max bit for bit, without their wrappers
             airborne,
             float(motor.sum() / motor.size),
@@ -306,6 +339,7 @@ class Pipeline:
             battery_v,
             motor,
             vel_heading_m_s=vel_heading,
+            accel_xy_frd_m_s2=accel_xy,
         )
         if not valid:
             self._clear()

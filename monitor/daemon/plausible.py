@@ -20,6 +20,9 @@ LOCAL_POSITION_NED's velocity is optional context (the omega^2 shares' baseline
 follows it), not a signal the classifier needs: a NaN, absurd (|v| beyond
 ``VELOCITY_MAX_M_S``) or frozen sample is dropped and counted like the others,
 but it only makes the step's velocity unknown; it never invalidates a step.
+The accelerometer's horizontal specific force (HIGHRES_IMU / SCALED_IMU) is
+context the same way: NaN, beyond ``ACCEL_XY_MAX_M_S2`` or frozen is dropped
+and counted as ``imu: ...``.
 """
 
 from __future__ import annotations
@@ -36,6 +39,9 @@ PITCH_SLACK_RAD = 1e-3  # float32 rounding of +-pi/2
 # Ground speed no multirotor reaches (PX4 MPC_XY_VEL_MAX defaults to 12 m/s; racing quadrotors stay below ~50 m/s):
 # beyond it the estimator has diverged or the field is garbage.
 VELOCITY_MAX_M_S = 60.0
+# 16 g: the range most of PX4's IMU drivers set (ICM-20602, ICM-42688-P; the BMI088 reads to 24 g). No drag on a
+# multirotor comes near it (a few m/s^2): beyond it the field is garbage or the sensor saturated in a crash.
+ACCEL_XY_MAX_M_S2 = 160.0
 
 
 class Plausibility:
@@ -102,6 +108,22 @@ class Plausibility:
             bad = "frozen"
         if bad is not None:
             self.dropped[f"velocity: {bad}"] += 1
+        return bad
+
+    def imu(self, t_us: int, accel_frd_m_s2: tuple[float, float, float]) -> str | None:
+        """Why an accelerometer sample is not usable as context (counted in ``dropped``), else None; like
+        ``velocity`` it never goes into ``last``. Range on x, y (what the decision uses); frozen on all three axes
+        (a live sensor's noise moves at least one)."""
+        x, y = accel_frd_m_s2[0], accel_frd_m_s2[1]
+        bad = None
+        if not (math.isfinite(x) and math.isfinite(y)):
+            bad = "not finite"
+        elif math.hypot(x, y) > ACCEL_XY_MAX_M_S2:
+            bad = f"beyond {ACCEL_XY_MAX_M_S2:g} m/s^2"
+        elif self._frozen("imu", t_us, tuple(accel_frd_m_s2), rest=False) is not None:
+            bad = "frozen"
+        if bad is not None:
+            self.dropped[f"imu: {bad}"] += 1
         return bad
 
     def battery(self, t_us: int | None, voltage_v: float) -> bool:

@@ -19,6 +19,12 @@ the same way but never starts the grid or moves the boot clock: which
 instants are emitted, and when, is exactly what it would be without it. It
 keeps only the samples within its ``max_age_us`` of its newest one (and the one
 before), so it stays small while no grid runs.
+
+A stream with ``mean_us > 0`` (the accelerometer: 50-250 Hz and vibrating)
+gives at ``g`` the mean of its finite samples in ``(g - mean_us, g]``, not one
+sample held; NaN when all of them are NaN (an implausible sample dropped is
+NaN). A span with no sample at all is held as above (a stream slower than the
+grid), stale after ``max_age_us``.
 """
 
 from __future__ import annotations
@@ -44,6 +50,7 @@ class StreamSpec:
     max_age_us: int
     paces: bool  # a pacing stream gates when an instant is final (the fast ones)
     moves_clock: bool = True  # False: held, but its samples neither start the grid nor make instants final
+    mean_us: int = 0  # > 0: the value at g is the mean of the samples in (g - mean_us, g] (see the module doc)
 
 
 @dataclass(frozen=True)
@@ -66,6 +73,11 @@ class _Stream:
         i = bisect.bisect_right(self.times, g) - 1
         if i < 0 or g - self.times[i] > self.spec.max_age_us:
             return np.full(self.spec.width, np.nan)
+        if self.spec.mean_us:
+            lo = bisect.bisect_right(self.times, g - self.spec.mean_us)
+            if lo <= i:  # samples in the span: their mean (a handful, so a loop beats np.nanmean's overhead)
+                good = [v for v in self.values[lo : i + 1] if not np.isnan(v).any()]
+                return sum(good) / len(good) if good else np.full(self.spec.width, np.nan)
         return self.values[i]
 
     def prune(self, g: int) -> None:
@@ -115,8 +127,9 @@ class StreamingHold:
             self.overflow += 1
         s.last_t = t_us if s.last_t is None else max(s.last_t, t_us)
         if not s.spec.moves_clock:
-            # Bounded even while no grid runs: older samples only hold instants more than max_age behind its newest.
-            s.prune(s.last_t - s.spec.max_age_us)
+            # Bounded even while no grid runs: older samples only hold instants more than max_age behind its newest
+            # (a mean stream keeps one span more, so an instant that is not stale still has its whole span).
+            s.prune(s.last_t - s.spec.max_age_us - s.spec.mean_us)
             return []  # nothing it holds can make an instant final
         self.clock_us = t_us if self.clock_us is None else max(self.clock_us, t_us)
         if self.next_g is None:

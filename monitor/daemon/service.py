@@ -49,7 +49,12 @@ VIBRATION_RATE_HZ = 10.0  # imbalance evidence beside the classifier (PX4's defa
 # LOCAL_POSITION_NED: the velocity the shares' baseline follows, held on the 20 Hz grid. PX4's own rate on an onboard
 # (companion) link, so the request never slows it for another consumer there; a radio link's 1 Hz gets raised.
 VELOCITY_RATE_HZ = 30.0
-EVIDENCE_FRESH_S = 2.0  # a VIBRATION / ESC_STATUS stream (or the grid's velocity) silent for longer is not live
+# HIGHRES_IMU: the body's specific force (the air's drag), averaged over each 20 Hz step. PX4's rate for it on an
+# onboard link; SCALED_IMU, what some links carry instead, is used as it comes (not requested).
+IMU_RATE_HZ = 50.0
+EVIDENCE_FRESH_S = 2.0  # a VIBRATION / ESC_STATUS stream (or the grid's velocity, IMU) silent for longer is not live
+# Context for the decision (the shares' baseline follows it), not evidence of a fault: listed apart in STATUS and events.
+CONTEXT = ("velocity", "imu")
 SINK_REPORT_PERIOD_S = 60.0  # a failing events file is told to the ground station once a minute
 MAV_SEVERITY_WARNING = 4
 REPORT_TOP_N = 20  # the report lists at most this many ignored sources / undecodable kinds
@@ -104,10 +109,12 @@ class Daemon:
         # Rotor effectiveness from the moment balance of the 5 s before an alert (in its event); needs the geometry.
         self.rotors = RecentEffectiveness(vehicle, pipeline.window, config.resample.rate_hz) if vehicle is not None else None
         self._evidence_t: dict[str, float] = {}  # evidence -> boot time (s) it was last usable
+        self._context_t: dict[str, float] = {}  # context (CONTEXT) -> boot time (s) a step last had it
         self._paused = ""  # why the classifier's evidence stopped while airborne ('' = flowing)
         self._pause_recorded = ""  # the pause last written to the journal and events file
         self._pause_log_limit = RateLimiter(PAUSE_LOG_PERIOD_S)
         self._live: list[str] = []  # evidence live at the last step
+        self._context: list[str] = []  # context live at the last step
         self._airborne = False
         self.statustexts = StatusTextQueue(config.alerts.statustext_min_interval_s, config.alerts.critical_threshold)
         self.stop = threading.Event()
@@ -268,9 +275,16 @@ class Daemon:
                 self._evidence_t["esc_rpm"] = e.timestamp_us / US_PER_S
 
     def live_evidence(self, t_s: float) -> list[str]:
-        """Which evidence is flowing now: classifier (motor stream + attitude), vibration, esc_rpm, and velocity
-        (LOCAL_POSITION_NED on the grid: not evidence itself, the context the shares' baseline follows)."""
+        """Which evidence is flowing now: classifier (motor stream + attitude), vibration, esc_rpm."""
         return [k for k, last in sorted(self._evidence_t.items()) if t_s - last <= EVIDENCE_FRESH_S]
+
+    def live_context(self, t_s: float) -> list[str]:
+        """Which context the grid steps carry now: velocity (LOCAL_POSITION_NED), imu (the specific force). Not
+        evidence itself: what the omega^2 shares' baseline follows."""
+        return [k for k in CONTEXT if t_s - self._context_t.get(k, -math.inf) <= EVIDENCE_FRESH_S]
+
+    def _context_status(self) -> str:
+        return f"; context live: {', '.join(self._context)}" if self._context else ""
 
     def _decide(self, step) -> None:
         """The shared decision rule on one grid step (pause when a stream stopped, never freeze it)."""
@@ -281,18 +295,24 @@ class Daemon:
         self.decision.step(t, step.inputs or StepInputs(step.airborne))
         if step.valid:
             self._evidence_t["classifier"] = t
-        if step.inputs is not None and step.inputs.vel_heading_m_s is not None:
-            self._evidence_t["velocity"] = t
+        if step.inputs is not None:
+            if step.inputs.vel_heading_m_s is not None:
+                self._context_t["velocity"] = t
+            if step.inputs.accel_xy_frd_m_s2 is not None:
+                self._context_t["imu"] = t
         live = self._live = self.live_evidence(t)
+        self._context = self.live_context(t)
         if step.airborne and not step.valid:
             self._paused = step.reason
             self._record_pause(step.time_boot_ms, step.reason, live)  # at every such step: one held back is written later
-            self._set_status(f"classifier paused: {step.reason}; evidence live: {', '.join(live) or 'none'}")
+            self._set_status(
+                f"classifier paused: {step.reason}; evidence live: {', '.join(live) or 'none'}{self._context_status()}"
+            )
         elif step.valid and self._paused:
             self._paused = ""
             self._record_resume(step.time_boot_ms, live)
         if step.valid:
-            self._set_status(f"airborne: deciding; evidence live: {', '.join(live)}")
+            self._set_status(f"airborne: deciding; evidence live: {', '.join(live)}{self._context_status()}")
         elif not step.airborne and not self._paused:
             self._set_status(f"not deciding: {step.reason}")
         self._blind_step(step)  # after the step's own pause state, so a recovered line says whether it runs
@@ -335,6 +355,7 @@ class Daemon:
                 "time_boot_ms": time_boot_ms,
                 "reason": reason,
                 "evidence_live": live,
+                "context_live": self._context,
                 "classifier_input": MOTOR_STREAM[self.cfg.input.motor_source],
             }
         )
@@ -344,7 +365,9 @@ class Daemon:
             return
         self._pause_recorded = ""
         log.info("t=%d ms: decision resumed", time_boot_ms)
-        self.events.write_record({"event": "resumed", "time_boot_ms": time_boot_ms, "evidence_live": live})
+        self.events.write_record(
+            {"event": "resumed", "time_boot_ms": time_boot_ms, "evidence_live": live, "context_live": self._context}
+        )
 
     def _announce(self, a: Announcement, time_boot_ms: int, step=None) -> None:
         self.counters.alerts += 1
@@ -553,7 +576,8 @@ class Daemon:
         if self.sequential and "ATTITUDE" in names:
             self.link.request_message_interval(sysid, comp, md.STREAM_IDS["VIBRATION"], VIBRATION_RATE_HZ)
             self.link.request_message_interval(sysid, comp, md.STREAM_IDS["LOCAL_POSITION_NED"], VELOCITY_RATE_HZ)
-            self.counters.stream_requests += 2
+            self.link.request_message_interval(sysid, comp, md.HIGHRES_IMU_ID, IMU_RATE_HZ)
+            self.counters.stream_requests += 3
         log.info("requested %s at %.0f Hz (MAV_CMD_SET_MESSAGE_INTERVAL)", ", ".join(names), self.cfg.link.stream_rate_hz)
 
     def _check_rates(self, now: float) -> None:
