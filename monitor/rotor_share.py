@@ -229,8 +229,16 @@ class RotorShare:
             var[a] = float(h @ self._P[a] @ h)
         return pred, var
 
-    def _update_line(self, trims: np.ndarray, regressors: np.ndarray, dt_s: float, learn: bool) -> None:
-        """Predict the plane over ``dt_s`` (drift), then fold in the window's trims when ``learn``."""
+    def _update_line(
+        self, trims: np.ndarray, regressors: np.ndarray, dt_s: float, learn: bool, max_intercept_gain: float | None = None
+    ) -> None:
+        """Predict the plane over ``dt_s`` (drift), then fold in the window's trims when ``learn``.
+
+        ``max_intercept_gain``: after the baseline's first seconds the intercept follows the trims no faster than
+        the former exponential average over SHARE_BASELINE_TAU_S (``dt / tau`` per window; the slopes keep their
+        gain, the covariance follows the gain used, Joseph form). Unclamped, the filter's first minutes after 10 s
+        of windows move the intercept six times faster and absorb a loss too small for the statistic: a 3.5 % loss
+        whose torque change the yaw balance reports lost its rotor's yaw-free rise, the alert's first hypothesis."""
         if dt_s > 0:
             self._P[:, 0, 0] += self._q_b * dt_s
             self._P[:, 1, 1] += FLAP_SLOPE_Q * dt_s
@@ -243,8 +251,13 @@ class RotorShare:
             P = self._P[a]
             ph = P @ h
             gain = ph / (float(h @ ph) + r)
+            if max_intercept_gain is not None and gain[0] > max_intercept_gain:
+                gain[0] = max_intercept_gain
+                i_kh = np.eye(3) - np.outer(gain, h)
+                P = i_kh @ P @ i_kh.T + r * np.outer(gain, gain)
+            else:
+                P = P - np.outer(gain, ph)
             self._theta[a] += gain * (float(trims[a]) - float(h @ self._theta[a]))
-            P = P - np.outer(gain, ph)
             self._P[a] = 0.5 * (P + P.T)
 
     def yaw_free_rise(self) -> np.ndarray | None:
@@ -287,9 +300,10 @@ class RotorShare:
         e = trims - pred
         # One variance for both axes, the larger: with a variance per axis, a shift along one rotor's direction
         # leaks into its neighbours' tests (U_i' S^-1 U_j != 0 for rotors sharing a side): rotor 4's loss, with
-        # the pitch plane less certain than the roll one, read as rotor 1 too (44 such alerts in 150 onsets).
+        # the pitch plane less certain than the roll one, read as rotor 1 too (59 of our 150 single onsets had an
+        # alert naming a healthy propeller, 19 with one variance; docs/ALERTS.md).
         inv_s = np.full(2, 1.0 / (self._r + float(var.max())))
-        self._update_line(trims, v, dt_s, learn=quiet)
+        self._update_line(trims, v, dt_s, learn=quiet, max_intercept_gain=min(dt_s / SHARE_BASELINE_TAU_S, 1.0))
         if quiet:
             self.baseline = _U @ self._theta[:, 0]
         k = min(dt_s / SHARE_BASELINE_TAU_S, 1.0) if dt_s > 0 else 0.0

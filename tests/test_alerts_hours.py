@@ -9,6 +9,7 @@ import pytest
 
 from offline.alerts.evaluate import classified_s, healthy_flight_count, healthy_sets, set_key
 from offline.alerts.flights import ALERT_FLIGHT_FIELDS, AlertFlight, FlightSet, heading_velocity
+from offline.sim.assumptions import REGISTER
 
 
 def _flight(samples: int, window: int, rate_hz: float) -> AlertFlight:
@@ -56,10 +57,14 @@ def test_the_flown_hours_set_stays_and_the_extra_flights_are_appended():
     sets = healthy_sets(10.0, 75.05, seed=200, pickup_fraction=0.25, physics="randomised")
     assert [(s.n_flights, s.first_flight, s.seed) for s in sets] == [(450, 0, 200), (30, 450, 200)]
     # The first set is the one earlier runs drew: its key is the key it had before first_flight existed, with what
-    # its flights hold (ALERT_FLIGHT_FIELDS: flights cached without the heading velocity are simulated again).
+    # its flights hold (ALERT_FLIGHT_FIELDS: flights cached without the heading velocity are simulated again) and
+    # the register's ranges that drew them (a new assumption, e.g. blade flapping, draws new flights).
     old = {**FlightSet("healthy", 450, seed=200, pickup_fraction=0.25, physics="randomised").__dict__, "model": "m"}
     del old["first_flight"]
-    assert set_key(sets[0], "m") == {**old, "fields": ALERT_FLIGHT_FIELDS}
+    register = hashlib.sha256(json.dumps(REGISTER.to_mapping(), sort_keys=True).encode()).hexdigest()[:16]
+    assert set_key(sets[0], "m") == {**old, "fields": ALERT_FLIGHT_FIELDS, "register": register}
+    wider = REGISTER.with_range("blade_flapping_trim_per_m_s", 0.0, 0.05)
+    assert hashlib.sha256(json.dumps(wider.to_mapping(), sort_keys=True).encode()).hexdigest()[:16] != register
     assert set_key(sets[1], "m")["first_flight"] == 450
     digest = [hashlib.sha256(json.dumps(set_key(s, "m"), sort_keys=True).encode()).hexdigest() for s in sets]
     assert digest[0] != digest[1]
