@@ -149,6 +149,7 @@ class RotorShare:
         # (a random walk with gain K << 1 has K^2 = q dt / R per update; R = r * window per overlapping window).
         self._q_b = self._r * self.window / (SHARE_BASELINE_TAU_S**2 * rate_hz)
         self._base = []  # the yaw balance's windows while the baseline is learnt
+        self._wording_b: np.ndarray | None = None  # (pitch, roll) intercept the alert wording reads (yaw_free_rise)
         self._restart_line()
         # The yaw balance (pair statistic): y = (s1 + s2 - s3 - s4) / 2, mean over YAW_AVERAGE_S, against its baseline.
         self.yaw_delta = min_thrust_loss
@@ -177,6 +178,7 @@ class RotorShare:
         self._svring[:] = np.nan
         self._n = self._yn = 0
         self._base, self.baseline, self.yaw_baseline = [], None, None
+        self._wording_b = None
         self._base_s = 0.0
         self._restart_line()
 
@@ -229,16 +231,8 @@ class RotorShare:
             var[a] = float(h @ self._P[a] @ h)
         return pred, var
 
-    def _update_line(
-        self, trims: np.ndarray, regressors: np.ndarray, dt_s: float, learn: bool, max_intercept_gain: float | None = None
-    ) -> None:
-        """Predict the plane over ``dt_s`` (drift), then fold in the window's trims when ``learn``.
-
-        ``max_intercept_gain``: after the baseline's first seconds the intercept follows the trims no faster than
-        the former exponential average over SHARE_BASELINE_TAU_S (``dt / tau`` per window; the slopes keep their
-        gain, the covariance follows the gain used, Joseph form). Unclamped, the filter's first minutes after 10 s
-        of windows move the intercept six times faster and absorb a loss too small for the statistic: a 3.5 % loss
-        whose torque change the yaw balance reports lost its rotor's yaw-free rise, the alert's first hypothesis."""
+    def _update_line(self, trims: np.ndarray, regressors: np.ndarray, dt_s: float, learn: bool) -> None:
+        """Predict the plane over ``dt_s`` (drift), then fold in the window's trims when ``learn``."""
         if dt_s > 0:
             self._P[:, 0, 0] += self._q_b * dt_s
             self._P[:, 1, 1] += FLAP_SLOPE_Q * dt_s
@@ -251,21 +245,23 @@ class RotorShare:
             P = self._P[a]
             ph = P @ h
             gain = ph / (float(h @ ph) + r)
-            if max_intercept_gain is not None and gain[0] > max_intercept_gain:
-                gain[0] = max_intercept_gain
-                i_kh = np.eye(3) - np.outer(gain, h)
-                P = i_kh @ P @ i_kh.T + r * np.outer(gain, gain)
-            else:
-                P = P - np.outer(gain, ph)
             self._theta[a] += gain * (float(trims[a]) - float(h @ self._theta[a]))
+            P = P - np.outer(gain, ph)
             self._P[a] = 0.5 * (P + P.T)
+
+    def _slopes_at(self, regressors: np.ndarray) -> np.ndarray:
+        """(pitch, roll) the plane's slopes give at these regressors (the intercept left out)."""
+        return np.array([self._theta[a, 1] * regressors[a] + self._theta[a, 2] * regressors[2 + a] for a in range(2)])
 
     def yaw_free_rise(self) -> np.ndarray | None:
         """(4,) each rotor's yaw-free share over the last YAW_AVERAGE_S less the baseline's at that span's mean
         velocity; None before both exist."""
         if self.baseline is None or self._yn < self.yaw_window:
             return None
-        pred, _ = self.line(self._mean_regressors(self._svring))
+        # Against the wording's intercept (the former 60-s average, fed while quiet): the filter's intercept moves
+        # faster in its first minutes and would absorb a loss too small for the statistic, whose rise is what a
+        # yaw-balance alert names first (a 3.5 % loss with a 25 % torque change; tests/test_decision_pair.py).
+        pred = self._wording_b + self._slopes_at(self._mean_regressors(self._svring))
         return _YAW_FREE @ (self._sring.sum(axis=0) / self.yaw_window) - _U @ pred
 
     def llr(self, dt_s: float = 0.0, quiet: bool = False, yaw_quiet: bool | None = None) -> np.ndarray | None:
@@ -292,6 +288,7 @@ class RotorShare:
             # trim (session 7: a false rotor-2 fault 14 s before an onset, from 10 windows after a 7-s hold).
             if self._base_s >= BASELINE_S and len(self._base) >= 3:
                 self.baseline = _U @ self._theta[:, 0]
+                self._wording_b = self._theta[:, 0].copy()
                 # The yaw balance's own mean over the last YAW_AVERAGE_S (its 2-s means scatter by 0.05)
                 self.yaw_baseline = float(np.mean(self._yring if self._yn >= self.yaw_window else np.asarray(self._base)))
                 self._base = []
@@ -303,7 +300,11 @@ class RotorShare:
         # the pitch plane less certain than the roll one, read as rotor 1 too (59 of our 150 single onsets had an
         # alert naming a healthy propeller, 19 with one variance; docs/ALERTS.md).
         inv_s = np.full(2, 1.0 / (self._r + float(var.max())))
-        self._update_line(trims, v, dt_s, learn=quiet, max_intercept_gain=min(dt_s / SHARE_BASELINE_TAU_S, 1.0))
+        self._update_line(trims, v, dt_s, learn=quiet)
+        if quiet and self._wording_b is not None:
+            # the wording's intercept: the former exponential average of the trims less the plane's slopes
+            k_w = min(dt_s / SHARE_BASELINE_TAU_S, 1.0) if dt_s > 0 else 0.0
+            self._wording_b += k_w * (trims - self._slopes_at(v) - self._wording_b)
         if quiet:
             self.baseline = _U @ self._theta[:, 0]
         k = min(dt_s / SHARE_BASELINE_TAU_S, 1.0) if dt_s > 0 else 0.0
