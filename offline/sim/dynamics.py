@@ -211,14 +211,16 @@ class Dynamics:
         self.last_total_thrust_n = self._total_thrust
 
         # Linear, with the attitude at the start of the step: dv = dt (R f_body / m + g).
+        v_air = None  # body-frame airspeed, when a per-flight term needs it (drag, blade flapping)
+        if self.per_flight is not None and (self.has_drag or self.flap_dt_over_inertia is not None):
+            rot = rotation_matrices(s.q_world_body)
+            v_air = np.matmul((s.vel_ned_m_s - self.wind_ned_m_s)[:, None, :], rot)[:, 0]
         if self.has_drag and self.per_flight is not None:
             # The same formula through one rotation matrix per flight (np.cross is slow on small batches).
-            q, v = s.q_world_body, s.vel_ned_m_s
-            rot = rotation_matrices(q)
             f_body = self.force_body_n
             f_body[:, :2] = 0.0
             f_body[:, 2] = -out[:, 10]
-            f_body -= self.drag * np.matmul((v - self.wind_ned_m_s)[:, None, :], rot)[:, 0]
+            f_body -= self.drag * v_air
             dv = np.matmul(rot, f_body[:, :, None])[:, :, 0] * (self.inv_mass * dt)
         elif self.has_drag:
             q, v = s.q_world_body, s.vel_ned_m_s
@@ -233,7 +235,6 @@ class Dynamics:
 
         if self.flap_dt_over_inertia is not None:
             # Blowback: nose-up flying forward, rolled away from a side flow (left for flow from the right).
-            v_air = np.matmul((s.vel_ned_m_s - self.wind_ned_m_s)[:, None, :], rotation_matrices(s.q_world_body))[:, 0]
             sum_om = om.sum(axis=1)
             self._d_att[:, 4] -= self.flap_dt_over_inertia[:, 0] * sum_om * v_air[:, 1]
             self._d_att[:, 5] += self.flap_dt_over_inertia[:, 1] * sum_om * v_air[:, 0]
