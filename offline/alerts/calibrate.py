@@ -17,11 +17,21 @@ keeps each statistic's highest renewal value over all calibration flights
 (``h_max_healthy``), and a rate below what the calibration hours can resolve
 (< 1 per calibration flight-time) never gets a threshold that one of those
 flights crossed. The file says from how many hours and crossings it was drawn.
+
+A point fit of a thin tail is fragile: 5 and 10 calibration hours of the same simulator put the physics fault
+threshold at 7.24 and 6.54 nat-s, and the lower one gave 17 false FAULTs in 10 h of the evaluation-only
+simulator where the higher gave none (session 12, models/decision-evaluation.md). So the file also keeps a
+bootstrap over *flights* (a flight's excursions are not independent of each other; flights are): each draw
+resamples the calibration flights with replacement and fits the tail again (``BOOTSTRAP_DRAWS``, seeded by the
+calibration seed, so the file is reproducible). The decision takes, for each rate, the ``CONFIDENCE`` quantile of
+the draws' thresholds: a threshold that meets the rate in 95 % of the calibration sets these flights could have
+been, not in half of them. A draw with no tail to fit counts as an infinite threshold.
 """
 
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import numpy as np
@@ -33,26 +43,34 @@ from offline.manifest import make_manifest
 
 MIN_EVENTS = 3
 TAIL_MAX_RATE_PER_H = 10.0  # fit the tail: grid points crossed at most this often (100x the fault target)
+BOOTSTRAP_DRAWS = 200  # flight resamples of the tail (the 95 % quantile of 200 draws: the 190th)
+CONFIDENCE = 0.95  # the quantile of the draws' thresholds the decision takes (monitor/decision_thresholds.py)
+H_GRID = np.geomspace(0.05, 500.0, 100)
 
 
-def peak_value(traces: list[list], statistic: str) -> float:
-    """The highest value the statistic reaches (any propeller) over all traces."""
-    peak = 0.0
-    for trace in traces:
+def flight_peaks(traces: list[list], statistic: str) -> np.ndarray:
+    """(n_flights,) the highest value the statistic reaches (any propeller) on each trace."""
+    peaks = np.zeros(len(traces))
+    for k, trace in enumerate(traces):
         s = np.zeros(4)
         for op, v in trace:
             if op == "scale":
                 s *= v
             elif statistic in v:
                 s = np.maximum(0.0, s + v[statistic])
-                peak = max(peak, float(s.max()))
-    return peak
+                peaks[k] = max(peaks[k], float(s.max()))
+    return peaks
 
 
-def crossing_counts(traces: list[list], h_grid: np.ndarray, statistic: str) -> np.ndarray:
-    """Crossings of each threshold (any propeller, renewal after each) over all traces."""
-    counts = np.zeros(len(h_grid), dtype=np.int64)
-    for trace in traces:
+def peak_value(traces: list[list], statistic: str) -> float:
+    """The highest value the statistic reaches (any propeller) over all traces."""
+    return float(flight_peaks(traces, statistic).max(initial=0.0))
+
+
+def flight_crossing_counts(traces: list[list], h_grid: np.ndarray, statistic: str) -> np.ndarray:
+    """(n_flights, len(h_grid)) crossings of each threshold (any propeller, renewal after each) on each trace."""
+    counts = np.zeros((len(traces), len(h_grid)), dtype=np.int64)
+    for k, trace in enumerate(traces):
         s = np.zeros((len(h_grid), 4))
         for op, v in trace:
             if op == "scale":
@@ -62,9 +80,14 @@ def crossing_counts(traces: list[list], h_grid: np.ndarray, statistic: str) -> n
                 continue
             s = np.maximum(0.0, s + v[statistic][None, :])
             hit = (s >= h_grid[:, None]).any(axis=1)
-            counts += hit
+            counts[k] += hit
             s[hit] = 0.0
     return counts
+
+
+def crossing_counts(traces: list[list], h_grid: np.ndarray, statistic: str) -> np.ndarray:
+    """Crossings of each threshold (any propeller, renewal after each) over all traces."""
+    return flight_crossing_counts(traces, h_grid, statistic).sum(axis=0)
 
 
 def fit_tail(h_grid: np.ndarray, counts: np.ndarray, hours: float) -> tuple[float, float, list]:
@@ -73,14 +96,33 @@ def fit_tail(h_grid: np.ndarray, counts: np.ndarray, hours: float) -> tuple[floa
     if ok.sum() < 3:
         raise ValueError(f"too few threshold crossings to fit a tail ({int(ok.sum())} usable points): fly more hours")
     x, y = h_grid[ok], np.log(counts[ok] / hours)
-    slope, intercept = np.polyfit(x, y, 1)
+    # var(ln c) ~ 1 / c (Poisson): weigh each point by sqrt(c), so the thin end of the tail does not steer the line
+    slope, intercept = np.polyfit(x, y, 1, w=np.sqrt(counts[ok]))
     if slope >= 0:
         raise ValueError("crossing rate does not fall with the threshold: no tail to fit")
     points = [[round(float(h), 3), int(c), round(float(c / hours), 4)] for h, c in zip(h_grid, counts)]
     return float(intercept), float(-slope), points
 
 
-def calibrate(healthy: list[AlertFlight], model_path: str | Path, cfg: DecisionConfig, provenance: dict) -> dict:
+def bootstrap_tails(
+    per_flight: np.ndarray, flight_hours: np.ndarray, h_grid: np.ndarray, draws: int, rng: np.random.Generator
+) -> tuple[list[list[float]], int]:
+    """The tail fitted again on ``draws`` resamples of the flights (with replacement): ([[a, b], ...], failed),
+    ``failed`` the draws with no tail to fit (fewer usable points, or a rate that does not fall)."""
+    n = len(per_flight)
+    fits, failed = [], 0
+    for _ in range(draws):
+        idx = rng.integers(0, n, n)
+        try:
+            a, b, _ = fit_tail(h_grid, per_flight[idx].sum(axis=0), float(flight_hours[idx].sum()))
+        except ValueError:
+            failed += 1
+            continue
+        fits.append([round(a, 6), round(b, 6)])
+    return fits, failed
+
+
+def calibrate(healthy: list[AlertFlight], model_path: str | Path, cfg: DecisionConfig, provenance: dict, seed: int = 0) -> dict:
     traces = []
     never = {k: np.inf for k in STATISTICS}
     for f in healthy:
@@ -90,31 +132,49 @@ def calibrate(healthy: list[AlertFlight], model_path: str | Path, cfg: DecisionC
         replay_decision(f, d)
         d.trace.append(("scale", 0.0))
         traces.append(d.trace)
-    hours = sum(f.hours for f in healthy)
-    h_grid = np.geomspace(0.05, 500.0, 100)
+    return fit_traces(traces, np.array([f.hours for f in healthy]), model_path, cfg, provenance, seed)
+
+
+def fit_traces(
+    traces: list[list], flight_hours: np.ndarray, model_path: str | Path, cfg: DecisionConfig, provenance: dict, seed: int
+) -> dict:
+    """The calibration file's content from the healthy flights' traces (``calibrate``)."""
+    hours = float(np.sum(flight_hours))
+    h_grid = H_GRID
+    rng = np.random.default_rng([seed, 13])  # the bootstrap's own stream: the same file for the same flights
     fits, points = {}, {}
     for stat in STATISTICS:
-        counts = crossing_counts(traces, h_grid, stat)
+        per_flight = flight_crossing_counts(traces, h_grid, stat)
+        counts = per_flight.sum(axis=0)
         points[stat] = [[round(float(h), 3), int(c)] for h, c in zip(h_grid, counts)]
         try:
             a, b, _ = fit_tail(h_grid, counts, hours)
             # A tail that still crosses at the top of the grid more often than the rates we serve is no tail.
             if counts[-1] / hours > cfg.false_alarms_per_hour:
                 raise ValueError(f"{counts[-1]} crossings of h={h_grid[-1]:.0f} in {hours:.2f} h: not an exponential tail")
-            fits[stat] = {"a": a, "b": b, "h_max_healthy": round(peak_value(traces, stat), 4)}
+            boot, failed = bootstrap_tails(per_flight, np.asarray(flight_hours, float), h_grid, BOOTSTRAP_DRAWS, rng)
+            fits[stat] = {
+                "a": a,
+                "b": b,
+                "h_max_healthy": round(peak_value(traces, stat), 4),
+                "bootstrap_ab": boot,
+                "bootstrap_failed": failed,
+            }
         except ValueError as exc:
             fits[stat] = None
             points[stat + "_disabled_because"] = str(exc)
     return {
         "fits": fits,
         "form": "crossings per healthy flight-hour = exp(a - b * h), h in nat-seconds; null = statistic disabled",
+        "confidence": CONFIDENCE,
         "model_sha256": file_sha256(model_path),
         "provenance": {
             **provenance,
-            "flights": len(healthy),
+            "flights": len(traces),
             "flight_hours": round(hours, 3),
             "min_events_per_point": MIN_EVENTS,
             "tail_max_rate_per_h": TAIL_MAX_RATE_PER_H,
+            "bootstrap": {"draws": BOOTSTRAP_DRAWS, "over": "flights, with replacement", "seed": [seed, 13]},
             "physics_statistic": physics_statistic(cfg),
             "pair_statistic": pair_statistic(cfg),
             "points_h_crossings": points,
@@ -126,6 +186,8 @@ def write_calibration(cal: dict, path: str | Path, config: dict, seed: int) -> P
     path = Path(path)
     cal = {**cal, "manifest": make_manifest("decision-calibration", config, seed)}
     tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(json.dumps(cal, indent=1) + "\n", encoding="utf-8")
+    text = json.dumps(cal, indent=1)
+    text = re.sub(r"\[\n\s+(\S+),\n\s+(\S+)\n\s+\]", r"[\1, \2]", text)  # an (a, b) draw on one line
+    tmp.write_text(text + "\n", encoding="utf-8")
     tmp.replace(path)
     return path

@@ -181,12 +181,14 @@ def main(argv=None) -> int:
             **ours_kw,
         )
         healthy = ours(fs)
-        cal = calibrate(healthy, args.model, cfg, {"flight_set": fs.__dict__, "simulator": "offline.sim (ours)"})
+        prov = {"flight_set": fs.__dict__, "simulator": "offline.sim (ours)"}
+        cal = calibrate(healthy, args.model, cfg, prov, seed=args.calibration_seed)
         config = {"flight_set": fs.__dict__}
         if args.physics == "randomised":
             config["assumptions"] = REGISTER.to_mapping()
         path = write_calibration(cal, args.calibration_out, config, args.calibration_seed)
-        print(f"calibration: {path} {cal['fits']}", file=sys.stderr)
+        ab = {k: None if v is None else (round(v["a"], 4), round(v["b"], 4)) for k, v in cal["fits"].items()}
+        print(f"calibration: {path} (a, b) {ab}", file=sys.stderr)
     if args.seed == args.calibration_seed:
         print("--seed must differ from --calibration-seed (evaluate on flights the calibration never saw)", file=sys.stderr)
         return 2
@@ -303,7 +305,7 @@ def main(argv=None) -> int:
 
 
 def _rest(cal: Calibration) -> tuple:
-    return cal.model_sha256, cal.provenance, cal.peaks
+    return cal.model_sha256, cal.provenance, cal.peaks, cal.bootstrap, cal.bootstrap_failed, cal.confidence
 
 
 def _revision(checkout: str) -> str:
