@@ -123,8 +123,10 @@ def run(args) -> dict:
         model, tlog = build_inputs(args, work)
         port = free_udp_port()
         report = work / "report.json"
+        profile = ["-m", "cProfile", "-o", str(Path(args.profile).resolve())] if args.profile else []
         cmd = [
             sys.executable,
+            *profile,
             "-m",
             "monitor",
             "--connect",
@@ -277,6 +279,9 @@ def main(argv=None) -> int:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--json", action="store_true")
     p.add_argument("--inprocess", action="store_true", help="time the normal path in process (CPU per message)")
+    p.add_argument(
+        "--profile", help="write the daemon's cProfile statistics here (the profiler's overhead inflates its CPU figure)"
+    )
     p.add_argument("--repeat", type=int, default=3, help="--inprocess: best of this many runs")
     p.add_argument(
         "--rule",

@@ -207,7 +207,7 @@ def randomised_chunks(vehicle: VehicleConfig, fs: FlightSet):
                 c = cond[i, r]
                 healthy = f.healthy_signature(r)
                 before[b, r] = healthy
-                after[b, r] = healthy if c == 0 else f.signature(r, "bent" if c == 1 else "cracked")
+                after[b, r] = healthy if c == 0 else _damaged(f, r, c)
                 if pickup[i]:  # the payload step scales every rotor: thrust / (1 + step) is mass * (1 + step)
                     k = 1.0 / (1.0 + step[i])
                     after[b, r] = dataclasses.replace(
@@ -238,6 +238,25 @@ def randomised_chunks(vehicle: VehicleConfig, fs: FlightSet):
             f"{fs.kind}-r{fs.seed}-{first + i}" + (f"-pickup{step[i]:+.2f}@{pickup_s[i]:.0f}s" if pickup[i] else "") for i in idx
         ]
         yield RandomisedChunk(flog, list(phys), cond[idx], onset[idx], names, after)
+
+
+def _damaged(flight_draw, r: int, c: int):
+    """Rotor r's signature after the onset for condition c (1 bent, 2 cracked): the flight's register draw."""
+    return flight_draw.signature(r, "bent" if c == 1 else "cracked")
+
+
+def onset_draws(fs: FlightSet) -> list[tuple[tuple[int, ...], list]]:
+    """Each flight of a randomised onset set: (faulty propellers 1..4, their signatures after the onset), as
+    ``randomised_chunks`` draws them, without simulating (what a flight's damage was: bench/bench_pair_physics.py)."""
+    from offline.sim.assumptions import REGISTER, draw_flights
+
+    cond = _conditions(fs.kind, fs.n_flights, fs.rng())  # the set stream's first draw, as in randomised_chunks
+    phys = draw_flights(REGISTER, fs.seed, fs.first_flight + np.arange(fs.n_flights))
+    out = []
+    for i, f in enumerate(phys):
+        faulty = [r for r in range(4) if cond[i, r]]
+        out.append((tuple(r + 1 for r in faulty), [_damaged(f, r, cond[i, r]) for r in faulty]))
+    return out
 
 
 def _simulate_randomised(vehicle: VehicleConfig, fs: FlightSet, clf: Classifier, log) -> list[AlertFlight]:
