@@ -49,3 +49,28 @@ def hold(sample_t_us: np.ndarray, values: np.ndarray, grid_t_us: np.ndarray, max
     ok &= age <= max_age_us
     out[ok] = v[idx[ok]]
     return out
+
+
+def span_mean(sample_t_us: np.ndarray, values: np.ndarray, grid_t_us: np.ndarray, span_us: int, max_age_us: int) -> np.ndarray:
+    """(G, W) at each grid instant g the mean of the finite samples in ``(g - span_us, g]``; NaN where every sample
+    there is NaN; where the span holds no sample, ``hold`` (a stream slower than the grid), stale after
+    ``max_age_us``. What the daemon's resampler gives a ``mean_us`` stream (monitor/daemon/resampler.py), so diagnose
+    and the daemon feed the decision the same specific force: a 50-250 Hz accelerometer that vibrates, one sample
+    of which held would be noise."""
+    t = np.asarray(sample_t_us, dtype=np.int64)
+    v = np.asarray(values, dtype=np.float64).reshape(len(t), -1)
+    held = hold(t, v, grid_t_us, max_age_us)
+    if len(t) == 0:
+        return held
+    finite = np.isfinite(v).all(axis=1)
+    csum = np.vstack([np.zeros((1, v.shape[1])), np.cumsum(np.where(finite[:, None], v, 0.0), axis=0)])
+    ccount = np.concatenate([[0], np.cumsum(finite)])
+    hi = np.searchsorted(t, grid_t_us, side="right")
+    lo = np.searchsorted(t, np.asarray(grid_t_us, dtype=np.int64) - int(span_us), side="right")
+    in_span, n = hi - lo, ccount[hi] - ccount[lo]
+    out = held.copy()
+    some = in_span > 0
+    with np.errstate(invalid="ignore", divide="ignore"):
+        mean = (csum[hi] - csum[lo]) / n[:, None]
+    out[some] = np.where((n[some] > 0)[:, None], mean[some], np.nan)
+    return out

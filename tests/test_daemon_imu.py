@@ -160,3 +160,27 @@ def test_highres_imu_is_requested_at_50_hz_beside_local_position(toy, rule):
         assert rates[HIGHRES_IMU_ID] == 50.0  # PX4's onboard-link rate: 2-3 samples in each 50 ms step
     else:  # the older rule has no decision to give it to
         assert HIGHRES_IMU_ID not in rates
+
+
+def test_diagnose_reads_each_steps_specific_force_as_the_daemon_does(toy, tmp_path):
+    """The same recorded flight, live through the daemon's pipeline and from its .tlog through diagnose's reader:
+    the decision gets the same per-step specific force (the mean of the step's own samples, bad ones left out),
+    not a sample held by one and a mean by the other."""
+    from test_daemon_helpers import write_tlog
+
+    from monitor.logs import read_log
+
+    def accel(t):  # vibration around a drag of (0.8, -0.3); every 9th sample NaN
+        if int(round(t * 130)) % 9 == 4:
+            return (math.nan, math.nan, math.nan)
+        return (0.8 + 2.5 * math.sin(2 * math.pi * 41 * t), -0.3 + 1.5 * math.cos(2 * math.pi * 23 * t), -9.8)
+
+    frames = synth_flight(8.0, seed=9, imu_hz=130.0, accel_of_t=accel)
+    _, steps = run_pipeline(toy, parse_all(frames))
+    table = read_log(write_tlog(tmp_path / "f.tlog", frames))
+    at = {int(t): i for i, t in enumerate(table.timestamp_us)}
+    later = [s for s in steps if flight_s(s) >= 0.5 and s.inputs.accel_xy_frd_m_s2 is not None]
+    assert len(later) > 140
+    live = np.array([s.inputs.accel_xy_frd_m_s2 for s in later])
+    logged = np.array([table.accel_frd_m_s2[at[int(s.timestamp_us)], :2] for s in later])
+    np.testing.assert_allclose(logged, live, rtol=0, atol=1e-9)

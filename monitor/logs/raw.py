@@ -17,7 +17,7 @@ import numpy as np
 from monitor.errors import LogFormatError
 from monitor.esc import EscCurve
 from monitor.flight import FlightTable, true_runs
-from monitor.resample import US_PER_S, grid_us, hold, period_us
+from monitor.resample import US_PER_S, grid_us, hold, period_us, span_mean
 
 # A held sample is used for at most this long, then it is NaN: a stream that
 # stopped is not held forever. Fixed (not derived from the log's own rate) and
@@ -204,8 +204,14 @@ def to_flight_table(raw: RawFlight, esc: EscCurve | None = None, rate_hz: float 
         extras[name] = held(stream, None if stream.values.ndim == 1 else stream.values.shape[1])
     opt = {
         n: (held(getattr(raw, n), 3) if getattr(raw, n) is not None and len(getattr(raw, n)) else None)
-        for n in ("accel_frd_m_s2", "vel_ned_m_s", "pos_ned_m")
+        for n in ("vel_ned_m_s", "pos_ned_m")
     }
+    acc = raw.accel_frd_m_s2  # each step's mean of the samples in its own period, as the daemon's (span_mean)
+    opt["accel_frd_m_s2"] = (
+        span_mean(acc.t_us, acc.values, grid, period_us(rate_hz), acc.max_age_us or MAX_AGE_US)
+        if acc is not None and len(acc)
+        else None
+    )
     return FlightTable(
         timestamp_us=grid,
         motor_cmd=cmd,
