@@ -184,3 +184,24 @@ def test_diagnose_reads_each_steps_specific_force_as_the_daemon_does(toy, tmp_pa
     live = np.array([s.inputs.accel_xy_frd_m_s2 for s in later])
     logged = np.array([table.accel_frd_m_s2[at[int(s.timestamp_us)], :2] for s in later])
     np.testing.assert_allclose(logged, live, rtol=0, atol=1e-9)
+
+
+def test_diagnose_reads_scaled_imu_in_milli_g_where_the_log_has_no_highres_imu(toy, tmp_path):
+    """A link that carries SCALED_IMU only (milli-g): the daemon converts it; so does diagnose's reader, through the
+    same decoder (it read HIGHRES_IMU alone, by hand, before)."""
+    from test_daemon_helpers import write_tlog
+
+    from monitor.logs import read_log
+
+    def scaled(t):
+        return (-102 * md.M_S2_PER_MG, (10 + int(t * 50) % 5) * md.M_S2_PER_MG, -1000 * md.M_S2_PER_MG)
+
+    frames = synth_flight(8.0, seed=6, imu_hz=50.0, accel_of_t=scaled, imu_msg="SCALED_IMU")
+    _, steps = run_pipeline(toy, parse_all(frames))
+    table = read_log(write_tlog(tmp_path / "scaled.tlog", frames))
+    at = {int(t): i for i, t in enumerate(table.timestamp_us)}
+    later = [s for s in steps if flight_s(s) >= 0.5 and s.inputs.accel_xy_frd_m_s2 is not None]
+    assert len(later) > 140
+    logged = np.array([table.accel_frd_m_s2[at[int(s.timestamp_us)], :2] for s in later])
+    np.testing.assert_allclose(logged, [s.inputs.accel_xy_frd_m_s2 for s in later], rtol=0, atol=1e-9)
+    assert np.allclose(logged[:, 0], -1.0003, atol=1e-3)  # -102 mG in m/s^2

@@ -30,11 +30,11 @@ V1_OVERHEAD = 8  # magic, len, seq, sys, comp, msgid, crc(2)
 V2_OVERHEAD = 12  # magic, len, incompat, compat, seq, sys, comp, msgid(3), crc(2)
 V2_SIGNATURE = 13
 MAVLINK_IFLAG_SIGNED = 0x01
-HEARTBEAT_ID, LOCAL_POSITION_NED_ID, HIGHRES_IMU_ID = 0, 32, 105
+HEARTBEAT_ID, LOCAL_POSITION_NED_ID = 0, 32
 # What a diagnosis needs: the ids the shared decoder handles, less ESC telemetry.
 CORE_IDS = frozenset((set(md.STREAM_IDS.values()) | {HEARTBEAT_ID}) - {md.ESC_STATUS_ID})
-# Plus what calibration reads: ESC RPM, position/velocity, accelerometer.
-WANTED_IDS = CORE_IDS | {md.ESC_STATUS_ID, LOCAL_POSITION_NED_ID, HIGHRES_IMU_ID}
+# Plus ESC RPM (calibration), position/velocity and the accelerometer (the decision's context; calibration).
+WANTED_IDS = CORE_IDS | {md.ESC_STATUS_ID, LOCAL_POSITION_NED_ID, md.HIGHRES_IMU_ID, md.SCALED_IMU_ID}
 # A receive time further than this from the previous one is a false frame start.
 MAX_TS_JUMP_US = 3_600_000_000
 
@@ -111,7 +111,8 @@ class _Collector:
 
     @staticmethod
     def _empty() -> dict[str, list]:
-        return {k: [] for k in ("cmd", "att", "rate", "bat", "armed", "landed", "esc", "pos", "vel", "acc")}
+        keys = ("cmd", "att", "rate", "bat", "armed", "landed", "esc", "pos", "vel", "acc_HIGHRES_IMU", "acc_SCALED_IMU")
+        return {k: [] for k in keys}
 
     def add(self, s) -> None:
         cur = self.sessions[-1]
@@ -135,6 +136,14 @@ class _Collector:
             cur["armed"].append((s.timestamp_us, 1.0 if s.armed else 0.0))
         elif isinstance(s, md.LandedState) and s.timestamp_us is not None:
             cur["landed"].append((s.timestamp_us, 0.0 if md.is_flying(s.landed_state) else 1.0))
+        elif isinstance(s, md.ImuAccel):  # the decoder's: HIGHRES_IMU of IMU 0 in m/s^2, SCALED_IMU from milli-g
+            cur["acc_" + s.source].append((s.timestamp_us, s.accel_frd_m_s2))
+        elif isinstance(s, md.LocalVelocity):
+            cur["vel"].append((s.timestamp_us, s.vel_ned_m_s))
+
+    def acceleration(self, cur: dict) -> Stream | None:
+        """HIGHRES_IMU where the log has it, else SCALED_IMU (the daemon's rule, per log rather than per gap)."""
+        return _stream(cur["acc_HIGHRES_IMU"]) or _stream(cur["acc_SCALED_IMU"])
 
 
 def _stream(items) -> Stream | None:
@@ -211,7 +220,7 @@ def read_tlog(path: str | Path, system_id: int | None = None, extras: bool = Tru
         landed=_stream(cur["landed"]),
         height_m=height,
         esc_rpm=_stream(cur["esc"]),
-        accel_frd_m_s2=_stream(cur["acc"]),
+        accel_frd_m_s2=col.acceleration(cur),
         vel_ned_m_s=_stream(cur["vel"]),
         pos_ned_m=pos,
         warnings=warnings,
@@ -242,14 +251,7 @@ def _read_frame_by_frame(buf: bytes, wanted, mav, dec: md.MavlinkDecoder, col: _
 
 
 def _extras(msg, dec: md.MavlinkDecoder, col: _Collector) -> None:
-    """Position/velocity and accelerometer for calibration; not needed by the classifier."""
-    kind = msg.get_type()
-    if kind not in ("LOCAL_POSITION_NED", "HIGHRES_IMU") or msg.get_srcSystem() != dec.system_id:
+    """Position for calibration (height, waypoints); velocity and the accelerometer come from the decoder."""
+    if msg.get_type() != "LOCAL_POSITION_NED" or msg.get_srcSystem() != dec.system_id:
         return
-    cur = col.sessions[-1]
-    if kind == "LOCAL_POSITION_NED":
-        t = int(msg.time_boot_ms) * US_PER_MS
-        cur["pos"].append((t, (msg.x, msg.y, msg.z)))
-        cur["vel"].append((t, (msg.vx, msg.vy, msg.vz)))
-    else:
-        cur["acc"].append((int(msg.time_usec), (msg.xacc, msg.yacc, msg.zacc)))
+    col.sessions[-1]["pos"].append((int(msg.time_boot_ms) * US_PER_MS, (msg.x, msg.y, msg.z)))
