@@ -113,7 +113,8 @@ crazypad: $(STAMP)
 # healthy randomised flights (HOURS); evaluate-alerts scores the rules on independent flights and writes
 # $(OUT)/alerts/alerts.{json,md}; `python -m offline.alerts.card $(OUT)/alerts/alerts.json` puts the table in the card. The issue's size is the default (10 classified healthy hours
 # per simulator, 200 onsets): hours of CPU on 2 cores; e.g. `make evaluate-alerts ALERT_ARGS="--healthy-hours 1 --onset-flights 64"`.
-HOURS ?= 5
+# The shipped calibration: 10 flown hours (450 flights), thresholds at the 95 % quantile of a flight bootstrap.
+HOURS ?= 10
 ALERT_ARGS ?=
 calibrate-alerts: $(STAMP)
 	$(BIN)/python -m offline.alerts.evaluate --calibrate --calibration-hours $(HOURS) --healthy-hours 0.05 --onset-flights 4 --out $(OUT)/alerts-calibration
