@@ -205,3 +205,45 @@ def test_diagnose_reads_scaled_imu_in_milli_g_where_the_log_has_no_highres_imu(t
     logged = np.array([table.accel_frd_m_s2[at[int(s.timestamp_us)], :2] for s in later])
     np.testing.assert_allclose(logged, [s.inputs.accel_xy_frd_m_s2 for s in later], rtol=0, atol=1e-9)
     assert np.allclose(logged[:, 0], -1.0003, atol=1e-3)  # -102 mG in m/s^2
+
+
+def test_diagnose_ignores_the_context_samples_the_daemon_ignores(toy, tmp_path):
+    """NaN, absurd and frozen velocity and IMU samples in a recorded flight: diagnose's reader drops the samples the
+    daemon drops (``monitor.envelope``), says so in a warning, and the steps that carry context are the daemon's."""
+    from test_daemon_helpers import write_tlog
+
+    from monitor.logs import read_log
+
+    def vel(t):
+        if 3.0 <= t < 5.0:
+            return (math.nan, math.nan, math.nan)
+        if 5.0 <= t < 7.0:
+            return (80.0, 0.5 * math.sin(t), 0.0)  # a diverged estimate
+        if 7.0 <= t < 10.0:
+            return (1.0, 2.0, 0.0)  # stuck from 7 s: frozen after 1 s
+        return (1.0 + 0.3 * math.sin(t), 2.0, 0.0)
+
+    def accel(t):
+        if 3.0 <= t < 5.0:
+            return (math.nan, 0.2, -9.8)
+        if 5.0 <= t < 7.0:
+            return (170.0 + math.sin(t), 0.2, -9.8)  # beyond the 16 g range
+        if 7.0 <= t < 10.0:
+            return (0.3, -0.2, -9.8)
+        return (0.3 + 0.2 * math.sin(40.0 * t), -0.2, -9.8)
+
+    frames = synth_flight(13.0, faulty=(3,), seed=4, pos_hz=30.0, vel_of_t=vel, imu_hz=50.0, accel_of_t=accel)
+    _, steps = run_pipeline(toy, parse_all(frames))
+    table = read_log(write_tlog(tmp_path / "bad.tlog", frames))
+    assert any("velocity samples ignored as implausible" in w and "beyond 60 m/s" in w for w in table.warnings)
+    assert any("imu samples ignored as implausible" in w and "frozen" in w for w in table.warnings)
+    at = {int(t): i for i, t in enumerate(table.timestamp_us)}
+    later = [s for s in steps if flight_s(s) >= 0.5 and int(s.timestamp_us) in at]
+    assert len(later) > 230
+    acc_live = np.array([s.inputs.accel_xy_frd_m_s2 is not None for s in later])
+    acc_log = np.array([np.isfinite(table.accel_frd_m_s2[at[int(s.timestamp_us)], :2]).all() for s in later])
+    vel_live = np.array([s.inputs.vel_heading_m_s is not None for s in later])
+    vel_log = np.array([np.isfinite(table.vel_ned_m_s[at[int(s.timestamp_us)], :2]).all() for s in later])
+    assert not acc_live.all() and not vel_live.all()  # the bad spans are there to be dropped
+    np.testing.assert_array_equal(acc_log, acc_live)
+    np.testing.assert_array_equal(vel_log, vel_live)

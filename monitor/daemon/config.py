@@ -11,6 +11,7 @@ from pathlib import Path
 
 from monitor.config import from_mapping, load_dataclass
 from monitor.decision import DecisionConfig
+from monitor.envelope import FROZEN_S
 from monitor.errors import ConfigError
 from monitor.resources import shipped
 
@@ -211,7 +212,7 @@ class PlausibleConfig:
     pwm_disarmed_us: float = 900.0  # ... or exactly the disarmed value (PWM_MAIN_DISn)
     rpm_max: float = 60_000.0  # motor_source esc: 0 <= rpm <= this
     battery_max_v: float = 100.0
-    frozen_s: float = 1.0  # a fast stream whose values stay bit-identical this long is a frozen channel
+    frozen_s: float = FROZEN_S  # a fast stream whose values stay bit-identical this long is a frozen channel
 
     def __post_init__(self) -> None:
         _within(self.attitude_max_rad, 3.0, 3.2, "plausible.attitude_max_rad")

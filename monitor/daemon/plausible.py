@@ -31,17 +31,12 @@ import math
 from collections import Counter
 
 from monitor.daemon.config import PlausibleConfig
+from monitor.envelope import ACCEL_XY_MAX_M_S2, VELOCITY_MAX_M_S
 from monitor.esc import EscCurve
 from monitor.resample import US_PER_S
 
 HALF_PI = math.pi / 2
 PITCH_SLACK_RAD = 1e-3  # float32 rounding of +-pi/2
-# Ground speed no multirotor reaches (PX4 MPC_XY_VEL_MAX defaults to 12 m/s; racing quadrotors stay below ~50 m/s):
-# beyond it the estimator has diverged or the field is garbage.
-VELOCITY_MAX_M_S = 60.0
-# 16 g: the range most of PX4's IMU drivers set (ICM-20602, ICM-42688-P; the BMI088 reads to 24 g). No drag on a
-# multirotor comes near it (a few m/s^2): beyond it the field is garbage or the sensor saturated in a crash.
-ACCEL_XY_MAX_M_S2 = 160.0
 
 
 class Plausibility:

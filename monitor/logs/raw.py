@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from monitor.envelope import implausible_context
 from monitor.errors import LogFormatError
 from monitor.esc import EscCurve
 from monitor.flight import FlightTable, true_runs
@@ -159,6 +160,21 @@ def _drop_short(mask: np.ndarray, min_len: int) -> np.ndarray:
     return out
 
 
+def _plausible_context(s: Stream | None, kind: str, warnings: list, source: str) -> Stream | None:
+    """The context stream with its implausible samples (``monitor.envelope``, the daemon's checks) set to NaN:
+    never evidence, a step without context. A warning counts them."""
+    if s is None or len(s) == 0:
+        return None
+    bad, why = implausible_context(s.t_us, s.values, kind)
+    if not bad.any():
+        return s
+    values = np.array(s.values, dtype=np.float64)
+    values[bad] = np.nan
+    what = ", ".join(f"{k}: {n}" for k, n in why.items())
+    warnings.append(f"{source}: {int(bad.sum())} {kind} samples ignored as implausible ({what})")
+    return Stream(s.t_us, values, s.max_age_us)
+
+
 def to_flight_table(raw: RawFlight, esc: EscCurve | None = None, rate_hz: float = 20.0) -> FlightTable:
     """Resample a decoded log onto the ``rate_hz`` boot-clock grid (zero-order hold, NaN when stale).
 
@@ -202,11 +218,11 @@ def to_flight_table(raw: RawFlight, esc: EscCurve | None = None, rate_hz: float 
         extras["height_m"] = held(raw.height_m, None)
     for name, stream in raw.extra_streams.items():
         extras[name] = held(stream, None if stream.values.ndim == 1 else stream.values.shape[1])
-    opt = {
-        n: (held(getattr(raw, n), 3) if getattr(raw, n) is not None and len(getattr(raw, n)) else None)
-        for n in ("vel_ned_m_s", "pos_ned_m")
-    }
-    acc = raw.accel_frd_m_s2  # each step's mean of the samples in its own period, as the daemon's (span_mean)
+    vel = _plausible_context(raw.vel_ned_m_s, "velocity", warnings, raw.source)
+    opt = {"vel_ned_m_s": held(vel, 3) if vel is not None else None}
+    opt["pos_ned_m"] = held(raw.pos_ned_m, 3) if raw.pos_ned_m is not None and len(raw.pos_ned_m) else None
+    acc = _plausible_context(raw.accel_frd_m_s2, "imu", warnings, raw.source)
+    # each step's mean of the samples in its own period, as the daemon's (span_mean)
     opt["accel_frd_m_s2"] = (
         span_mean(acc.t_us, acc.values, grid, period_us(rate_hz), acc.max_age_us or MAX_AGE_US)
         if acc is not None and len(acc)
