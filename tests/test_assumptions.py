@@ -257,3 +257,28 @@ def test_blade_flapping_trims_the_front_rotors_by_the_drawn_share_per_m_s():
     d = yaw_free[1, late].mean(axis=0) - yaw_free[0, late].mean(axis=0)
     # PX4 order: 1 front-right, 2 rear-left, 3 front-left, 4 rear-right
     np.testing.assert_allclose(d, [-trim * v[1], trim * v[1], -trim * v[1], trim * v[1]], atol=0.006)
+
+
+def test_quadratic_drag_slows_the_body_by_c_v_squared():
+    """Hand calculation: level, at 10 m/s north in still air, with only the drawn parasitic drag c = 0.03 N/(m/s)^2
+    on body x, one step of dt changes the north velocity by -c v^2 dt / m (3 N on 1.5 kg: -2 m/s^2), and a flight
+    drawn without it by nothing beyond its linear drag."""
+    from offline.sim.dynamics import Dynamics, VehicleState
+    from offline.sim.perflight import PerFlightTerms
+    from offline.sim.propeller import QuadraticPropeller
+
+    still = REGISTER.with_range("wind_mean_m_s", 0.0, 0.0).with_range("turbulence_sigma_w_m_s", 0.0, 0.0)
+    still = still.with_range("linear_drag_n_per_m_s", 0.0, 0.0)
+    phys = [draw_flights(still.with_range("quadratic_drag_n_per_m2_s2", c, c), 4, range(1))[0] for c in (0.0, 0.03)]
+    terms = PerFlightTerms.from_flights(phys, VEHICLE)
+    np.testing.assert_allclose(terms.quadratic_drag_n_per_m2_s2, [[0.0] * 3, [0.03] * 3])
+    dt, mass = 0.002, VEHICLE.mass_kg
+    dyn = Dynamics(VEHICLE, np.full(2, mass), dt, per_flight=terms)
+    s = VehicleState.hover(2, (0.0, 0.0, -10.0), np.zeros(4))
+    s.vel_ned_m_s[:] = [10.0, 0.0, 0.0]
+    prop = QuadraticPropeller.for_vehicle(VEHICLE)
+    prop.reset(s.omega_rad_s)
+    dyn.step(s, np.zeros((2, 4)), prop)  # rotors off: gravity and drag only
+    dv_north = s.vel_ned_m_s[:, 0] - 10.0
+    assert dv_north[1] - dv_north[0] == pytest.approx(-0.03 * 10.0**2 * dt / mass, rel=1e-6)  # -0.004 m/s
+    assert abs(dv_north[0]) < 1e-12  # no drag drawn: nothing

@@ -15,6 +15,8 @@ Every calibration term of ``VehicleConfig`` acts here:
 - ``cg_offset_frd_m``: the rotors' lever arms are measured from the shifted CG;
 - ``linear_drag_n_per_m_s``: body-axis drag on the airspeed (velocity minus
   ``wind_ned_m_s``); with zero drag the wind cannot act and is skipped;
+- per-flight physics only: parasitic drag ``-c |v_air| v_air`` per body axis
+  (``quadratic_drag_n_per_m2_s2``) and blade flapping;
 - mass (plus per-flight payload, a point mass at the CG) and inertia.
 ``gyro_bias_frd_rad_s`` is a sensor term and acts in ``simulator``.
 
@@ -144,6 +146,7 @@ class Dynamics:
         self.esc_offset_rad_s = None
         self.spin_up = None  # rotor inertia / dt, (B, 1): the spin-up yaw reaction J dω/dt
         self.flap_dt_over_inertia = None  # (B, 2) k dt / (Ixx, Iyy): blade flapping (per-flight physics only)
+        self.quad_drag = None  # (B, 3) parasitic drag, N per (m/s)^2 (per-flight physics only)
         if per_flight is not None:
             pf = per_flight
             self.motor_alpha = 1.0 - np.exp(-dt / (pf.motor_time_constant_s[:, None] * (ratio if np.any(ratio != 1.0) else 1.0)))
@@ -152,7 +155,9 @@ class Dynamics:
             self.esc_offset_rad_s = pf.esc_offset_rad_s.copy()
             self.drag = pf.linear_drag_n_per_m_s.copy()
             self.wind_ned_m_s = np.broadcast_to(pf.wind_mean_ned_m_s, (n, 3)).copy()  # rewritten with gusts
-            self.has_drag = bool(np.any(self.drag > 0))
+            qd = pf.quadratic_drag_n_per_m2_s2
+            self.quad_drag = qd.copy() if qd is not None and np.any(qd > 0) else None  # (B, 3), N per (m/s)^2
+            self.has_drag = bool(np.any(self.drag > 0)) or self.quad_drag is not None
             self.voltage_scale = np.ones((n, 1))  # (V / V_full)^k, rewritten by the simulator
             if np.any(pf.rotor_inertia_kg_m2 > 0):
                 self.spin_up = (pf.rotor_inertia_kg_m2 / dt)[:, None]
@@ -221,6 +226,8 @@ class Dynamics:
             f_body[:, :2] = 0.0
             f_body[:, 2] = -out[:, 10]
             f_body -= self.drag * v_air
+            if self.quad_drag is not None:  # parasitic drag: -c |v| v per body axis
+                f_body -= self.quad_drag * np.sqrt(np.einsum("bi,bi->b", v_air, v_air))[:, None] * v_air
             dv = np.matmul(rot, f_body[:, :, None])[:, :, 0] * (self.inv_mass * dt)
         elif self.has_drag:
             q, v = s.q_world_body, s.vel_ned_m_s

@@ -67,6 +67,8 @@ class PerFlightTerms:
     # (B,) blade flapping, N m per (rad/s of rotor speed) per (m/s of airspeed): each rotor adds
     # k omega (-v_right, +v_forward, 0) in body FRD (blowback: nose-up flying forward). 0 = none.
     flapping_nm_per_rad_s_m_s: np.ndarray | None = None
+    # (B, 3) body-axis parasitic drag, N per (m/s)^2: the force is -c |v_air| v_air per axis. None = none.
+    quadratic_drag_n_per_m2_s2: np.ndarray | None = None
 
     @property
     def n(self) -> int:
@@ -106,4 +108,7 @@ class PerFlightTerms:
             turbulence_sigma_w_m_s=col("turbulence_sigma_w_m_s"),
             noise_seeds=np.array([f["noise_seed"] for f in flights], dtype=np.uint64),
             flapping_nm_per_rad_s_m_s=np.array([flapping_coefficient(f, vehicle) for f in flights]),
+            quadratic_drag_n_per_m2_s2=np.array(
+                [np.asarray(f.values.get("quadratic_drag_n_per_m2_s2", np.zeros(3)), dtype=np.float64) for f in flights]
+            ),
         )
