@@ -66,10 +66,12 @@ CRITICAL for two or more propellers). A lower rate gives a higher threshold.
 
 Regime changes reset or hold the evidence (``RegimeTracker``): landing and
 take-off end a flight's evidence; windows containing an aggressive manoeuvre
-(tilt or body rate beyond the training envelope), a collective step (payload
-drop or pick-up) or battery sag add nothing, and a collective step or a sag
-also halves what was gathered before it (it was evidence about another
-vehicle state; a collective step also re-learns the baselines). A stopped
+(tilt or body rate beyond the training envelope) or a collective step (payload
+drop or pick-up) add nothing, and a collective step also halves what was
+gathered before it (evidence about another vehicle state) and re-learns the
+baselines. A battery sag does the same to the network's statistics only: it
+scales every rotor's speed for its command alike, which the omega^2 shares
+and the yaw balance (ratios) do not see. A stopped
 stream pauses the decision (evidence kept, nothing added, nothing announced)
 and says why; it is never frozen into an alert.
 
@@ -172,6 +174,7 @@ __all__ = [
 ]
 
 STATUSTEXT_MAX_CHARS = 50
+NETWORK_STATISTICS = ("absolute", "change")  # what a battery sag discounts (RegimeTracker.network_holding)
 MAV_SEVERITY_CRITICAL, MAV_SEVERITY_WARNING, MAV_SEVERITY_NOTICE = 2, 4, 5
 
 
@@ -309,15 +312,19 @@ class Decision:
             self._new_flight()
             return
         self.share.push(s.motor_rpm, s.vel_heading_m_s, s.accel_xy_frd_m_s2)
-        if event in ("collective_step", "battery_sag"):
+        if event == "collective_step":
             for v in self.S.values():
                 v *= 0.5  # gathered about another vehicle state: keep half; the hold stops new evidence
             self._last_window_t = None
-            if event == "collective_step":  # another mass: what the network says about it is learnt again
-                self._forget_baseline()
-                self.share.reset()
+            self._forget_baseline()  # another mass: what the network says about it is learnt again
+            self.share.reset()
             if self.trace is not None:
                 self.trace.append(("scale", 0.5))
+        elif event == "battery_sag":  # the network's statistics only (RegimeTracker.network_holding)
+            for k in NETWORK_STATISTICS:
+                self.S[k] *= 0.5
+            if self.trace is not None:
+                self.trace.append(("scale", {k: 0.5 for k in NETWORK_STATISTICS}))
 
     def pause(self, reason: str) -> None:
         """A stream stopped: keep the statistics, add nothing until evidence flows again (``resume``)."""
@@ -340,15 +347,19 @@ class Decision:
         self._last_p = np.asarray(ev.fault_probability, dtype=np.float64)
         # Evidence per independent sample (one share-averaging span), spread over the seconds this window covers.
         phys = self.share.llr(dt, quiet=not self.S["physics"].any(), yaw_quiet=not self.S["pair"].any())
-        inc = {"absolute": llr * dt}
-        if self.baseline is None:
-            self._baseline_llr.append(llr)
-            self._baseline_s += dt
-            if self._baseline_s >= BASELINE_S:
-                self.baseline = np.maximum(np.median(np.stack(self._baseline_llr), axis=0), 0.0)
-                self._baseline_llr = []
+        inc = {}
+        if self.regime.network_holding:  # a battery sag: the network's evidence waits, the shares' does not
+            self.held_windows += 1
         else:
-            inc["change"] = (llr - self.baseline) * dt
+            inc["absolute"] = llr * dt
+            if self.baseline is None:
+                self._baseline_llr.append(llr)
+                self._baseline_s += dt
+                if self._baseline_s >= BASELINE_S:
+                    self.baseline = np.maximum(np.median(np.stack(self._baseline_llr), axis=0), 0.0)
+                    self._baseline_llr = []
+            else:
+                inc["change"] = (llr - self.baseline) * dt
         if phys is not None:
             inc["physics"] = phys * (dt / self.share.average_s)
             ccw, cw = self.share.yaw_llr * (dt / YAW_AVERAGE_S)  # one independent sample per YAW_AVERAGE_S

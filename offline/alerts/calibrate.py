@@ -48,6 +48,11 @@ CONFIDENCE = 0.95  # the quantile of the draws' thresholds the decision takes (m
 H_GRID = np.geomspace(0.05, 500.0, 100)
 
 
+def _factor(scale, statistic: str) -> float:
+    """A trace's ("scale", factor) applies to every statistic; ("scale", {statistic: factor}) to those named."""
+    return float(scale.get(statistic, 1.0)) if isinstance(scale, dict) else float(scale)
+
+
 def flight_peaks(traces: list[list], statistic: str) -> np.ndarray:
     """(n_flights,) the highest value the statistic reaches (any propeller) on each trace."""
     peaks = np.zeros(len(traces))
@@ -55,7 +60,7 @@ def flight_peaks(traces: list[list], statistic: str) -> np.ndarray:
         s = np.zeros(4)
         for op, v in trace:
             if op == "scale":
-                s *= v
+                s *= _factor(v, statistic)
             elif statistic in v:
                 s = np.maximum(0.0, s + v[statistic])
                 peaks[k] = max(peaks[k], float(s.max()))
@@ -74,7 +79,7 @@ def flight_crossing_counts(traces: list[list], h_grid: np.ndarray, statistic: st
         s = np.zeros((len(h_grid), 4))
         for op, v in trace:
             if op == "scale":
-                s *= v
+                s *= _factor(v, statistic)
                 continue
             if statistic not in v:
                 continue
