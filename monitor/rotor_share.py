@@ -335,13 +335,12 @@ class RotorShare:
         # alert naming a healthy propeller, 19 with one variance; docs/ALERTS.md).
         inv_s = np.full(2, 1.0 / (self._r + float(var.max())))
         self._update_line(trims, v, dt_s, learn=quiet)
+        k = min(dt_s / SHARE_BASELINE_TAU_S, 1.0) if dt_s > 0 else 0.0  # the former exponential average's gain
         if quiet and self._wording_b is not None:
             # the wording's intercept: the former exponential average of the trims less the plane's slopes
-            k_w = min(dt_s / SHARE_BASELINE_TAU_S, 1.0) if dt_s > 0 else 0.0
-            self._wording_b += k_w * (trims - self._slopes_at(v) - self._wording_b)
+            self._wording_b += k * (trims - self._slopes_at(v) - self._wording_b)
         if quiet:
             self.baseline = _U @ np.array([self._th[0][0], self._th[1][0]])
-        k = min(dt_s / SHARE_BASELINE_TAU_S, 1.0) if dt_s > 0 else 0.0
         if self._yn >= self.yaw_window:
             dy = float(self._yring.sum() / self.yaw_window) - self.yaw_baseline
             if quiet if yaw_quiet is None else yaw_quiet:

@@ -16,6 +16,7 @@ from test_daemon_helpers import synth_flight, toy_model
 from test_daemon_pipeline import parse_all, run_pipeline
 from test_daemon_velocity import (
     BOOT0_S,
+    bad_velocity,
     check_context_is_optional,
     flight_s,
     requested_rates,
@@ -95,17 +96,19 @@ def test_without_an_imu_stream_the_specific_force_is_none_and_the_classifier_ste
     assert p.stats["imu_late"] == 0
 
 
-def test_nan_absurd_and_frozen_imu_data_is_ignored_and_counted_never_a_pause(toy):
-    def accel(t):
-        if 3.0 <= t < 5.0:
-            return (math.nan, 0.2, -9.8)
-        if 5.0 <= t < 7.0:
-            return (170.0 + math.sin(t), 0.2, -9.8)  # beyond the 16 g range
-        if 7.0 <= t < 10.0:
-            return (0.3, -0.2, -9.8)  # stuck: bit-identical from 7 s, frozen after plausible.frozen_s (1 s)
-        return (0.3 + 0.2 * math.sin(40.0 * t), -0.2, -9.8)
+def bad_accel(t):
+    """The bad-context flight's accelerometer (``run_bad_context_flight``'s spans): NaN, absurd, stuck, good."""
+    if 3.0 <= t < 5.0:
+        return (math.nan, 0.2, -9.8)
+    if 5.0 <= t < 7.0:
+        return (170.0 + math.sin(t), 0.2, -9.8)  # beyond the 16 g range
+    if 7.0 <= t < 10.0:
+        return (0.3, -0.2, -9.8)  # stuck: bit-identical from 7 s, frozen after plausible.frozen_s (1 s)
+    return (0.3 + 0.2 * math.sin(40.0 * t), -0.2, -9.8)
 
-    p = run_bad_context_flight(toy, "accel_xy_frd_m_s2", imu_hz=50.0, accel_of_t=accel)
+
+def test_nan_absurd_and_frozen_imu_data_is_ignored_and_counted_never_a_pause(toy):
+    p = run_bad_context_flight(toy, "accel_xy_frd_m_s2", imu_hz=50.0, accel_of_t=bad_accel)
     dropped = p.plausible.dropped
     assert dropped["imu: not finite"] >= 95 and dropped["imu: beyond 160 m/s^2"] >= 95, dropped
     assert dropped["imu: frozen"] >= 95, dropped
@@ -214,25 +217,7 @@ def test_diagnose_ignores_the_context_samples_the_daemon_ignores(toy, tmp_path):
 
     from monitor.logs import read_log
 
-    def vel(t):
-        if 3.0 <= t < 5.0:
-            return (math.nan, math.nan, math.nan)
-        if 5.0 <= t < 7.0:
-            return (80.0, 0.5 * math.sin(t), 0.0)  # a diverged estimate
-        if 7.0 <= t < 10.0:
-            return (1.0, 2.0, 0.0)  # stuck from 7 s: frozen after 1 s
-        return (1.0 + 0.3 * math.sin(t), 2.0, 0.0)
-
-    def accel(t):
-        if 3.0 <= t < 5.0:
-            return (math.nan, 0.2, -9.8)
-        if 5.0 <= t < 7.0:
-            return (170.0 + math.sin(t), 0.2, -9.8)  # beyond the 16 g range
-        if 7.0 <= t < 10.0:
-            return (0.3, -0.2, -9.8)
-        return (0.3 + 0.2 * math.sin(40.0 * t), -0.2, -9.8)
-
-    frames = synth_flight(13.0, faulty=(3,), seed=4, pos_hz=30.0, vel_of_t=vel, imu_hz=50.0, accel_of_t=accel)
+    frames = synth_flight(13.0, faulty=(3,), seed=4, pos_hz=30.0, vel_of_t=bad_velocity, imu_hz=50.0, accel_of_t=bad_accel)
     _, steps = run_pipeline(toy, parse_all(frames))
     table = read_log(write_tlog(tmp_path / "bad.tlog", frames))
     assert any("velocity samples ignored as implausible" in w and "beyond 60 m/s" in w for w in table.warnings)

@@ -133,17 +133,19 @@ def run_bad_context_flight(toy, field: str, **stream):
     return p
 
 
-def test_nan_absurd_and_frozen_velocity_is_ignored_and_counted_never_a_pause(toy):
-    def vel(t):
-        if 3.0 <= t < 5.0:
-            return (math.nan, math.nan, math.nan)
-        if 5.0 <= t < 7.0:
-            return (80.0, 0.5 * math.sin(t), 0.0)  # 80 m/s: a diverged estimate
-        if 7.0 <= t < 10.0:
-            return (1.0, 2.0, 0.0)  # stuck: bit-identical from 7 s, frozen after plausible.frozen_s (1 s)
-        return (1.0 + 0.3 * math.sin(t), 2.0, 0.0)
+def bad_velocity(t):
+    """The bad-context flight's velocity (``run_bad_context_flight``'s spans): NaN, absurd, stuck, good."""
+    if 3.0 <= t < 5.0:
+        return (math.nan, math.nan, math.nan)
+    if 5.0 <= t < 7.0:
+        return (80.0, 0.5 * math.sin(t), 0.0)  # 80 m/s: a diverged estimate
+    if 7.0 <= t < 10.0:
+        return (1.0, 2.0, 0.0)  # stuck: bit-identical from 7 s, frozen after plausible.frozen_s (1 s)
+    return (1.0 + 0.3 * math.sin(t), 2.0, 0.0)
 
-    p = run_bad_context_flight(toy, "vel_heading_m_s", pos_hz=30.0, vel_of_t=vel)
+
+def test_nan_absurd_and_frozen_velocity_is_ignored_and_counted_never_a_pause(toy):
+    p = run_bad_context_flight(toy, "vel_heading_m_s", pos_hz=30.0, vel_of_t=bad_velocity)
     dropped = p.plausible.dropped
     assert dropped["velocity: not finite"] >= 55 and dropped["velocity: beyond 60 m/s"] >= 55, dropped
     assert dropped["velocity: frozen"] >= 55, dropped
