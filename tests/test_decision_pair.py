@@ -233,6 +233,7 @@ def test_evaluation_scores_sets_against_the_truth():
     row = summarise({"healthy": [[]], "onset": alerts}, [flight(())], onset)
     assert row["pair_onsets"] == 2 and row["pair_alert_contains_truth"] == 0.5  # 1+2 named; 1+3 only overlapped
     assert row["pair_alert_overlaps_truth"] == 1.0
+    assert (row["pair_alerted"], row["pair_contains_truth_of_alerted"]) == (2, 0.5)
     assert row["single_onsets"] == 2 and row["single_detected"] == 0.5  # "1 or 1+2" calls 1; "1+2 or 3+4" not 4
     assert row["wrong_propeller_alerts"] == 1 and row["set_alerts"] == 4
     # apart: same-spin (1+2, named) and adjacent (1+3, not); both lose 10 %, inside the 5-20 %
@@ -242,4 +243,5 @@ def test_evaluation_scores_sets_against_the_truth():
     small = [flight((1, 2), loss=0.04), flight((1, 3))]  # a pair with a propeller below 5 % is scored, and apart
     row = summarise({"healthy": [[]], "onset": [[pair_only], []]}, [flight(())], small)
     assert row["pair_alert_contains_truth"] == 0.5 and row["pair_onsets_each_5pct"] == 1
+    assert (row["pair_alerted"], row["pair_contains_truth_of_alerted"]) == (1, 1.0)  # the silent pair is not alerted
     assert row["pair_contains_truth_each_5pct"] == 0.0

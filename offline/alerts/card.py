@@ -32,6 +32,7 @@ COLUMNS = (
     "alerts before onset",
     "pairs: alert overlaps truth",
     "pairs: alert or its set contains truth",
+    "pairs alerted: of those, contains truth",
     "pairs, each >= 5 %: contains truth (same-spin / adjacent, all losses)",
     "set alerts after onset",
 )
@@ -63,6 +64,7 @@ def row_cells(sim: str, name: str, v: dict) -> tuple[str, ...]:
         f"{v['alerts_before_onset']}",
         _pct(v["pair_alert_overlaps_truth"], v["pair_onsets"]),
         _pct(v.get("pair_alert_contains_truth"), v["pair_onsets"]),
+        _pct(v.get("pair_contains_truth_of_alerted"), v.get("pair_alerted")),
         f"{_pct(v.get('pair_contains_truth_each_5pct'), v.get('pair_onsets_each_5pct'))} "
         f"({_pct(v.get('pair_contains_truth_same_spin'), v.get('pair_onsets_same_spin'))} / "
         f"{_pct(v.get('pair_contains_truth_adjacent'), v.get('pair_onsets_adjacent'))})",

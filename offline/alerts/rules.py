@@ -120,7 +120,9 @@ def summarise(rule_alerts: dict[str, list], healthy: list[AlertFlight], onset: l
     fault alert after the onset names a propeller of the pair; ``contains`` (issue 13's done-when), the alert
     or one of its sets contains both; ``contains`` again over the pairs whose propellers each lose at least
     ``MIN_PAIR_LOSS`` (the issue's 5-20 %; all where a flight does not know its losses), over same-spin diagonal
-    pairs (1+2, 3+4: seen only in the yaw balance) and over adjacent ones.
+    pairs (1+2, 3+4: seen only in the yaw balance) and over adjacent ones. ``pair_alerted``: the pair flights with
+    a fault alert after the onset; ``pair_contains_truth_of_alerted``: of those, the share whose alert (or a set
+    of it) contains the pair, i.e. what a pilot told of a fault can trust; the silent rest is in ``contains``.
     """
     h_alerts = [[_with_sets(a) for a in al] for al in rule_alerts["healthy"]]
     o_alerts = [[_with_sets(a) for a in al] for al in rule_alerts["onset"]]
@@ -130,6 +132,7 @@ def summarise(rule_alerts: dict[str, list], healthy: list[AlertFlight], onset: l
     lat, hit, wrong, pair_ok, n_single, n_pair, early = [], 0, 0, 0, 0, 0, 0
     n_all, hit_all, wrong_suspect, pair_contains, set_alerts = 0, 0, 0, 0, 0
     pair_by = {"each_5pct": [0, 0], "same_spin": [0, 0], "adjacent": [0, 0]}  # [flights, contains truth]
+    pair_alerted, pair_alerted_contains = 0, 0
     for f, al in zip(onset, o_alerts):
         truth = set(f.truth)
         faults = [(t, p, sets) for t, lvl, p, sets in al if lvl == "fault"]
@@ -162,6 +165,9 @@ def summarise(rule_alerts: dict[str, list], healthy: list[AlertFlight], onset: l
                 pair_ok += 1
             contains = any(t >= f.onset_s and any(truth <= set(s) for s in (p, *sets)) for t, p, sets in faults)
             pair_contains += contains
+            if after:
+                pair_alerted += 1
+                pair_alerted_contains += contains
             groups = ["same_spin" if truth in SAME_SPIN else "adjacent"]
             if not f.thrust_loss or min(f.thrust_loss) >= MIN_PAIR_LOSS:  # unknown losses: the set's own range
                 groups.append("each_5pct")
@@ -188,6 +194,8 @@ def summarise(rule_alerts: dict[str, list], healthy: list[AlertFlight], onset: l
         "pair_onsets": n_pair,
         "pair_alert_overlaps_truth": round(pair_ok / n_pair, 4) if n_pair else None,
         "pair_alert_contains_truth": round(pair_contains / n_pair, 4) if n_pair else None,
+        "pair_alerted": pair_alerted,
+        "pair_contains_truth_of_alerted": round(pair_alerted_contains / pair_alerted, 4) if pair_alerted else None,
         "set_alerts": set_alerts,
         **{f"pair_onsets_{g}": n for g, (n, _) in pair_by.items()},
         **{f"pair_contains_truth_{g}": round(k / n, 4) if n else None for g, (n, k) in pair_by.items()},
