@@ -40,11 +40,12 @@ def main(argv=None) -> int:
     p.add_argument("--cache", default="", help="the evaluation's flight cache (offline.alerts.evaluate --cache)")
     p.add_argument("--seed", type=int, default=202, help="the pair set's seed (the evaluation's: its --seed + 2)")
     p.add_argument("--flights", type=int, default=50)
+    p.add_argument("--duration-s", type=float, default=80.0, help="flight length (the evaluation's: 80 s)")
     args = p.parse_args(argv)
     model = REPO_ROOT / "models" / "classifier.onnx"
     vehicle = load_vehicle(REPO_ROOT / "models" / "vehicle.yaml")
     clf = Classifier(str(model))
-    fs = FlightSet("pair", n_flights=args.flights, seed=args.seed, physics="randomised")
+    fs = FlightSet("pair", n_flights=args.flights, seed=args.seed, physics="randomised", duration_s=args.duration_s)
     flights = cached(args.cache, set_key(fs, file_sha256(model)), lambda: simulate_set(vehicle, fs, clf, log=print))
     draws = onset_draws(fs)
     run = decision_rule(DecisionConfig())
@@ -60,7 +61,7 @@ def main(argv=None) -> int:
                 hit = t - f.onset_s
                 break
         same_spin = set(truth) in ({1, 2}, {3, 4})
-        rows.append((f.name, truth, f.thrust_loss, float(np.mean(g)), same_spin, hit, 80.0 - f.onset_s))
+        rows.append((f.name, truth, f.thrust_loss, float(np.mean(g)), same_spin, hit, args.duration_s - f.onset_s))
     print("flight | pair | thrust loss | g (yaw shift) | fault containing the pair, s after onset | flight left, s")
     for name, truth, loss, g, ss, hit, left in rows:
         if ss:
