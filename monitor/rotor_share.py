@@ -102,6 +102,16 @@ NOVEL_DRAG_SD = DRAG_SLOPE_PRIOR_SD
 BASELINE_PRIOR_VAR = 1.0  # the intercept before any window (diffuse)
 
 
+def _floats(x) -> list[float]:
+    """A short vector as Python floats (the plane's filter runs in floats: numpy's small-array calls cost more)."""
+    return x.tolist() if isinstance(x, np.ndarray) else list(x)
+
+
+def _p_times_h(P: list[list[float]], v: float, f: float) -> list[float]:
+    """P h for a 3 x 3 covariance and the regressor h = (1, v, f)."""
+    return [P[i][0] + P[i][1] * v + P[i][2] * f for i in range(3)]
+
+
 class RotorShare:
     """Window-mean share of omega^2 per rotor against the flight's own baseline: thrust-loss evidence.
 
@@ -183,6 +193,10 @@ class RotorShare:
         """(2, 3) the plane per axis (pitch, roll): (b, k_v, k_a)."""
         return np.array(self._th)
 
+    def _intercepts(self) -> np.ndarray:
+        """(2,) the plane's (pitch, roll) intercepts."""
+        return np.array([self._th[0][0], self._th[1][0]])
+
     def reset(self) -> None:
         self._ring[:] = np.nan
         self._vring[:] = np.nan
@@ -236,14 +250,13 @@ class RotorShare:
     def line(self, regressors: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The baseline's (pitch, roll) trims at these (v_forward, v_right, f_x, f_y) and their variances (what the
         plane does not know there)."""
-        r = regressors.tolist() if isinstance(regressors, np.ndarray) else list(regressors)
+        r = _floats(regressors)
         pred, var = [0.0, 0.0], [0.0, 0.0]
         for a in range(2):
             v, f = r[a], r[2 + a]
             b, kv, ka = self._th[a]
             pred[a] = b + kv * v + ka * f
-            P = self._P[a]
-            ph = [P[i][0] + P[i][1] * v + P[i][2] * f for i in range(3)]
+            ph = _p_times_h(self._P[a], v, f)
             var[a] = ph[0] + ph[1] * v + ph[2] * f
             box = self._seen[a]
             if box is not None:  # beyond what it was learnt on, the plane is a guess: a slope's prior per unit beyond
@@ -262,12 +275,12 @@ class RotorShare:
         if not learn:
             return
         r = self._r * self.window  # overlapping windows: one independent sample per ``window`` of them
-        x = regressors.tolist() if isinstance(regressors, np.ndarray) else list(regressors)
-        y = trims.tolist() if isinstance(trims, np.ndarray) else list(trims)
+        x = _floats(regressors)
+        y = _floats(trims)
         for a in range(2):
             h = (1.0, x[a], x[2 + a])
             P, th = self._P[a], self._th[a]
-            ph = [P[i][0] + P[i][1] * h[1] + P[i][2] * h[2] for i in range(3)]
+            ph = _p_times_h(P, h[1], h[2])
             s = ph[0] + ph[1] * h[1] + ph[2] * h[2] + r
             gain = [p / s for p in ph]
             innov = y[a] - (th[0] + th[1] * h[1] + th[2] * h[2])
@@ -284,7 +297,7 @@ class RotorShare:
 
     def _slopes_at(self, regressors: np.ndarray) -> np.ndarray:
         """(pitch, roll) the plane's slopes give at these regressors (the intercept left out)."""
-        r = regressors.tolist() if isinstance(regressors, np.ndarray) else list(regressors)
+        r = _floats(regressors)
         return np.array([self._th[a][1] * r[a] + self._th[a][2] * r[2 + a] for a in range(2)])
 
     def yaw_free_rise(self) -> np.ndarray | None:
@@ -321,7 +334,7 @@ class RotorShare:
             # here, and a baseline finalised on the half second after a hold took a transient for the airframe's
             # trim (session 7: a false rotor-2 fault 14 s before an onset, from 10 windows after a 7-s hold).
             if self._base_s >= BASELINE_S and len(self._base) >= 3:
-                self._wording_b = np.array([self._th[0][0], self._th[1][0]])
+                self._wording_b = self._intercepts()
                 self.baseline = _U @ self._wording_b
                 # The yaw balance's own mean over the last YAW_AVERAGE_S (its 2-s means scatter by 0.05)
                 self.yaw_baseline = float(np.mean(self._yring if self._yn >= self.yaw_window else np.asarray(self._base)))
@@ -340,7 +353,7 @@ class RotorShare:
             # the wording's intercept: the former exponential average of the trims less the plane's slopes
             self._wording_b += k * (trims - self._slopes_at(v) - self._wording_b)
         if quiet:
-            self.baseline = _U @ np.array([self._th[0][0], self._th[1][0]])
+            self.baseline = _U @ self._intercepts()
         if self._yn >= self.yaw_window:
             dy = float(self._yring.sum() / self.yaw_window) - self.yaw_baseline
             if quiet if yaw_quiet is None else yaw_quiet:
