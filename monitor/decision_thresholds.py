@@ -19,7 +19,7 @@ from monitor.decision_config import DecisionConfig
 from monitor.errors import ConfigError
 from monitor.labels import N_PROPS
 from monitor.resources import shipped
-from monitor.rotor_share import SAME_SPIN_PAIRS, SHARE_AVERAGE_S, SHARE_SIGMA, YAW_AVERAGE_S, YAW_SIGMA
+from monitor.rotor_share import PLANE_CUT, SAME_SPIN_PAIRS, SHARE_AVERAGE_S, SHARE_SIGMA, YAW_AVERAGE_S, YAW_SIGMA
 
 SECONDS_PER_HOUR = 3600.0
 # The checkout's models/decision-calibration.json, or the installed package data (monitor/resources.py).
@@ -207,10 +207,11 @@ def _thresholds(cfg: DecisionConfig, window_s: float, rates: dict, model_sha256,
 def physics_statistic(cfg: DecisionConfig) -> dict:
     """What a physics-statistic calibration holds for: its thresholds mean nothing for another reference or noise model."""
     return {
-        "form": "share-cusum-v3",  # v3: the baseline spans BASELINE_S of evidence windows, not of flight
+        "form": "share-cusum-v4",  # v3: the baseline spans BASELINE_S of evidence windows; v4: its plane learns trimmed means
         "min_thrust_loss": cfg.min_thrust_loss,
         "share_sigma": SHARE_SIGMA,
         "share_average_s": SHARE_AVERAGE_S,
+        "plane_cut": PLANE_CUT,
     }
 
 
