@@ -348,7 +348,8 @@ class RotorShare:
             return None
         m = self._ring.sum(axis=0) / self.window  # the ring's mean, bit for bit (see push)
         trims = _AXES @ m  # (pitch, roll): the collective and yaw directions are orthogonal to both
-        fit = span_mean(self._ring @ _AXES.T, self.plane_cut) if self.plane_cut > 0 else trims  # what the plane learns
+        learns = self.baseline is None or quiet
+        fit = span_mean(self._ring @ _AXES.T, self.plane_cut) if learns and self.plane_cut > 0 else trims  # the plane's
         v = self._mean_regressors(self._vring)
         y = float(_Y @ m)  # the baseline's share of the yaw balance: over BASELINE_S like the shares'
         if self.baseline is None:

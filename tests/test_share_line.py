@@ -139,4 +139,3 @@ def test_a_gust_beyond_what_the_plane_was_learnt_on_is_heard_less_not_read_as_a_
     monkeypatch.setattr(rs, "NOVEL_FLAP_SD", 0.0)
     monkeypatch.setattr(rs, "NOVEL_DRAG_SD", 0.0)
     assert any(a.level == "fault" for a in _gust_beyond_what_was_learnt())
-
