@@ -19,15 +19,11 @@ BASELINE_S = 10.0  # classified seconds that define the airframe's own baseline 
 SAME_SPIN_PAIRS = ((1, 2), (3, 4))  # PX4 quad-X: 1, 2 CCW (diagonal), 3, 4 CW (diagonal)
 
 
-def span_mean(x: np.ndarray, cut: float) -> np.ndarray:
-    """The mean over axis 0 of ``x`` with the ``cut`` fraction of its values at each end dropped (per column):
-    0 is the mean, 0.5 the median (what the baseline's plane learns each span's trims as: PLANE_CUT)."""
+def trimmed_mean(x: np.ndarray, cut: float) -> np.ndarray:
+    """The mean over axis 0 of ``x`` with ``int(cut * len(x))`` of its values dropped at each end, per column
+    (scipy.stats.trim_mean's, without scipy onboard): what the baseline's plane learns each span's trims as."""
     n = x.shape[0]
-    if cut >= 0.5:
-        return np.median(x, axis=0)
     k = int(cut * n)
-    if k == 0:
-        return x.sum(axis=0) / n
     return np.sort(x, axis=0)[k : n - k].sum(axis=0) / (n - 2 * k)
 
 
@@ -60,7 +56,7 @@ SHARE_BASELINE_TAU_S = 60.0  # slow drifts (battery sag, motor warm-up) enter th
 # latency of 7.7 s at >= 8 % loss, 2 s 4.2 s with the fault threshold 1.5x the highest healthy value, 1 s 3.8 s
 # at only 1.1x), never on the evaluation-only simulator.
 SHARE_AVERAGE_S = 2.0
-# What the baseline's plane learns from: each span's trims as a 10 %-trimmed mean (``span_mean``), not the mean.
+# What the baseline's plane learns from: each span's trims as a 10 %-trimmed mean (``trimmed_mean``), not the mean.
 # 20-Hz snapshots of a 200-Hz motor command can catch one controller tick of a transient: evalsim's one false FAULT
 # in 10 healthy hours (seed 300, healthy_0019, session 14) was a single snapshot of a sharp stop (rotor 2 at
 # 1432 RPM, the others 2463-4790, held for two samples) inside the first 10 s: it put a pitch trim of -0.07 into
@@ -174,7 +170,6 @@ class RotorShare:
         self.rate_hz = rate_hz
         self.delta = 0.5 * min_thrust_loss
         self.sigma = sigma
-        self.plane_cut = PLANE_CUT
         self._ring = np.full((self.window, N_PROPS), np.nan)
         # (v_forward, v_right, f_x, f_y): heading-frame velocity and body specific force; NaN where not streamed
         self._vring = np.full((self.window, 4), np.nan)
@@ -349,7 +344,7 @@ class RotorShare:
         m = self._ring.sum(axis=0) / self.window  # the ring's mean, bit for bit (see push)
         trims = _AXES @ m  # (pitch, roll): the collective and yaw directions are orthogonal to both
         learns = self.baseline is None or quiet
-        fit = span_mean(self._ring @ _AXES.T, self.plane_cut) if learns and self.plane_cut > 0 else trims  # the plane's
+        fit = trimmed_mean(self._ring @ _AXES.T, PLANE_CUT) if learns and PLANE_CUT > 0 else trims  # the plane's
         v = self._mean_regressors(self._vring)
         y = float(_Y @ m)  # the baseline's share of the yaw balance: over BASELINE_S like the shares'
         if self.baseline is None:
