@@ -126,6 +126,7 @@ from monitor.rotor_share import (
     SHARE_AVERAGE_S,
     SHARE_SIGMA,
     YAW_AVERAGE_S,
+    YAW_FREE_GAP,
     YAW_FREE_RISE,
     YAW_SIGMA,
     RotorShare,
@@ -147,6 +148,7 @@ __all__ = [
     "STATISTICS",
     "STATUSTEXT_MAX_CHARS",
     "YAW_AVERAGE_S",
+    "YAW_FREE_GAP",
     "YAW_FREE_RISE",
     "YAW_SIGMA",
     "Announcement",
@@ -488,13 +490,16 @@ class Decision:
     def _yaw_alone_sets(self) -> list[tuple[int, ...]]:
         """What the yaw balance alone names: both same-spin pairs (by the shift's sign) and the single rotor whose
         yaw-free share rose most (a small loss with a large torque change), first when its rise is beyond what
-        healthy flights reach (``YAW_FREE_RISE``)."""
+        healthy flights reach (``YAW_FREE_RISE``), then every other rotor whose rise is within ``YAW_FREE_GAP`` of
+        it (the healthy spread of two rotors' rises: the evidence cannot tell them apart)."""
         pairs = self._pairs_by_sign()
         rise = self.share.yaw_free_rise()
         if rise is None or not np.isfinite(rise).all():
             return pairs
-        i = int(np.argmax(rise))
-        return [(i + 1,), *pairs] if rise[i] >= YAW_FREE_RISE else [*pairs, (i + 1,)]
+        order = [int(j) for j in np.argsort(-rise, kind="stable")]
+        i = order[0]
+        near = [(j + 1,) for j in order[1:] if rise[j] >= rise[i] - YAW_FREE_GAP]
+        return [(i + 1,), *pairs, *near] if rise[i] >= YAW_FREE_RISE else [*pairs, (i + 1,), *near]
 
     def hypothesis_sets(self, level: str = "fault", now: list[str] | None = None) -> list[tuple[int, ...]]:
         """Candidate faulty sets, most likely first: the window's hypotheses when given, else from the levels.
@@ -502,7 +507,8 @@ class Decision:
         The pair statistic (yaw balance) alone, with no propeller at ``level``, is worded from physics whatever
         the window's hypotheses say (``_yaw_alone_sets``): both same-spin pairs (``1+2 or 3+4``, the one the yaw
         shift fits with drag torque scaling with thrust first) and the single whose yaw-free share rose most
-        (``1 or 1+2 or 3+4`` when that rise is beyond healthy, else ``1+2 or 3+4 or 1``).
+        (``1 or 1+2 or 3+4`` when that rise is beyond healthy, else ``1+2 or 3+4 or 1``), then the singles whose
+        rise is within ``YAW_FREE_GAP`` of its (``1+2 or 3+4 or 1 or 4``).
         Without hypotheses: the propellers at ``level``, widened by those at suspect level now (a same-spin
         partner that is only suspected makes ``1`` into ``1 or 1+2``). The pair statistic adds the
         same-spin pair of a single propeller (``1`` -> ``1 or 1+2``: the evidence cannot tell them apart).

@@ -27,6 +27,7 @@ from monitor.decision import (
     statustext,
     thresholds,
 )
+from offline.alerts.rules import _wrong
 
 RATE_HZ, WINDOW = 20.0, 100
 HOVER_RPM = 6500.0
@@ -61,13 +62,14 @@ def pair_loss(pair: tuple[int, int], f: float, c: float = 0.0) -> np.ndarray:
 
 
 def single_loss(rotor: int, f: float, c: float = 0.0) -> np.ndarray:
-    """Hover trim after rotor 1 or 3 loses thrust f: T_i = T_partner, the other pair equal, yaw balanced."""
+    """Hover trim after one rotor loses thrust f: T_i = T_partner, the other pair equal, yaw balanced."""
     g = 1.0 - (1.0 - f) * (1.0 + c)
     a = 1.0  # the damaged rotor
     partner = 1.0 - f  # same thrust as the damaged one
     other = (a * (1.0 - g) + partner) / 2.0  # the opposite-spin pair balances the yaw torque
     w2 = np.empty(4)
-    i, p = (0, 1) if rotor == 1 else (2, 3)
+    i = rotor - 1
+    p = i ^ 1  # its same-spin diagonal partner: 1 <-> 2, 3 <-> 4
     o = [k for k in range(4) if k not in (i, p)]
     w2[i], w2[p], w2[o] = a, partner, other
     return w2
@@ -82,10 +84,12 @@ def test_a_same_spin_pair_losing_thrust_raises_the_pair_not_a_single(pair, first
     faults = [a for a in out if a.level == "fault"]
     assert faults, [a.text for a in out]
     a = faults[0]
-    # both pairs first (the sign of the torque change is unmeasured), then the single a yaw shift alone may also be
-    # (a small loss with a large torque change), last: no rotor's yaw-free share rose beyond healthy
+    # both pairs first (the sign of the torque change is unmeasured), then the singles a yaw shift alone may also be
+    # (a small loss with a large torque change), last: no rotor's yaw-free share rose beyond healthy, and none
+    # rose more than the healthy spread of two rotors' rises above another (YAW_FREE_GAP), so all four are named
     assert a.text.startswith(first) and a.text.endswith("?") and len(a.text) <= STATUSTEXT_MAX_CHARS
-    assert a.sets[0] == pair and set(a.sets[:2]) == {(1, 2), (3, 4)} and len(a.sets) == 3 and len(a.sets[2]) == 1
+    assert a.sets[0] == pair and set(a.sets[:2]) == {(1, 2), (3, 4)}
+    assert sorted(a.sets[2:]) == [(1,), (2,), (3,), (4,)]
     assert 30.0 + YAW_AVERAGE_S / 2 < a.t_s < 75.0  # after the 10-s mean has moved, well within the flight
     # the yaw-free shares did not move: no single propeller is claimed
     assert d.level == ["none"] * 4 and d.pair_level == "fault"
@@ -140,9 +144,30 @@ def test_a_small_single_with_a_large_torque_change_is_named_first_when_the_yaw_b
     assert faults, [a.text for a in out]
     a = faults[0]
     assert d.level == ["none"] * 4 and d.pair_level == "fault"
-    assert a.sets[0] == (rotor,) and set(a.sets[1:]) == {(1, 2), (3, 4)}
+    assert a.sets[0] == (rotor,) and set(a.sets[1:3]) == {(1, 2), (3, 4)}
+    # after the pairs, the rotors whose rise is within YAW_FREE_GAP of the rotor's (less than f/2 of rise cannot
+    # set one rotor apart from the healthy spread of two rotors' rises): singles only, each once
+    assert all(len(s) == 1 for s in a.sets[3:]) and len(set(a.sets)) == len(a.sets)
     assert a.text.startswith(f"PROP {rotor} or ") and len(a.text) <= STATUSTEXT_MAX_CHARS
     assert d.verdict()["hypothesis_sets"][0] == [rotor]
+
+
+def test_a_yaw_alone_alert_names_every_single_its_rises_cannot_tell_apart():
+    # Our simulator, seed 601 (session 16): rotor 4 lost 3.2-3.3 % with a large torque change, the yaw balance
+    # alone raised a FAULT, and rotor 1's 10-s yaw-free rise was 0.003-0.008 above rotor 4's (a pitch trim the
+    # baseline had not caught up with): it was alerted "PROP 1 or 3+4 or 1+2?", no hypothesis within the truth.
+    # Here: rotor 4 loses 3.3 % (rise +f/2 = 0.0165 against its neighbours) with its torque per thrust up 29 %,
+    # and a pitch trim of 0.02 the baseline never saw (rotors 1 and 3 +0.01, 2 and 4 -0.01). Rotor 1's rise leads
+    # by 0.0035, within the healthy spread of two neighbours' rises (YAW_FREE_GAP): rotor 4 is named too.
+    d = analytic()
+    pitch = 0.02 * np.array([0.5, -0.5, 0.5, -0.5])
+    w2 = single_loss(4, 0.033, c=0.29) + pitch
+    out = fly(d, lambda t: np.ones(4) if t < 30.0 else w2, 120.0, seed=6)
+    faults = [a for a in out if a.level == "fault"]
+    assert faults and d.level == ["none"] * 4 and d.pair_level == "fault", [a.text for a in out]
+    a = faults[0]
+    assert (4,) in a.sets and (1,) in a.sets and set(a.sets[:2]) == {(1, 2), (3, 4)}
+    assert not _wrong(a.propellers, a.sets, {4}) and len(a.text) <= STATUSTEXT_MAX_CHARS
 
 
 def losses(f: dict[int, float]) -> np.ndarray:
