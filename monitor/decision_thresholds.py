@@ -18,6 +18,7 @@ import numpy as np
 from monitor.decision_config import DecisionConfig
 from monitor.errors import ConfigError
 from monitor.labels import N_PROPS
+from monitor.regime import COLLECTIVE_SHIFT_S
 from monitor.resources import shipped
 from monitor.rotor_share import PLANE_CUT, SAME_SPIN_PAIRS, SHARE_AVERAGE_S, SHARE_SIGMA, YAW_AVERAGE_S, YAW_SIGMA
 
@@ -207,18 +208,23 @@ def _thresholds(cfg: DecisionConfig, window_s: float, rates: dict, model_sha256,
 def physics_statistic(cfg: DecisionConfig) -> dict:
     """What a physics-statistic calibration holds for: its thresholds mean nothing for another reference or noise model."""
     return {
-        "form": "share-cusum-v4",  # v3: the baseline spans BASELINE_S of evidence windows; v4: its plane learns trimmed means
+        # v3: the baseline spans BASELINE_S of evidence windows; v4: its plane learns trimmed means; v5: windows are
+        # held while the collective RPM stands apart (monitor.regime.COLLECTIVE_SHIFT_S)
+        "form": "share-cusum-v5",
         "min_thrust_loss": cfg.min_thrust_loss,
         "share_sigma": SHARE_SIGMA,
         "share_average_s": SHARE_AVERAGE_S,
         "plane_cut": PLANE_CUT,
+        "collective_shift_s": COLLECTIVE_SHIFT_S,
     }
 
 
 def pair_statistic(cfg: DecisionConfig) -> dict:
     """What a pair-statistic calibration holds for (reference and noise model of the yaw balance)."""
     noise = {"yaw_sigma": YAW_SIGMA, "yaw_average_s": YAW_AVERAGE_S}
-    return {"form": "yaw-balance-cusum-v2", "min_thrust_loss": cfg.min_thrust_loss, **noise}  # v2: its baseline as the shares'
+    # v2: its baseline as the shares'; v3: held as the shares are while the collective RPM stands apart
+    form = {"form": "yaw-balance-cusum-v3", "min_thrust_loss": cfg.min_thrust_loss}
+    return {**form, **noise, "collective_shift_s": COLLECTIVE_SHIFT_S}
 
 
 def file_sha256(path: str | Path) -> str:
