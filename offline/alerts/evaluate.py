@@ -320,8 +320,9 @@ def _revision(checkout: str) -> str:
         return Path(checkout).name
 
 
-# The decision rule's parts (monitor/decision.py imports them), in import order; a checkout before the split has none.
-DECISION_PARTS = ("decision_config", "rotor_share", "decision_thresholds", "regime", "stream_evidence")
+# The decision rule's parts (monitor/decision.py imports them), each after what it imports (decision_thresholds
+# reads regime); a checkout before the split has none.
+DECISION_PARTS = ("decision_config", "rotor_share", "regime", "decision_thresholds", "stream_evidence")
 
 
 def _load(name: str, path: Path):
