@@ -508,7 +508,7 @@ class Decision:
         the window's hypotheses say (``_yaw_alone_sets``): both same-spin pairs (``1+2 or 3+4``, the one the yaw
         shift fits with drag torque scaling with thrust first) and the single whose yaw-free share rose most
         (``1 or 1+2 or 3+4`` when that rise is beyond healthy, else ``1+2 or 3+4 or 1``), then the singles whose
-        rise is within ``YAW_FREE_GAP`` of its (``1+2 or 3+4 or 1 or 4``).
+        rise is within ``YAW_FREE_GAP`` of that rotor's (``1+2 or 3+4 or 1 or 4``).
         Without hypotheses: the propellers at ``level``, widened by those at suspect level now (a same-spin
         partner that is only suspected makes ``1`` into ``1 or 1+2``). The pair statistic adds the
         same-spin pair of a single propeller (``1`` -> ``1 or 1+2``: the evidence cannot tell them apart).

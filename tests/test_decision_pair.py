@@ -158,7 +158,8 @@ def test_a_yaw_alone_alert_names_every_single_its_rises_cannot_tell_apart():
     # baseline had not caught up with): it was alerted "PROP 1 or 3+4 or 1+2?", no hypothesis within the truth.
     # Here: rotor 4 loses 3.3 % (rise +f/2 = 0.0165 against its neighbours) with its torque per thrust up 29 %,
     # and a pitch trim of 0.02 the baseline never saw (rotors 1 and 3 +0.01, 2 and 4 -0.01). Rotor 1's rise leads
-    # by 0.0035, within the healthy spread of two neighbours' rises (YAW_FREE_GAP): rotor 4 is named too.
+    # (0.01 against ~0.006, to first order), within the healthy spread of two neighbours' rises (YAW_FREE_GAP):
+    # rotor 4 is named too.
     d = analytic()
     pitch = 0.02 * np.array([0.5, -0.5, 0.5, -0.5])
     w2 = single_loss(4, 0.033, c=0.29) + pitch
