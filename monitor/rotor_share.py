@@ -95,10 +95,13 @@ YAW_FREE_RISE = 0.012
 # Which single a yaw-balance alert names is only as sure as the rises differ. A loss f moves its rotor's rise by
 # f/2 against its neighbours' (0.0165 at 3.3 %), and two neighbours' healthy 10-s rises differ by up to 0.033
 # (99 % quantile of the largest adjacent difference, the decision's own rise every 0.5 s over the 10 calibration
-# hours of seed 100, out/s16/rise_spread.py in session 16; 99.9 %: 0.069). So every rotor whose rise is within
+# hours of seed 100, out/s16/rise_spread.py in session 16) and 0.069 (99.9 %). So every rotor whose rise is within
 # YAW_FREE_GAP of the largest is a hypothesis too, after the pairs: two rotor-4 losses of 3.2-3.3 % on our
-# simulator (seed 601) were alerted "PROP 1 or 3+4 or 1+2?", rotor 1's rise 0.003-0.008 above rotor 4's.
-YAW_FREE_GAP = 0.033
+# simulator (seed 601) were alerted "PROP 1 or 3+4 or 1+2?", rotor 1's rise 0.003-0.008 above rotor 4's. The
+# 99.9 % quantile, not the 99 %: an alert is raised at one instant, and at speed, where the plane misfits, the
+# rises stray most: with 0.033 a 2.7 % rotor-4 loss (ours seed 201, 4 m/s, -2.3 m/s^2) still read rotor 1 0.036
+# above rotor 4. A yaw shift alone says "a same-spin pair or one propeller"; the rises only order the singles.
+YAW_FREE_GAP = 0.069
 # The trims follow the airspeed. Blade flapping tilts each disc back in edgewise flow (blowback) and the rotors
 # trim it: flying forward at airspeed u the front rotors' yaw-free share falls by t u, the rear ones' rises as much
 # (a_pitch = 2 t u), and a side flow does the same in roll. t is the airframe's own: 0 to ~0.025 per m/s (our
