@@ -68,7 +68,11 @@ def test_one_read_takes_every_waiting_datagram_in_order(udpin):
     assert link.drained
     assert [m.get_msgbuf() for m, _, _ in batch] == sent  # every datagram, in order, in one read
     assert all(received <= read for _, received, read in batch)
-    assert [r for _, r, _ in batch] == sorted(r for _, r, _ in batch)
+    # In arrival order, to within the conversion's jitter: each stamp is the kernel's realtime stamp moved onto
+    # perf_counter by reading both clocks at that datagram's read (link.py), two reads that differ by a fraction
+    # of a microsecond per datagram (once 0.4 us out of order, session 16's suite).
+    stamps = [r for _, r, _ in batch]
+    assert all(later >= earlier - 10e-6 for earlier, later in zip(stamps, stamps[1:])), stamps
 
 
 def test_a_read_is_bounded_and_the_rest_comes_next(udpin, monkeypatch):
