@@ -104,18 +104,13 @@ class RegimeTracker:
         if s.tilt_rad > self._tilt_max or s.rate_rad_s > self._rate_max:
             event = "aggressive"
         elif len(self._rpm) == 2 * self._median_n and self._n % self._check_every == 0:
-            rpm = list(self._rpm)
-            old, new = statistics.median(rpm[: self._median_n]), statistics.median(rpm[self._median_n :])
-            if old > 0 and abs(new - old) / old > c.collective_step_fraction:
+            if self._collective_moved(self._median_n):
                 event = "collective_step"
                 self._rpm.clear()  # measure the next step from the new level
-        if not event and len(self._rpm) >= self._median_n + self._shift_n:
-            rpm = list(self._rpm)[-(self._median_n + self._shift_n) :]
-            old, new = statistics.median(rpm[: self._median_n]), statistics.median(rpm[self._median_n :])
-            if old > 0 and abs(new - old) / old > c.collective_step_fraction:
-                self.hold_until_step = max(self.hold_until_step, self.step + 1)  # this step's window is held
-                self.shift_steps += 1
-                self.last_reason = "collective_shift"
+        if not event and len(self._rpm) >= self._median_n + self._shift_n and self._collective_moved(self._shift_n):
+            self.hold_until_step = max(self.hold_until_step, self.step + 1)  # this step's window is held
+            self.shift_steps += 1
+            self.last_reason = "collective_shift"
         if not event and len(self._volts) == self.window:
             v0, v1 = self._volts[0], self._volts[-1]
             if v0 > 0 and (v0 - v1) / v0 > c.battery_sag_fraction:
@@ -129,6 +124,13 @@ class RegimeTracker:
             else:
                 self.hold_until_step = self.step + self.window
         return event
+
+    def _collective_moved(self, n_new: int) -> bool:
+        """The median mean RPM of the last ``n_new`` steps against that of the COLLECTIVE_MEDIAN_S before them:
+        moved by more than alerts.collective_step_fraction?"""
+        rpm = list(self._rpm)[-(self._median_n + n_new) :]
+        old, new = statistics.median(rpm[: self._median_n]), statistics.median(rpm[self._median_n :])
+        return old > 0 and abs(new - old) / old > self.cfg.collective_step_fraction
 
     @property
     def holding(self) -> bool:
