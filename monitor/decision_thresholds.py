@@ -20,7 +20,15 @@ from monitor.errors import ConfigError
 from monitor.labels import N_PROPS
 from monitor.regime import COLLECTIVE_SHIFT_S
 from monitor.resources import shipped
-from monitor.rotor_share import PLANE_CUT, SAME_SPIN_PAIRS, SHARE_AVERAGE_S, SHARE_SIGMA, YAW_AVERAGE_S, YAW_SIGMA
+from monitor.rotor_share import (
+    FLAP_SLOPE_Q,
+    PLANE_CUT,
+    SAME_SPIN_PAIRS,
+    SHARE_AVERAGE_S,
+    SHARE_SIGMA,
+    YAW_AVERAGE_S,
+    YAW_SIGMA,
+)
 
 SECONDS_PER_HOUR = 3600.0
 # The checkout's models/decision-calibration.json, or the installed package data (monitor/resources.py).
@@ -209,13 +217,15 @@ def physics_statistic(cfg: DecisionConfig) -> dict:
     """What a physics-statistic calibration holds for: its thresholds mean nothing for another reference or noise model."""
     return {
         # v3: the baseline spans BASELINE_S of evidence windows; v4: its plane learns trimmed means; v5: windows are
-        # held while the collective RPM stands apart (monitor.regime.COLLECTIVE_SHIFT_S)
-        "form": "share-cusum-v5",
+        # held while the collective RPM stands apart (monitor.regime.COLLECTIVE_SHIFT_S); v6: the plane's slopes drift
+        # a tenth as fast (monitor.rotor_share.FLAP_SLOPE_Q)
+        "form": "share-cusum-v6",
         "min_thrust_loss": cfg.min_thrust_loss,
         "share_sigma": SHARE_SIGMA,
         "share_average_s": SHARE_AVERAGE_S,
         "plane_cut": PLANE_CUT,
         "collective_shift_s": COLLECTIVE_SHIFT_S,
+        "flap_slope_q_per_s": FLAP_SLOPE_Q,
     }
 
 

@@ -139,3 +139,42 @@ def test_a_gust_beyond_what_the_plane_was_learnt_on_is_heard_less_not_read_as_a_
     monkeypatch.setattr(rs, "NOVEL_FLAP_SD", 0.0)
     monkeypatch.setattr(rs, "NOVEL_DRAG_SD", 0.0)
     assert any(a.level == "fault" for a in _gust_beyond_what_was_learnt())
+
+
+def _cruise_with_drag(onset_s: float = math.inf, rotor: int = 2, loss: float = 0.08, duration_s: float = 120.0):
+    """Forward flight whose airspeed swings between 0 and 6 m/s for 90 s (the plane learns its flapping and drag
+    slopes: specific force -0.3 per s times the airspeed), then cruise at 5-6 m/s, inside what was learnt, with a
+    loss ``loss`` of ``rotor``'s thrust from ``onset_s``."""
+    d = Decision(DecisionConfig(), RATE_HZ, WINDOW, use_stored_calibration=False)
+    rng = np.random.default_rng(6)
+    out = []
+    for j in range(int(duration_s * RATE_HZ)):
+        t = (j + 1) / RATE_HZ
+        air = 3.0 - 3.0 * math.cos(2.0 * math.pi * t / 40.0) if t < 90.0 else 5.5 + 0.5 * math.sin(t / 3.0)
+        w2 = 1.0 + TRIM_PER_M_S * 2.0 * air * _PITCH
+        if t >= onset_s:
+            w2[rotor - 1] /= 1.0 - loss
+        rpm = HOVER_RPM * np.sqrt(w2) * (1.0 + 0.002 * rng.standard_normal(4))
+        f = np.array([-0.3 * air, 0.0]) + 0.05 * rng.standard_normal(2)
+        d.step(t, StepInputs(True, float(np.mean(rpm)), 0.05, 0.1, 15.5, rpm, np.array([air, 0.0]), f))
+        if j >= WINDOW - 1:
+            out += d.window_evidence(t, WindowEvidence(np.full(4, 0.01)))
+    return out
+
+
+def test_a_loss_at_a_speed_the_plane_has_learnt_keeps_its_weight_while_it_is_heard(monkeypatch):
+    """While evidence gathers the plane does not learn, and what it does not know grows by the slopes' drift
+    (FLAP_SLOPE_Q). At a speed and drag it has flown, an 8 % loss is a fault within 10 s (the issue's p95), named
+    alone; the same flight without the loss raises nothing."""
+    assert _cruise_with_drag() == []
+    out = _cruise_with_drag(onset_s=100.0)
+    faults = [a for a in out if a.level == "fault"]
+    assert faults and 100.0 < faults[0].t_s <= 110.0, [(a.t_s, a.text) for a in out]
+    assert all(a.propellers == (2,) for a in out), [(a.t_s, a.text) for a in out]
+    # With the slopes drifting ten times faster (sessions 12-16) the plane's doubt at 2 m/s^2 outgrows the loss's
+    # evidence within seconds of the onset: the same loss is heard later than 10 s. What made it quick.
+    import monitor.rotor_share as rs
+
+    monkeypatch.setattr(rs, "FLAP_SLOPE_Q", 10.0 * rs.FLAP_SLOPE_Q)
+    slow = [a for a in _cruise_with_drag(onset_s=100.0) if a.level == "fault"]
+    assert not slow or slow[0].t_s > 110.0, [(a.t_s, a.text) for a in slow]
