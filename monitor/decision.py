@@ -122,6 +122,7 @@ from monitor.regime import RegimeTracker, StepInputs
 from monitor.rotor_share import (
     BASELINE_S,
     LLR_CLIP,
+    QUIET_NATS,
     SAME_SPIN_PAIRS,
     SHARE_AVERAGE_S,
     SHARE_SIGMA,
@@ -348,7 +349,7 @@ class Decision:
         llr = window_llr(ev.fault_probability)
         self._last_p = np.asarray(ev.fault_probability, dtype=np.float64)
         # Evidence per independent sample (one share-averaging span), spread over the seconds this window covers.
-        phys = self.share.llr(dt, quiet=not self.S["physics"].any(), yaw_quiet=not self.S["pair"].any())
+        phys = self.share.llr(dt, quiet=not (self.S["physics"] > QUIET_NATS).any(), yaw_quiet=not self.S["pair"].any())
         inc = {}
         if self.regime.network_holding:  # a battery sag: the network's evidence waits, the shares' does not
             self.held_windows += 1

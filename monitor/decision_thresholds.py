@@ -23,6 +23,7 @@ from monitor.resources import shipped
 from monitor.rotor_share import (
     FLAP_SLOPE_Q,
     PLANE_CUT,
+    QUIET_NATS,
     SAME_SPIN_PAIRS,
     SHARE_AVERAGE_S,
     SHARE_SIGMA,
@@ -218,14 +219,15 @@ def physics_statistic(cfg: DecisionConfig) -> dict:
     return {
         # v3: the baseline spans BASELINE_S of evidence windows; v4: its plane learns trimmed means; v5: windows are
         # held while the collective RPM stands apart (monitor.regime.COLLECTIVE_SHIFT_S); v6: the plane's slopes drift
-        # a tenth as fast (monitor.rotor_share.FLAP_SLOPE_Q)
-        "form": "share-cusum-v6",
+        # a tenth as fast (monitor.rotor_share.FLAP_SLOPE_Q); v7: it learns while every statistic is below QUIET_NATS
+        "form": "share-cusum-v7",
         "min_thrust_loss": cfg.min_thrust_loss,
         "share_sigma": SHARE_SIGMA,
         "share_average_s": SHARE_AVERAGE_S,
         "plane_cut": PLANE_CUT,
         "collective_shift_s": COLLECTIVE_SHIFT_S,
         "flap_slope_q_per_s": FLAP_SLOPE_Q,
+        "quiet_nats": QUIET_NATS,
     }
 
 

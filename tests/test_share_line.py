@@ -178,3 +178,37 @@ def test_a_loss_at_a_speed_the_plane_has_learnt_keeps_its_weight_while_it_is_hea
     monkeypatch.setattr(rs, "FLAP_SLOPE_Q", 10.0 * rs.FLAP_SLOPE_Q)
     slow = [a for a in _cruise_with_drag(onset_s=100.0) if a.level == "fault"]
     assert not slow or slow[0].t_s > 110.0, [(a.t_s, a.text) for a in slow]
+
+
+def _learns_new_speed(stuck_nats: float) -> float:
+    """Hover-to-2 m/s flight for 40 s (the plane learns), then 10 s at a speed the plane has not flown (8 m/s: its
+    doubt there is large, so windows add almost nothing either way), entered with one statistic at ``stuck_nats``.
+    Returns the fastest forward speed the pitch plane has learnt from."""
+    d = Decision(DecisionConfig(), RATE_HZ, WINDOW, use_stored_calibration=False)
+    rng = np.random.default_rng(9)
+    for j in range(int(50 * RATE_HZ)):
+        t = (j + 1) / RATE_HZ
+        air = 1.0 - math.cos(2.0 * math.pi * t / 20.0) if t < 40.0 else 8.0
+        w2 = 1.0 + TRIM_PER_M_S * 2.0 * air * _PITCH
+        if air > 7.0:
+            w2[0] += 0.05  # at 8 m/s the trim is not what the slope learnt at 0-2 m/s says (rotor 1 up 5 %)
+        rpm = HOVER_RPM * np.sqrt(w2) * (1.0 + 0.002 * rng.standard_normal(4))
+        d.step(t, StepInputs(True, float(np.mean(rpm)), 0.05, 0.1, 15.5, rpm, np.array([air, 0.0])))
+        if 40.0 <= t < 42.5:  # held there while the 2-s windows fill with the new speed
+            d.S["physics"][:] = [stuck_nats, 0.0, 0.0, 0.0]
+        if j >= WINDOW - 1:
+            d.window_evidence(t, WindowEvidence(np.full(4, 0.01)))
+    return d.share._seen[0][1]
+
+
+def test_a_statistic_left_at_a_few_hundredths_of_a_nat_does_not_stop_the_plane_learning(monkeypatch):
+    """The plane learns only while no evidence gathers. Where it doubts (a speed it has not flown) each window's
+    evidence is tiny either way, so a CUSUM entering at 0.05 nat neither grows nor drains (session 17, ours
+    `single-r801-26`: rotor 1 at 0.05-0.07 for 9 s). It learns the new speed; entering with 1 nat (evidence) it does
+    not; and had "quiet" meant exactly 0 (monitor.rotor_share.QUIET_NATS), the 0.05 would have stopped it too."""
+    assert _learns_new_speed(0.05) > 7.0
+    assert _learns_new_speed(1.0) < 3.0
+    import monitor.decision as dec
+
+    monkeypatch.setattr(dec, "QUIET_NATS", 0.0)
+    assert _learns_new_speed(0.05) < 3.0
