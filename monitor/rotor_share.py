@@ -177,10 +177,11 @@ class RotorShare:
     What is left lives in two dimensions, the pitch and roll trims (``_AXES``). Baseline: per axis a plane
     ``b + k_v v + k_a f`` in the heading-frame velocity and the body's horizontal specific force (blade flapping
     follows airspeed, see FLAP_SLOPE_PRIOR_SD), a Kalman filter over (b, k_v, k_a) fed by every evidence window of
-    the first ``BASELINE_S`` (held ones do not count: a least-squares fit of those windows), then the intercept only
-    while no evidence is gathering (``quiet``), so slow drifts (battery sag) are absorbed, at the rate of an
-    exponential average over ``SHARE_BASELINE_TAU_S``, and a step is not. Without those streams the regressors are 0 and the plane is its intercept: the flight's own
-    mean, as before flapping was modelled.
+    the first ``BASELINE_S`` (held ones do not count: a least-squares fit of those windows), then only while no
+    evidence is gathering (``quiet``: no physics statistic above ``QUIET_NATS``), so slow drifts (battery sag) are
+    absorbed, at the rate of an exponential average over ``SHARE_BASELINE_TAU_S``, and a step is not. Without those
+    streams the regressors are 0 and the plane is its intercept: the flight's own mean, as before flapping was
+    modelled.
 
     Per window: the Gaussian mean-shift log-likelihood ratio, for each rotor i, of the window-mean trims e
     (less the plane at this window's mean regressors) shifted by f U_i (a loss ``f = alerts.min_thrust_loss``, the
@@ -362,8 +363,8 @@ class RotorShare:
     def llr(self, dt_s: float = 0.0, quiet: bool = False, yaw_quiet: bool | None = None) -> np.ndarray | None:
         """Per-rotor evidence of the current window, or None (no full window, or baseline still being learnt).
 
-        ``quiet``: no physics evidence is gathering, so the baseline (the plane: intercept and slopes) may follow
-        the window for ``dt_s``
+        ``quiet``: no physics evidence is gathering (the caller's test: every statistic <= ``QUIET_NATS``), so the
+        baseline (the plane: intercept and slopes) may follow the window for ``dt_s``
         (``yaw_quiet``: the same for the yaw balance; default ``quiet``). The yaw balance's evidence of the
         same window is left in ``yaw_llr`` (zeros when None is returned).
         """
