@@ -37,18 +37,26 @@ def rpm_at(t: float, rng, onset_s: float = math.inf, rotor: int = 3, loss: float
     return HOVER_RPM * np.sqrt(w2) * (1.0 + 0.002 * rng.standard_normal(4))
 
 
-def fly(with_velocity: bool, duration_s: float = 150.0, **fault) -> list:
+def replay(inputs, duration_s: float, seed: int, after_step=None) -> tuple[Decision, list]:
+    """An airborne flight at the decision's own inputs: ``inputs(t, rng)`` gives each step's (RPM, heading-frame
+    velocity, horizontal specific force), either context None; every window is classified healthy (P = 0.01), so
+    whatever is announced comes from the shares. ``after_step(d, t)`` may touch the decision before each window."""
     d = Decision(DecisionConfig(), RATE_HZ, WINDOW, use_stored_calibration=False)
-    rng = np.random.default_rng(11)
+    rng = np.random.default_rng(seed)
     out = []
     for j in range(int(duration_s * RATE_HZ)):
         t = (j + 1) / RATE_HZ
-        rpm = rpm_at(t, rng, **fault)
-        v = velocity(t) if with_velocity else None
-        d.step(t, StepInputs(True, float(np.mean(rpm)), 0.05, 0.1, 15.5, rpm, v))
+        rpm, vel, f = inputs(t, rng)
+        d.step(t, StepInputs(True, float(np.mean(rpm)), 0.05, 0.1, 15.5, rpm, vel, f))
+        if after_step is not None:
+            after_step(d, t)
         if j >= WINDOW - 1:
             out += d.window_evidence(t, WindowEvidence(np.full(4, 0.01)))
-    return out
+    return d, out
+
+
+def fly(with_velocity: bool, duration_s: float = 150.0, **fault) -> list:
+    return replay(lambda t, rng: (rpm_at(t, rng, **fault), velocity(t) if with_velocity else None, None), duration_s, 11)[1]
 
 
 def test_flapping_trim_in_fast_flight_raises_nothing_when_velocity_is_streamed():
@@ -89,21 +97,17 @@ def _hover_turning_in_wind(with_specific_force: bool, duration_s: float = 120.0)
     """Hovering (ground velocity 0) in a steady 5 m/s wind while the heading turns a full circle from 20 s to 80 s:
     the airspeed in the body frame turns with it, and so does the flapping trim. The specific force is the drag,
     -0.3 per s times the airspeed (a linear drag coefficient per mass), with IMU noise."""
-    d = Decision(DecisionConfig(), RATE_HZ, WINDOW, use_stored_calibration=False)
-    rng = np.random.default_rng(4)
-    out = []
-    for j in range(int(duration_s * RATE_HZ)):
-        t = (j + 1) / RATE_HZ
+
+    def inputs(t, rng):
         yaw = 2.0 * math.pi * min(max((t - 20.0) / 60.0, 0.0), 1.0)
         wind_ned = np.array([-5.0, 0.0])  # blowing towards the south: airspeed north 5 m/s when hovering
         air = np.array([math.cos(yaw) * -wind_ned[0] + math.sin(yaw) * -wind_ned[1], -math.sin(yaw) * -wind_ned[0]])
         w2 = 1.0 + TRIM_PER_M_S * (2.0 * air[0] * _PITCH + 2.0 * air[1] * _ROLL)
         rpm = HOVER_RPM * np.sqrt(w2) * (1.0 + 0.002 * rng.standard_normal(4))
         f = -0.3 * air + 0.05 * rng.standard_normal(2) if with_specific_force else None
-        d.step(t, StepInputs(True, float(np.mean(rpm)), 0.05, 0.1, 15.5, rpm, np.zeros(2), f))
-        if j >= WINDOW - 1:
-            out += d.window_evidence(t, WindowEvidence(np.full(4, 0.01)))
-    return out
+        return rpm, np.zeros(2), f
+
+    return replay(inputs, duration_s, 4)[1]
 
 
 def test_the_specific_force_carries_the_wind_the_ground_velocity_does_not_see():
@@ -116,19 +120,14 @@ def _gust_beyond_what_was_learnt(duration_s: float = 120.0) -> list:
     The flapping roll trim is linear in the airspeed (2 t air), the drag quadratic (specific force -0.08 air |air|,
     what RotorPy's parasitic drag does): a plane learnt on the small wind extrapolates the gust's trim wrong by
     ~0.2 in roll (healthy-r200-381's false FAULT, session 12: the lateral specific force swung to -1.1 m/s^2)."""
-    d = Decision(DecisionConfig(), RATE_HZ, WINDOW, use_stored_calibration=False)
-    rng = np.random.default_rng(8)
-    out = []
-    for j in range(int(duration_s * RATE_HZ)):
-        t = (j + 1) / RATE_HZ
+
+    def inputs(t, rng):
         air = 1.0 + math.sin(t / 7.0) if t < 70.0 or t >= 80.0 else 3.7
         w2 = 1.0 + TRIM_PER_M_S * 2.0 * air * _ROLL
         rpm = HOVER_RPM * np.sqrt(w2) * (1.0 + 0.002 * rng.standard_normal(4))
-        f = np.array([0.0, -0.08 * air * abs(air)]) + 0.05 * rng.standard_normal(2)
-        d.step(t, StepInputs(True, float(np.mean(rpm)), 0.05, 0.1, 15.5, rpm, np.zeros(2), f))
-        if j >= WINDOW - 1:
-            out += d.window_evidence(t, WindowEvidence(np.full(4, 0.01)))
-    return out
+        return rpm, np.zeros(2), np.array([0.0, -0.08 * air * abs(air)]) + 0.05 * rng.standard_normal(2)
+
+    return replay(inputs, duration_s, 8)[1]
 
 
 def test_a_gust_beyond_what_the_plane_was_learnt_on_is_heard_less_not_read_as_a_fault(monkeypatch):
@@ -145,21 +144,16 @@ def _cruise_with_drag(onset_s: float = math.inf, rotor: int = 2, loss: float = 0
     """Forward flight whose airspeed swings between 0 and 6 m/s for 90 s (the plane learns its flapping and drag
     slopes: specific force -0.3 per s times the airspeed), then cruise at 5-6 m/s, inside what was learnt, with a
     loss ``loss`` of ``rotor``'s thrust from ``onset_s``."""
-    d = Decision(DecisionConfig(), RATE_HZ, WINDOW, use_stored_calibration=False)
-    rng = np.random.default_rng(6)
-    out = []
-    for j in range(int(duration_s * RATE_HZ)):
-        t = (j + 1) / RATE_HZ
+
+    def inputs(t, rng):
         air = 3.0 - 3.0 * math.cos(2.0 * math.pi * t / 40.0) if t < 90.0 else 5.5 + 0.5 * math.sin(t / 3.0)
         w2 = 1.0 + TRIM_PER_M_S * 2.0 * air * _PITCH
         if t >= onset_s:
             w2[rotor - 1] /= 1.0 - loss
         rpm = HOVER_RPM * np.sqrt(w2) * (1.0 + 0.002 * rng.standard_normal(4))
-        f = np.array([-0.3 * air, 0.0]) + 0.05 * rng.standard_normal(2)
-        d.step(t, StepInputs(True, float(np.mean(rpm)), 0.05, 0.1, 15.5, rpm, np.array([air, 0.0]), f))
-        if j >= WINDOW - 1:
-            out += d.window_evidence(t, WindowEvidence(np.full(4, 0.01)))
-    return out
+        return rpm, np.array([air, 0.0]), np.array([-0.3 * air, 0.0]) + 0.05 * rng.standard_normal(2)
+
+    return replay(inputs, duration_s, 6)[1]
 
 
 def test_a_loss_at_a_speed_the_plane_has_learnt_keeps_its_weight_while_it_is_heard(monkeypatch):
@@ -184,20 +178,19 @@ def _learns_new_speed(stuck_nats: float) -> float:
     """Hover-to-2 m/s flight for 40 s (the plane learns), then 10 s at a speed the plane has not flown (8 m/s: its
     doubt there is large, so windows add almost nothing either way), entered with one statistic at ``stuck_nats``.
     Returns the fastest forward speed the pitch plane has learnt from."""
-    d = Decision(DecisionConfig(), RATE_HZ, WINDOW, use_stored_calibration=False)
-    rng = np.random.default_rng(9)
-    for j in range(int(50 * RATE_HZ)):
-        t = (j + 1) / RATE_HZ
+
+    def inputs(t, rng):
         air = 1.0 - math.cos(2.0 * math.pi * t / 20.0) if t < 40.0 else 8.0
         w2 = 1.0 + TRIM_PER_M_S * 2.0 * air * _PITCH
         if air > 7.0:
             w2[0] += 0.05  # at 8 m/s the trim is not what the slope learnt at 0-2 m/s says (rotor 1 up 5 %)
-        rpm = HOVER_RPM * np.sqrt(w2) * (1.0 + 0.002 * rng.standard_normal(4))
-        d.step(t, StepInputs(True, float(np.mean(rpm)), 0.05, 0.1, 15.5, rpm, np.array([air, 0.0])))
+        return HOVER_RPM * np.sqrt(w2) * (1.0 + 0.002 * rng.standard_normal(4)), np.array([air, 0.0]), None
+
+    def stuck(d, t):
         if 40.0 <= t < 42.5:  # held there while the 2-s windows fill with the new speed
             d.S["physics"][:] = [stuck_nats, 0.0, 0.0, 0.0]
-        if j >= WINDOW - 1:
-            d.window_evidence(t, WindowEvidence(np.full(4, 0.01)))
+
+    d, _ = replay(inputs, 50.0, 9, after_step=stuck)
     return d.share._seen[0][1]
 
 
