@@ -305,6 +305,10 @@ class Decision:
         self.paused_reason = ""
         self.windows = 0
         self.held_windows = 0
+        # Seconds of windows whose omega^2 shares were tested against the airframe's learnt baseline: 0 means the
+        # shares never said anything either way (each flight first learns BASELINE_S of evidence), so "no alert" is
+        # then no verdict at all, not one of health.
+        self.tested_s = 0.0
         self.announcements: list[Announcement] = []
         self.trace: list | None = None  # offline calibration: ("add", {stat: increments}) / ("scale", factor)
 
@@ -364,6 +368,7 @@ class Decision:
             else:
                 inc["change"] = (llr - self.baseline) * dt
         if phys is not None:
+            self.tested_s += dt
             inc["physics"] = phys * (dt / self.share.average_s)
             ccw, cw = self.share.yaw_llr * (dt / YAW_AVERAGE_S)  # one independent sample per YAW_AVERAGE_S
             inc["pair"] = np.array([ccw, ccw, cw, cw])
@@ -568,6 +573,7 @@ class Decision:
             "thresholds": self.thresholds.as_dict(),
             "windows": self.windows,
             "held_windows": self.held_windows,
+            "tested_s": round(self.tested_s, 2),
             "regime_events": dict(self.regime.counts),
             "vibration_rejected": dict(self.vibration.rejected),
         }

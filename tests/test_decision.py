@@ -224,3 +224,25 @@ def test_the_per_window_clip_is_np_clip_bit_for_bit():
     x = np.array([np.nan, -np.inf, np.inf, -0.0, 0.0, LLR_CLIP, -LLR_CLIP, 1e300, -1e300, 0.3, -7.25])
     expected = np.clip(x, -LLR_CLIP, LLR_CLIP)
     assert _clip_llr(x).tobytes() == expected.tobytes()
+
+
+def test_no_alert_before_the_shares_baseline_is_no_verdict_and_says_so():
+    # Each flight first learns BASELINE_S (10 s) of evidence windows; the first window ends 5 s after take-off.
+    # A 14 s hover is never tested: its silence is no verdict. The next flight (after a landing) hovers 40 s:
+    # tested from 15 s on, 25 s of it, by hand.
+    from monitor.diagnose.cli import in_flight_summary
+    from monitor.rotor_share import BASELINE_S
+
+    rng = np.random.default_rng(1)
+    rpm = lambda t: HOVER_RPM * (1.0 + 0.01 * rng.standard_normal(4))  # noqa: E731
+    d = analytic()
+    assert fly(d, lambda t: np.full(4, 0.01), 14.0, rpm_of_t=rpm) == []
+    final = d.verdict()
+    assert final["tested_s"] == 0.0 and final["windows"] > 0
+    text = in_flight_summary({"alerts": [], "final": final})
+    assert text.startswith("no verdict") and f"{BASELINE_S:.0f}-s baseline" in text, text
+    d.step(14.05, StepInputs(False))
+    assert fly(d, lambda t: np.full(4, 0.01), 40.0, rpm_of_t=rpm, t0_s=14.1) == []
+    final = d.verdict()
+    assert final["tested_s"] == pytest.approx(40.0 - WINDOW / RATE_HZ - BASELINE_S, abs=0.11), final
+    assert in_flight_summary({"alerts": [], "final": final}).startswith(f"no alert ({final['tested_s']:.1f} s")

@@ -85,6 +85,7 @@ from monitor.logs.guards import DEFAULT_MAX_SECONDS, check_size, check_time_adva
 from monitor.model import Classifier, choose_esc
 from monitor.progress import bar
 from monitor.resources import shipped
+from monitor.rotor_share import BASELINE_S
 from monitor.vehicle import DEFAULT_VEHICLE, load_vehicle
 
 DEFAULT_MODEL = shipped("classifier.onnx")
@@ -197,6 +198,23 @@ def _sets_text(hypotheses: list[dict], names: list[str]) -> str:
     )
 
 
+def in_flight_summary(decision: dict) -> str:
+    """The in-flight rule's alerts, or what its silence means: "no alert" only after the omega^2 shares were tested
+    against the flight's learnt baseline; before that (a log shorter than its 10 s of baseline, or held throughout)
+    the rule has no verdict either way."""
+    alerts = decision["alerts"]
+    if alerts:
+        return "; ".join(f"{a['text']} at {a['t_boot_s']:.1f} s" for a in alerts)
+    final = decision["final"]
+    tested = final.get("tested_s", 0.0)
+    if tested > 0:
+        return f"no alert ({tested:.1f} s of flight tested against its baseline)"
+    return (
+        f"no verdict: no window got past the flight's {BASELINE_S:.0f}-s baseline "
+        f"({final['windows']} windows, {final['held_windows']} held)"
+    )
+
+
 def format_text(d: Diagnosis, baseline=None) -> str:
     lines = [f"== {d.source}"]
     names = [p["name"] for p in d.propellers]
@@ -241,10 +259,7 @@ def format_text(d: Diagnosis, baseline=None) -> str:
                 )
             )
     if d.decision is not None:
-        alerts = d.decision["alerts"]
-        lines.append(
-            "  in-flight rule: " + ("; ".join(f"{a['text']} at {a['t_boot_s']:.1f} s" for a in alerts) if alerts else "no alert")
-        )
+        lines.append("  in-flight rule: " + in_flight_summary(d.decision))
     if d.physics is not None:
         eff = ", ".join(
             f"{rotor_name(n, i + 1)} {m:.2f}±{s:.2f}"
