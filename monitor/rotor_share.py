@@ -258,6 +258,11 @@ class RotorShare:
         self._base_s = 0.0
         self._restart_line()
 
+    @property
+    def learning_s(self) -> float | None:
+        """Seconds of evidence windows learnt towards the baseline (of ``BASELINE_S``), None once it is learnt."""
+        return None if self.baseline is not None else self._base_s
+
     def push(
         self, rpm: np.ndarray | None, vel_heading_m_s: np.ndarray | None = None, accel_xy_frd_m_s2: np.ndarray | None = None
     ) -> None:

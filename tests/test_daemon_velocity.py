@@ -167,7 +167,7 @@ def test_status_says_whether_velocity_is_live_and_a_stopped_stream_gives_none(to
     stop_ms = (BOOT0_S + 8.0) * 1000  # LOCAL_POSITION_NED stops 8 s into the flight, the rest flows on
     msgs = [m for m in msgs if not (m.get_type() == "LOCAL_POSITION_NED" and m.time_boot_ms > stop_ms)]
     d, seen = run_daemon(toy, msgs, "vel_heading_m_s")
-    statuses = d.notifier.statuses()
+    statuses = [s.split("; shares learning")[0] for s in d.notifier.statuses()]  # learning: its own test
     # Context, not evidence of a fault: listed apart.
     assert "airborne: deciding; evidence live: classifier, esc_rpm; context live: velocity" in statuses, statuses
     assert statuses[-1] == "airborne: deciding; evidence live: classifier, esc_rpm", statuses  # 2 s after it stopped
@@ -175,6 +175,19 @@ def test_status_says_whether_velocity_is_live_and_a_stopped_stream_gives_none(to
     assert all(v is not None for t, v in seen if 0.5 <= t <= 8.0)
     assert all(v is None for t, v in seen if t >= 8.3)  # stale after resample.max_gap_s (0.25 s)
     assert d.report()["pipeline"]["velocity_steps"] > 140
+
+
+def test_status_says_while_the_shares_learn_their_baseline_and_stops_once_learnt(toy):
+    # The first 10 s of evidence windows after take-off (the first window ends 5 s in) teach the shares the
+    # flight's baseline: no FAULT can come from them yet, and STATUS says so, once per second learnt, not per step.
+    d, _ = run_daemon(toy, parse_all(synth_flight(24.0, seed=7, pos_hz=30.0)), "vel_heading_m_s")
+    statuses = d.notifier.statuses()
+    learning = [s for s in statuses if "; shares learning baseline (" in s]
+    assert learning and learning[0].endswith("; shares learning baseline (0 of 10 s)"), statuses
+    assert any(s.endswith("(9 of 10 s)") for s in learning), learning
+    assert len({s.rsplit("(", 1)[1] for s in learning}) == 10 and len(learning) <= 20, learning
+    assert statuses[-1].startswith("airborne: deciding") and "learning" not in statuses[-1], statuses
+    assert d.decision.share.learning_s is None and d.decision.verdict()["tested_s"] > 0
 
 
 def requested_rates(toy, rule: str) -> dict[int, float]:

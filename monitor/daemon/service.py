@@ -34,6 +34,7 @@ from monitor.daemon.sdnotify import Notifier
 from monitor.decision import Announcement, Decision, EscTelemetry, StepInputs, WindowEvidence, file_sha256
 from monitor.hypotheses import FlightSets, load_rule
 from monitor.resample import US_PER_S
+from monitor.rotor_share import BASELINE_S
 
 log = logging.getLogger("propwatch.monitor")
 
@@ -286,6 +287,12 @@ class Daemon:
     def _context_status(self) -> str:
         return f"; context live: {', '.join(self._context)}" if self._context else ""
 
+    def _learning_status(self) -> str:
+        """While the flight's omega^2 shares learn their baseline, nothing they say is tested yet: no FAULT can come
+        from them (the first BASELINE_S of evidence windows after each take-off or collective step)."""
+        learnt = self.decision.share.learning_s
+        return "" if learnt is None else f"; shares learning baseline ({int(learnt)} of {BASELINE_S:.0f} s)"
+
     def _decide(self, step) -> None:
         """The shared decision rule on one grid step (pause when a stream stopped, never freeze it)."""
         t = step.timestamp_us / US_PER_S
@@ -312,7 +319,9 @@ class Daemon:
             self._paused = ""
             self._record_resume(step.time_boot_ms, live)
         if step.valid:
-            self._set_status(f"airborne: deciding; evidence live: {', '.join(live)}{self._context_status()}")
+            self._set_status(
+                f"airborne: deciding; evidence live: {', '.join(live)}{self._context_status()}{self._learning_status()}"
+            )
         elif not step.airborne and not self._paused:
             self._set_status(f"not deciding: {step.reason}")
         self._blind_step(step)  # after the step's own pause state, so a recovered line says whether it runs
