@@ -305,7 +305,7 @@ class Decision:
         self.paused_reason = ""
         self.windows = 0
         self.held_windows = 0
-        # Seconds of windows whose omega^2 shares were tested against the airframe's learnt baseline: 0 means the
+        # Seconds of windows whose omega^2 shares were tested against the flight's learnt baseline: 0 means the
         # shares never said anything either way (each flight first learns BASELINE_S of evidence), so "no alert" is
         # then no verdict at all, not one of health.
         self.tested_s = 0.0
