@@ -43,15 +43,16 @@ from offline.sim.log import BOOT_OFFSET_US
 OURS_SEEDS = {"single": 211, "pair": 212}
 
 
-def ours_flights(n: int, out: Path, duration_s: float) -> list[dict]:
-    """``n`` singles and ``n`` pairs of our simulator as .tlog files; their truth."""
+def ours_flights(n: int, out: Path, duration_s: float, onset_s: tuple[float, float] = (25.0, 50.0)) -> list[dict]:
+    """``n`` singles and ``n`` pairs of our simulator as .tlog files, damaged at a time drawn in ``onset_s``; their
+    truth."""
     from offline.alerts.flights import FlightSet, randomised_chunks
     from offline.sim.io_tlog import write_tlog
 
     vehicle = load_vehicle(DEFAULT_VEHICLE)
     truths = []
     for kind, seed in OURS_SEEDS.items():
-        fs = FlightSet(kind, n_flights=n, duration_s=duration_s, physics="randomised", seed=seed)
+        fs = FlightSet(kind, n_flights=n, duration_s=duration_s, physics="randomised", seed=seed, onset_s=onset_s)
         for ch in randomised_chunks(vehicle, fs):
             for b, name in enumerate(ch.names):
                 path = write_tlog(out / f"{name}.tlog", ch.flog, b)
@@ -108,6 +109,7 @@ def score_flight(t: dict, clf: Classifier, esc, vehicle) -> dict:
         "diagnose": sorted(v["faulty_propellers"]),
         "confidence": v["confidence"],
         "source": v.get("source", "whole flight"),
+        "in_flight_alerts": [a["text"] for a in (d.decision or {}).get("alerts", [])],
         "change_boot_s": v.get("change_boot_s"),
         "hypotheses": [sorted(h["faulty_propellers"]) for h in (res["hypotheses"] or [])],
         "rotor_effectiveness": res["rotor_effectiveness"],
@@ -162,6 +164,7 @@ def summary(rows: list[dict]) -> dict:
         "diagnose_mean_hypotheses": frac(ok, lambda r: len(r["hypotheses"])),
         "diagnose_names_a_healthy_propeller": frac(ok, wrong("diagnose")),
         "diagnose_from_in_flight_change": frac(ok, lambda r: r["source"] == "in-flight change"),
+        "in_flight_alerted": frac(ok, lambda r: bool(r["in_flight_alerts"])),  # any level
         "change_before_onset": sum(1 for r in ok if r["change_boot_s"] is not None and r["change_boot_s"] < r["onset_boot_s"]),
         "change_latency_median_s": (
             round(float(np.median([r["change_boot_s"] - r["onset_boot_s"] for r in ok if r["change_boot_s"] is not None])), 2)
@@ -284,8 +287,18 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--duration", type=float, default=80.0)
     p.add_argument("--model", default=str(REPO_ROOT / "models" / "classifier.onnx"))
     p.add_argument("--out", default="out/onset-diagnose")
+    p.add_argument(
+        "--onset-s",
+        type=float,
+        nargs=2,
+        default=(25.0, 50.0),
+        metavar=("LO", "HI"),
+        help="our flights' damage time, drawn in [LO, HI] s (0 0.5: damaged from take-off, which no in-flight change shows)",
+    )
     p.add_argument("--card", action="store_true", help="upsert the table into models/classifier.card-tables.json")
     args = p.parse_args(argv)
+    if args.card and tuple(args.onset_s) != (25.0, 50.0):
+        p.error("--card: the card's table is of flights damaged 25-50 s in (the default --onset-s)")
     out = Path(args.out)
     t0 = time.process_time()
     clf = Classifier(args.model)
@@ -294,7 +307,7 @@ def main(argv: list[str] | None = None) -> int:
     sets = {}
     if args.ours:
         (out / "ours").mkdir(parents=True, exist_ok=True)
-        sets["ours"] = ours_flights(args.ours, out / "ours", args.duration)
+        sets["ours"] = ours_flights(args.ours, out / "ours", args.duration, tuple(args.onset_s))
     if args.evalsim:
         sets["evalsim"] = evalsim_flights(args.evalsim, out / "evalsim", args.seed)
     rows = {sim: [score_flight(t, clf, esc, vehicle) for t in ts] for sim, ts in sets.items()}
