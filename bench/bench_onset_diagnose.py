@@ -41,9 +41,10 @@ from monitor.vehicle import DEFAULT_VEHICLE, REPO_ROOT, load_vehicle
 from offline.sim.log import BOOT_OFFSET_US
 
 OURS_SEEDS = {"single": 211, "pair": 212}
+CARD_ONSET_S = (25.0, 50.0)  # the card table's flights: damaged 25-50 s into an 80 s flight
 
 
-def ours_flights(n: int, out: Path, duration_s: float, onset_s: tuple[float, float] = (25.0, 50.0)) -> list[dict]:
+def ours_flights(n: int, out: Path, duration_s: float, onset_s: tuple[float, float] = CARD_ONSET_S) -> list[dict]:
     """``n`` singles and ``n`` pairs of our simulator as .tlog files, damaged at a time drawn in ``onset_s``; their
     truth."""
     from offline.alerts.flights import FlightSet, randomised_chunks
@@ -172,7 +173,11 @@ def summary(rows: list[dict]) -> dict:
             else None
         ),
         "share_single_exact": frac(single, lambda r: [r["share_rotor"]] == r["faulty_propellers"]),
-        "share_change_single_exact": frac(single, lambda r: [r["share_change_rotor"]] == r["faulty_propellers"]),
+        # None where no flight had 100 airborne samples before its onset (damaged from take-off)
+        "share_change_single_exact": frac(
+            [r for r in single if r["share_change_rotor"] is not None],
+            lambda r: [r["share_change_rotor"]] == r["faulty_propellers"],
+        ),
     }
 
 
@@ -291,13 +296,13 @@ def main(argv: list[str] | None = None) -> int:
         "--onset-s",
         type=float,
         nargs=2,
-        default=(25.0, 50.0),
+        default=CARD_ONSET_S,
         metavar=("LO", "HI"),
         help="our flights' damage time, drawn in [LO, HI] s (0 0.5: damaged from take-off, which no in-flight change shows)",
     )
     p.add_argument("--card", action="store_true", help="upsert the table into models/classifier.card-tables.json")
     args = p.parse_args(argv)
-    if args.card and tuple(args.onset_s) != (25.0, 50.0):
+    if args.card and tuple(args.onset_s) != CARD_ONSET_S:
         p.error("--card: the card's table is of flights damaged 25-50 s in (the default --onset-s)")
     out = Path(args.out)
     t0 = time.process_time()
