@@ -129,3 +129,28 @@ def test_baseline_deviation_by_hand():
     # spreads floored at 0.02: 0.05, 0.02, 0.02, 0.03
     np.testing.assert_allclose(b.deviation(np.array([1.2, 0.9, 0.94, 1.0])), [2.0, 0.0, -3.0, 0.0])
     assert HealthyBaseline.from_dict(json.loads(json.dumps(b.to_dict()))) == b
+
+
+@pytest.mark.realdata
+@needs_crazypad
+def test_adapt_json_on_two_healthy_logs_is_strict_json(tmp_path, capsys):
+    """Two healthy logs: one fits, one is held out, so the calibration has no flight-to-flight spread. What is
+    undefined must read null: ``propwatch adapt --json`` used to crash (json.dump(allow_nan=False) on a NaN)."""
+    from offline.adapt.cli import main
+
+    args = ["--healthy", *HEALTHY_E9[:2], "--vehicle", str(CRAZYFLIE), "--out", str(tmp_path), "--format", "crazypad"]
+    assert main([*args, "--json", "--flights-per-label", "1", "--epochs", "1"]) == 0
+    res = json.loads(capsys.readouterr().out)  # strict: the default parser accepts NaN, so check by hand below
+
+    def floats(o):
+        if isinstance(o, dict):
+            return [x for v in o.values() for x in floats(v)]
+        if isinstance(o, list):
+            return [x for v in o for x in floats(v)]
+        return [o] if isinstance(o, float) else []
+
+    assert all(np.isfinite(floats(res))), res
+    manifest = json.loads((tmp_path / "adapt.manifest.json").read_text())
+    assert all(np.isfinite(floats(manifest)))
+    assert "nan" not in (tmp_path / "card.md").read_text().lower()
+    assert ".nan" not in (tmp_path / "vehicle.yaml").read_text()

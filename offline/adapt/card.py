@@ -26,7 +26,13 @@ def card_markdown(m: dict) -> str:
         "",
         f"**Calibration** (steady-state view, `offline/calibrate/fit.py`): cause `{cal['cause']}` ({cal['why']}); "
         f"held-out RMS command error {cal['holdout_rms_cmd']['nominal']} -> {cal['holdout_rms_cmd']['calibrated']}; "
-        f"unexplained residual {un.get('rms_cmd')} command units ({un.get('in_standard_errors')} standard errors).",
+        f"unexplained residual {un.get('rms_cmd')} command units ("
+        + (
+            f"{un['in_standard_errors']} standard errors"
+            if un.get("in_standard_errors") is not None
+            else "no flight-to-flight spread to measure it against: one fit flight"
+        )
+        + ").",
         "",
         f"**Healthy baseline** ({base['basis']} shares, PX4 order, names {', '.join(base['motor_names'])}): mean "
         + ", ".join(f"{x:.3f}" for x in base["shares_mean"])

@@ -406,10 +406,16 @@ class SteadyTermResult:
         return {
             "term": self.name,
             "params": {k: round(v, 6) for k, v in self.params.items()},
-            "fit_rms_cmd": round(self.fit_rms_cmd, 1),
-            "holdout_rms_cmd": round(self.holdout_rms_cmd, 1),
+            "fit_rms_cmd": _finite_or_none(round(self.fit_rms_cmd, 1)),
+            "holdout_rms_cmd": _finite_or_none(round(self.holdout_rms_cmd, 1)),
             "bic": round(self.bic, 2),
         }
+
+
+def _finite_or_none(v: float) -> float | None:
+    """A figure for JSON: None where it is undefined (NaN or infinite), never NaN."""
+    v = float(v)
+    return v if math.isfinite(v) else None
 
 
 def _steady_rms(vehicle: VehicleConfig, measured: np.ndarray) -> float:
@@ -466,19 +472,23 @@ class SteadyCalibration:
         """
         n = max(len(self.fit_files), 1)
         se = self.spread_rms_cmd / math.sqrt(n) if self.spread_rms_cmd > 0 else float("nan")
-        return {"rms_cmd": self.calibrated_bias_rms_cmd, "in_standard_errors": self.calibrated_bias_rms_cmd / se}
+        # One fit flight has no flight-to-flight spread: the size in standard errors is undefined (None), not NaN.
+        return {
+            "rms_cmd": _finite_or_none(self.calibrated_bias_rms_cmd),
+            "in_standard_errors": _finite_or_none(self.calibrated_bias_rms_cmd / se),
+        }
 
     def to_dict(self) -> dict:
         return {
             "airframe": self.airframe,
-            "unexplained_residual": {k: round(float(v), 3) for k, v in self.unexplained.items()},
+            "unexplained_residual": {k: None if v is None else round(v, 3) for k, v in self.unexplained.items()},
             "cause": self.cause,
             "why": TERMS[self.cause].why if self.cause else "no term beats the nominal model",
             "ranking": [r.to_dict() for r in self.ranking],
             "nominal_fit_rms_cmd": round(self.nominal_fit_rms_cmd, 1),
             "holdout_rms_cmd": {
-                "nominal": round(self.nominal_holdout_rms_cmd, 1),
-                "calibrated": round(self.calibrated_holdout_rms_cmd, 1),
+                "nominal": _finite_or_none(round(self.nominal_holdout_rms_cmd, 1)),
+                "calibrated": _finite_or_none(round(self.calibrated_holdout_rms_cmd, 1)),
             },
             "calibrated_terms": {
                 "motor_efficiency": list(self.calibrated.motor_efficiency),
