@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fleet.identity import identify
+from monitor.logs.identity import identify
 from monitor import __version__ as PROPWATCH_VERSION
 from monitor.errors import PropwatchError
 from monitor.vehicle import REPO_ROOT
@@ -54,9 +54,9 @@ def model_version(path: Path) -> str:
     verdict: the model file, its set rule beside it (``<model>.sets.json``, when present) and the decision
     calibration when it belongs to this model (``monitor.decision`` uses no other). A recalibrated set rule or
     decision threshold beside the same model makes old rows another version (``fleet ingest``'s ``other_model``)."""
-    from monitor.decision import DEFAULT_CALIBRATION, load_calibration
+    from monitor.decision.hypotheses import rule_path
+    from monitor.decision.thresholds import DEFAULT_CALIBRATION, load_calibration
     from monitor.errors import ConfigError
-    from monitor.hypotheses import rule_path
 
     h = hashlib.sha256(Path(path).read_bytes())
     model_sha256 = h.hexdigest()  # the model's own digest; h goes on to take its rule and calibration
