@@ -17,14 +17,16 @@ from pathlib import Path
 
 import numpy as np
 
-from monitor.decision import STATISTICS, Decision, DecisionConfig, WindowEvidence, load_calibration
+from monitor.decision.config import DecisionConfig
+from monitor.decision.rule import Decision, WindowEvidence
+from monitor.decision.thresholds import STATISTICS, load_calibration
 from monitor.model import Classifier
 from monitor.vehicle import REPO_ROOT, load_vehicle
 
 
 def load_flights(set_name: str, n: int, seed: int, cache: Path, model: str, physics: str = "randomised", pickup: float = 0.25):
     """The set through the same cache as ``python -m offline.alerts.evaluate --cache``."""
-    from monitor.decision import file_sha256
+    from monitor.decision.thresholds import file_sha256
     from offline.alerts.evaluate import cached, evalsim_cached, set_key
     from offline.alerts.flights import FlightSet, simulate_set
 
@@ -72,8 +74,8 @@ def replay_listing(f, d: Decision) -> list[dict]:
 def share_spread(flights) -> dict:
     """Yaw-free omega^2 share (mean over SHARE_AVERAGE_S) and the yaw balance y = (s1 + s2 - s3 - s4) / 2 (mean
     over YAW_AVERAGE_S) minus the flight's first 10 s: pooled std and tails of each; and the largest rise of one
-    rotor's yaw-free share over YAW_AVERAGE_S (what words a yaw-balance alert: monitor.decision.YAW_FREE_RISE)."""
-    from monitor.rotor_share import _Y, _YAW_FREE, BASELINE_S, SHARE_AVERAGE_S, YAW_AVERAGE_S
+    rotor's yaw-free share over YAW_AVERAGE_S (what words a yaw-balance alert: monitor.decision.rotor_share.YAW_FREE_RISE)."""
+    from monitor.decision.rotor_share import _Y, _YAW_FREE, BASELINE_S, SHARE_AVERAGE_S, YAW_AVERAGE_S
 
     devs, ydevs, rises = [], [], []
     for f in flights:

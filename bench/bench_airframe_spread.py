@@ -20,7 +20,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_localise import add_model_option, model_paths  # noqa: E402
 
-from monitor.hypotheses import load_rule  # noqa: E402
+from monitor.decision.hypotheses import load_rule  # noqa: E402
 from monitor.model import Classifier  # noqa: E402
 from monitor.vehicle import DEFAULT_VEHICLE, load_vehicle  # noqa: E402
 from offline.classifier.conformal import measure_with_check, region_from_dataset, share_singles  # noqa: E402

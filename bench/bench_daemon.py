@@ -4,7 +4,7 @@
     python bench/bench_daemon.py --minutes 1 --speed 10   # quick run (6 s)
 
 ``--rule consecutive`` runs the older alert rule instead of the decision
-layer (``monitor/decision.py``, the default), to see what the layer costs.
+layer (``monitor/decision/rule.py``, the default), to see what the layer costs.
 
 Two processes, as deployed: ``propwatch replay`` plays the flight as PX4 would
 (udpout) and ``propwatch monitor`` listens (udpin) and classifies at every

@@ -1,6 +1,6 @@
 """Can the response to differential commands locate a damaged rotor on an airframe nobody measured? (issue 12)
 
-The moment balance (monitor.effectiveness) reads each rotor's thrust from the steady balance, where a CG offset or
+The moment balance (monitor.decision.effectiveness) reads each rotor's thrust from the steady balance, where a CG offset or
 a motor spread looks exactly like damage. The *dynamic* response is immune to both: write the four commanded ω²
 (times kF·L) in the quad-X Hadamard patterns, collective T, roll R, pitch P and yaw Y. With per-rotor thrust
 effectiveness η, Euler's equation gives (FRD, PX4 order, levers r, p, spin s, c = 1)::
@@ -38,8 +38,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from monitor.labels import LABEL_TABLE  # noqa: E402
-from monitor.share_baseline import share_baseline  # noqa: E402
 from monitor.vehicle import DEFAULT_VEHICLE, load_vehicle  # noqa: E402
+from offline.share_baseline import share_baseline  # noqa: E402
 
 RPM_TO_RAD_S = 2.0 * np.pi / 60.0
 

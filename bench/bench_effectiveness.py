@@ -1,6 +1,6 @@
 """Rotor effectiveness from 5 s of 20 Hz data, on both simulators: a hidden 5, 10, 20 % thrust loss.
 
-Issue 12 asks the moment-balance estimator (monitor.effectiveness) to recover a hidden per-rotor thrust
+Issue 12 asks the moment-balance estimator (monitor.decision.effectiveness) to recover a hidden per-rotor thrust
 loss of 5, 10 and 20 % within +-2 points from 5 s of 20 Hz data on both simulators, at <= 0.2 ms a window.
 - *ours*: offline.sim with analytic propellers, each rotor in turn scaled to 0.95 / 0.90 / 0.80 of thrust
   (torque per thrust unchanged), random routes;
@@ -27,8 +27,8 @@ from pathlib import Path
 
 import numpy as np
 
+from monitor.decision.effectiveness import HYPOTHESES, Evidence, HypothesisBank, Priors, RotorGeometry, window_balance
 from monitor.diagnose.physics import usable_window_starts
-from monitor.effectiveness import HYPOTHESES, Evidence, HypothesisBank, Priors, RotorGeometry, window_balance
 from monitor.vehicle import DEFAULT_VEHICLE, load_vehicle
 from offline.evalsim.score import read_tables
 from offline.evalsim.sets import write_set

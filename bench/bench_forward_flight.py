@@ -24,9 +24,10 @@ from dataclasses import replace
 
 import numpy as np
 
-from monitor.decision import DecisionConfig, file_sha256, load_calibration
+from monitor.decision.config import DecisionConfig
+from monitor.decision.rotor_share import _YAW_FREE, BASELINE_S, SHARE_AVERAGE_S
+from monitor.decision.thresholds import file_sha256, load_calibration
 from monitor.model import Classifier
-from monitor.rotor_share import _YAW_FREE, BASELINE_S, SHARE_AVERAGE_S
 from monitor.vehicle import REPO_ROOT
 from offline.alerts.evaluate import _revision, cached, previous_rule
 from offline.alerts.flights import ALERT_FLIGHT_FIELDS, evalsim_specs

@@ -3,7 +3,7 @@
 Scores three verdicts on flights of the evaluation-only simulator (offline/evalsim: RotorPy dynamics,
 its own controller and damage model, torque per thrust FALLING; never used for training or selection)
 and reads our own simulator's figures from ``bench/bench_localise.py``'s JSON:
-- ``moment balance``: monitor.effectiveness' most probable set (nominal-airframe priors);
+- ``moment balance``: monitor.decision.effectiveness' most probable set (nominal-airframe priors);
 - each classifier given with ``--model NAME=PATH`` (default ``shipped CNN`` = models/classifier.onnx), through
   monitor.diagnose;
 - ``ω²-share``: the rotor with the largest flight-mean share of ω² (singles only, no training).

@@ -4,7 +4,7 @@ For each of the paper's sets A, B, C (Table 4.2) and each fault kind, one 80 s f
 simulated (offline.dataset, LSTM propellers as the shipped classifier was trained on) and every flight
 gets three verdicts:
 - ``physics``: the most probable propeller set of the moment-balance hypothesis bank
-  (monitor.effectiveness, nominal priors, no airframe baseline), its 95 % credible set and size;
+  (monitor.decision.effectiveness, nominal priors, no airframe baseline), its 95 % credible set and size;
 - each classifier given with ``--model NAME=PATH`` (default: the shipped one) as ``propwatch diagnose`` runs it
   (``monitor.diagnose.engine.diagnose_table`` after the first 5 s, with the vehicle for the moment balance): the
   verdict's set, which is the conformal set's most probable member when the model has a rule beside it;
@@ -21,8 +21,8 @@ from pathlib import Path
 
 import numpy as np
 
+from monitor.decision.effectiveness import HYPOTHESES, Evidence, HypothesisBank, Priors, RotorGeometry, credible_set
 from monitor.diagnose.engine import diagnose_table
-from monitor.effectiveness import HYPOTHESES, Evidence, HypothesisBank, Priors, RotorGeometry, credible_set
 from monitor.flight import FlightTable
 from monitor.model import Classifier
 from monitor.vehicle import DEFAULT_VEHICLE, REPO_ROOT, load_vehicle

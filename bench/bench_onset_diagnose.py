@@ -36,8 +36,8 @@ from monitor.diagnose.physics import physics_evidence
 from monitor.logs import read_log
 from monitor.model import Classifier, choose_esc
 from monitor.resample import US_PER_S
-from monitor.share_baseline import omega2_shares, share_baseline
 from monitor.vehicle import DEFAULT_VEHICLE, REPO_ROOT, load_vehicle
+from offline.share_baseline import omega2_shares, share_baseline
 from offline.sim.log import BOOT_OFFSET_US
 
 OURS_SEEDS = {"single": 211, "pair": 212}

@@ -25,7 +25,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from monitor.decision import DecisionConfig, file_sha256  # noqa: E402
+from monitor.decision.config import DecisionConfig  # noqa: E402
+from monitor.decision.thresholds import file_sha256
 from monitor.model import Classifier  # noqa: E402
 from monitor.vehicle import load_vehicle  # noqa: E402
 from offline.alerts.evaluate import REPO_ROOT, cached, set_key  # noqa: E402

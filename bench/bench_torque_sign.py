@@ -23,7 +23,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_localise import add_model_option, model_paths, physics_verdicts, share_verdicts, system_verdicts  # noqa: E402
 
-from monitor.effectiveness import HypothesisBank, Priors, RotorGeometry  # noqa: E402
+from monitor.decision.effectiveness import HypothesisBank, Priors, RotorGeometry  # noqa: E402
 from monitor.model import Classifier  # noqa: E402
 from monitor.vehicle import DEFAULT_VEHICLE, load_vehicle  # noqa: E402
 from offline.dataset.generate import DatasetSpec, generate  # noqa: E402

@@ -4,7 +4,7 @@
 
 Simulated CrazyPAD missions (``offline.crazypad.mission``) logged at 100 Hz on the calibrated-free nominal
 Crazyflie (``models/crazyflie.yaml``): healthy; the CG moved 4 mm toward PX4 rotor 2 (Bitcraze M3) in x and y;
-rotor 2 with 15 % less thrust and torque. Per flight, ``monitor.response_gain.fit_response_gain`` on the roll
+rotor 2 with 15 % less thrust and torque. Per flight, ``offline.response_gain.fit_response_gain`` on the roll
 and pitch accelerations (differentiated gyro), lag = the motor time constant. Prints the mean fitted gains
 (x 1e3, each in the rotor's expected moment direction: all four positive and alike for a healthy vehicle) and
 rotor 2's gain relative to the mean of the four. About 20 s.
@@ -27,9 +27,9 @@ REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
 from monitor.errors import ModelError  # noqa: E402
-from monitor.response_gain import angular_acceleration, fit_response_gain  # noqa: E402
 from monitor.vehicle import load_vehicle  # noqa: E402
 from offline.crazypad.mission import batch_waypoints, sim_config  # noqa: E402
+from offline.response_gain import angular_acceleration, fit_response_gain  # noqa: E402
 from offline.sim.propeller import QuadraticPropeller  # noqa: E402
 from offline.sim.simulator import simulate  # noqa: E402
 

@@ -1,7 +1,7 @@
 """The physical envelope of the decision's context streams, shared by the daemon and the log reader.
 
 Velocity (LOCAL_POSITION_NED, or a log's estimator velocity) and the accelerometer's horizontal specific force are
-optional context for the omega^2 shares' baseline (monitor/rotor_share.py): a sample that is not finite, beyond its
+optional context for the omega^2 shares' baseline (monitor/decision/rotor_share.py): a sample that is not finite, beyond its
 envelope, or bit-identical for ``FROZEN_S`` of boot time is never evidence. The daemon checks each sample as it
 arrives (``monitor.daemon.plausible``); ``propwatch diagnose`` checks a log's samples the same way before they reach
 the 20 Hz grid (``implausible_context``), so both feed the decision the same context.

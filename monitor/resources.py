@@ -30,21 +30,6 @@ def shipped(name: str) -> Path:
     return models_dir() / name
 
 
-def vehicles_for_cmd_unit(unit: str) -> list[Path]:
-    """Shipped vehicle YAMLs whose ESC curve takes motor commands in ``unit`` (and that ship their own classifier)."""
-    from monitor.errors import PropwatchError
-    from monitor.vehicle import load_vehicle
-
-    found = []
-    for path in sorted(models_dir().glob("*.yaml")):
-        try:
-            if load_vehicle(path).esc.cmd_unit == unit and path.with_name(f"{path.stem}-classifier.onnx").is_file():
-                found.append(path)
-        except PropwatchError:
-            continue
-    return found
-
-
 def display_path(path: Path) -> str:
     """``models/crazyflie.yaml`` in a checkout (what a user types from its root); the full path when installed."""
     try:

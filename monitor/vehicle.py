@@ -25,9 +25,9 @@ from pathlib import Path
 
 import numpy as np
 
-from monitor.errors import ConfigError
+from monitor.errors import ConfigError, PropwatchError
 from monitor.esc import EscCurve
-from monitor.resources import shipped
+from monitor.resources import models_dir, shipped
 
 GRAVITY_M_S2 = 9.80665  # standard gravity (ISO 80000-3), PX4 CONSTANTS_ONE_G; the one definition
 
@@ -160,3 +160,15 @@ def quad_x_positions(arm_length_m: float) -> tuple[Vec3, Vec3, Vec3, Vec3]:
 # The repository root (a checkout's models/ lives there); shipped files are found through monitor.resources.
 REPO_ROOT = Path(__file__).resolve().parent.parent
 DEFAULT_VEHICLE = shipped("vehicle.yaml")
+
+
+def vehicles_for_cmd_unit(unit: str) -> list[Path]:
+    """Shipped vehicle YAMLs whose ESC curve takes motor commands in ``unit`` (and that ship their own classifier)."""
+    found = []
+    for path in sorted(models_dir().glob("*.yaml")):
+        try:
+            if load_vehicle(path).esc.cmd_unit == unit and path.with_name(f"{path.stem}-classifier.onnx").is_file():
+                found.append(path)
+        except PropwatchError:
+            continue
+    return found

@@ -2,7 +2,7 @@
 
 Windows of one flight are not independent (the same unmodelled effects, drag, gusts, lag, sit in
 all of them), so a posterior that multiplies them is over-confident. The noise inflation of
-``monitor.effectiveness.Priors`` is the smallest factor on the per-window noise whose 95 % credible
+``monitor.decision.effectiveness.Priors`` is the smallest factor on the per-window noise whose 95 % credible
 sets hold the truth in at least 95 % of randomised flights (split-conformal in spirit: calibrated on
 flights the verdict never saw, and never on the evaluation-only simulator).
 
@@ -25,7 +25,15 @@ import json
 
 import numpy as np
 
-from monitor.effectiveness import HYPOTHESES, Evidence, HypothesisBank, Priors, RotorGeometry, credible_set, window_balance
+from monitor.decision.effectiveness import (
+    HYPOTHESES,
+    Evidence,
+    HypothesisBank,
+    Priors,
+    RotorGeometry,
+    credible_set,
+    window_balance,
+)
 from monitor.vehicle import DEFAULT_VEHICLE, load_vehicle
 from offline.dataset.generate import DatasetSpec, generate
 from offline.sim.assumptions import REGISTER, nominal_airframe

@@ -15,10 +15,10 @@ import pytest
 
 pytest.importorskip("rotorpy")
 
+from monitor.decision.effectiveness import SET_PRIOR  # noqa: E402
+from monitor.decision.hypotheses import load_rule  # noqa: E402
 from monitor.diagnose import cli  # noqa: E402
 from monitor.diagnose.physics import airframe_log_bayes_factor  # noqa: E402
-from monitor.effectiveness import SET_PRIOR  # noqa: E402
-from monitor.hypotheses import load_rule  # noqa: E402
 from monitor.resources import shipped  # noqa: E402
 from monitor.vehicle import DEFAULT_VEHICLE, load_vehicle  # noqa: E402
 

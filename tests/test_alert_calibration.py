@@ -16,7 +16,8 @@ import math
 import numpy as np
 import pytest
 
-from monitor.decision import DecisionConfig, load_calibration, thresholds
+from monitor.decision.config import DecisionConfig
+from monitor.decision.thresholds import load_calibration, thresholds
 from offline.alerts.calibrate import H_GRID, fit_traces, flight_crossing_counts, flight_peaks, write_calibration
 
 LAM_PER_H, B, H0 = 30.0, 1.0, 1.0

@@ -1,7 +1,7 @@
 """``offline.alerts.evaluate --compare-with``: another checkout's decision rule, replayed as that checkout has it.
 
-The rule lives in several modules (monitor/decision.py and its parts); a comparison that loaded the other
-checkout's decision.py but this tree's parts would replay a mix of both.
+The rule lives in several modules (monitor/decision/rule.py and its parts); a comparison that loaded the other
+checkout's rule but this tree's parts would replay a mix of both.
 """
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ import sys
 
 import numpy as np
 
-from monitor.decision import DecisionConfig
+from monitor.decision.config import DecisionConfig
 from monitor.vehicle import REPO_ROOT
 from offline.alerts.evaluate import DECISION_PARTS, previous_rule
 from offline.alerts.flights import AlertFlight
@@ -34,29 +34,29 @@ def onset_flight() -> AlertFlight:
 
 def checkout_copy(tmp_path):
     root = tmp_path / "other"
-    (root / "monitor").mkdir(parents=True)
+    (root / "monitor" / "decision").mkdir(parents=True)
     (root / "models").mkdir()
-    for part in (*DECISION_PARTS, "decision"):
-        shutil.copy(REPO_ROOT / "monitor" / f"{part}.py", root / "monitor" / f"{part}.py")
+    for part in (*DECISION_PARTS, "rule"):
+        shutil.copy(REPO_ROOT / "monitor" / "decision" / f"{part}.py", root / "monitor" / "decision" / f"{part}.py")
     shutil.copy(REPO_ROOT / "models" / "decision-calibration.json", root / "models")
     return root
 
 
 def test_this_checkout_compared_with_itself_gives_the_same_alerts_and_leaves_the_modules_alone(tmp_path):
     f = onset_flight()
-    before = {p: sys.modules.get(f"monitor.{p}") for p in DECISION_PARTS}
+    before = {p: sys.modules.get(f"monitor.decision.{p}") for p in DECISION_PARTS}
     ours = decision_rule(DecisionConfig())(f)
     theirs = previous_rule(str(checkout_copy(tmp_path)))(f)
     assert ours and [a[1:3] for a in ours][:2] == [("suspect", (3,)), ("fault", (3,))]
     assert theirs == ours
-    assert {p: sys.modules.get(f"monitor.{p}") for p in DECISION_PARTS} == before
+    assert {p: sys.modules.get(f"monitor.decision.{p}") for p in DECISION_PARTS} == before
 
 
 def test_the_other_checkouts_parts_are_the_ones_replayed(tmp_path):
     # The other checkout's config asks for thrust losses of 30 % or more: its rule stays silent on a 10 % loss.
-    # Loading its decision.py with this tree's parts would alert as this tree does.
+    # Loading its rule with this tree's parts would alert as this tree does.
     root = checkout_copy(tmp_path)
-    cfg = root / "monitor" / "decision_config.py"
+    cfg = root / "monitor" / "decision" / "config.py"
     text = cfg.read_text()
     assert "min_thrust_loss: float = 0.08" in text
     cfg.write_text(text.replace("min_thrust_loss: float = 0.08", "min_thrust_loss: float = 0.3"))

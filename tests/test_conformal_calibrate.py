@@ -107,7 +107,7 @@ def test_beyond_register_regions_count_for_the_rule_not_for_the_airframe_check(c
 def test_a_rule_file_with_a_weight_is_what_diagnose_reads(calibrated, tmp_path):
     import json
 
-    from monitor.hypotheses import load_rule, rule_path
+    from monitor.decision.hypotheses import load_rule, rule_path
 
     res, _ = calibrated
     model = tmp_path / "m.onnx"

@@ -94,7 +94,7 @@ def test_full_healthy_flight_raises_no_alert(tmp_path, flights):
     tlog, faulty = flights["healthy"]
     assert faulty == ()
     raw, _ = frames_of(tlog)
-    # The daemon's default rule (monitor/decision.py); the from-take-off tests above use the consecutive one.
+    # The daemon's default rule (monitor/decision/rule.py); the from-take-off tests above use the consecutive one.
     cfg = "alerts:\n  rule: sequential\n"
     d, _, events, _, received, report = fly_over_udp(tmp_path, CLASSIFIER, raw, speed=4, config_text=cfg)
     assert report["pipeline"]["classified"] > 1000, d.text[-2000:]  # it did watch the flight

@@ -77,7 +77,7 @@ class Proc:
 
 # These tests exercise the link, streams and sinks with a toy model whose faults are present from the
 # first sample: they run the daemon on the consecutive-window rule. The sequential decision rule (the
-# default, which alerts on a change, see monitor/decision.py) has its own tests in test_decision*.py.
+# default, which alerts on a change, see monitor/decision/rule.py) has its own tests in test_decision*.py.
 CONSECUTIVE_RULE = "alerts:\n  rule: consecutive\n"
 _RULE_DIR = Path(tempfile.mkdtemp(prefix="propwatch-rule-"))
 

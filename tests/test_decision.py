@@ -1,4 +1,4 @@
-"""The shared decision rule (monitor/decision.py) on window sequences with known answers."""
+"""The shared decision rule (monitor/decision/rule.py) on window sequences with known answers."""
 
 from __future__ import annotations
 
@@ -8,18 +8,10 @@ import math
 import numpy as np
 import pytest
 
-from monitor.decision import (
-    STATISTICS,
-    Calibration,
-    Decision,
-    DecisionConfig,
-    StepInputs,
-    WindowEvidence,
-    analytic_threshold,
-    load_calibration,
-    statustext,
-    thresholds,
-)
+from monitor.decision.config import DecisionConfig
+from monitor.decision.regime import StepInputs
+from monitor.decision.rule import Decision, WindowEvidence, statustext
+from monitor.decision.thresholds import STATISTICS, Calibration, analytic_threshold, load_calibration, thresholds
 from monitor.errors import ConfigError
 
 RATE_HZ, WINDOW = 20.0, 100
@@ -219,7 +211,7 @@ def test_statustext_wording():
 
 def test_the_per_window_clip_is_np_clip_bit_for_bit():
     # RotorShare clips with minimum/maximum (cheaper per window): the same values as np.clip, NaN and -0.0 included.
-    from monitor.rotor_share import LLR_CLIP, _clip_llr
+    from monitor.decision.rotor_share import LLR_CLIP, _clip_llr
 
     x = np.array([np.nan, -np.inf, np.inf, -0.0, 0.0, LLR_CLIP, -LLR_CLIP, 1e300, -1e300, 0.3, -7.25])
     expected = np.clip(x, -LLR_CLIP, LLR_CLIP)
@@ -230,8 +222,8 @@ def test_no_alert_before_the_shares_baseline_is_no_verdict_and_says_so():
     # Each flight first learns BASELINE_S (10 s) of evidence windows; the first window ends 5 s after take-off.
     # A 14 s hover is never tested: its silence is no verdict. The next flight (after a landing) hovers 40 s:
     # tested from 15 s on, 25 s of it, by hand.
+    from monitor.decision.rotor_share import BASELINE_S
     from monitor.diagnose.cli import in_flight_summary
-    from monitor.rotor_share import BASELINE_S
 
     rng = np.random.default_rng(1)
     rpm = lambda t: HOVER_RPM * (1.0 + 0.01 * rng.standard_normal(4))  # noqa: E731

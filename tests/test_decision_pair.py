@@ -1,4 +1,4 @@
-"""The pair statistic (monitor/decision.py): the yaw balance of the omega^2 shares.
+"""The pair statistic (monitor/decision/rule.py): the yaw balance of the omega^2 shares.
 
 A same-spin diagonal pair (1+2 CCW or 3+4 CW) that loses thrust on both rotors keeps roll and pitch balanced, so
 the yaw-free shares do not move; the controller re-trims yaw instead, and y = (s1 + s2 - s3 - s4) / 2 moves by
@@ -15,18 +15,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from monitor.decision import (
-    LEVELS,
-    STATUSTEXT_MAX_CHARS,
-    YAW_AVERAGE_S,
-    Decision,
-    DecisionConfig,
-    StepInputs,
-    WindowEvidence,
-    load_calibration,
-    statustext,
-    thresholds,
-)
+from monitor.decision.config import LEVELS, DecisionConfig
+from monitor.decision.regime import StepInputs
+from monitor.decision.rotor_share import YAW_AVERAGE_S
+from monitor.decision.rule import STATUSTEXT_MAX_CHARS, Decision, WindowEvidence, statustext
+from monitor.decision.thresholds import load_calibration, thresholds
 from offline.alerts.rules import _wrong
 
 RATE_HZ, WINDOW = 20.0, 100

@@ -14,17 +14,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from monitor.decision import (
-    SHARE_SIGMA,
-    Calibration,
-    Decision,
-    DecisionConfig,
-    StepInputs,
-    WindowEvidence,
-    load_calibration,
-    physics_statistic,
-    thresholds,
-)
+from monitor.decision.config import DecisionConfig
+from monitor.decision.regime import StepInputs
+from monitor.decision.rotor_share import SHARE_SIGMA
+from monitor.decision.rule import Decision, WindowEvidence
+from monitor.decision.thresholds import Calibration, load_calibration, physics_statistic, thresholds
 
 RATE_HZ, WINDOW = 20.0, 100
 HOVER_RPM = 6500.0
@@ -74,7 +68,7 @@ def test_a_payload_whose_trim_is_a_large_loss_is_held_until_the_step_rule_re_lea
     # shares called rotor 3 FAULT 4.8 s later, 1.7 s before the 10-s median rule saw the step. Here the payload
     # moves rotor 1's share 6 % up (a 12 % loss's pattern, beyond the reference): while the last 2 s of mean RPM
     # stand apart from the 10 s before, windows are held; the step rule then re-learns. Nothing is raised.
-    import monitor.regime as regime
+    import monitor.decision.regime as regime
 
     def rpm(t):
         return HOVER_RPM * (1.15 * shares(0.06) if t >= 40.0 else shares(0.0))

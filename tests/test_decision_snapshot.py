@@ -6,7 +6,7 @@ sample of the mixer's transient (rotor 2 at 1432 RPM, rotor 4 at 2463, rotors 1 
 two samples by the telemetry) fell inside the 10 s the shares' plane is learnt on. Learnt from plain 2-s means, the
 plane took it as a slope in the specific force and mispredicted the cruise trim by 0.05 along rotor 2's direction:
 a false FAULT 24 s into a healthy flight (session 14's one false FAULT in 10 evalsim hours). The plane learns from
-10 %-trimmed means (monitor.rotor_share.PLANE_CUT); the evidence is unchanged. Since session 17 it also learns
+10 %-trimmed means (monitor.decision.rotor_share.PLANE_CUT); the evidence is unchanged. Since session 17 it also learns
 while every statistic is below QUIET_NATS, which re-learns the slope as well: either alone keeps the flight quiet.
 """
 
@@ -14,9 +14,9 @@ from __future__ import annotations
 
 import pytest
 
-import monitor.decision as dec
-import monitor.rotor_share as rs
-from monitor.decision import DecisionConfig
+import monitor.decision.rotor_share as rs
+import monitor.decision.rule as dec
+from monitor.decision.config import DecisionConfig
 from monitor.model import Classifier
 from monitor.resources import shipped
 from offline.alerts.flights import evalsim_set

@@ -173,7 +173,7 @@ def test_reports_of_same_named_logs_do_not_overwrite(capsys, model, tmp_path):
 
 def test_a_verdict_below_the_stated_probability_is_not_faulty_and_exits_3(capsys, model, logs, monkeypatch):
     import monitor.diagnose.engine as engine
-    from monitor.decision import DecisionConfig
+    from monitor.decision.config import DecisionConfig
 
     code, res = run(capsys, logs[2], "--model", model, "--json")
     assert code == 0 and res["verdict"]["confidence"] == "confident"
@@ -192,7 +192,7 @@ def test_a_verdict_below_the_stated_probability_is_not_faulty_and_exits_3(capsys
 def test_a_conformal_rule_beside_the_model_gives_the_hypothesis_set(capsys, model, logs, tmp_path):
     import shutil
 
-    from monitor.hypotheses import rule_path
+    from monitor.decision.hypotheses import rule_path
 
     ruled = tmp_path / "ruled.onnx"
     shutil.copy(model, ruled)
@@ -228,7 +228,7 @@ def test_with_a_set_rule_the_fault_probability_is_the_verdicts_own_score(capsys,
     # call unlikely. The network's own mean stays, under its own key.
     import shutil
 
-    from monitor.hypotheses import flight_score, rule_path
+    from monitor.decision.hypotheses import flight_score, rule_path
     from monitor.labels import LABEL_TABLE
 
     _, plain = run(capsys, logs[2], "--model", model, "--json")

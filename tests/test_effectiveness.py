@@ -1,11 +1,11 @@
-"""Rotor effectiveness from moment balance (monitor.effectiveness): hand calculations and hidden losses."""
+"""Rotor effectiveness from moment balance (monitor.decision.effectiveness): hand calculations and hidden losses."""
 
 import dataclasses
 
 import numpy as np
 import pytest
 
-from monitor.effectiveness import (
+from monitor.decision.effectiveness import (
     HYPOTHESES,
     Baseline,
     Evidence,

@@ -1,4 +1,4 @@
-"""The fast per-window path of monitor.effectiveness gives the numbers of the straightforward one.
+"""The fast per-window path of monitor.decision.effectiveness gives the numbers of the straightforward one.
 
 ``window_balance`` sums all its segments (the window and its sub-blocks) in one reduction, and
 ``HypothesisBank.window_posterior`` scores a window in data space (3 x 3 per set) instead of through
@@ -10,7 +10,7 @@ information-form path that diagnose sums over a flight.
 import numpy as np
 import pytest
 
-from monitor.effectiveness import (
+from monitor.decision.effectiveness import (
     RPM_TO_RAD_S,
     SUB_BLOCKS,
     Baseline,

@@ -15,12 +15,12 @@ pytest.importorskip("rotorpy")
 
 from monitor.esc import PAPER_ESC  # noqa: E402
 from monitor.logs import read_log  # noqa: E402
-from monitor.share_baseline import omega2_shares, share_baseline  # noqa: E402
 from monitor.vehicle import DEFAULT_VEHICLE, load_vehicle  # noqa: E402
 from offline.evalsim import frames  # noqa: E402
 from offline.evalsim.airframe import Airframe, Damage  # noqa: E402
 from offline.evalsim.environment import Sensors, Wind  # noqa: E402
 from offline.evalsim.flight import START_NED_M, FlightSpec, multirotor_for, simulate_flights, truth  # noqa: E402
+from offline.share_baseline import omega2_shares, share_baseline  # noqa: E402
 
 REPO = Path(__file__).resolve().parent.parent
 V = load_vehicle(DEFAULT_VEHICLE)
@@ -416,7 +416,7 @@ def test_forward_flight_with_flapping_trims_the_front_rotors_down_by_the_hand_ca
     # omega^2 share of the front rotors (1, 3) falls by s = k 4 w_h v / (m g a_x) and the rear's rises by as much
     # (the pattern (-s, +s, -s, +s) is a pitch moment s m g a_x). At 8 m/s with k = 1.8e-5: s = 0.20. The same
     # flight without flapping stays trimmed within a few hundredths.
-    from monitor.rotor_share import _YAW_FREE
+    from monitor.decision.rotor_share import _YAW_FREE
     from offline.evalsim.sets import FLAPPING_MAX, build_set
 
     leg = ((60.0, 0.0, -10.0),) * 5

@@ -11,7 +11,8 @@ from monitor.cli import main as propwatch
 from monitor.errors import LogFormatError
 from monitor.logs import detect_format
 from monitor.logs.csvlog import load_formats
-from monitor.resources import shipped, vehicles_for_cmd_unit
+from monitor.resources import shipped
+from monitor.vehicle import vehicles_for_cmd_unit
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 CRAZYPAD_CUT = DATA / "crazypad" / "motor" / "cut_propeller_M3_4mm_4mm_39mm" / "E8_log00.csv.gz"

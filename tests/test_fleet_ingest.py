@@ -295,8 +295,8 @@ def test_model_version_covers_the_set_rule_and_the_decision_calibration_beside_t
     import hashlib
 
     from fleet.worker import SHIPPED_MODELS, model_version
-    from monitor.decision import DEFAULT_CALIBRATION
-    from monitor.hypotheses import rule_path
+    from monitor.decision.hypotheses import rule_path
+    from monitor.decision.thresholds import DEFAULT_CALIBRATION
 
     shipped = SHIPPED_MODELS[0]
     if not rule_path(shipped).is_file():

@@ -7,8 +7,8 @@ import json
 import numpy as np
 import pytest
 
+from monitor.decision.hypotheses import flight_score, hypothesis_set, load_rule, rule_path
 from monitor.errors import ModelError
-from monitor.hypotheses import flight_score, hypothesis_set, load_rule, rule_path
 from monitor.labels import LABEL_TABLE
 from offline.classifier.conformal import conformal_threshold, measure
 
@@ -94,7 +94,7 @@ def test_classifier_weight_lets_the_balance_outvote_a_network_sure_of_what_only_
 
 
 def test_yaw_classes_join_exactly_the_sets_a_same_spin_pair_apart():
-    from monitor.hypotheses import YAW_CLASS
+    from monitor.decision.hypotheses import YAW_CLASS
 
     classes = {}
     for k, c in enumerate(YAW_CLASS):
@@ -115,7 +115,7 @@ def test_yaw_classes_join_exactly_the_sets_a_same_spin_pair_apart():
 
 
 def test_the_daemon_words_a_yaw_class_split_with_the_rules_weight():
-    from monitor.hypotheses import FlightSets, SetRule
+    from monitor.decision.hypotheses import FlightSets, SetRule
 
     p = np.full(16, 1e-6)
     p[14], p[2] = 0.95, 0.05  # label 15 = {2, 3, 4}, label 3 = {2}: one yaw class, split by the network alone
@@ -160,8 +160,10 @@ def test_rule_file_is_read_and_a_bad_one_is_named(tmp_path):
 
 
 def test_flight_sets_word_the_daemons_alerts_as_the_flights_hypotheses():
-    from monitor.decision import Decision, DecisionConfig, StepInputs, WindowEvidence
-    from monitor.hypotheses import FlightSets, SetRule
+    from monitor.decision.config import DecisionConfig
+    from monitor.decision.hypotheses import FlightSets, SetRule
+    from monitor.decision.regime import StepInputs
+    from monitor.decision.rule import Decision, WindowEvidence
 
     rule = SetRule("classifier x moment balance", 0.3, 0.95, 160, thresholds=(("classifier", 0.2),))
     sets = FlightSets(rule)
@@ -196,8 +198,10 @@ def _fly_with_a_network_set(label_p, network_p, share_rotor: int | None, seed: i
     """80 s at 20 Hz through the shipped rule (analytic thresholds). From 40 s: rotor ``share_rotor``'s omega^2
     share rises by 10 % (None: the shares stay put), the network's P(faulty) per propeller is ``network_p`` (0.01
     before), and its recent set (a classifier-only conformal rule) is worded from ``label_p``. The announcements."""
-    from monitor.decision import Decision, DecisionConfig, StepInputs, WindowEvidence
-    from monitor.hypotheses import FlightSets, SetRule
+    from monitor.decision.config import DecisionConfig
+    from monitor.decision.hypotheses import FlightSets, SetRule
+    from monitor.decision.regime import StepInputs
+    from monitor.decision.rule import Decision, WindowEvidence
 
     sets = FlightSets(SetRule("classifier", 0.3, 0.95, 160, thresholds=(("classifier", 0.3),)))
     d = Decision(DecisionConfig(), 20.0, 100, use_stored_calibration=False)
@@ -374,7 +378,7 @@ def test_conformal_cli_refuses_a_sparsity_prior_outside_0_1_before_reading_anyth
 
 
 def test_flight_sets_word_an_onset_from_the_recent_windows_not_the_healthy_minutes_before():
-    from monitor.hypotheses import FlightSets, SetRule
+    from monitor.decision.hypotheses import FlightSets, SetRule
 
     rule = SetRule("classifier", 0.05, 0.95, 160, thresholds=(("classifier", 0.05),))
     healthy, prop2 = np.full(16, 0.001), np.full(16, 0.001)
@@ -392,7 +396,7 @@ def test_flight_sets_word_an_onset_from_the_recent_windows_not_the_healthy_minut
 def test_deferred_flight_sets_are_the_sets_add_gives_whenever_they_are_read():
     """The daemon defers each window's set until an alert reads it: read later (after more windows, a reset),
     it is still the set of its own window, and it reads as the tuple ``add`` returns."""
-    from monitor.hypotheses import FlightSets, RecentSet, SetRule
+    from monitor.decision.hypotheses import FlightSets, RecentSet, SetRule
 
     rule = SetRule("classifier", 0.05, 0.95, 160, sparsity_prior=0.7)
     eager, lazy = FlightSets(rule, horizon=5), FlightSets(rule, horizon=5)

@@ -80,7 +80,7 @@ def test_installed_wheel_diagnoses_a_shared_log_from_root(tmp_path):
     assert out["log"] == str(LOG171) and "error" not in out
     assert out["windows"] > 0
     # The in-flight decision (daemon and diagnose) reads the shipped threshold calibration, not the analytic fallback.
-    cal = _run([str(py), "-c", "from monitor.decision import load_calibration as c; print(c().model_sha256)"], cwd="/")
+    cal = _run([str(py), "-c", "from monitor.decision.thresholds import load_calibration as c; print(c().model_sha256)"], cwd="/")
     assert cal.returncode == 0 and len(cal.stdout.strip()) == 64, cal.stdout + cal.stderr
     # simulate reads the shipped vehicle.yaml (and propeller models) the same way.
     r = _run(

@@ -1,4 +1,4 @@
-"""``monitor.response_gain``: the 100 Hz per-rotor response-gain fit, checked against hand-built open-loop flights.
+"""``offline.response_gain``: the 100 Hz per-rotor response-gain fit, checked against hand-built open-loop flights.
 
 The fit's physics: a damaged rotor buys less angular acceleration per command change (its gain drops); a CG
 offset adds a constant moment (trim) and leaves the gains alone. On an open-loop synthetic flight with known
@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from monitor.errors import ModelError
-from monitor.response_gain import angular_acceleration, fit_response_gain
+from offline.response_gain import angular_acceleration, fit_response_gain
 
 RATE_HZ = 100.0
 LAG_S = 0.03

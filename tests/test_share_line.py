@@ -2,7 +2,7 @@
 
 Synthetic flights at the decision's own inputs: each rotor's omega^2 is 1 + its yaw-free trim, where blade flapping
 trims the front rotors down by t v flying forward at v (the rear ones up as much) and rolls the same way in a side
-flow (monitor.rotor_share). t = 0.025 per m/s is the register's largest (ArduPilot log171's trim).
+flow (monitor.decision.rotor_share). t = 0.025 per m/s is the register's largest (ArduPilot log171's trim).
 """
 
 from __future__ import annotations
@@ -11,8 +11,10 @@ import math
 
 import numpy as np
 
-from monitor.decision import Decision, DecisionConfig, StepInputs, WindowEvidence
-from monitor.rotor_share import _PITCH, _ROLL, RotorShare
+from monitor.decision.config import DecisionConfig
+from monitor.decision.regime import StepInputs
+from monitor.decision.rotor_share import _PITCH, _ROLL, RotorShare
+from monitor.decision.rule import Decision, WindowEvidence
 
 RATE_HZ, WINDOW = 20.0, 100
 HOVER_RPM = 6500.0
@@ -133,7 +135,7 @@ def _gust_beyond_what_was_learnt(duration_s: float = 120.0) -> list:
 def test_a_gust_beyond_what_the_plane_was_learnt_on_is_heard_less_not_read_as_a_fault(monkeypatch):
     assert not [a for a in _gust_beyond_what_was_learnt() if a.level == "fault"]
     # Without the box (the plane trusted as far as it extrapolates) the same gust faults: what kept it out.
-    import monitor.rotor_share as rs
+    import monitor.decision.rotor_share as rs
 
     monkeypatch.setattr(rs, "NOVEL_FLAP_SD", 0.0)
     monkeypatch.setattr(rs, "NOVEL_DRAG_SD", 0.0)
@@ -167,7 +169,7 @@ def test_a_loss_at_a_speed_the_plane_has_learnt_keeps_its_weight_while_it_is_hea
     assert all(a.propellers == (2,) for a in out), [(a.t_s, a.text) for a in out]
     # With the slopes drifting ten times faster (sessions 12-16) the plane's doubt at 2 m/s^2 outgrows the loss's
     # evidence within seconds of the onset: the same loss is heard later than 10 s. What made it quick.
-    import monitor.rotor_share as rs
+    import monitor.decision.rotor_share as rs
 
     monkeypatch.setattr(rs, "FLAP_SLOPE_Q", 10.0 * rs.FLAP_SLOPE_Q)
     slow = [a for a in _cruise_with_drag(onset_s=100.0) if a.level == "fault"]
@@ -198,10 +200,10 @@ def test_a_statistic_left_at_a_few_hundredths_of_a_nat_does_not_stop_the_plane_l
     """The plane learns only while no evidence gathers. Where it doubts (a speed it has not flown) each window's
     evidence is tiny either way, so a CUSUM entering at 0.05 nat neither grows nor drains (session 17, ours
     `single-r801-26`: rotor 1 at 0.05-0.07 for 9 s). It learns the new speed; entering with 1 nat (evidence) it does
-    not; and had "quiet" meant exactly 0 (monitor.rotor_share.QUIET_NATS), the 0.05 would have stopped it too."""
+    not; and had "quiet" meant exactly 0 (monitor.decision.rotor_share.QUIET_NATS), the 0.05 would have stopped it too."""
     assert _learns_new_speed(0.05) > 7.0
     assert _learns_new_speed(1.0) < 3.0
-    import monitor.decision as dec
+    import monitor.decision.rule as dec
 
     monkeypatch.setattr(dec, "QUIET_NATS", 0.0)
     assert _learns_new_speed(0.05) < 3.0

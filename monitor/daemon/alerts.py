@@ -1,6 +1,6 @@
 """The STATUSTEXT queue (the events file is monitor/daemon/events.py) and the older consecutive-window rule.
 
-The daemon decides with ``monitor.decision.Decision`` (shared with
+The daemon decides with ``monitor.decision.rule.Decision`` (shared with
 ``propwatch diagnose``; ``alerts.rule: sequential``, the default). The rule
 below is kept as ``alerts.rule: consecutive`` and as the comparison row of
 ``make evaluate-alerts``.

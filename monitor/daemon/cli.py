@@ -17,7 +17,7 @@ import sys
 import time
 from pathlib import Path
 
-from monitor.daemon.config import MonitorConfig, load_monitor_config, parse_address, parse_source
+from monitor.daemon.config import MonitorConfig, load_monitor_config, parse_address, parse_endpoint, parse_source
 from monitor.daemon.events import EventWriter
 from monitor.daemon.link import Link, LinkGuard, read_signing_key
 from monitor.daemon.pipeline import Pipeline
@@ -61,6 +61,10 @@ def guard(cfg: MonitorConfig) -> LinkGuard:
         allow_addresses=tuple(parse_address(a) for a in c.allow_addresses),
         allow_sources=tuple(parse_source(s) for s in c.allow_sources),
         max_peers=c.max_peers,
+        autopilot_address=parse_endpoint(c.autopilot_address, "link.autopilot_address") if c.autopilot_address else None,
+        ground_stations=tuple(parse_endpoint(g, "link.ground_stations") for g in c.ground_stations),
+        autopilot_component_id=c.autopilot_component_id,
+        pin_wait_s=c.pin_wait_s,
     )
 
 

@@ -10,7 +10,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from monitor.config import from_mapping, load_dataclass
-from monitor.decision import DecisionConfig
+from monitor.decision.config import DecisionConfig
 from monitor.envelope import FROZEN_S
 from monitor.errors import ConfigError
 from monitor.resources import shipped
@@ -45,16 +45,24 @@ def parse_source(text: str) -> tuple[int | None, int | None]:
     return ids  # type: ignore[return-value]
 
 
-def parse_address(text: str) -> tuple[str, int | None]:
+def parse_address(text: str, key: str = "link.allow_addresses") -> tuple[str, int | None]:
     """``"127.0.0.1"`` -> (host, None) any port; ``"127.0.0.1:14580"`` -> (host, port)."""
     host, _, port = str(text).partition(":")
     if not host:
-        raise ConfigError(f"link.allow_addresses: {text!r} has no host")
+        raise ConfigError(f"{key}: {text!r} has no host")
     if not port:
         return host, None
     if not port.isdigit() or not 0 < int(port) < 65536:
-        raise ConfigError(f"link.allow_addresses: {text!r}: port must be 1..65535")
+        raise ConfigError(f"{key}: {text!r}: port must be 1..65535")
     return host, int(port)
+
+
+def parse_endpoint(text: str, key: str) -> tuple[str, int]:
+    """``"10.0.0.7:14550"`` -> (host, port); both are required."""
+    host, port = parse_address(text, key)
+    if port is None:
+        raise ConfigError(f"{key}: {text!r} must be HOST:PORT")
+    return host, port
 
 
 @dataclass(frozen=True)
@@ -80,6 +88,13 @@ class LinkConfig:
     allow_addresses: tuple[str, ...] = ()
     allow_sources: tuple[str, ...] = ()
     max_peers: int = 8  # udpin: distinct sender addresses remembered for the report (replies go only to the autopilot's)
+    # The pinned autopilot (monitor.daemon.pin): on udpin its "HOST:PORT" ('' = the one address whose HEARTBEATs
+    # pin it first; a second candidate before that is refused with it). Its system id is learnt only from its
+    # HEARTBEATs on that link (system_id 0), and nothing else ever moves the pin.
+    autopilot_address: str = ""
+    # "HOST:PORT" that also get our HEARTBEAT, STATUSTEXT and NAMED_VALUE_FLOAT (never a command); nobody else does.
+    ground_stations: tuple[str, ...] = ()
+    pin_wait_s: float = 2.0  # a candidate autopilot's HEARTBEATs span this long, no other heard, before it is pinned
     # udpin: sleep through the datagrams that cannot complete the next 20 Hz step and read them together
     # (monitor.daemon.pacing): measured 85 -> 55-60 wake-ups/s at 20 Hz; latency still counts from each arrival.
     pace_reads: bool = True
@@ -102,6 +117,11 @@ class LinkConfig:
             parse_address(a)
         for s in self.allow_sources:
             parse_source(s)
+        _within(self.pin_wait_s, 0.0, 60.0, "link.pin_wait_s")
+        if self.autopilot_address:
+            parse_endpoint(self.autopilot_address, "link.autopilot_address")
+        for g in self.ground_stations:
+            parse_endpoint(g, "link.ground_stations")
 
 
 @dataclass(frozen=True)

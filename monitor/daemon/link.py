@@ -11,13 +11,16 @@ On ``udpin`` one read takes every datagram waiting (bounded), each with the
 kernel's arrival stamp where Linux gives one, so the loop can sleep between
 grid steps (``monitor.daemon.pacing``) without hiding the wait from the latency.
 
-Trust (``LinkGuard``): with a signing key, pymavlink's MAVLink 2 signing
-verifies every incoming frame (unsigned, MAVLink 1 and badly signed frames
-come out as bad data) and signs everything we send. Source allow-lists by
-address and by SYSID/COMPID drop the rest, counted. On ``udpin`` nothing is
-sent before the autopilot is known, then only to the address its HEARTBEAT
-came from; other senders are remembered in a bounded list for the report,
-never answered.
+Trust (``LinkGuard``, docs/SECURITY.md): with a signing key every incoming
+frame is verified by ``monitor.daemon.signing`` (signature first, then its
+timestamp, per stream) and everything we send is signed; refused frames are
+counted and each (reason, sender) is written to the journal once. Source
+allow-lists by address and by SYSID/COMPID drop the rest, counted. The
+autopilot is pinned (``monitor.daemon.pin``): its system id is learnt only
+from its HEARTBEATs on the pinned link, and on ``udpin`` nothing is sent
+before that, then only to the pinned address and the configured ground
+stations; the pin never follows a newcomer. ``flight_authenticated`` says
+whether every frame the daemon used was verified.
 """
 
 from __future__ import annotations
@@ -39,7 +42,10 @@ os.environ.setdefault("MAVLINK20", "1")  # ESC_STATUS (id 291) exists only in MA
 os.environ.setdefault("MAVLINK_DIALECT", "common")  # mavutil's default 'all' costs ~1 s of start-up
 
 from pymavlink import mavutil  # noqa: E402
+from pymavlink.dialects.v20 import common as mavlink2  # noqa: E402
 
+from monitor.daemon.pin import PIN_WAIT_S, AutopilotPin, Origin  # noqa: E402
+from monitor.daemon.signing import TIMESTAMP_UNITS_PER_S, SignatureGate  # noqa: E402
 from monitor.errors import ConfigError  # noqa: E402
 from monitor.resample import US_PER_S  # noqa: E402
 
@@ -54,7 +60,8 @@ LOG_SUFFIXES = (".tlog", ".mavlink")
 REOPEN_PERIOD_S = 1.0
 UDP_MAX_PACKET = 65535
 SIGNING_KEY_BYTES = 32
-MAX_SIGNING_STREAMS = 256  # pymavlink keeps one timestamp per (link, sys, comp) it ever saw: keep it bounded
+SIGNING_EPOCH_S = 1420070400  # MAVLink signing timestamps count from 2015-01-01 00:00 UTC
+MAX_ANNOUNCED = 64  # (reason, sender) pairs written to the journal once each; beyond that, counted only
 MAX_DATAGRAMS_PER_READ = 256  # a read drains the socket, within bounds (PX4 sends ~100 a second)
 # Kernel receive stamps (struct timespec on CLOCK_REALTIME), Linux only; Python's socket module does not name
 # the option. 35 = SO_TIMESTAMPNS (asm-generic: x86, arm, arm64, riscv); SCM_TIMESTAMPNS is the same number.
@@ -73,6 +80,10 @@ class LinkGuard:
     allow_addresses: tuple[tuple[str, int | None], ...] = ()  # (host, port or None = any)
     allow_sources: tuple[tuple[int | None, int | None], ...] = ()  # (sysid, compid), None = any
     max_peers: int = 8
+    autopilot_address: tuple[str, int] | None = None  # udpin: the autopilot's pinned (host, port); None = learnt
+    ground_stations: tuple[tuple[str, int], ...] = ()  # (host, port) that also get our HEARTBEAT, STATUSTEXT, values
+    autopilot_component_id: int = 1
+    pin_wait_s: float = PIN_WAIT_S
 
     def address_ok(self, addr: tuple[str, int]) -> bool:
         return not self.allow_addresses or any(h == addr[0] and p in (None, addr[1]) for h, p in self.allow_addresses)
@@ -137,10 +148,26 @@ class Link:
         self.is_udpin = url.startswith(("udpin:", "udp:"))
         self.peers: OrderedDict[tuple[str, int], int] = OrderedDict()  # udpin senders, bounded, for the report
         self.rejected: Counter = Counter()  # why frames/datagrams were dropped
-        self._origin: dict[int, tuple[str, int]] = {}  # id(message) -> sender address, for the last udpin read
         self.drained = True  # the last read left nothing waiting
-        self._autopilot_addr: tuple[str, int] | None = None
-        self._signing: Any = None
+        # Signature checks and the pin apply to a live link; a recorded log is read as it was recorded.
+        key = self.guard.signing_key
+        self.gate = SignatureGate(key) if key is not None and not self.is_log else None
+        self.pin = (
+            None
+            if self.is_log
+            else AutopilotPin(system_id, self.guard.autopilot_component_id, self.guard.autopilot_address, self.guard.pin_wait_s)
+        )
+        self.unverified_frames = 0  # frames passed on without a verified signature (all of them with signing off)
+        self._announced: set[tuple[str, str]] = set()
+        self._tx = mavlink2.MAVLink(None, srcSystem=system_id or 1, srcComponent=component_id)
+        if key is not None:
+            self._tx.signing.secret_key = key
+            self._tx.signing.sign_outgoing = True
+            self._tx.signing.link_id = self.guard.signing_link_id
+            self._tx.signing.timestamp = max(1, int((time.time() - SIGNING_EPOCH_S) * TIMESTAMP_UNITS_PER_S))
+        self._gcs_sock: socket.socket | None = None
+        if not self.is_log:
+            self._warn_if_trusting()
         if self.is_log:
             self.open()
         else:
@@ -167,16 +194,9 @@ class Link:
             raise ConfigError(f"--connect {self.url}: {exc}") from exc
         if not self.is_log:
             self.conn.mav.robust_parsing = True
-            if self.guard.signing_key is not None:
-                self.conn.setup_signing(
-                    self.guard.signing_key, sign_outgoing=True, allow_unsigned_callback=None, link_id=self.guard.signing_link_id
-                )
-                self._signing = self.conn.mav.signing  # its counters outlive a reopen's connection
             if self.is_udpin:
                 _stamp_arrivals(self.conn.port)
-                self.conn.clients = set()  # replies go to the autopilot's address only, once it is known
-                if self._autopilot_addr is not None:
-                    self.conn.clients.add(self._autopilot_addr)
+                self.conn.clients = set()  # pymavlink sends to no one: ``_write`` sends to the pinned address only
         elif self.guard.signing_key is not None:
             log.warning("%s: a recorded log is read without signature checks (its timestamps are in the past)", self.url)
         log.info("link open: %s%s", self.url, " (MAVLink 2 signing on)" if self.guard.signing_key else "")
@@ -194,6 +214,9 @@ class Link:
 
     def close(self) -> None:
         """Close; a live link reopens on a later ``read`` after ``REOPEN_PERIOD_S``."""
+        if self._gcs_sock is not None:
+            self._gcs_sock.close()
+            self._gcs_sock = None
         if self.conn is not None:
             try:
                 self.conn.close()
@@ -202,9 +225,29 @@ class Link:
             self.conn = None
             self._next_open = time.monotonic() + REOPEN_PERIOD_S
 
+    def _warn_if_trusting(self) -> None:
+        """Once, at start-up: a network link without signing trusts whoever can reach it."""
+        if self.gate is not None or not (self.is_udpin or self.is_tcp or self.is_udpout):
+            return
+        pinned = self.guard.autopilot_address is not None or self.guard.allow_addresses
+        log.warning(
+            "SECURITY: MAVLink signing is off on %s%s: this configuration TRUSTS THE NETWORK "
+            "(set link.signing_key_path%s; docs/SECURITY.md)",
+            self.url,
+            "" if pinned else " and no autopilot address is pinned: anyone who reaches it can pose as the autopilot",
+            "" if pinned else " and link.autopilot_address",
+        )
+
+    @property
+    def flight_authenticated(self) -> bool:
+        """True when signing is on and every frame the daemon was given verified (so far): a flight whose
+        evidence may be forged must never become a vehicle's history."""
+        return self.gate is not None and self.gate.accepted > 0 and self.unverified_frames == 0
+
     def set_system_id(self, system_id: int) -> None:
         """We speak as a component of the vehicle we monitor."""
         self._system_id = system_id
+        self._tx.srcSystem = system_id
         if self.conn is None:
             return
         self.conn.mav.srcSystem = system_id
@@ -248,7 +291,6 @@ class Link:
         added as a peer (our own recvmsg, not pymavlink's)."""
         port = self.conn.port
         out: list[tuple[Any, float, float]] = []
-        self._origin = {}
         for _ in range(MAX_DATAGRAMS_PER_READ):
             try:
                 data, anc, _flags, addr = port.recvmsg(UDP_MAX_PACKET, _ANC_BUFSIZE)
@@ -265,14 +307,14 @@ class Link:
                 self.rejected["peers forgotten"] += 1
             if not data:
                 continue
-            for m in self._parse(data):
-                self._origin[id(m)] = addr
+            for m in self._parse(data, addr):
                 out.append((m, received, read_s))
         self.drained = False
         return out
 
-    def _parse(self, data: bytes) -> list[Any]:
-        """The messages in ``data`` (BAD_DATA for what does not parse), signature and source checks applied."""
+    def _parse(self, data: bytes, origin: Origin = None) -> list[Any]:
+        """The messages in ``data`` (BAD_DATA for what does not parse) that pass the signature, source and pin
+        checks; ``origin`` is the udpin sender (None: the link has one peer)."""
         self.bytes_in += len(data)
         if self.conn.first_byte:
             self.conn.auto_mavlink_version(data)
@@ -281,51 +323,57 @@ class Link:
         except Exception as exc:  # noqa: BLE001 - pymavlink raises MAVError and struct errors on garbage
             log.debug("parse error: %s", exc)
             return [_BadData(str(exc))]
-        if self._signing is not None:
-            self.rejected["invalid or missing signature"] += sum(
-                1 for m in msgs if m.get_type() == "BAD_DATA" and "signature" in str(getattr(m, "reason", ""))
-            )
-            if len(self._signing.stream_timestamps) > MAX_SIGNING_STREAMS:
-                self._prune_signing_streams()
-        if self.guard.allow_sources:
-            kept = [
-                m for m in msgs if m.get_type() == "BAD_DATA" or self.guard.source_ok(m.get_srcSystem(), m.get_srcComponent())
-            ]
-            self.rejected["source not allowed"] += len(msgs) - len(kept)
-            msgs = kept
-        return msgs
+        out = []
+        for m in msgs:
+            if m.get_type() == "BAD_DATA":
+                out.append(m)
+                continue
+            sys_id, comp_id = m.get_srcSystem(), m.get_srcComponent()
+            if self.gate is not None:
+                why = self.gate.check(m.get_msgbuf(), sys_id, comp_id)
+                if why:
+                    self.rejected["invalid or missing signature"] += 1
+                    self._announce(f"{why} frames", origin)
+                    continue
+            if self.guard.allow_sources and not self.guard.source_ok(sys_id, comp_id):
+                self.rejected["source not allowed"] += 1
+                continue
+            if self.pin is not None and not self.pin.admit(m, origin):
+                continue
+            if self.gate is None:
+                self.unverified_frames += 1
+            out.append(m)
+        return out
+
+    def _announce(self, what: str, origin: Origin) -> None:
+        who = self.url if origin is None else f"{origin[0]}:{origin[1]}"
+        if (what, who) in self._announced or len(self._announced) >= MAX_ANNOUNCED:
+            return
+        self._announced.add((what, who))
+        log.warning("%s from %s refused (counted from now on, not logged again)", what, who)
 
     def autopilot_seen(self, msg: Any = None) -> None:
-        """``msg`` is the autopilot's HEARTBEAT: udpin answers the address it came from, and only that one."""
-        addr = self._origin.get(id(msg))
-        if not self.is_udpin or self.conn is None or addr is None:
-            return
-        if addr != self._autopilot_addr:
-            if self._autopilot_addr is not None:
-                log.warning("autopilot now at %s:%d (was %s:%d)", *addr, *self._autopilot_addr)
-            self._autopilot_addr = addr
-            self.conn.clients = {addr}
-            self.conn.clients_last_alive = {}
-
-    def _prune_signing_streams(self) -> None:
-        """pymavlink records a timestamp for every (link, sys, comp) that sent a signed-looking frame,
-        valid or not: keep the autopilot's (replay protection) and forget the rest."""
-        keep = self._system_id
-        ts = self._signing.stream_timestamps
-        self._signing.stream_timestamps = {k: v for k, v in ts.items() if k[1] == keep}
-        self.rejected["signing streams forgotten"] += len(ts) - len(self._signing.stream_timestamps)
+        """The autopilot's HEARTBEAT: nothing to do, the reply address is the pin's (``monitor.daemon.pin``), and a
+        later HEARTBEAT from anywhere never moves it."""
 
     def stats(self) -> dict:
-        out: dict[str, Any] = {"rejected": dict(self.rejected), "peers_remembered": len(self.peers)}
-        signing = self._signing
-        if signing is not None:
+        out: dict[str, Any] = {
+            "rejected": dict(self.rejected),
+            "peers_remembered": len(self.peers),
+            "unverified_frames": self.unverified_frames,
+            "flight_authenticated": self.flight_authenticated,
+        }
+        if self.gate is not None:
             out["signing"] = {
-                "good": signing.goodsig_count,
-                "bad": signing.badsig_count,
-                "refused": self.rejected["invalid or missing signature"],
+                "good": self.gate.accepted,
+                "refused": dict(self.gate.refused),
+                "streams": len(self.gate.streams),
+                "clock_jumps": self.gate.jumps,
             }
-        if self._autopilot_addr is not None:
-            out["autopilot_address"] = f"{self._autopilot_addr[0]}:{self._autopilot_addr[1]}"
+        if self.pin is not None:
+            out["pin"] = {"system_id": self.pin.system_id, "refused": dict(self.pin.refused), "conflict": self.pin.conflict}
+            if self.pin.address is not None:
+                out["autopilot_address"] = f"{self.pin.address[0]}:{self.pin.address[1]}"
         return out
 
     def _read_log(self, timeout_s: float) -> list[tuple[Any, float]]:
@@ -355,14 +403,38 @@ class Link:
         return [(m, time.perf_counter())]
 
     # -- sending (the complete list of what we ever send) ---------------------
-    def _send(self, encode: Callable[[Any], Any]) -> None:
-        """``encode(mav)`` builds the message; nothing is sent to a log or while the link is down."""
+    def _send(self, encode: Callable[[Any], Any], to_ground: bool = True) -> None:
+        """``encode(mav)`` builds the message (signed with a key); it goes to the autopilot and, with ``to_ground``,
+        to the configured ground stations. Nothing is sent to a log or while the link is down."""
         if self.is_log or self.conn is None:
             return
+        tx = self._tx
+        if self.gate is not None:  # MAVLink signing: never sign behind the newest timestamp verified
+            ref = self.gate.newest(time.monotonic())
+            if ref is not None and ref > tx.signing.timestamp:
+                tx.signing.timestamp = int(ref)
         try:
-            self.conn.mav.send(encode(self.conn.mav))
+            buf = encode(tx).pack(tx)
+            tx.seq = (tx.seq + 1) % 256
+            self._write(buf, to_ground)
         except OSError as exc:
             log.warning("send failed: %s", exc)
+
+    def _write(self, buf: bytes, to_ground: bool) -> None:
+        if not self.is_udpin:
+            self.conn.write(buf)
+        elif self.pin is not None and self.pin.pinned and self.pin.address is not None:
+            self.conn.port.sendto(buf, self.pin.address)
+        if not to_ground or not self.guard.ground_stations:
+            return
+        if self.is_udpin:
+            sock = self.conn.port
+        else:
+            if self._gcs_sock is None:
+                self._gcs_sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+            sock = self._gcs_sock
+        for addr in self.guard.ground_stations:
+            sock.sendto(buf, addr)
 
     def send_heartbeat(self) -> None:
         self._send(lambda mav: mav.heartbeat_encode(MAV_TYPE_ONBOARD_CONTROLLER, MAV_AUTOPILOT_INVALID, 0, 0, MAV_STATE_ACTIVE))
@@ -392,7 +464,8 @@ class Link:
                 0,
                 0,
                 0,
-            )
+            ),
+            to_ground=False,  # a command is for the autopilot only
         )
 
 

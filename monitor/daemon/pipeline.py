@@ -46,11 +46,10 @@ from monitor.daemon.config import MonitorConfig
 from monitor.daemon.pacing import ReadPacer
 from monitor.daemon.plausible import Plausibility
 from monitor.daemon.resampler import GridStep, StreamingHold, StreamSpec
-from monitor.decision import StepInputs
+from monitor.decision.regime import StepInputs, heading_velocity
 from monitor.esc import EscCurve
 from monitor.features import step_feature_function
 from monitor.model import Classifier
-from monitor.regime import heading_velocity
 from monitor.resample import US_PER_S, period_us
 
 

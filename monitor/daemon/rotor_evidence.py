@@ -2,7 +2,7 @@
 
 The daemon keeps the last ``window`` consecutive valid grid steps (5 s at 20 Hz) of commanded RPM and body
 rates; when it raises an alert it reads them as ``propwatch diagnose`` reads a log
-(``monitor.diagnose.physics``, ``monitor.effectiveness``): the window's roll, pitch and yaw balance of the
+(``monitor.diagnose.physics``, ``monitor.decision.effectiveness``): the window's roll, pitch and yaw balance of the
 commanded ω² against the measured rates gives each rotor's fraction of nominal thrust under the balance's
 most probable set, with its standard deviation (the balance's own least-squares reading,
 ``Priors.for_measurement``). It is the 5 s before the alert, so a fault that began mid-flight is read as it
@@ -26,8 +26,16 @@ from collections import deque
 
 import numpy as np
 
-from monitor.diagnose.physics import PLAUSIBLE_EFFECTIVENESS, PRE_CHANGE_MARGIN_S, baseline_from_balances
-from monitor.effectiveness import Baseline, HypothesisBank, Priors, RotorGeometry, window_balance
+from monitor.decision.effectiveness import (
+    PLAUSIBLE_EFFECTIVENESS,
+    PRE_CHANGE_MARGIN_S,
+    Baseline,
+    HypothesisBank,
+    Priors,
+    RotorGeometry,
+    baseline_from_balances,
+    window_balance,
+)
 
 
 class RecentEffectiveness:

@@ -31,10 +31,13 @@ from monitor.daemon.pacing import MAX_PAUSE_S
 from monitor.daemon.pipeline import Pipeline
 from monitor.daemon.rotor_evidence import RecentEffectiveness
 from monitor.daemon.sdnotify import Notifier
-from monitor.decision import Announcement, Decision, EscTelemetry, StepInputs, WindowEvidence, file_sha256
-from monitor.hypotheses import FlightSets, load_rule
+from monitor.decision.hypotheses import FlightSets, load_rule
+from monitor.decision.regime import StepInputs
+from monitor.decision.rotor_share import BASELINE_S
+from monitor.decision.rule import Announcement, Decision, WindowEvidence
+from monitor.decision.stream_evidence import EscTelemetry
+from monitor.decision.thresholds import file_sha256
 from monitor.resample import US_PER_S
-from monitor.rotor_share import BASELINE_S
 
 log = logging.getLogger("propwatch.monitor")
 

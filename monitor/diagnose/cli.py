@@ -38,7 +38,7 @@ Output with ``--json`` (stdout), for one LOG (every key: docs/diagnose-json.md):
                   "imbalance_names" in ``verdict``, no faulty propeller, both causes in ``hypotheses``)
 
 Confidence: a model shipped with a conformal rule (``classifier.sets.json``,
-monitor/hypotheses.py) gives a set of hypotheses: every propeller set whose
+monitor/decision/hypotheses.py) gives a set of hypotheses: every propeller set whose
 score (the classifier's mean label probability times the moment balance's
 likelihood) reaches the threshold that held the truth in 95 % of randomised
 calibration flights. One set: ``confident``, its propellers FAULTY. More:
@@ -77,6 +77,7 @@ import json
 import sys
 from pathlib import Path
 
+from monitor.decision.rotor_share import BASELINE_S
 from monitor.diagnose.engine import Diagnosis, describe_label, diagnose_table, name_verdict, rotor_name, round_floats
 from monitor.errors import PropwatchError
 from monitor.esc import EscCurve
@@ -85,7 +86,6 @@ from monitor.logs.guards import DEFAULT_MAX_SECONDS, check_size, check_time_adva
 from monitor.model import Classifier, choose_esc
 from monitor.progress import bar
 from monitor.resources import shipped
-from monitor.rotor_share import BASELINE_S
 from monitor.vehicle import DEFAULT_VEHICLE, load_vehicle
 
 DEFAULT_MODEL = shipped("classifier.onnx")

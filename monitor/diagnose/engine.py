@@ -10,7 +10,7 @@ envelope (its mean RPM against the RPM the model was trained on).
 Verdict: the label with the highest mean probability over the windows used;
 ``faulty_propellers`` are that label's propellers; ``fault_probability[i]``
 is the mean over windows of the model's P(propeller i faulty). With a
-conformal rule beside the model (``monitor.hypotheses``), the verdict is the
+conformal rule beside the model (``monitor.decision.hypotheses``), the verdict is the
 most probable set of the rule's score, and ``fault_probability[i]`` is that
 same score's marginal (the summed probability of every set holding propeller i),
 so the verdict and its probabilities never disagree; the network's own mean
@@ -36,16 +36,19 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from monitor.decision import Decision, DecisionConfig, StepInputs, WindowEvidence, file_sha256
-from monitor.diagnose.physics import PRE_CHANGE_MARGIN_S, SET_PRIOR, PhysicsEvidence, own_baseline, physics_evidence
+from monitor.decision.config import DecisionConfig
+from monitor.decision.effectiveness import PRE_CHANGE_MARGIN_S
+from monitor.decision.hypotheses import SetRule, flight_score, hypothesis_set, load_rule
+from monitor.decision.regime import StepInputs, heading_velocity
+from monitor.decision.rule import Decision, WindowEvidence
+from monitor.decision.thresholds import file_sha256
+from monitor.diagnose.physics import SET_PRIOR, PhysicsEvidence, own_baseline, physics_evidence
 from monitor.errors import ModelError
 from monitor.esc import EscCurve
 from monitor.features import compute_features, signals_needed, sliding_windows, valid_windows
 from monitor.flight import FlightTable
-from monitor.hypotheses import SetRule, flight_score, hypothesis_set, load_rule
 from monitor.labels import LABEL_TABLE, fault_probability_from_label_probs, label_for
 from monitor.model import Classifier
-from monitor.regime import heading_velocity
 from monitor.resample import US_PER_S
 
 # Airborne RPM against what the model saw in training (its normaliser's mean and
@@ -78,7 +81,7 @@ class Diagnosis:
     envelope: dict = field(default_factory=dict)  # the figures behind the envelope checks
     decision: dict | None = None  # the shared in-flight rule replayed: {"alerts": [...], "final": {...}}
     physics: PhysicsEvidence | None = None  # rotor effectiveness and the sets the moment balance allows
-    hypotheses: list[dict] | None = None  # the model's conformal set (monitor.hypotheses), when it has a rule
+    hypotheses: list[dict] | None = None  # the model's conformal set (monitor.decision.hypotheses), when it has a rule
     hypothesis_rule: dict | None = None  # that rule: score, threshold, coverage, calibration flights
     physics_basis: str | None = None  # which windows the physics evidence read, when not the whole flight's
 
@@ -166,7 +169,8 @@ def envelope_checks(
     figures = {} if figures is None else figures
     unit = table.extras.get("motor_cmd_unit")
     if esc is not None and unit is not None and unit != esc.cmd_unit:
-        from monitor.resources import display_path, vehicles_for_cmd_unit
+        from monitor.resources import display_path
+        from monitor.vehicle import vehicles_for_cmd_unit
 
         fits = [f"--vehicle {display_path(p)}" for p in vehicles_for_cmd_unit(unit)]
         return warnings, (

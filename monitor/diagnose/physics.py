@@ -1,7 +1,7 @@
 """The physics evidence of one flight: rotor effectiveness and the sets of propellers it allows.
 
 Non-overlapping 5 s windows lying wholly in the air with every signal measured give their
-moment balances (``monitor.effectiveness``); the balances add up over the flight and the 16
+moment balances (``monitor.decision.effectiveness``); the balances add up over the flight and the 16
 propeller sets are weighed against them. What comes out is what a flight-test engineer can
 check by hand: "rotor 3 delivers 0.90 ± 0.02 of nominal thrust", and, where the balance
 cannot tell sets apart (a same-spin diagonal pair against a healthy vehicle, all four against
@@ -14,14 +14,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from monitor.effectiveness import (
+from monitor.decision.effectiveness import (
     HYPOTHESES,
+    PLAUSIBLE_EFFECTIVENESS,
     SET_PRIOR,
     Baseline,
     Evidence,
     HypothesisBank,
     Priors,
     RotorGeometry,
+    baseline_from_balances,
     credible_set,
     window_balance,
 )
@@ -29,9 +31,6 @@ from monitor.flight import FlightTable
 from monitor.resample import US_PER_S
 
 CREDIBLE_MASS = 0.95
-# A rotor outside this range of nominal thrust is not a damaged propeller but a balance that does not
-# close for this vehicle (another airframe, wrong ESC curve or inertia): the evidence is withheld.
-PLAUSIBLE_EFFECTIVENESS = (0.5, 1.15)
 
 
 @dataclass(frozen=True)
@@ -75,7 +74,7 @@ def usable_window_starts(table: FlightTable, window: int) -> np.ndarray:
 def table_balances(
     table: FlightTable, geometry: RotorGeometry, window: int, between_boot_s: tuple[float, float] | None = None
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(z, H, std) of the flight's usable non-overlapping windows (``monitor.effectiveness.window_balance``);
+    """(z, H, std) of the flight's usable non-overlapping windows (``monitor.decision.effectiveness.window_balance``);
     ``between_boot_s``: only windows lying wholly inside that span of boot time (s)."""
     starts = usable_window_starts(table, window)
     if between_boot_s is not None and len(starts):
@@ -98,25 +97,6 @@ def table_evidence(
     if len(z):
         ev.add(z, h, std, priors)
     return ev
-
-
-# A baseline read from a flight's own windows: the spread of its windows' balances, floored at this (the per-window
-# noise floor of the balance, Priors.noise_floor).
-OWN_BASELINE_STD_FLOOR = 0.01
-# The onset precedes the in-flight rule's first announcement by its detection delay (median 4-5 s, p95 under 10 s
-# on both simulators): a flight's own baseline ends this long before that announcement.
-PRE_CHANGE_MARGIN_S = 10.0
-
-
-def baseline_from_balances(z: np.ndarray) -> Baseline | None:
-    """Windows' balances (n, 3) of one flight as its own ``Baseline`` (the airframe's trim, CG offset and motor
-    spread at this flight's operating point, in the balance's units); None with fewer than 2 finite windows."""
-    z = np.asarray(z, dtype=np.float64).reshape(-1, 3)
-    z = z[np.isfinite(z).all(axis=1)]
-    if len(z) < 2:
-        return None
-    std = np.maximum(z.std(axis=0, ddof=1), OWN_BASELINE_STD_FLOOR)
-    return Baseline(disturbance_mean=tuple(map(float, z.mean(axis=0))), disturbance_std=tuple(map(float, std)))
 
 
 def own_baseline(table: FlightTable, vehicle, until_boot_s: float, window: int = 100) -> Baseline | None:

@@ -1,6 +1,6 @@
 """Calibrate the decision's thresholds on healthy flights: the exceedance-rate tail of its CUSUM.
 
-Each healthy flight is replayed through ``monitor.decision.Decision`` itself
+Each healthy flight is replayed through ``monitor.decision.rule.Decision`` itself
 (regime holds and discounts included) with its trace on; the traced updates
 are then re-run against a grid of thresholds, restarting the statistic at
 each crossing (a renewal: after an alarm the monitor starts again), which
@@ -36,7 +36,9 @@ from pathlib import Path
 
 import numpy as np
 
-from monitor.decision import STATISTICS, Decision, DecisionConfig, Thresholds, file_sha256, pair_statistic, physics_statistic
+from monitor.decision.config import DecisionConfig
+from monitor.decision.rule import Decision
+from monitor.decision.thresholds import STATISTICS, Thresholds, file_sha256, pair_statistic, physics_statistic
 from offline.alerts.flights import AlertFlight
 from offline.alerts.rules import replay_decision
 from offline.manifest import make_manifest
@@ -44,7 +46,7 @@ from offline.manifest import make_manifest
 MIN_EVENTS = 3
 TAIL_MAX_RATE_PER_H = 10.0  # fit the tail: grid points crossed at most this often (100x the fault target)
 BOOTSTRAP_DRAWS = 200  # flight resamples of the tail (the 95 % quantile of 200 draws: the 190th)
-CONFIDENCE = 0.95  # the quantile of the draws' thresholds the decision takes (monitor/decision_thresholds.py)
+CONFIDENCE = 0.95  # the quantile of the draws' thresholds the decision takes (monitor/decision/thresholds.py)
 H_GRID = np.geomspace(0.05, 500.0, 100)
 
 

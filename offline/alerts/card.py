@@ -89,7 +89,7 @@ def hours_line(result: dict) -> str:
 def card_table(result: dict, source: str) -> CardTable:
     th = result["thresholds"]
     note = (
-        "What the daemon and `diagnose` alert on (monitor/decision.py, docs/ALERTS.md): sequential tests with thresholds "
+        "What the daemon and `diagnose` alert on (monitor/decision/rule.py, docs/ALERTS.md): sequential tests with thresholds "
         f"from stated false-alarm rates (suspect {th['suspect']}, fault {th['fault']}; {th['source']}), replayed over "
         "healthy flights and in-flight onsets of both simulators. *ours*: this project's simulator, every flight's physics "
         "drawn from the register; *evalsim*: the evaluation-only simulator, never used to calibrate. "

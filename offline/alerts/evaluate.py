@@ -32,7 +32,8 @@ import time
 from pathlib import Path
 
 from monitor.daemon.config import AlertConfig
-from monitor.decision import DEFAULT_CALIBRATION, Calibration, DecisionConfig, file_sha256, load_calibration, thresholds
+from monitor.decision.config import DecisionConfig
+from monitor.decision.thresholds import DEFAULT_CALIBRATION, Calibration, file_sha256, load_calibration, thresholds
 from monitor.model import Classifier
 from monitor.vehicle import REPO_ROOT, load_vehicle
 from offline.alerts.calibrate import calibrate, write_calibration
@@ -81,7 +82,7 @@ def parse_args(argv):
     p.add_argument(
         "--compare-with",
         default="",
-        help="a checkout (e.g. ../main) whose monitor/decision.py and models/decision-calibration.json give one more row",
+        help="a checkout (e.g. ../main) whose monitor/decision/rule.py and models/decision-calibration.json give one more row",
     )
     return p.parse_args(argv)
 
@@ -320,9 +321,11 @@ def _revision(checkout: str) -> str:
         return Path(checkout).name
 
 
-# The decision rule's parts (monitor/decision.py imports them), each after what it imports (decision_thresholds
-# reads regime); a checkout before the split has none.
-DECISION_PARTS = ("decision_config", "rotor_share", "regime", "decision_thresholds", "stream_evidence")
+# The decision rule's parts (monitor/decision/rule.py imports them), each after what it imports (thresholds reads
+# regime). A checkout from before the package keeps them beside monitor/decision.py as FLAT_DECISION_PARTS (or,
+# before the split, has none).
+DECISION_PARTS = ("config", "rotor_share", "regime", "thresholds", "stream_evidence")
+FLAT_DECISION_PARTS = ("decision_config", "rotor_share", "regime", "decision_thresholds", "stream_evidence")
 
 
 def _load(name: str, path: Path):
@@ -335,6 +338,15 @@ def _load(name: str, path: Path):
     return mod
 
 
+def decision_files(monitor_dir: Path) -> tuple[list[tuple[str, Path]], Path]:
+    """A checkout's rule parts as (module name, file), in load order, and the file of its rule."""
+    package = monitor_dir / "decision"
+    if package.is_dir():
+        return [(f"monitor.decision.{p}", package / f"{p}.py") for p in DECISION_PARTS], package / "rule.py"
+    flat = [(f"monitor.{p}", monitor_dir / f"{p}.py") for p in FLAT_DECISION_PARTS]
+    return [(name, path) for name, path in flat if path.is_file()], monitor_dir / "decision.py"
+
+
 def previous_rule(checkout: str):
     """Another checkout's decision module with its own calibration file, replayed like the shipped one.
 
@@ -342,13 +354,12 @@ def previous_rule(checkout: str):
     then this tree's are put back), so the rule replayed is that checkout's, not a mix with this one's."""
     from offline.alerts.rules import replay_decision
 
-    monitor_dir = Path(checkout) / "monitor"
-    saved = {f"monitor.{p}": sys.modules.get(f"monitor.{p}") for p in DECISION_PARTS}
+    parts, rule_file = decision_files(Path(checkout) / "monitor")
+    saved = {name: sys.modules.get(name) for name, _ in parts}
     try:
-        for part in DECISION_PARTS:
-            if (monitor_dir / f"{part}.py").is_file():
-                _load(f"monitor.{part}", monitor_dir / f"{part}.py")
-        mod = _load("previous_decision", monitor_dir / "decision.py")
+        for name, path in parts:
+            _load(name, path)
+        mod = _load("previous_decision", rule_file)
     finally:
         for name, own in saved.items():
             if own is None:

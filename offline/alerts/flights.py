@@ -31,10 +31,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from monitor.decision.regime import StepInputs, heading_velocity
 from monitor.esc import RPM_PER_RAD_S
 from monitor.labels import LABEL_MASKS
 from monitor.model import Classifier
-from monitor.regime import StepInputs, heading_velocity
 from monitor.resample import US_PER_S
 from monitor.vehicle import VehicleConfig
 from offline.dataset.generate import DatasetSpec, degraded_signals, routes, simulate_flights, vehicle_variant

@@ -6,7 +6,7 @@ k + window - 1. Every rule returns ``[(t_s, level, propellers)]`` or
 alert names, e.g. ``((1,), (1, 2))`` for ``PROP 1 or 1+2?``); an empty
 propeller tuple is an alert that names none (vibration metrics).
 
-* ``decision``: ``monitor.decision.Decision``, the shipped rule, fed step by step as the daemon feeds it.
+* ``decision``: ``monitor.decision.rule.Decision``, the shipped rule, fed step by step as the daemon feeds it.
 * ``consecutive``: the rule before it (``monitor.daemon.alerts.AlertRule``: P >= 0.9 in 20 windows in a row).
 * ``px4_imbalance``: PX4's imbalanced-propeller check (commander FailureDetector::updateImbalancedPropStatus):
   metric = (std(acc_x) + std(acc_y)) / 2 - std(acc_z) from vehicle_imu_status.var_accel, low-passed with a
@@ -23,7 +23,8 @@ import numpy as np
 
 from monitor.daemon.alerts import AlertRule
 from monitor.daemon.config import AlertConfig
-from monitor.decision import Decision, DecisionConfig, WindowEvidence
+from monitor.decision.config import DecisionConfig
+from monitor.decision.rule import Decision, WindowEvidence
 from offline.alerts.flights import AlertFlight
 
 PX4_FD_IMB_PROP_THR = 30.0  # PX4 parameter FD_IMB_PROP_THR default

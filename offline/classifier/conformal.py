@@ -12,11 +12,11 @@ assumption register, some with one range moved (``propwatch dataset --assumption
 torque per thrust falling, -30..0 %, or rising, 0..+30 %), and ``--beyond`` regions past the register's ranges
 (``make card``: hover losses of 12-25 %): the register is a statement of ignorance that may itself be wrong, and a
 rule must not fall apart just outside it. For every flight the three candidate scores of
-``monitor.hypotheses`` are computed (the classifier's mean label probability, that times the moment balance's
+``monitor.decision.hypotheses`` are computed (the classifier's mean label probability, that times the moment balance's
 likelihood, the balance alone), each under every sparsity prior rho of ``SPARSITY_GRID``; the two with the
 classifier also under every classifier weight tau of ``CLASSIFIER_WEIGHT_GRID`` (the network's split within each
 yaw class, the sets only the unmeasured yaw torque separates, as p**tau: the network learned the register's own
-distribution of that torque, the balance states and marginalises its prior; ``monitor.hypotheses.YAW_CLASS``). A
+distribution of that torque, the balance states and marginalises its prior; ``monitor.decision.hypotheses.YAW_CLASS``). A
 candidate's threshold is the smallest of its regions' own split-conformal thresholds (the score the truth reaches
 in all but ``1 - coverage`` of that region's flights), so the coverage holds in each region, not only on average
 over the register: whichever way the unmeasured torque goes. The rule chosen (``choose``) passes the torque-sign
@@ -38,10 +38,10 @@ from pathlib import Path
 
 import numpy as np
 
+from monitor.decision.effectiveness import Evidence, HypothesisBank, Priors, RotorGeometry
+from monitor.decision.hypotheses import SCORES, flight_score, hypothesis_set, rule_path
 from monitor.diagnose.physics import airframe_log_bayes_factor
-from monitor.effectiveness import Evidence, HypothesisBank, Priors, RotorGeometry
 from monitor.features import compute_features, sliding_windows
-from monitor.hypotheses import SCORES, flight_score, hypothesis_set, rule_path
 from monitor.labels import LABEL_TABLE
 from monitor.model import Classifier
 from monitor.vehicle import DEFAULT_VEHICLE, load_vehicle
@@ -170,7 +170,7 @@ def region_from_dataset(ds: FaultDataset, name: str, clf: Classifier, vehicle) -
 
 
 def share_rotors(ds: FaultDataset) -> np.ndarray:
-    """(F,) the ω²-share baseline's rotor (monitor/share_baseline.py) per flight, after the first 5 s."""
+    """(F,) the ω²-share baseline's rotor (offline/share_baseline.py) per flight, after the first 5 s."""
     rpm = ds.signals["motor_rpm"][:, WARMUP_STEPS:, :].astype(np.float64)
     w2 = np.square(rpm).mean(axis=1)
     return np.argmax(w2 / w2.mean(axis=1, keepdims=True), axis=1) + 1

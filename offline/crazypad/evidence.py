@@ -9,7 +9,7 @@ propellers intact) from a damaged M3 propeller (cuts, tape) on the real flights:
   if anything does;
 - **activity**: std of each motor's sample-to-sample command change over its mean, at 100 Hz
   (``monitor.features.motor_command_activity``), M3 over the mean of the other three;
-- **response gain** (``monitor.response_gain``): per rotor, the roll acceleration per change of its command
+- **response gain** (``offline.response_gain``): per rotor, the roll acceleration per change of its command
   (gyro rate differentiated in controller logs, the estimator's roll angle twice in motor logs, which log
   no rate), relative to the mean of the four; a damaged M3 should lower M3's, a mass near it should not;
 - **command couplings**: the controller's roll/pitch/yaw/thrust channels recovered from the four commands
@@ -36,10 +36,10 @@ from monitor.errors import LogFormatError, ModelError
 from monitor.features import motor_command_activity, vibration_energy
 from monitor.flight import true_runs
 from monitor.logs import read_log
-from monitor.response_gain import angular_acceleration, fit_response_gain
 from offline.crazypad.data import DEFAULT_ROOT, CrazypadFlight
 from offline.crazypad.real import core_mask, log_format
 from offline.crazypad.vehicle import bitcraze_order
+from offline.response_gain import angular_acceleration, fit_response_gain
 
 NATIVE_RATE_HZ = 100.0  # CrazyPAD's logging rate (data README: median dt 9.9 ms)
 M3 = 2  # index of Bitcraze M3 in M1..M4 order

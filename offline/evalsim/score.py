@@ -8,7 +8,7 @@ A *predictor* is a callable ``FlightTable -> dict`` returning at least
 
 Two predictors are included: ``classifier_predictor`` (the shipped ONNX
 through ``monitor.diagnose``) and ``share_predictor`` (the ω²-share baseline,
-``monitor.share_baseline``), optionally with per-airframe healthy shares.
+``offline.share_baseline``), optionally with per-airframe healthy shares.
 """
 
 from __future__ import annotations
@@ -26,7 +26,7 @@ from monitor.esc import PAPER_ESC
 from monitor.flight import FlightTable
 from monitor.labels import label_for
 from monitor.logs import read_log
-from monitor.share_baseline import omega2_shares, share_baseline
+from offline.share_baseline import omega2_shares, share_baseline
 
 Predictor = Callable[[FlightTable], dict]
 

@@ -1,7 +1,7 @@
 """The verdict as a small set of propeller-set hypotheses with a stated coverage (issue 12, point 4).
 
 A flight's score over the 16 propeller sets is the classifier's mean label probability over its windows,
-that times the moment balance's likelihood of each set (``monitor.effectiveness``), or that likelihood
+that times the moment balance's likelihood of each set (``monitor.decision.effectiveness``), or that likelihood
 alone, renormalised: the calibration picks one of the three on our own data.
 Split conformal prediction turns that score into a set: on flights of our own simulator with randomised
 physics that the classifier never saw, the threshold is the score the truth reached in all but
@@ -13,7 +13,7 @@ through the unmeasured torque change), the sparser one is named, and both stay i
 on our own stress sets by ``offline.classifier.conformal`` (the weakest prior whose singles never fall below
 the ω²-share baseline on any torque region); 1 is no prior (older rule files).
 One member: the verdict is that set. More: physics could not tell them apart, and the output says so
-(the daemon words it as `monitor.decision.statustext` does: ``PROP 1 or 1+2?``).
+(the daemon words it as `monitor.decision.rule.statustext` does: ``PROP 1 or 1+2?``).
 
 The coverage holds for flights like the calibration flights (whole flights of that simulator, the
 airframe as its file says); it is a statement about that population, not a promise on any one log.

@@ -427,3 +427,27 @@ def credible_set(verdict: Verdict, mass: float = 0.95) -> list[int]:
     cum = np.cumsum(verdict.probability[order])
     n = int(np.searchsorted(cum, mass - 1e-12) + 1)
     return [int(k) for k in order[:n]]
+
+
+# A rotor outside this range of nominal thrust is not a damaged propeller but a balance that does not
+# close for this vehicle (another airframe, wrong ESC curve or inertia): the evidence is withheld.
+PLAUSIBLE_EFFECTIVENESS = (0.5, 1.15)
+
+
+# A baseline read from a flight's own windows: the spread of its windows' balances, floored at this (the per-window
+# noise floor of the balance, Priors.noise_floor).
+OWN_BASELINE_STD_FLOOR = 0.01
+# The onset precedes the in-flight rule's first announcement by its detection delay (median 4-5 s, p95 under 10 s
+# on both simulators): a flight's own baseline ends this long before that announcement.
+PRE_CHANGE_MARGIN_S = 10.0
+
+
+def baseline_from_balances(z: np.ndarray) -> Baseline | None:
+    """Windows' balances (n, 3) of one flight as its own ``Baseline`` (the airframe's trim, CG offset and motor
+    spread at this flight's operating point, in the balance's units); None with fewer than 2 finite windows."""
+    z = np.asarray(z, dtype=np.float64).reshape(-1, 3)
+    z = z[np.isfinite(z).all(axis=1)]
+    if len(z) < 2:
+        return None
+    std = np.maximum(z.std(axis=0, ddof=1), OWN_BASELINE_STD_FLOOR)
+    return Baseline(disturbance_mean=tuple(map(float, z.mean(axis=0))), disturbance_std=tuple(map(float, std)))

@@ -15,12 +15,9 @@ from pathlib import Path
 
 import numpy as np
 
-from monitor.decision_config import DecisionConfig
-from monitor.errors import ConfigError
-from monitor.labels import N_PROPS
-from monitor.regime import COLLECTIVE_SHIFT_S
-from monitor.resources import shipped
-from monitor.rotor_share import (
+from monitor.decision.config import DecisionConfig
+from monitor.decision.regime import COLLECTIVE_SHIFT_S
+from monitor.decision.rotor_share import (
     FLAP_SLOPE_Q,
     PLANE_CUT,
     QUIET_NATS,
@@ -30,6 +27,9 @@ from monitor.rotor_share import (
     YAW_AVERAGE_S,
     YAW_SIGMA,
 )
+from monitor.errors import ConfigError
+from monitor.labels import N_PROPS
+from monitor.resources import shipped
 
 SECONDS_PER_HOUR = 3600.0
 # The checkout's models/decision-calibration.json, or the installed package data (monitor/resources.py).
@@ -218,8 +218,8 @@ def physics_statistic(cfg: DecisionConfig) -> dict:
     """What a physics-statistic calibration holds for: its thresholds mean nothing for another reference or noise model."""
     return {
         # v3: the baseline spans BASELINE_S of evidence windows; v4: its plane learns trimmed means; v5: windows are
-        # held while the collective RPM stands apart (monitor.regime.COLLECTIVE_SHIFT_S); v6: the plane's slopes drift
-        # a tenth as fast (monitor.rotor_share.FLAP_SLOPE_Q); v7: it learns while every statistic is below QUIET_NATS
+        # held while the collective RPM stands apart (monitor.decision.regime.COLLECTIVE_SHIFT_S); v6: the plane's slopes drift
+        # a tenth as fast (monitor.decision.rotor_share.FLAP_SLOPE_Q); v7: it learns while every statistic is below QUIET_NATS
         "form": "share-cusum-v7",
         "min_thrust_loss": cfg.min_thrust_loss,
         "share_sigma": SHARE_SIGMA,

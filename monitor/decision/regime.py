@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from monitor.decision_config import DecisionConfig
+from monitor.decision.config import DecisionConfig
 
 COLLECTIVE_MEDIAN_S = 10.0  # a collective step compares the median mean RPM of two such spans (manoeuvres average out)
 # The step rule above sees a payload step only once the last 10 s are mostly after it: 5-7 s late. On our simulator

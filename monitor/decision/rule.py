@@ -87,10 +87,10 @@ The wording: ``PROP 3 FAULT p=0.97`` only when one hypothesis remains; when
 the propellers at suspect level widen the set, or the evidence comes with
 several hypotheses, ``PROP 1 or 1+2?`` (<= 50 characters).
 
-Where the parts live (each name is re-exported here): the settings and levels in ``monitor.decision_config``;
-the omega^2 shares and the yaw balance in ``monitor.rotor_share``; thresholds and the calibration file in
-``monitor.decision_thresholds``; regimes in ``monitor.regime``; VIBRATION and ESC_STATUS validation in
-``monitor.stream_evidence``. This module combines them: the CUSUMs, the levels and the wording.
+The parts live beside this module in ``monitor.decision`` (its docstring lists them): the settings and levels in
+``config``; the omega^2 shares and the yaw balance in ``rotor_share``; thresholds and the calibration file in
+``thresholds``; regimes in ``regime``; VIBRATION and ESC_STATUS validation in ``stream_evidence``. This module
+combines them: the CUSUMs, the levels and the wording.
 """
 
 from __future__ import annotations
@@ -100,81 +100,31 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from monitor.decision_config import FAULT_RANK, LEVELS, DecisionConfig
-from monitor.decision_thresholds import (
-    DEFAULT_CALIBRATION,
-    PHYSICS_STATISTICS,
-    ROTOR_STATISTICS,
-    STATISTICS,
-    Calibration,
-    Thresholds,
-    analytic_threshold,
-    fault_statistics,
-    file_sha256,
-    load_calibration,
-    pair_statistic,
-    physics_statistic,
-    suspect_statistics,
-    thresholds,
-)
-from monitor.labels import N_PROPS
-from monitor.regime import RegimeTracker, StepInputs
-from monitor.rotor_share import (
+from monitor.decision.config import FAULT_RANK, LEVELS, DecisionConfig
+from monitor.decision.regime import RegimeTracker, StepInputs
+from monitor.decision.rotor_share import (
     BASELINE_S,
     LLR_CLIP,
     QUIET_NATS,
     SAME_SPIN_PAIRS,
     SHARE_AVERAGE_S,
-    SHARE_SIGMA,
     YAW_AVERAGE_S,
     YAW_FREE_GAP,
     YAW_FREE_RISE,
-    YAW_SIGMA,
     RotorShare,
 )
-from monitor.stream_evidence import VIBE_MIN_RATIO, EscTelemetry, VibrationEvidence
-
-# The rule's parts live in their own modules; their names are re-exported here, where callers have always found them.
-__all__ = [
-    "BASELINE_S",
-    "DEFAULT_CALIBRATION",
-    "FAULT_RANK",
-    "LEVELS",
-    "LLR_CLIP",
-    "PHYSICS_STATISTICS",
-    "ROTOR_STATISTICS",
-    "SAME_SPIN_PAIRS",
-    "SHARE_AVERAGE_S",
-    "SHARE_SIGMA",
-    "STATISTICS",
-    "STATUSTEXT_MAX_CHARS",
-    "YAW_AVERAGE_S",
-    "YAW_FREE_GAP",
-    "YAW_FREE_RISE",
-    "YAW_SIGMA",
-    "Announcement",
-    "Calibration",
-    "Decision",
-    "DecisionConfig",
-    "EscTelemetry",
-    "RegimeTracker",
-    "RotorShare",
-    "StepInputs",
-    "Thresholds",
-    "VibrationEvidence",
-    "WindowEvidence",
-    "analytic_threshold",
-    "fault_statistics",
-    "file_sha256",
-    "load_calibration",
-    "pair_statistic",
-    "physics_statistic",
-    "propeller_text",
-    "statustext",
-    "suspect_statistics",
-    "thresholds",
-    "window_llr",
-]
+from monitor.decision.stream_evidence import VIBE_MIN_RATIO, VibrationEvidence
+from monitor.decision.thresholds import (
+    ROTOR_STATISTICS,
+    STATISTICS,
+    Calibration,
+    analytic_threshold,
+    fault_statistics,
+    load_calibration,
+    suspect_statistics,
+    thresholds,
+)
+from monitor.labels import N_PROPS
 
 STATUSTEXT_MAX_CHARS = 50
 NETWORK_STATISTICS = ("absolute", "change")  # what a battery sag discounts (RegimeTracker.network_holding)

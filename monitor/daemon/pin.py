@@ -1,0 +1,123 @@
+"""Which autopilot the daemon listens to, decided once per boot from the pinned link alone.
+
+The autopilot's system id is learnt only from autopilot HEARTBEATs (component
+``autopilot_component_id``, a real autopilot type) that came over the pinned
+link: on ``udpin`` the configured ``link.autopilot_address``, or else the one
+address whose heartbeats pinned it; a serial device or TCP peer is a link of
+its own. A candidate is pinned once its heartbeats span ``wait_s`` of monotonic
+time (``link.pin_wait_s``; at least two heartbeats: a sequence, not one frame),
+time enough for a second candidate to be heard. Two candidates before that (two system ids, or one system id from two
+addresses) are both refused, for the rest of the run, and announced: the
+operator sets ``link.system_id`` / ``link.autopilot_address``. Once pinned,
+frames from any other address are refused, and so are other systems' autopilot
+components; the pin is never moved to a newcomer.
+
+Every refusal is counted by reason (``refused``); each (reason, source) is
+written to the journal once (``announced`` bounds the set).
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections import Counter
+from collections.abc import Callable
+from typing import Any
+
+from monitor.mavlink_decode import _NOT_AUTOPILOT_TYPES, MAV_AUTOPILOT_INVALID, MAV_TYPE_GCS  # the decoder's own test
+
+log = logging.getLogger("propwatch.monitor.link")
+
+PIN_WAIT_S = 2.0  # PX4 sends HEARTBEAT at 1 Hz: pinned at its third, about 2 s after it is first heard
+MAX_CANDIDATES = 16
+MAX_ANNOUNCED = 64
+Origin = tuple[str, int] | None  # a udpin sender; None: the link has one peer (serial, TCP, udpout)
+
+
+def is_autopilot_heartbeat(msg: Any, component_id: int) -> bool:
+    return (
+        msg.get_type() == "HEARTBEAT"
+        and msg.get_srcComponent() == component_id
+        and getattr(msg, "autopilot", MAV_AUTOPILOT_INVALID) != MAV_AUTOPILOT_INVALID
+        and getattr(msg, "type", MAV_TYPE_GCS) not in _NOT_AUTOPILOT_TYPES
+    )
+
+
+def describe(sys_id: int, origin: Origin) -> str:
+    return f"system {sys_id}" + ("" if origin is None else f" at {origin[0]}:{origin[1]}")
+
+
+class AutopilotPin:
+    def __init__(
+        self,
+        system_id: int | None,
+        component_id: int,
+        address: Origin = None,
+        wait_s: float = PIN_WAIT_S,
+        clock: Callable[[], float] = time.monotonic,
+    ):
+        self.configured_system_id = system_id
+        self.component_id = component_id
+        self.configured_address = address
+        self.wait_s = wait_s
+        self.clock = clock
+        self.system_id: int | None = None  # pinned
+        self.address: Origin = address  # pinned (configured, or learnt with the system id)
+        self.conflict = ""  # two candidates: nothing is admitted for the rest of the run
+        self._candidates: dict[tuple[int, Origin], list[float]] = {}  # -> heartbeat times (monotonic)
+        self.refused: Counter = Counter()
+        self.announced: set[tuple[str, str]] = set()
+
+    @property
+    def pinned(self) -> bool:
+        return self.system_id is not None
+
+    def admit(self, msg: Any, origin: Origin) -> bool:
+        reason, who = self._why(msg, origin)
+        if not reason:
+            return True
+        self.refused[reason] += 1
+        self.announce(reason, who)
+        return False
+
+    def announce(self, reason: str, who: str) -> None:
+        if (reason, who) in self.announced or len(self.announced) >= MAX_ANNOUNCED:
+            return
+        self.announced.add((reason, who))
+        log.warning("refused: %s (%s); counted from now on, not logged again", reason, who)
+
+    def _why(self, msg: Any, origin: Origin) -> tuple[str, str]:
+        sys_id, comp_id = msg.get_srcSystem(), msg.get_srcComponent()
+        if self.address is not None and origin is not None and origin != self.address:
+            return "not the pinned autopilot link", describe(sys_id, origin)
+        if self.pinned:
+            if comp_id == self.component_id and sys_id != self.system_id:
+                return "another autopilot", describe(sys_id, origin)
+            return "", ""
+        if self.conflict:
+            return "two autopilot candidates, none pinned", self.conflict
+        if not is_autopilot_heartbeat(msg, self.component_id):
+            return "before the autopilot was pinned", "any"
+        if self.configured_system_id is not None and sys_id != self.configured_system_id:
+            return "another autopilot", describe(sys_id, origin)
+        return self._candidate(sys_id, origin)
+
+    def _candidate(self, sys_id: int, origin: Origin) -> tuple[str, str]:
+        key = (sys_id, origin)
+        if key not in self._candidates and len(self._candidates) < MAX_CANDIDATES:
+            self._candidates[key] = []
+        if len(self._candidates) > 1:
+            self.conflict = " and ".join(describe(*k) for k in self._candidates)
+            hint = "link.system_id" if len({s for s, _ in self._candidates}) > 1 else "link.autopilot_address"
+            log.error("two autopilot candidates (%s): both refused until %s is configured", self.conflict, hint)
+            return "two autopilot candidates, none pinned", self.conflict
+        beats = self._candidates[key]
+        beats.append(self.clock())
+        if len(beats) >= 2 and beats[-1] - beats[0] >= self.wait_s:
+            self.system_id, self.address = sys_id, origin if origin is not None else self.address
+            self._candidates.clear()
+            log.info(
+                "autopilot pinned: %s (%d heartbeats over %.1f s)", describe(sys_id, origin), len(beats), beats[-1] - beats[0]
+            )
+            return "", ""
+        return "before the autopilot was pinned", "any"
