@@ -6,7 +6,7 @@ STAMP := $(VENV)/.installed
 DATA ?= ../shared/data
 OUT ?= out
 
-.PHONY: setup demo test lint bench models propellers classifier crazypad clean calibrate-physics evaluate-physics dataset-randomised card card-text calibrate-alerts evaluate-alerts evaluate-torque-sign
+.PHONY: setup demo test lint bench bench-measure models propellers classifier crazypad clean calibrate-physics evaluate-physics dataset-randomised card card-text calibrate-alerts evaluate-alerts evaluate-torque-sign
 
 $(STAMP): pyproject.toml
 	$(PY) -m venv $(VENV)
@@ -30,8 +30,20 @@ lint: $(STAMP)
 	$(BIN)/ruff check monitor offline fleet tests bench
 	$(BIN)/ruff format --check monitor offline fleet tests bench
 
+# Every script in bench/ runs as a module from the repository root (python -m bench.<name>). `make bench` runs
+# the bench_* timings and the import-graph counts; `make bench-measure` the scripts that measured shipped constants
+# and cards, each with its defaults and outputs under $(OUT)/bench (minutes to an hour; CrazyPAD ones need its data).
+BENCH ?= $(sort $(basename $(notdir $(wildcard bench/bench_*.py)))) house_counts
+BENCH_MEASURE ?= alerts_flights crazypad_baseline crazypad_fusion crazypad_fusion_sim crazypad_separation response_gain_sim
 bench: $(STAMP)
-	for b in bench/bench_*.py; do echo "== $$b"; $(BIN)/python $$b || exit 1; done
+	for b in $(BENCH); do echo "== bench.$$b"; $(BIN)/python -m bench.$$b || exit 1; done
+
+bench-measure: $(STAMP)
+	mkdir -p $(OUT)/bench
+	for b in $(BENCH_MEASURE); do echo "== bench.$$b"; $(BIN)/python -m bench.$$b || exit 1; done
+	$(BIN)/python -m bench.crazypad_adapt --out $(OUT)/bench/crazypad-adapt
+	$(BIN)/python -m bench.evalsim_hidden --out $(OUT)/bench/evalsim-hidden
+	$(BIN)/python -m bench.evalsim_lag --out $(OUT)/bench/evalsim-lag
 
 # Rebuild the shipped models (minutes to an hour on 2 cores; not run by tests).
 propellers: $(STAMP)
@@ -125,7 +137,7 @@ evaluate-alerts: $(STAMP)
 # Issue 12's torque-sign check: the damaged blade's torque-per-thrust change up (+2..+10 %) vs down (-10..-2 %),
 # 192 singles each; fails when the shipped system's single-propeller accuracy moves by more than 2 points (~6 min).
 evaluate-torque-sign: $(STAMP)
-	$(BIN)/python bench/bench_torque_sign.py --flights-per-label 48 --check
+	$(BIN)/python -m bench.bench_torque_sign --flights-per-label 48 --check
 
 clean:
 	rm -rf $(VENV) $(OUT) .pytest_cache
@@ -136,4 +148,4 @@ calibrate-physics: $(STAMP)
 
 # Localisation on our paper sets (physics, CNN, omega^2-share side by side; a few minutes).
 evaluate-physics: $(STAMP)
-	$(BIN)/python bench/bench_localise.py --json $(OUT)/localise-ours.json
+	$(BIN)/python -m bench.bench_localise --json $(OUT)/localise-ours.json

@@ -1,8 +1,8 @@
 """Per-flight alert listing for the decision rule (issue 13 diagnosis): which flight alarms, when, on which
 statistic and propeller, and in which regime.
 
-    python bench/alerts_flights.py --set ours-healthy --flights 24 --seed 200
-    python bench/alerts_flights.py --set evalsim-healthy --flights 23 --seed 200   # understanding only
+    python -m bench.alerts_flights --set ours-healthy --flights 24 --seed 200
+    python -m bench.alerts_flights --set evalsim-healthy --flights 23 --seed 200   # understanding only
 
 Flights are classified once and cached (``--cache``, pickles of ``AlertFlight`` lists), so the rule can be
 re-run on them in seconds. evalsim is evaluation-only: read its listing to understand failure modes, never

@@ -8,18 +8,15 @@ is scored as ``propwatch diagnose`` answers: its conformal rule with the airfram
 (``offline.classifier.conformal.measure_with_check``), beside the ω²-share baseline's singles.
 The evaluation-only simulator's counterpart is evalsim ``shift_quarter`` / ``shift_half`` (bench_generalisation.py).
 
-Run: ``python bench/bench_airframe_spread.py [--flights-per-label 10] [--seed 8]`` (about 4 min on 2 cores).
+Run: ``python -m bench.bench_airframe_spread [--flights-per-label 10] [--seed 8]`` (about 4 min on 2 cores).
 """
 
 from __future__ import annotations
 
 import argparse
 import sys
-from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_localise import add_model_option, model_paths  # noqa: E402
-
+from bench.bench_localise import add_model_option, model_paths
 from monitor.decision.hypotheses import load_rule  # noqa: E402
 from monitor.model import Classifier  # noqa: E402
 from monitor.vehicle import DEFAULT_VEHICLE, load_vehicle  # noqa: E402

@@ -1,6 +1,6 @@
 """Which unmeasured assumption breaks a classifier: score it on randomised data with one group varied at a time.
 
-    .venv/bin/python bench/bench_assumptions.py [--model models/classifier.onnx] [--flights-per-label 2]
+    .venv/bin/python -m bench.bench_assumptions [--model models/classifier.onnx] [--flights-per-label 2]
         [--duration-s 30] [--by group|entry] [--seed 7]
 
 For each group of ``offline/sim/assumptions.py`` (or each entry, ``--by entry``)

@@ -1,7 +1,7 @@
 """Benchmark of the onboard monitor daemon: a replayed flight over UDP loopback, as on the vehicle.
 
-    python bench/bench_daemon.py                      # 10-minute flight at real pace (the issue's measure)
-    python bench/bench_daemon.py --minutes 1 --speed 10   # quick run (6 s)
+    python -m bench.bench_daemon                      # 10-minute flight at real pace (the issue's measure)
+    python -m bench.bench_daemon --minutes 1 --speed 10   # quick run (6 s)
 
 ``--rule consecutive`` runs the older alert rule instead of the decision
 layer (``monitor/decision/rule.py``, the default), to see what the layer costs.
@@ -54,8 +54,8 @@ import threading
 import time
 from pathlib import Path
 
-REPO = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(REPO / "tests"))
+from bench import REPO
+
 TARGETS = {"latency_p99_ms": 5.0, "cpu_percent": 5.0, "rss_mb": 150.0, "startup_s": 2.0}
 CLK_TCK = os.sysconf("SC_CLK_TCK")
 POSITION_RATE_HZ = 30.0  # LOCAL_POSITION_NED: PX4's rate on an onboard (companion) link, what the daemon requests
@@ -97,12 +97,12 @@ def wakeups(pid: int) -> int:
 def build_inputs(args, work: Path) -> tuple[Path, Path]:
     model = Path(args.model) if args.model else REPO / "models" / "classifier.onnx"
     if not model.is_file():
-        from test_daemon_helpers import toy_model
+        from tests.test_daemon_helpers import toy_model
 
         model = toy_model(work / "toy.onnx")
     if args.tlog:
         return model, Path(args.tlog)
-    from test_daemon_helpers import synth_flight, write_tlog
+    from tests.test_daemon_helpers import synth_flight, write_tlog
 
     frames = synth_flight(args.minutes * 60.0, faulty=(3,), seed=args.seed, pos_hz=POSITION_RATE_HZ, imu_hz=IMU_RATE_HZ)
     return model, write_tlog(work / "flight.tlog", frames)

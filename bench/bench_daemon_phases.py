@@ -1,8 +1,8 @@
 """Where the daemon's CPU goes at real pace: its own thread time per phase, over a replayed flight.
 
-    python bench/bench_daemon_phases.py                 # 1-minute synthetic flight at real pace
-    python bench/bench_daemon_phases.py --minutes 10
-    python bench/bench_daemon_phases.py --floor         # only select() + recvfrom() of the same datagram rate
+    python -m bench.bench_daemon_phases                 # 1-minute synthetic flight at real pace
+    python -m bench.bench_daemon_phases --minutes 10
+    python -m bench.bench_daemon_phases --floor         # only select() + recvfrom() of the same datagram rate
 
 ``bench/bench_daemon.py`` gives the daemon's total CPU share; this splits it. The daemon
 runs in this process (``propwatch monitor`` on udpin, as deployed) with a thread-time
@@ -35,8 +35,7 @@ import threading
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_daemon import REPO, build_inputs, free_udp_port  # noqa: E402
+from bench.bench_daemon import REPO, build_inputs, free_udp_port
 
 PHASES = ("read", "handle", "step", "decide", "inference", "tick")
 

@@ -1,6 +1,6 @@
 """Throughput of ``propwatch diagnose`` on a 30-minute simulated tlog, as a multiple of real time.
 
-    python bench/bench_diagnose.py [--tlog PATH] [--minutes 30] [--hop 20] [--model PATH]
+    python -m bench.bench_diagnose [--tlog PATH] [--minutes 30] [--hop 20] [--model PATH]
 
 Without --tlog it simulates one flight with ``propwatch simulate --format tlog``
 (issue 2's PX4-like stream: 50 Hz ATTITUDE, SERVO_OUTPUT_RAW, LOCAL_POSITION_NED,
@@ -22,8 +22,7 @@ import tempfile
 import time
 from pathlib import Path
 
-REPO = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(REPO / "tests"))  # the fixture model, when no shipped model exists
+from bench import REPO
 
 
 def simulate(minutes: float, out: Path) -> Path:
@@ -89,7 +88,7 @@ def main(argv=None) -> int:
     with tempfile.TemporaryDirectory() as tmp:
         model = args.model
         if not model.is_file():
-            from test_diagnose_fixtures import build_model
+            from tests.test_diagnose_fixtures import build_model
 
             model = build_model(Path(tmp) / "fixture.onnx")
             print(f"(no {args.model}: using the test fixture model)")

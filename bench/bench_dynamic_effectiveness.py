@@ -25,18 +25,16 @@ spread (a weak motor has less thrust per command, like damage), and its scatter 
 80 s flight, against the register's 3-11 % damage) makes it weak evidence: a likelihood ratio of about 1.7 for a
 typical 7 % loss. It is not used in the verdict; at 100 Hz (CrazyPAD) the scatter is smaller.
 
-    python bench/bench_dynamic_effectiveness.py out/data-rrcal/RRcal-varied.npz   (seconds)
+    python -m bench.bench_dynamic_effectiveness out/data-rrcal/RRcal-varied.npz   (seconds)
 """
 
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from monitor.labels import LABEL_TABLE  # noqa: E402
 from monitor.vehicle import DEFAULT_VEHICLE, load_vehicle  # noqa: E402
 from offline.share_baseline import share_baseline  # noqa: E402

@@ -16,7 +16,7 @@ window_posterior per window (CPU, not wall time: on a shared machine waiting for
 cost); ``--reference``: through Evidence + posterior, the information-form path a flight's many windows take
 (run with PYTHONPATH at an older tree to time its code the same way).
 
-Run: ``python bench/bench_effectiveness.py [--out out/effectiveness] [--flights 24]`` (a few minutes).
+Run: ``python -m bench.bench_effectiveness [--out out/effectiveness] [--flights 24]`` (a few minutes).
 """
 
 from __future__ import annotations

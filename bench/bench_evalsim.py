@@ -1,7 +1,7 @@
 """evalsim speed: real-time factor of the evaluation-only simulator at batch 1 and 32 (paper-set
 flights), against one derivative of RotorPy's own ``Multirotor``.
 
-    python bench/bench_evalsim.py [--duration-s 80] [--batch 32] [--json]
+    python -m bench.bench_evalsim [--duration-s 80] [--batch 32] [--json]
 
 Prints; asserts nothing (speed depends on the machine and its load). Process CPU time is
 given beside wall clock: on a shared machine CPU time is the fairer figure.

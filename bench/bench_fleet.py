@@ -1,6 +1,6 @@
 """Fleet ingest throughput: logs/s and MB/s for 200 mixed logs, serial vs Ray with 1 and 2 workers.
 
-    python bench/bench_fleet.py [--dir /tmp/propwatch-fleet-bench] [--data ../shared/data]
+    python -m bench.bench_fleet [--dir /tmp/propwatch-fleet-bench] [--data ../shared/data]
                                 [--runs serial,ray1,ray2] [--json out.json]
 
 The 200 logs are made once into --dir and reused: simulated PX4-like .tlogs
@@ -31,13 +31,12 @@ import json
 import logging
 import os
 import shutil
-import sys
 import tempfile
 import time
 from pathlib import Path
 
-REPO = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(REPO))
+from bench import REPO
+
 # One BLAS/OpenMP thread per process, as Ray gives each 1-CPU worker: the serial loop is then one
 # core's worth of work too, and idle BLAS threads do not spin against the workers on a busy machine.
 for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):

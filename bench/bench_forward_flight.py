@@ -11,7 +11,7 @@ drawn from 0 to log171's trim, ``offline.evalsim.sets.FLAPPING_MAX``) against th
 
 Evaluation only: never used to choose a threshold or a setting.
 
-    python bench/bench_forward_flight.py --flights 48 --card   # ~7 min on 2 cores
+    python -m bench.bench_forward_flight --flights 48 --card   # ~7 min on 2 cores
 """
 
 from __future__ import annotations
@@ -118,7 +118,7 @@ def card_table(result: dict, argv_text: str):
     )
     rows = tuple(table_cells(name, r) for name, r in result["rows"].items())
     return CardTable(
-        "alerts-forward-flight", CARD_TITLE, note, COLUMNS, rows, f"python bench/bench_forward_flight.py {argv_text}"
+        "alerts-forward-flight", CARD_TITLE, note, COLUMNS, rows, f"python -m bench.bench_forward_flight {argv_text}"
     )
 
 

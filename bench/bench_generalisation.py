@@ -10,8 +10,8 @@ and reads our own simulator's figures from ``bench/bench_localise.py``'s JSON:
 
 Run (about 20 min on 2 idle cores; sets are written once and reused)::
 
-    python bench/bench_localise.py --json out/localise-ours.json
-    python bench/bench_generalisation.py --out out/generalisation --ours out/localise-ours.json --card
+    python -m bench.bench_localise --json out/localise-ours.json
+    python -m bench.bench_generalisation --out out/generalisation --ours out/localise-ours.json --card
 
 Give both scripts the same ``--model`` options to compare models side by side.
 
@@ -22,16 +22,13 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 from pathlib import Path
 
+from bench.bench_localise import add_model_option, model_paths
 from monitor.diagnose.physics import predict_table
 from monitor.vehicle import DEFAULT_VEHICLE, REPO_ROOT, load_vehicle
 from offline.evalsim.score import classifier_predictor, read_tables, score, share_predictor
 from offline.evalsim.sets import write_set
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_localise import add_model_option, model_paths  # noqa: E402
 
 SETS = {"paper": 32, "shift_quarter": 32, "shift_half": 32, "shift": 32, "healthy": 22}
 # flights: two per label (bent-like, cracked-like); 2 x 11 nuisances. shift_quarter / shift_half are shift flight for
@@ -132,7 +129,7 @@ def main(argv=None) -> int:
             ),
             columns=("data", "verdict", "exact", "single", "set size / truth in set", "flights"),
             rows=tuple(card_rows(evalsim, ours)),
-            produced_by="python bench/bench_generalisation.py --out out/generalisation --ours out/localise-ours.json "
+            produced_by="python -m bench.bench_generalisation --out out/generalisation --ours out/localise-ours.json "
             "--model NAME=PATH (one per row's system) --card",
         )
         upsert_table(REPO_ROOT / "models" / TABLES_FILE, table)

@@ -1,7 +1,7 @@
 """Heavier variants of the hardening fuzz tests (tests/test_fuzz_*.py), with the issue's sizes.
 
-    python bench/bench_hardening.py                 # all three, issue sizes (~1 minute)
-    python bench/bench_hardening.py --only flood --seconds 10
+    python -m bench.bench_hardening                 # all three, issue sizes (~1 minute)
+    python -m bench.bench_hardening --only flood --seconds 10
 
 - ``flood``: the daemon on udpin receives ~20 000 messages/s for ``--seconds``,
   ATTITUDE and SERVO_OUTPUT_RAW on one repeated timestamp (a frozen autopilot
@@ -30,10 +30,8 @@ import threading
 import time
 from pathlib import Path
 
-REPO = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(REPO / "bench"))
-sys.path.insert(0, str(REPO / "tests"))
-from bench_daemon import build_inputs, cpu_seconds, free_udp_port, rss_mb  # noqa: E402
+from bench import REPO
+from bench.bench_daemon import build_inputs, cpu_seconds, free_udp_port, rss_mb
 
 
 def start_daemon(work: Path, model: Path, port: int) -> subprocess.Popen:
@@ -52,7 +50,8 @@ def stop(d: subprocess.Popen, work: Path) -> dict:
 
 def flood(args, work: Path, model: Path) -> dict:
     from pymavlink.dialects.v20 import common as mavlink
-    from test_daemon_helpers import synth_flight
+
+    from tests.test_daemon_helpers import synth_flight
 
     port = free_udp_port()
     d = start_daemon(work, model, port)
@@ -132,7 +131,7 @@ def senders(args, work: Path, model: Path) -> dict:
 def zeros(args, work: Path, model: Path) -> dict:
     import struct
 
-    from test_daemon_helpers import synth_flight, write_tlog
+    from tests.test_daemon_helpers import synth_flight, write_tlog
 
     heads = {
         "tlog": write_tlog(work / "h.tlog", synth_flight(1.0)).read_bytes()[:3000],

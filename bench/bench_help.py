@@ -1,6 +1,6 @@
 """Wall time of ``propwatch COMMAND --help`` for every command, each in a fresh interpreter.
 
-    python bench/bench_help.py [--repeat 3] [--budget-s 1.0]
+    python -m bench.bench_help [--repeat 3] [--budget-s 1.0]
 
 A fresh process per call is what a user meets (imports included). Prints the best of
 --repeat runs per command and whether it is inside the budget (issue 16: < 1 s; torch
@@ -14,11 +14,8 @@ import argparse
 import subprocess
 import sys
 import time
-from pathlib import Path
 
-REPO = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(REPO))
-
+from bench import REPO
 from monitor.cli import COMMANDS  # noqa: E402
 
 

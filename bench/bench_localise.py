@@ -9,7 +9,7 @@ gets three verdicts:
   (``monitor.diagnose.engine.diagnose_table`` after the first 5 s, with the vehicle for the moment balance): the
   verdict's set, which is the conformal set's most probable member when the model has a rule beside it;
 - ``share``: the ω²-share baseline (the rotor with the largest flight-mean share of ω²; always one rotor).
-Run: ``python bench/bench_localise.py [--flights-per-label 1] [--duration-s 80] [--model NAME=PATH ...] [--json out.json]``.
+Run: ``python -m bench.bench_localise [--flights-per-label 1] [--duration-s 80] [--model NAME=PATH ...] [--json out.json]``.
 """
 
 from __future__ import annotations

@@ -18,7 +18,7 @@ without the register's telemetry degradation; ``--evalsim N`` flights of the eva
 ``onset`` set (singles and pairs, 5-20 % thrust loss, its own telemetry), which nothing trains or selects on.
 Each log goes through the log reader and ``diagnose_table`` as the CLI runs it.
 
-    python bench/bench_onset_diagnose.py --ours 20 --evalsim 40 --card   # ~2 min on 2 cores (evalsim set written once)
+    python -m bench.bench_onset_diagnose --ours 20 --evalsim 40 --card   # ~2 min on 2 cores (evalsim set written once)
 """
 
 from __future__ import annotations
@@ -278,7 +278,7 @@ def write_card_table(res: dict, argv_text: str) -> None:
         ),
         columns=COLUMNS,
         rows=tuple(table_rows(res)),
-        produced_by=f"python bench/bench_onset_diagnose.py {argv_text}".strip(),
+        produced_by=f"python -m bench.bench_onset_diagnose {argv_text}".strip(),
     )
     upsert_table(REPO_ROOT / "models" / TABLES_FILE, table)
     print(f"card table 'onset-diagnose' written to models/{TABLES_FILE}")

@@ -1,6 +1,6 @@
 """Which same-spin pairs can physics see? The evaluation's pair onsets against their yaw-balance shift.
 
-    python bench/bench_pair_physics.py --cache out/alerts-cache     # the evaluation's pair set (seed 202), ~1 min
+    python -m bench.bench_pair_physics --cache out/alerts-cache     # the evaluation's pair set (seed 202), ~1 min
 
 A same-spin diagonal pair (1+2 CCW, 3+4 CW) that loses thrust keeps roll and pitch balanced, so the yaw-free
 omega^2 shares do not move; what moves is the yaw balance, by g = 1 - (1 - f)(1 + c) per rotor: f the thrust
@@ -18,12 +18,8 @@ own, -12..-2 % per thrust, so every pair of it moves the yaw balance by more tha
 from __future__ import annotations
 
 import argparse
-import sys
-from pathlib import Path
 
 import numpy as np
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from monitor.decision.config import DecisionConfig  # noqa: E402
 from monitor.decision.thresholds import file_sha256

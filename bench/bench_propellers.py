@@ -1,6 +1,6 @@
 """Simulator real-time factor with LSTM propellers against analytic ones, in the same run.
 
-    .venv/bin/python bench/bench_propellers.py [--batch 256] [--duration-s 10] [--threads 1]
+    .venv/bin/python -m bench.bench_propellers [--batch 256] [--duration-s 10] [--threads 1]
 
 Prints, per propeller kind: wall and CPU time, aggregate real-time factor
 (flights x simulated seconds / seconds) on each, and the propeller model's own

@@ -1,7 +1,7 @@
 """Simulator speed and memory: real-time factors at batch 1 and 256 (80 s flights, one core),
 peak memory against batch size, and RotorPy (Multirotor + SE3Control, 5 ms step) side by side.
 
-    .venv/bin/python bench/bench_sim.py [--quick] [--json]
+    .venv/bin/python -m bench.bench_sim [--quick] [--json]
 
 The figures print; nothing is asserted (speed depends on the machine and its load). Both
 wall-clock and process CPU time are given: on a shared machine the CPU-time figure is the

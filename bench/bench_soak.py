@@ -1,7 +1,7 @@
 """Soak test of the onboard monitor: a long flight at real pace over UDP loopback, RSS sampled every minute.
 
-    python bench/bench_soak.py                     # 60-minute flight at real pace (the issue's soak)
-    python bench/bench_soak.py --minutes 5 --sample-s 10   # a shorter run
+    python -m bench.bench_soak                     # 60-minute flight at real pace (the issue's soak)
+    python -m bench.bench_soak --minutes 5 --sample-s 10   # a shorter run
 
 As ``bench_daemon.py`` (``propwatch replay`` as PX4 on udpout, ``propwatch
 monitor`` on udpin), but long: the daemon's resident memory is read from
@@ -29,9 +29,8 @@ from pathlib import Path
 
 import numpy as np
 
-REPO = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(REPO / "bench"))
-from bench_daemon import build_inputs, cpu_seconds, free_udp_port, rss_mb  # noqa: E402
+from bench import REPO
+from bench.bench_daemon import build_inputs, cpu_seconds, free_udp_port, rss_mb
 
 
 def run(args) -> dict:

@@ -7,7 +7,7 @@ only change is the sign. Single-propeller accuracy must move by <= 2 points betw
 for the moment balance, each ``--model NAME=PATH`` (default the shipped one) as ``propwatch diagnose`` runs it
 (its verdict, the conformal set's best member where the model has a rule) and the omega^2-share baseline.
 
-Run: ``python bench/bench_torque_sign.py [--flights-per-label 2] [--duration-s 60]``; the issue's check is
+Run: ``python -m bench.bench_torque_sign [--flights-per-label 2] [--duration-s 60]``; the issue's check is
 ``make evaluate-torque-sign`` (48 flights per label and sign: 192 singles each, standard error ~1.2 points;
 about 6 min on 2 cores), which fails when a model moves by more than 2 points.
 """
@@ -15,14 +15,10 @@ about 6 min on 2 cores), which fails when a model moves by more than 2 points.
 from __future__ import annotations
 
 import argparse
-import sys
-from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_localise import add_model_option, model_paths, physics_verdicts, share_verdicts, system_verdicts  # noqa: E402
-
+from bench.bench_localise import add_model_option, model_paths, physics_verdicts, share_verdicts, system_verdicts
 from monitor.decision.effectiveness import HypothesisBank, Priors, RotorGeometry  # noqa: E402
 from monitor.model import Classifier  # noqa: E402
 from monitor.vehicle import DEFAULT_VEHICLE, load_vehicle  # noqa: E402

@@ -1,6 +1,6 @@
 """The CrazyPAD experiment as one ``propwatch adapt`` call per airframe, plus its real-data scoring.
 
-    nice python bench/crazypad_adapt.py --out out/crazypad-adapt [--flights-per-label 10] [--epochs 6]
+    nice python -m bench.crazypad_adapt --out out/crazypad-adapt [--flights-per-label 10] [--epochs 6]
 
 Per airframe: ``adapt`` on its healthy motor logs (even numbers calibrate, odd are held out and
 scored), every fault and mass log of that airframe given as ``--labelled`` with the paper's truth
@@ -13,13 +13,10 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 from collections import defaultdict
 from pathlib import Path
 
-REPO = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(REPO))
-
+from bench import REPO
 from offline.adapt.pipeline import AdaptConfig, adapt  # noqa: E402
 from offline.crazypad.data import AIRFRAMES, DEFAULT_ROOT, load_manifest, select  # noqa: E402
 from offline.crazypad.experiment import GROUP_ORDER  # noqa: E402

@@ -1,6 +1,6 @@
 """The healthy-baseline rule of ``propwatch adapt`` on every real CrazyPAD motor log, per condition.
 
-    nice python bench/crazypad_baseline.py [--root ../shared/data/crazypad] [--json out.json]
+    nice python -m bench.crazypad_baseline [--root ../shared/data/crazypad] [--json out.json]
 
 Per airframe (E8, E9), the baseline (``monitor.baseline``) is built from its healthy logs with an
 even number (the CrazyPAD split of ``offline/crazypad/data.py``); every other motor log is
@@ -14,15 +14,12 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 from collections import defaultdict
 from pathlib import Path
 
 import numpy as np
 
-REPO = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(REPO))
-
+from bench import REPO
 from monitor.baseline import OUTLIER_SPREADS, baseline_from_tables  # noqa: E402
 from monitor.vehicle import load_vehicle  # noqa: E402
 from offline.crazypad.data import AIRFRAMES, DEFAULT_ROOT, load_manifest, select  # noqa: E402

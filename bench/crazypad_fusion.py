@@ -1,6 +1,6 @@
 """The verdict of an adapted airframe on every real CrazyPAD motor log: classifier, baseline, and both fused.
 
-    nice python bench/crazypad_fusion.py [--root ../shared/data/crazypad] [--json out.json] [--write-card]
+    nice python -m bench.crazypad_fusion [--root ../shared/data/crazypad] [--json out.json] [--write-card]
 
 Per airframe (E8, E9) the healthy baseline (``monitor.baseline``) is built from its healthy logs with an
 even number (the CrazyPAD split, ``offline/crazypad/data.py``), exactly as ``propwatch adapt`` stores it;
@@ -31,15 +31,12 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 from collections import defaultdict
 from pathlib import Path
 
 import numpy as np
 
-REPO = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(REPO))
-
+from bench import REPO
 from monitor.baseline import OUTLIER_SPREADS, baseline_from_tables, cg_or_damage, fuse  # noqa: E402
 from monitor.diagnose.engine import diagnose_table  # noqa: E402
 from monitor.labels import LABEL_TABLE, label_from_mask  # noqa: E402

@@ -1,6 +1,6 @@
 """The baseline's k on simulated CrazyPAD flights only: healthy false alarms and single-rotor cuts named, per rotor.
 
-    nice python bench/crazypad_fusion_sim.py [--baselines 20] [--seed 0]
+    nice python -m bench.crazypad_fusion_sim [--baselines 20] [--seed 0]
 
 Our simulator (``offline.crazypad.simdata``, the training recipe: healthy rotors +-3 % thrust from flight to flight,
 cuts of 8-40 % thrust on ANY one rotor, command noise as measured on healthy flights). Each trial draws an
@@ -14,15 +14,11 @@ About 30 s.
 from __future__ import annotations
 
 import argparse
-import sys
 from dataclasses import replace
-from pathlib import Path
 
 import numpy as np
 
-REPO = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(REPO))
-
+from bench import REPO
 from monitor.baseline import SPREAD_FLOOR  # noqa: E402
 from monitor.vehicle import load_vehicle  # noqa: E402
 from offline.crazypad.simdata import Recipe, simulate_dataset  # noqa: E402

@@ -1,6 +1,6 @@
 """Which evidence tells a CG offset near M3 from a damaged M3 propeller on real CrazyPAD flights?
 
-    nice python bench/crazypad_separation.py [--root ../shared/data/crazypad] [--json out.json]
+    nice python -m bench.crazypad_separation [--root ../shared/data/crazypad] [--json out.json]
 
 Reads every CrazyPAD flight at 100 Hz (motor logs with logged commands; controller logs
 with commands rebuilt by the firmware mixer), prints the effect size of each condition
@@ -13,11 +13,7 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 from pathlib import Path
-
-REPO = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(REPO))
 
 from offline.crazypad.data import DEFAULT_ROOT, load_manifest  # noqa: E402
 from offline.crazypad.evidence import effect_sizes, flight_evidence, separation  # noqa: E402

@@ -1,6 +1,6 @@
 """The calibrator and ``propwatch adapt`` on the evaluation-only simulator's ``hidden`` set.
 
-    nice python bench/evalsim_hidden.py --out out/evalsim-hidden [--duration-s 40] [--adapt cg_offset weak_motor motor_lag]
+    nice python -m bench.evalsim_hidden --out out/evalsim-hidden [--duration-s 40] [--adapt cg_offset weak_motor motor_lag]
 
 The ``hidden`` set (``offline/evalsim``, RotorPy-based, never used for training) holds airframes
 each with one hidden effect (CG offset, weak motor, motor lag, linear drag, ESC curve), each with
@@ -18,14 +18,10 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 from collections import defaultdict
 from pathlib import Path
 
 import numpy as np
-
-REPO = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(REPO))
 
 from monitor.baseline import OUTLIER_SPREADS, HealthyBaseline, baseline_from_tables  # noqa: E402
 from monitor.logs import read_log  # noqa: E402

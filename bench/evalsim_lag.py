@@ -1,6 +1,6 @@
 """Is a motor lag identifiable from 20 Hz telemetry of the evaluation-only simulator? A sweep.
 
-    nice python bench/evalsim_lag.py --out out/evalsim-lag [--duration-s 40] [--flights 2]
+    nice python -m bench.evalsim_lag --out out/evalsim-lag [--duration-s 40] [--flights 2]
         [--lags-ms 20 30 45 60 75] [--pattern common one] [--jitter-ms 0 4] [--seeds 0]
 
 For every (pattern, hidden lag, telemetry jitter, seed): fly ``--flights`` healthy evalsim flights
@@ -20,15 +20,11 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
-import sys
 import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
-
-REPO = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(REPO))
 
 from monitor.logs import read_log  # noqa: E402
 from monitor.vehicle import DEFAULT_VEHICLE, load_vehicle  # noqa: E402

@@ -1,6 +1,6 @@
 """Does the 100 Hz response-gain fit tell a CG offset from a damaged rotor where the truth is known? Our simulator.
 
-    nice python bench/response_gain_sim.py [--flights 4] [--seed 0] [--sim ours|evalsim]
+    nice python -m bench.response_gain_sim [--flights 4] [--seed 0] [--sim ours|evalsim]
 
 Simulated CrazyPAD missions (``offline.crazypad.mission``) logged at 100 Hz on the calibrated-free nominal
 Crazyflie (``models/crazyflie.yaml``): healthy; the CG moved 4 mm toward PX4 rotor 2 (Bitcraze M3) in x and y;
@@ -17,15 +17,11 @@ rotor 2's gain relative to the mean of the four. About 20 s.
 from __future__ import annotations
 
 import argparse
-import sys
 from dataclasses import replace
-from pathlib import Path
 
 import numpy as np
 
-REPO = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(REPO))
-
+from bench import REPO
 from monitor.errors import ModelError  # noqa: E402
 from monitor.vehicle import load_vehicle  # noqa: E402
 from offline.crazypad.mission import batch_waypoints, sim_config  # noqa: E402
