@@ -11,5 +11,6 @@ SET_NAMES = (
     "shift_half",
     "shift_quarter",
     "forward_flight",
+    "vehicles",
 )
 DEFAULT_DURATION_S = 80.0

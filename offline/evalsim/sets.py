@@ -13,6 +13,10 @@ NEVER used for training or model selection (see the package docstring).
 | effectiveness | one rotor losing exactly 5, 10 or 20 % thrust, torque per thrust unchanged or falling |
 | forward_flight | healthy flights at up to 10 m/s with blade flapping drawn from 0 to the forward-flight trim of a
   real hard-flown quad (ArduPilot log171, ``FLAPPING_MAX``): the aerodynamic trim neither simulator had before |
+| vehicles | vehicle memory: airframe a = i // 12 drawn like ``shift`` (motors ±4-8 %, CG ±1 cm, inertia ±10 %) plus
+  motor lag 25-50 ms; its flights 3 healthy references (no payload, light wind), then 9 later ones (payload 0 to
+  +25 %, light or gusty wind, new routes): 4 healthy and 5 with one propeller damaged from take-off (thrust loss
+  3-20 %); each ends in landing and disarm, one day after the last, with the airframe's own AUTOPILOT_VERSION uid |
 | paper_torque_rising | CONTROL: ``paper`` flight for flight (same seeds, routes, losses) but the damaged blade's
   drag torque at equal speed RISES by |δ| (training's ``torque_factor = 1 + gain``) instead of its torque per
   thrust falling by |δ| |
@@ -39,8 +43,9 @@ from offline.evalsim.airframe import Airframe, Damage
 from offline.evalsim.environment import Sensors, Telemetry, Wind
 from offline.evalsim.flight import FlightSpec, simulate_flights, truth
 from offline.evalsim.names import DEFAULT_DURATION_S, SET_NAMES
+from offline.fleet_sim import append_autopilot_version, vehicle_uid
 from offline.manifest import make_manifest, write_manifest
-from offline.sim.io_tlog import write_tlog
+from offline.sim.io_tlog import DEFAULT_WALL_BOOT_US, write_tlog
 
 _SET_CODES = {n: i + 101 for i, n in enumerate(SET_NAMES)}
 BATCH = 32  # flights integrated together (memory ~ BATCH * duration)
@@ -284,6 +289,36 @@ def _hidden(v, seed, i, duration_s) -> FlightSpec:
     return _spec("hidden", seed, i, af, rng, duration_s, nuisance=effect, airframe_id=f"hidden-{a:03d}-{effect}")
 
 
+VEHICLE_FLIGHTS = 12  # per airframe of the ``vehicles`` set
+VEHICLE_REFERENCES = 3  # its first flights: healthy references
+VEHICLE_HEALTHY_LATER = (0, 3, 6, 8)  # later flights (k - VEHICLE_REFERENCES) that stay healthy
+VEHICLE_LOSS = (0.03, 0.20)  # thrust loss at hover of a damaged propeller
+
+
+def _vehicles(v, seed, i, duration_s) -> FlightSpec:
+    """Airframe a = i // VEHICLE_FLIGHTS, drawn once and flown again and again (``vehicles`` in the table above)."""
+    a, k = divmod(i, VEHICLE_FLIGHTS)
+    arng = _rng("vehicles", seed, 100_000 + a)  # the airframe: shared by its flights
+    af = _base(v, arng, arng.uniform(0.04, 0.08))
+    cg = (float(arng.uniform(-0.01, 0.01)), float(arng.uniform(-0.01, 0.01)), 0.0)
+    inertia = np.asarray(v.inertia_diag_kg_m2) * (1 + arng.uniform(-0.1, 0.1, 3))
+    lag = tuple(float(x) for x in arng.uniform(0.025, 0.05, 4))
+    af = af.with_(cg_offset_frd_m=cg, inertia_diag_kg_m2=tuple(float(x) for x in inertia), motor_time_constant_s=lag)
+    rng = _rng("vehicles", seed, i)
+    if k < VEHICLE_REFERENCES:
+        return _spec("vehicles", seed, i, af, rng, duration_s, nuisance="reference", airframe_id=f"vehicle-{a:03d}")
+    j = k - VEHICLE_REFERENCES
+    af = af.with_(payload_kg=float(rng.uniform(0.0, 0.25)) * v.mass_kg)
+    wind = _gusty_wind(rng) if rng.random() < 0.5 else _light_wind(rng)
+    if j in VEHICLE_HEALTHY_LATER:
+        return _spec("vehicles", seed, i, af, rng, duration_s, wind=wind, nuisance="later", airframe_id=f"vehicle-{a:03d}")
+    rotor = (a + j) % 4 + 1
+    dmg = _damage(rng, (rotor,), "bent" if rng.random() < 0.5 else "cracked")
+    loss = tuple(float(rng.uniform(*VEHICLE_LOSS)) if p + 1 == rotor else 0.0 for p in range(4))
+    af = af.with_(damage=replace(dmg, thrust_loss_at_hover=loss))
+    return _spec("vehicles", seed, i, af, rng, duration_s, wind=wind, nuisance="later", airframe_id=f"vehicle-{a:03d}")
+
+
 def _effectiveness(v, seed, i, duration_s) -> FlightSpec:
     rng = _rng("effectiveness", seed, i)
     rotor = i % 4 + 1
@@ -338,7 +373,9 @@ _BUILDERS: dict[str, tuple[Callable, int]] = {
     "effectiveness": (_effectiveness, 12),
     "paper_torque_rising": (_paper_torque_rising, 16),
     "forward_flight": (_forward_flight, 16),
+    "vehicles": (_vehicles, 5 * VEHICLE_FLIGHTS),
 }
+DAY_US = 86_400 * 1_000_000
 
 
 def build_set(
@@ -381,7 +418,12 @@ def write_set(
         logs = simulate_flights(chunk)
         for spec, log in zip(chunk, logs, strict=True):
             tlog = f"{spec.name}.tlog"
-            write_tlog(out / tlog, log, 0)
+            if name == "vehicles":  # each airframe's flights a day apart, ending in landing and disarm, with its uid
+                a, k = divmod(int(spec.name.rsplit("_", 1)[1]), VEHICLE_FLIGHTS)
+                write_tlog(out / tlog, log, 0, wall_boot_us=DEFAULT_WALL_BOOT_US + k * DAY_US, landing=True)
+                append_autopilot_version(out / tlog, vehicle_uid(a))
+            else:
+                write_tlog(out / tlog, log, 0)
             t = truth(spec, file=tlog)
             _write_json(out / f"{spec.name}.json", t)
             entries.append(

@@ -60,13 +60,20 @@ def write_tlog(
     wall_boot_us: int = DEFAULT_WALL_BOOT_US,
     battery_full_v: float = 16.8,
     battery_capacity_mah: float = 5000.0,
+    landing: bool = False,
 ) -> Path:
-    """Write flight ``i`` of ``log`` as a .tlog at ``path`` (temp file, then rename)."""
+    """Write flight ``i`` of ``log`` as a .tlog at ``path`` (temp file, then rename).
+
+    ``landing``: after the last simulated sample the log ends as PX4 ends a mission (``landing_tail``): the land
+    detector says on the ground, the motors idle, then the vehicle disarms. The simulators fly no touchdown; the
+    tail carries only the flags and outputs a monitor reads to know the flight ended in landing and disarm."""
     path = Path(path)
     tmp = path.with_name(path.name + ".tmp")
     try:
         with open(tmp, "wb") as fh:
             _write(fh, log, i, wall_boot_us, battery_full_v, battery_capacity_mah)
+            if landing:
+                landing_tail(fh, int(log.timestamp_us[-1]), 1.0 / log.log_rate_hz, wall_boot_us)
         os.replace(tmp, path)
     finally:
         if tmp.exists():
@@ -177,3 +184,40 @@ def _write(fh, log: FlightLog, i: int, wall_boot_us: int, battery_full_v: float,
                 ),
             )
             next_slow = (t // slow_period_us + 1) * slow_period_us
+
+
+# PX4's idle and disarmed outputs (PWM_MAIN_MIN 1100 us, PWM_MAIN_DISARM 900 us) and how long the tail lasts.
+IDLE_PWM_US, DISARMED_PWM_US = 1100, 900
+LANDED_IDLE_S, DISARMED_S = 1.0, 2.0
+
+
+def landing_tail(fh, last_us: int, dt_s: float, wall_boot_us: int) -> None:
+    """Append a mission's end after boot time ``last_us``: ``LANDED_IDLE_S`` on the ground armed at idle, then
+    ``DISARMED_S`` disarmed (HEARTBEAT without MAV_MODE_FLAG_SAFETY_ARMED), level and at rest."""
+    mav = mavlink2.MAVLink(None, srcSystem=1, srcComponent=mavlink2.MAV_COMP_ID_AUTOPILOT1)
+    step_us = int(round(dt_s * US_PER_S))
+    n = int(round((LANDED_IDLE_S + DISARMED_S) / dt_s))
+    for j in range(1, n + 1):
+        t = last_us + j * step_us
+        armed = j * dt_s <= LANDED_IDLE_S
+        pwm = IDLE_PWM_US if armed else DISARMED_PWM_US
+        msgs = []
+        if j == 1 or (t // US_PER_S) != ((t - step_us) // US_PER_S):
+            base = BASE_MODE_ARMED_AUTO if armed else BASE_MODE_ARMED_AUTO & ~mavlink2.MAV_MODE_FLAG_SAFETY_ARMED
+            msgs.append(
+                mav.heartbeat_encode(
+                    mavlink2.MAV_TYPE_QUADROTOR,
+                    mavlink2.MAV_AUTOPILOT_PX4,
+                    base,
+                    PX4_CUSTOM_MODE_AUTO_MISSION,
+                    mavlink2.MAV_STATE_ACTIVE if armed else mavlink2.MAV_STATE_STANDBY,
+                    3,
+                )
+            )
+            msgs.append(mav.extended_sys_state_encode(mavlink2.MAV_VTOL_STATE_UNDEFINED, mavlink2.MAV_LANDED_STATE_ON_GROUND))
+        t_ms = t // US_PER_MS
+        msgs.append(mav.attitude_encode(t_ms, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0))
+        msgs.append(mav.servo_output_raw_encode(t & 0xFFFFFFFF, 0, *([pwm] * 4), 0, 0, 0, 0))
+        for m in msgs:
+            fh.write(struct.pack(">Q", wall_boot_us + int(t)))
+            fh.write(m.pack(mav))

@@ -1,0 +1,72 @@
+"""Measure the vehicle-memory constants (``monitor/memory/thresholds.py``) on our own simulator's fleet.
+
+    python -m offline.vehicles.calibrate --fleet DIR
+
+DIR: ``offline.vehicles.ours.write_fleet(DIR, 288, seed=1)`` (24 airframes). Never the evaluation-only simulator.
+- PRIOR_COV: covariance of healthy later flights' deviations from their vehicle's 3 references, over (1 + 1/3)
+  (a new flight against a mean of 3: the flight-to-flight covariance of one flight's intercept);
+- FAULT_STATISTIC / SUSPECT_STATISTIC: the 99th / 95th percentile of the healthy later flights' fault statistic
+  judged with that prior;
+- SET_STATISTIC: the 99th percentile, over damaged flights past FAULT_STATISTIC, of the best hypothesis's statistic
+  minus the true one's (at least 2).
+Prints the constants to paste, beside the ones in use.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+from unittest import mock
+
+import numpy as np
+
+from monitor.memory import thresholds as th
+from monitor.memory.judge import judge
+from monitor.memory.normal import normal_of
+from offline.vehicles.evaluate import REFERENCES, later_flights, load_fleet
+
+
+def calibrate(fleet: Path) -> dict:
+    by = load_fleet(fleet)
+    dev = []
+    for refs, f in later_flights(by):
+        if not f["faulty"]:
+            dev.append(normal_of([r["summary"] for r in refs]).deviation(f["summary"]))
+    prior = np.cov(np.array(dev).T) / (1.0 + 1.0 / REFERENCES)
+    with mock.patch.object(th, "PRIOR_COV", tuple(map(tuple, prior))):
+        judged = [(f, judge(normal_of([r["summary"] for r in refs]), f["summary"])) for refs, f in later_flights(by)]
+    healthy = [v["fault_statistic"] for f, v in judged if not f["faulty"]]
+    fault = float(np.quantile(healthy, 0.99))
+    gaps = [
+        v["fault_statistic"] - v["statistics"][str(f["faulty"][0])]
+        for f, v in judged
+        if len(f["faulty"]) == 1 and v["fault_statistic"] >= fault
+    ]
+    return {
+        "prior_cov": prior.tolist(),
+        "fault": fault,
+        "suspect": float(np.quantile(healthy, 0.95)),
+        "set": float(max(2.0, np.quantile(gaps, 0.99))) if gaps else 2.0,
+        "healthy_flights": len(healthy),
+        "damaged_past_fault": len(gaps),
+    }
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(
+        prog="python -m offline.vehicles.calibrate", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    p.add_argument("--fleet", required=True, type=Path)
+    args = p.parse_args(argv)
+    c = calibrate(args.fleet)
+    print(f"{c['healthy_flights']} healthy later flights, {c['damaged_past_fault']} damaged singles past the fault level")
+    print("PRIOR_COV = (\n" + "".join(f"    ({', '.join(f'{x:.3e}' for x in row)}),\n" for row in c["prior_cov"]) + ")")
+    print(f"FAULT_STATISTIC = {c['fault']:.1f}  (in use {th.FAULT_STATISTIC})")
+    print(f"SUSPECT_STATISTIC = {c['suspect']:.1f}  (in use {th.SUSPECT_STATISTIC})")
+    print(f"SET_STATISTIC = {c['set']:.1f}  (in use {th.SET_STATISTIC})")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
