@@ -30,6 +30,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "monitor": ("monitor.daemon.cli", "run the onboard monitor daemon"),
     "replay": ("monitor.replay", "replay a .tlog as if it were PX4"),
     "fleet": ("fleet.cli", "fleet: ingest many logs into a health database (Ray), web report"),
+    "baseline": ("monitor.memory.cli", "a vehicle's healthy normal from its own flights: learn, show, note"),
 }
 
 

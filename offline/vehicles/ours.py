@@ -88,7 +88,7 @@ def _physics(seed: int, plan: list[dict]):
     own = draw_flights(REGISTER, seed * 1000 + SEED_CODE, [p["airframe"] for p in plan])
     each = draw_flights(REGISTER, seed, [SEED_CODE * 100_000 + i for i in range(len(plan))])
     out = []
-    for p, af, f in zip(plan, own, each, strict=True):
+    for _, af, f in zip(plan, own, each, strict=True):
         vals = dict(f.values)
         vals.update({k: af.values[k] for k in AIRFRAME_KEYS if k in af.values})
         out.append(FlightPhysics(vals))

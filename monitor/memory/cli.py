@@ -1,0 +1,122 @@
+"""``propwatch baseline``: a vehicle's healthy normal from its own flights.
+
+    propwatch baseline learn LOG... --out B.json [--vehicle-id ID] [--format F] [--vehicle YAML] [--json]
+    propwatch baseline show B.json [--json]
+    propwatch baseline note B.json --event props-replaced|motor-replaced|... [--date YYYY-MM-DD]
+
+``learn`` reads flights the operator declares healthy (at least 3, of one vehicle: the logs' own ids, or
+``--vehicle-id`` for logs without one) and writes B.json; ``diagnose LOG --baseline B.json`` then judges a flight
+against it. ``note`` records maintenance; an event that changes the airframe restarts the normal.
+Exit 2 with one line naming the file and the reason on bad input; nothing is written then.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime as _dt
+import json
+import sys
+from pathlib import Path
+
+from monitor.memory.baseline import EVENTS, MIN_FLIGHTS, BaselineError, VehicleBaseline
+
+
+def _date(text: str) -> str:
+    try:
+        return _dt.date.fromisoformat(text).isoformat()
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(f"not a date (YYYY-MM-DD): {text!r}") from exc
+
+
+def parse_args(argv):
+    p = argparse.ArgumentParser(
+        prog="propwatch baseline", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    sub = p.add_subparsers(dest="cmd", required=True)
+    lp = sub.add_parser("learn", help=f"learn B.json from at least {MIN_FLIGHTS} healthy flights of one vehicle")
+    lp.add_argument("logs", nargs="+", metavar="LOG")
+    lp.add_argument("--out", required=True, type=Path, help="the baseline file to write (B.json)")
+    lp.add_argument("--vehicle-id", default=None, help="the vehicle's id, for logs that carry none")
+    lp.add_argument("--format", dest="fmt", default=None, help="log format (as diagnose --format)")
+    lp.add_argument("--vehicle", default=None, help="vehicle YAML whose ESC curve converts commands to RPM (as diagnose)")
+    lp.add_argument("--json", action="store_true", help="print the summary as JSON")
+    sp = sub.add_parser("show", help="what a baseline holds")
+    sp.add_argument("baseline", type=Path)
+    sp.add_argument("--json", action="store_true")
+    np_ = sub.add_parser("note", help="record a maintenance event")
+    np_.add_argument("baseline", type=Path)
+    np_.add_argument("--event", required=True, help=f"one of: {', '.join(EVENTS)}")
+    np_.add_argument("--date", type=_date, default=None, help="the event's date (default today, UTC)")
+    return p.parse_args(argv)
+
+
+def describe(b: VehicleBaseline) -> dict:
+    """The summary ``show`` and ``learn`` print: vehicle, flights, normal, spread, events."""
+    out = {
+        "vehicle_id": b.vehicle_id,
+        "id_source": b.id_source,
+        "basis": b.basis,
+        "motor_names": list(b.motor_names),
+        "compared_with": b.compared_with(),
+        "ready": b.ready,
+        "flights_needed": MIN_FLIGHTS,
+        "flights": [{"name": f["name"], "date": f["date"], "source": f["source"]} for f in b.active()],
+        "history_flights": len(b.flights),
+        "events": b.events,
+    }
+    if b.ready:
+        n = b.normal()
+        out["normal_share"] = [round(float(x), 5) for x in n.intercept]
+        out["spread_share"] = [round(float(x), 5) for x in n.cov.diagonal() ** 0.5]
+        out["tilt_slopes_share_per_rad"] = [[round(float(x), 4) for x in row] for row in n.slopes]
+    return out
+
+
+def text(b: VehicleBaseline, d: dict) -> str:
+    lines = [f"vehicle {d['vehicle_id']} ({d['id_source']}), rotors {', '.join(d['motor_names'])}, {d['basis']} shares"]
+    if d["ready"]:
+        lines.append(b.compared_with_text())
+        lines.append("  normal share per rotor:  " + "  ".join(f"{x:.4f}" for x in d["normal_share"]))
+        lines.append("  flight-to-flight spread: " + "  ".join(f"{x:.4f}" for x in d["spread_share"]))
+    else:
+        lines.append(f"no vehicle baseline yet ({len(d['flights'])} of {MIN_FLIGHTS} flights)")
+    for f in d["flights"]:
+        lines.append(f"  flight {f['name']} ({f['date'] or 'time unknown'}, {f['source']})")
+    for e in d["events"]:
+        lines.append(f"  event {e['event']} ({e['date'] or 'date unknown'})")
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parse_args(argv)
+    try:
+        if args.cmd == "learn":
+            from monitor.memory.learn import learn_from_logs, read_flight
+            from monitor.vehicle import DEFAULT_VEHICLE, load_vehicle
+
+            esc = load_vehicle(args.vehicle or DEFAULT_VEHICLE).esc
+            flights = [read_flight(p, args.fmt, esc) for p in args.logs]
+            b = learn_from_logs(flights, args.vehicle_id)
+            b.save(args.out)
+        elif args.cmd == "show":
+            b = VehicleBaseline.load(args.baseline)
+        else:
+            b = VehicleBaseline.load(args.baseline)
+            restarted = b.note(args.event, args.date or _dt.datetime.now(_dt.timezone.utc).date().isoformat())
+            b.save(args.baseline)
+            print(f"{args.baseline}: {args.event} recorded" + ("; the normal restarts from the next flight" if restarted else ""))
+            return 0
+    except BaselineError as exc:
+        print(f"propwatch baseline: error: {exc}", file=sys.stderr)
+        return 2
+    d = describe(b)
+    if getattr(args, "json", False):
+        json.dump(d, sys.stdout, allow_nan=False)
+        sys.stdout.write("\n")
+    else:
+        print(text(b, d))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
