@@ -278,3 +278,27 @@ def test_a_battery_sag_does_not_hide_a_loss_from_the_omega2_shares():
     assert faults and faults[0].propellers == (4,) and faults[0].t_s <= 66.0, [(a.t_s, a.text) for a in out]
     healthy, d = _loss_with_a_sag(0.0, sag_at_s=60.5)
     assert d.regime.counts["battery_sag"] >= 1 and healthy == []
+
+
+def test_the_collective_shift_kept_sorted_step_by_step_is_the_median_of_the_spans():
+    """The shift test reads medians from spans kept sorted as values enter and leave; through climbs, payload
+    steps, landings (a reset) and collective steps (a clear) they must be the medians of the RPM history itself."""
+    from monitor.decision.regime import RegimeTracker
+
+    tracker = RegimeTracker(DecisionConfig(), RATE_HZ, WINDOW)
+    rng = np.random.default_rng(3)
+    level, compared, events = HOVER_RPM, 0, set()
+    for j in range(6000):
+        if j % 700 == 350:
+            level *= rng.choice([0.8, 0.97, 1.03, 1.25])  # steps the step rule catches, shifts it only holds
+        airborne = j % 2500 < 2400
+        rpm = level + 40.0 * rng.standard_normal() if j % 97 else math.nan  # an unknown RPM now and then
+        events.add(tracker.update(StepInputs(airborne, rpm, 0.05, 0.1, 15.5)))
+        history = list(tracker._rpm)
+        if len(history) >= tracker._median_n + tracker._shift_n:
+            assert tracker._collective_shifted() == tracker._collective_moved(tracker._shift_n)
+            span = history[-(tracker._median_n + tracker._shift_n) :]
+            assert tracker._old_sorted == sorted(span[: tracker._median_n])
+            assert tracker._new_sorted == sorted(span[tracker._median_n :])
+            compared += 1
+    assert compared > 4000 and {"collective_step", "landed"} <= events and tracker.shift_steps > 0

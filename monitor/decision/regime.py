@@ -6,6 +6,7 @@ Part of the decision rule (``monitor.decision``): ``RegimeTracker`` reads each g
 
 from __future__ import annotations
 
+import bisect
 import math
 import statistics
 from collections import deque
@@ -67,6 +68,10 @@ class RegimeTracker:
         self._median_n = max(int(round(COLLECTIVE_MEDIAN_S * rate_hz)), 1)
         self._shift_n = max(int(round(COLLECTIVE_SHIFT_S * rate_hz)), 1)
         self._rpm: deque[float] = deque(maxlen=2 * self._median_n)  # the last 2 x 10 s of mean RPM (collective step)
+        # The same values kept sorted for the shift test, which runs every step: the last COLLECTIVE_SHIFT_S and
+        # the COLLECTIVE_MEDIAN_S before them (``_collective_shifted``), updated as values enter and leave.
+        self._new_sorted: list[float] = []
+        self._old_sorted: list[float] = []
         self._volts: deque[float] = deque(maxlen=window)
         self._n = 0
         self.hold_until_step = 0
@@ -80,7 +85,7 @@ class RegimeTracker:
         self._check_every = max(window // 5, 1)
 
     def reset(self) -> None:
-        self._rpm.clear()
+        self._clear_rpm()
         self._volts.clear()
         self._n = 0
         self.hold_until_step = self.step + self.window  # a window must lie wholly after take-off
@@ -96,7 +101,7 @@ class RegimeTracker:
             return "landed" if was_flying else ""
         self._n += 1
         if math.isfinite(s.mean_rpm):
-            self._rpm.append(s.mean_rpm)
+            self._push_rpm(s.mean_rpm)
         if math.isfinite(s.battery_v):
             self._volts.append(s.battery_v)
         event = ""
@@ -106,8 +111,8 @@ class RegimeTracker:
         elif len(self._rpm) == 2 * self._median_n and self._n % self._check_every == 0:
             if self._collective_moved(self._median_n):
                 event = "collective_step"
-                self._rpm.clear()  # measure the next step from the new level
-        if not event and len(self._rpm) >= self._median_n + self._shift_n and self._collective_moved(self._shift_n):
+                self._clear_rpm()  # measure the next step from the new level
+        if not event and len(self._rpm) >= self._median_n + self._shift_n and self._collective_shifted():
             self.hold_until_step = max(self.hold_until_step, self.step + 1)  # this step's window is held
             self.shift_steps += 1
             self.last_reason = "collective_shift"
@@ -124,6 +129,37 @@ class RegimeTracker:
             else:
                 self.hold_until_step = self.step + self.window
         return event
+
+    def _clear_rpm(self) -> None:
+        self._rpm.clear()
+        self._new_sorted.clear()
+        self._old_sorted.clear()
+
+    def _push_rpm(self, rpm: float) -> None:
+        """Append to ``_rpm`` and move the sorted spans along: the value ``_shift_n`` back passes from the new span
+        to the old, the one ``_median_n`` before that leaves the old."""
+        q = self._rpm
+        n = len(q) + 1  # values once this one is in (the deque drops its oldest only beyond both spans)
+        if n > self._shift_n:
+            moved = q[-self._shift_n]
+            del self._new_sorted[bisect.bisect_left(self._new_sorted, moved)]
+            bisect.insort(self._old_sorted, moved)
+        if n > self._shift_n + self._median_n:
+            left = q[-(self._shift_n + self._median_n)]
+            del self._old_sorted[bisect.bisect_left(self._old_sorted, left)]
+        q.append(rpm)
+        bisect.insort(self._new_sorted, rpm)
+
+    @staticmethod
+    def _sorted_median(x: list[float]) -> float:
+        """``statistics.median`` of an already sorted list (the same arithmetic)."""
+        n = len(x)
+        return x[n // 2] if n % 2 else (x[n // 2 - 1] + x[n // 2]) / 2
+
+    def _collective_shifted(self) -> bool:
+        """``_collective_moved(self._shift_n)`` from the spans kept sorted."""
+        old, new = self._sorted_median(self._old_sorted), self._sorted_median(self._new_sorted)
+        return old > 0 and abs(new - old) / old > self.cfg.collective_step_fraction
 
     def _collective_moved(self, n_new: int) -> bool:
         """The median mean RPM of the last ``n_new`` steps against that of the COLLECTIVE_MEDIAN_S before them:
