@@ -15,6 +15,7 @@ The site is written into a temporary folder and swapped in, so a reader never se
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import html
 import json
@@ -28,6 +29,7 @@ import numpy as np
 from fleet.errors import FleetError
 from fleet.schema import open_db
 from fleet.svg import COLORS, Series, line_chart
+from monitor.diagnose.verdict import Verdict, compared_with_words, verdict_of
 
 RECENT_FLIGHTS = 3
 TREND_FLIGHTS = 10
@@ -78,6 +80,36 @@ def _probability(h: dict) -> str:
     """A hypothesis' probability, or what stands instead (the in-flight rule ranks its sets without weighing them)."""
     p = h.get("probability")
     return f"{float(p):.3f}" if p is not None else html.escape(str(h.get("evidence") or h.get("cause") or "-"))
+
+
+def _day(t) -> str | None:
+    """A date column (DATE, TIMESTAMP or text) as ``YYYY-MM-DD``; None stays None."""
+    if t is None:
+        return None
+    return t.strftime("%Y-%m-%d") if hasattr(t, "strftime") else str(t)[:10]
+
+
+def row_verdict(f: dict) -> Verdict:
+    """The verdict of one database row: its stored diagnosis through ``monitor.diagnose.verdict``, exactly as
+    ``propwatch diagnose`` prints it, with "compared with" from the vehicle memory's columns (``baseline_flights``,
+    ``compared_with_first``, ``compared_with_last``; absent or NULL: none)."""
+    if f.get("diagnosis"):
+        res = json.loads(f["diagnosis"])
+    else:
+        res = {"log": f.get("path"), "error": f.get("error") or "not diagnosed"}
+    v = verdict_of(res)
+    said = compared_with_words(f.get("baseline_flights"), _day(f.get("compared_with_first")), _day(f.get("compared_with_last")))
+    return dataclasses.replace(v, compared_with=said) if said else v
+
+
+def verdict_cells(v: Verdict) -> str:
+    """A flight's verdict as table cells (headline, confidence, next step); ``data-*`` state it for machines."""
+    e = html.escape
+    return (
+        f"<td class='verdict {v.state.replace(' ', '-')}' data-state='{e(v.state)}' data-confidence='{e(v.confidence)}'"
+        f" data-propellers='{','.join(map(str, v.propellers))}' data-replace='{','.join(map(str, v.replace))}'>"
+        f"{e(v.headline)}</td><td>{e(v.confidence)}</td><td class='next'>{e(v.next_step)}</td>"
+    )
 
 
 def effectiveness_trends(flights: list[dict]) -> list[tuple[int, float, int]]:

@@ -26,7 +26,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from monitor.diagnose.engine import rotor_name
+from monitor.labels import faulty_for
 from monitor.resources import shipped
 
 REPO = Path(__file__).resolve().parent.parent
@@ -39,23 +39,10 @@ def _propwatch(*args: str) -> subprocess.CompletedProcess:
 
 
 def _verdict_line(res: dict) -> str:
+    """What ``propwatch diagnose`` says of one log, in its own words (``summary``, monitor/diagnose/verdict.py)."""
     if res.get("error"):
         return f"error: {res['error']}"
-    v = res.get("verdict")
-    if not v:
-        return f"no verdict: {res.get('reason')}"
-    probs = " ".join(f"{p['name']}={p['fault_probability']:.2f}" for p in res["propellers"])
-    faulty = ", ".join(rotor_name(n, i) for n, i in zip(v["faulty_names"], v["faulty_propellers"])) or "none"
-    line = (
-        f"label {v['label']}, faulty {faulty} ({v.get('confidence', 'confident')}), P(faulty) {probs}, {res['windows']} windows"
-    )
-    hyps = res.get("hypotheses") or []
-    if len(hyps) > 1:  # what physics could not tell apart, as diagnose's set gives it
-        sets = " or ".join(
-            "{" + ",".join(map(str, h["faulty_propellers"])) + "}" if h["faulty_propellers"] else "healthy" for h in hyps[:4]
-        )
-        line += f"; possible: {sets}" + (f" (+{len(hyps) - 4} more)" if len(hyps) > 4 else "")
-    return line
+    return f"{res['summary']['headline']}\n     next step: {res['summary']['next_step']}"
 
 
 def _diagnose(log: Path, reports: Path, *extra: str) -> dict:
@@ -75,38 +62,37 @@ def _diagnose(log: Path, reports: Path, *extra: str) -> dict:
     return res
 
 
+# The demo's simulated flights: (folder, label, fault condition); tests/test_verdict_agreement.py flies the same.
+DEMO_CASES = (("healthy", "1", "bent"), ("prop3-bent", "4", "bent"), ("prop1-cracked", "2", "cracked"))
+DEMO_SEED = 7
+
+
+def simulate_args(out: Path, case: tuple[str, str, str], duration_s: float) -> list[str]:
+    """``propwatch simulate`` arguments for one demo flight."""
+    name, label, fault = case
+    return ["--out", str(out / name), "--label", label, "--fault", fault, "--seed", str(DEMO_SEED),
+            "--duration-s", str(duration_s), "--format", "tlog"]  # fmt: skip
+
+
 def run(out: Path, data: Path, duration_s: float = 40.0) -> int:
     out.mkdir(parents=True, exist_ok=True)
     print(f"== 1. simulate ({duration_s:.0f} s flights, shipped LSTM propeller models)")
-    cases = [("healthy", "1", "bent"), ("prop3-bent", "4", "bent"), ("prop1-cracked", "2", "cracked")]
+    cases = DEMO_CASES
     failures = 0
-    for name, label, fault in cases:
-        r = _propwatch(
-            "simulate",
-            "--out",
-            str(out / name),
-            "--label",
-            label,
-            "--fault",
-            fault,
-            "--seed",
-            "7",
-            "--duration-s",
-            str(duration_s),
-            "--format",
-            "tlog",
-        )
+    for case in cases:
+        r = _propwatch("simulate", *simulate_args(out, case, duration_s))
         if r.returncode != 0:
             print(r.stderr)
             return r.returncode
     print("\n== 2. diagnose the simulated flights with models/classifier.onnx")
-    for name, label, _ in cases:
+    for name, label, fault in cases:
         logs = sorted((out / name).glob("*.tlog"))
         res = _diagnose(logs[0], out / "reports" / name)
         got = (res.get("verdict") or {}).get("label")
         ok = got == int(label)
         failures += 0 if ok else 1
-        print(f"     truth: label {label} -> {'correct' if ok else 'WRONG'}")
+        truth = "healthy" if label == "1" else f"propeller(s) {'+'.join(map(str, faulty_for(int(label))))} {fault}"
+        print(f"     truth: {truth} -> the most likely answer is {'right' if ok else 'WRONG'}")
 
     print("\n== 3. real logs")
     ardu = data / "ardupilot_log171" / "log171.bin"

@@ -85,11 +85,12 @@ def test_baseline_names_a_rotor_the_classifier_calls_healthy(tmp_path, healthy_l
         if separable is None:  # nobody measured CG offset against damage: the rotor is named
             assert res["verdict"]["faulty_propellers"] == [1] and res["verdict"]["confidence"] == "confident" and code == 0
             assert [p["faulty"] for p in res["propellers"]] == [True, False, False, False]
-            assert "verdict: label 2: propeller 1 faulty" in text, text
+            assert "Propeller 1 (front-right) is damaged: replace it." in text, text
         else:  # measured alike: an imbalance near rotor 1, no propeller called faulty
             assert res["verdict"]["faulty_propellers"] == [] and res["verdict"]["imbalance_rotors"] == [1] and code == 3
             assert not any(p["faulty"] for p in res["propellers"])
-            assert "verdict: imbalance near propeller 1: CG offset or damage (no propeller called faulty)" in text, text
+            assert "Imbalance near propeller 1 (front-right): a shifted load or battery, or a damaged propeller." in text, text
+            assert "REPLACE" not in text, text
 
 
 CRAZYPAD = REPO_ROOT.parent / "shared" / "data" / "crazypad"

@@ -67,7 +67,8 @@ def test_every_named_feature_is_fed_from_the_log(capsys, logs, tmp_path):
 
 def test_text_output_and_hop(capsys, model, logs):
     code, out = run(capsys, logs[2], "--model", model)
-    assert code == 0 and "label 3" in out and "<- FAULTY" in out and "airborne" in out
+    assert code == 0 and "Propeller 2 (rear-left) is damaged: replace it." in out and "2 rear-left REPLACE" in out
+    assert "label" not in out and "s after take-off" in out
     _, every = run(capsys, logs[2], "--model", model, "--json", "--hop", "1")
     _, sparse = run(capsys, logs[2], "--model", model, "--json", "--hop", "7")
     t_every, t_sparse = every["timeline"]["t_boot_s"], sparse["timeline"]["t_boot_s"]
@@ -94,7 +95,7 @@ def test_report_writes_png_and_html(capsys, model, logs, tmp_path):
     html = (out / "f3.tlog.html").read_text()
     png = out / "f3.tlog.png"
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and png.stat().st_size > 10_000
-    assert "Verdict: label 4: propeller 3 faulty" in html and "f3.tlog.png" in html and "Airborne segments used" in html
+    assert "Propeller 3 (front-left) is damaged: replace it." in html and "f3.tlog.png" in html and "Airborne" in html
 
 
 def test_outside_envelope_is_refused_not_classified(capsys, logs, tmp_path):
@@ -186,7 +187,7 @@ def test_a_verdict_below_the_stated_probability_is_not_faulty_and_exits_3(capsys
     assert v["label_probability_of_verdict"] == sure and 0.0 <= v["agreeing_windows"] <= 1.0
     assert not any(p["faulty"] for p in res["propellers"])
     code, out = run(capsys, logs[2], "--model", model)
-    assert code == 3 and "<- FAULTY" not in out and f"{v['confidence']} (label probability" in out
+    assert code == 3 and "REPLACE" not in out and "Propeller 2 (rear-left) may be damaged (not sure)" in out
 
 
 def test_a_conformal_rule_beside_the_model_gives_the_hypothesis_set(capsys, model, logs, tmp_path):
@@ -215,7 +216,7 @@ def test_a_conformal_rule_beside_the_model_gives_the_hypothesis_set(capsys, mode
     assert p == sorted(p, reverse=True) and res["verdict"]["faulty_propellers"] == res["hypotheses"][0]["faulty_propellers"]
     assert not any(x["faulty"] for x in res["propellers"])
     code, out = run(capsys, logs[2], "--model", ruled)
-    assert code == 3 and "cannot tell apart" in out and "<- FAULTY" not in out
+    assert code == 3 and "Not sure: 16 possible damage patterns" in out and "why not sure:" in out and "REPLACE" not in out
     rule_path(ruled).write_text("{")  # a damaged rule is an error naming the file, not a silent fallback
     assert diagnose([str(logs[2]), "--model", str(ruled), "--json"]) == 2
     assert "ruled.sets.json" in capsys.readouterr().err

@@ -31,11 +31,11 @@ def test_crazypad_names_stand_beside_px4_numbers():
     assert [p["px4_rotor"] for p in out["propellers"]] == [1, 2, 3, 4]
     assert out["label_probability"][2] == 1.0 and out["timeline"]["label"] == [3]
     text = format_text(d)
-    assert "label 3: M3 (PX4 rotor 2) faulty" in text
-    assert "M3 (PX4 rotor 2): P(faulty) = 0.900  <- FAULTY" in text
-    assert "M2 (PX4 rotor 4): P(faulty) = 0.300" in text
+    # The text names the vehicle's own rotor and where it sits (PX4 rotor 2 is rear-left); no label number.
+    assert "Propeller M3 (rear-left) is damaged: replace it." in text and "label" not in text
+    assert "M3 rear-left REPLACE" in text and "M2 rear-right ok" in text
 
 
 def test_px4_names_are_not_repeated():
     text = format_text(_diag(["1", "2", "3", "4"]))
-    assert "label 3: propeller 2 faulty" in text and "propeller 2: P(faulty) = 0.900  <- FAULTY" in text
+    assert "Propeller 2 (rear-left) is damaged: replace it." in text and "2 rear-left REPLACE" in text

@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from monitor.diagnose.report import broken_at_gaps, unwrap_deg
+from monitor.diagnose import report
+from monitor.diagnose.report import broken_at_gaps
 
 
 def test_probability_line_is_broken_across_a_landed_gap():
@@ -18,16 +19,39 @@ def test_probability_line_is_broken_across_a_landed_gap():
     assert np.array_equal(same, t[:3])  # nothing inserted without a gap
 
 
-def test_yaw_is_unwrapped_across_180_and_keeps_gaps():
-    yaw = np.deg2rad([170.0, 179.0, -179.0, np.nan, -170.0])  # turning right through 180
-    deg = unwrap_deg(yaw)
-    assert deg[:3] == pytest.approx([170.0, 179.0, 181.0])
-    assert np.isnan(deg[3]) and deg[4] == pytest.approx(190.0)
+def test_thrust_share_band_is_the_flights_own_start_and_a_later_loss_leaves_it():
+    from monitor.flight import FlightTable
+
+    n = 20 * 40  # 40 s at 20 Hz, airborne throughout; rotor 3 spins 10 % faster from 25 s (a lost piece of blade)
+    rpm = np.full((n, 4), 7000.0)
+    rpm[500:, 2] *= 1.10
+    nan = np.full(n, np.nan)
+    table = FlightTable(
+        source="x",
+        rate_hz=20.0,
+        timestamp_us=(np.arange(n) * 50_000).astype(np.int64),
+        motor_cmd=rpm,
+        motor_rpm=rpm,
+        roll_rad=nan,
+        pitch_rad=nan,
+        yaw_rad=nan,
+        roll_rate_rad_s=nan,
+        pitch_rate_rad_s=nan,
+        yaw_rate_rad_s=nan,
+        battery_v=nan,
+        airborne=np.ones(n, bool),
+    )
+    share, band = report.thrust_shares(table)
+    assert np.allclose(np.nansum(share, axis=1)[60:], 1.0)  # shares of one total
+    assert band[:, 0] == pytest.approx(0.25 - report.SHARE_BAND) and band[:, 1] == pytest.approx(0.25 + report.SHARE_BAND)
+    assert np.isnan(share[:39]).all()  # the 2-s mean needs 2 s of flight
+    assert band[2, 0] <= share[400, 2] <= band[2, 1] and share[-1, 2] > band[2, 1]  # rotor 3 leaves its band
+    short = FlightTable(**{**table.__dict__, "airborne": np.arange(n) < 150})  # 7.5 s airborne: no band to learn
+    assert report.thrust_shares(short)[1] is None
 
 
 def test_report_names_empty_panels_not_logged(tmp_path, monkeypatch):
     pytest.importorskip("matplotlib")
-    from monitor.diagnose import report
     from monitor.diagnose.engine import Diagnosis
     from monitor.flight import FlightTable
 
@@ -56,5 +80,5 @@ def test_report_names_empty_panels_not_logged(tmp_path, monkeypatch):
     d = Diagnosis("x.csv", None, 0, [], reason="test")
     page = report.write_report(d, table, tmp_path)
     assert page.is_file() and page.with_suffix(".png").stat().st_size > 10_000
-    # No window (no verdict) and no body rate at all: both panels say so; attitude (roll, yaw) is drawn.
-    assert named == ["no window classified, so P(faulty)", "body rates"]
+    # No window (no verdict): the classifier's panel says so; shares, motor outputs and attitude (roll) are drawn.
+    assert named == ["no stretch of flight classified, so the classifier's probability"]

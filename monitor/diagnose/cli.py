@@ -78,7 +78,8 @@ import sys
 from pathlib import Path
 
 from monitor.decision.rotor_share import BASELINE_S
-from monitor.diagnose.engine import Diagnosis, describe_label, diagnose_table, name_verdict, rotor_name, round_floats
+from monitor.diagnose.engine import Diagnosis, diagnose_table, name_verdict, round_floats
+from monitor.diagnose.verdict import POSITION, flight_seconds, set_words, verdict_of
 from monitor.errors import PropwatchError
 from monitor.esc import EscCurve
 from monitor.logs import read_raw, to_flight_table
@@ -187,13 +188,10 @@ class _PrintTrap(io.TextIOBase):
 
 
 def _sets_text(hypotheses: list[dict], names: list[str]) -> str:
+    """Hypothesis sets in plain words with their probabilities: ``propeller 3 (front-left) 99 % or propellers
+    1+2+3 1 %``."""
     return " or ".join(
-        (
-            "{" + ", ".join(rotor_name(names[i - 1], i) for i in h["faulty_propellers"]) + "}"
-            if h["faulty_propellers"]
-            else "healthy"
-        )
-        + f" p={h['probability']:.2f}"
+        set_words(h["faulty_propellers"], names) + (f" {100 * h['probability']:.0f} %" if "probability" in h else "")
         for h in hypotheses
     )
 
@@ -215,78 +213,37 @@ def in_flight_summary(decision: dict) -> str:
     )
 
 
-def format_text(d: Diagnosis, baseline=None) -> str:
-    lines = [f"== {d.source}"]
-    names = [p["name"] for p in d.propellers]
-    if d.verdict is None:
-        lines.append(f"no verdict: {d.reason}")
-    else:
-        conf = d.verdict.get("confidence", "confident")
-        what, mark = describe_label(d.verdict["label"], names, conf), "  <- FAULTY"
-        imb = d.verdict.get("imbalance_rotors")
-        if baseline is not None and imb:  # CG offset and damage measured alike on this airframe
-            where = " + ".join(rotor_name(names[i - 1], i) for i in imb)
-            what = f"{baseline.imbalance_wording(where)} (no propeller called faulty)"
-        if baseline is not None and imb:  # the label (1) is no claim here: say what the imbalance rests on
-            lines.append(f"verdict: {what}, from {d.windows} windows: {conf} (the rotors' shares against this airframe's")
-            lines[-1] += " healthy baseline; a CG offset and damage were measured alike on its kind of flights)"
-        elif d.verdict.get("source") == "in-flight change":
-            whole = d.verdict["whole_flight"]
-            lines.append(
-                f"verdict: {what}, from the in-flight rule's fault at {d.verdict['change_boot_s']:.1f} s: {conf} "
-                f"(the flight against its own start; the whole flight's {d.windows} windows said "
-                f"{describe_label(whole['label'], names, whole['confidence'])})"
-            )
-        else:
-            lines.append(
-                f"verdict: {what}, from {d.windows} windows: {conf} (label probability "
-                + f"{d.verdict.get('label_probability_of_verdict', float('nan')):.2f}, "
-                + f"{100 * d.verdict.get('agreeing_windows', float('nan')):.0f} % of windows agree; marked FAULTY from "
-                + f"{d.verdict.get('faulty_probability_required', float('nan')):.2f})"
-            )
-        over = " over the whole flight" if d.verdict.get("source") == "in-flight change" else ""
-        for p in d.propellers:
-            lines.append(
-                f"  {rotor_name(p['name'], p['propeller'])}: P(faulty{over}) = {p['fault_probability']:.3f}"
-                + (
-                    mark
-                    if p["faulty"]
-                    else "  <- IMBALANCE"
-                    if imb and p["propeller"] in imb
-                    else "  <- suspect"
-                    if p.get("suspect")
-                    else ""
-                )
-            )
-    if d.decision is not None:
-        lines.append("  in-flight rule: " + in_flight_summary(d.decision))
-    if d.physics is not None:
-        eff = ", ".join(
-            f"{rotor_name(n, i + 1)} {m:.2f}±{s:.2f}"
-            for i, (n, m, s) in enumerate(zip(names, d.physics.rotor_effectiveness, d.physics.rotor_effectiveness_std))
-        )
-        over = f"{d.physics.windows} x 5 s" + (f", {d.physics_basis}" if d.physics_basis else "")
-        lines.append(f"  rotor effectiveness (fraction of nominal thrust, moment balance over {over}): {eff}")
-        sets = _sets_text(d.physics.hypotheses, names)
-        lines.append(("  physics cannot tell apart: " if d.physics.ambiguous else "  physics: ") + sets)
-    change = d.verdict is not None and d.verdict.get("source") == "in-flight change" and not d.verdict.get("imbalance_rotors")
-    if d.hypotheses is not None and change:
-        what = "cannot tell apart" if len(d.hypotheses) > 1 else "one set"
+STATUS_WORD = {"replace": "REPLACE", "inspect": "INSPECT", "ok": "ok"}
+
+
+def format_text(d: Diagnosis, baseline=None, result: dict | None = None) -> str:
+    """The verdict in a pilot's words (``render_text``). ``result``: the ``--json`` object when the caller has it
+    (with ``baseline``), else ``d.to_json()``; ``baseline`` is no longer read (the fused verdict is in ``d``)."""
+    return render_text(result if result is not None else d.to_json())
+
+
+def render_text(result: dict) -> str:
+    """One diagnosis (a ``--json`` object) as text, from its ``Verdict`` (``monitor.diagnose.verdict``): headline,
+    next step, why, evidence, per-propeller status. Label numbers, windows and the set rule stay in ``--json``."""
+    v = verdict_of(result)
+    lines = [f"== {result['log']}", v.headline]
+    if v.why:
+        lines.append(f"  why not sure: {v.why}")
+    lines.append(f"  next step: {v.next_step}")
+    if v.compared_with:
+        lines.append(f"  compared {v.compared_with}")
+    if v.state not in ("no verdict", "unreadable"):
         lines.append(
-            f"  verdict set (the in-flight rule's, weighed by the moment balance after the change; {what}): "
-            + _sets_text(d.hypotheses, names)
+            "  propellers: " + ", ".join(f"{v.names[i - 1]} {POSITION[i]} {STATUS_WORD[v.status(i)]}" for i in range(1, 5))
         )
-    elif d.hypotheses is not None and d.hypothesis_rule is None:  # an imbalance's causes (monitor.baseline.cg_or_damage)
-        lines.append("  cannot tell apart: " + " or ".join(h.get("cause", str(h["faulty_propellers"])) for h in d.hypotheses))
-    elif d.hypotheses is not None:
-        r = d.hypothesis_rule
-        what = "cannot tell apart" if len(d.hypotheses) > 1 else "one set"
-        lines.append(
-            f"  verdict set ({100 * r['coverage']:.0f} % conformal, {r['score']}; {what}): {_sets_text(d.hypotheses, names)}"
-        )
-    for s in d.segments:
-        lines.append(f"  airborne {s['start_boot_s']:.1f}-{s['stop_boot_s']:.1f} s boot time ({s['steps']} steps)")
-    lines += [f"  warning: {w}" for w in d.warnings]
+    lines += [f"  evidence: {e}" for e in v.evidence]
+    hyps = result.get("hypotheses")
+    if len(v.sets) > 1 and hyps:
+        lines.append("  possible: " + _sets_text(hyps, list(v.names)))
+    for s in result.get("airborne_segments") or []:
+        a, b = flight_seconds(s["start_boot_s"], v.takeoff_boot_s), flight_seconds(s["stop_boot_s"], v.takeoff_boot_s)
+        lines.append(f"  airborne {a:.0f}-{b:.0f} s after take-off ({b - a:.0f} s)")
+    lines += [f"  warning: {w}" for w in result.get("warnings") or []]
     return "\n".join(lines)
 
 
@@ -403,16 +360,17 @@ def main(argv: list[str] | None = None) -> int:
         if args.report:
             from monitor.diagnose.report import write_report
 
-            page = write_report(d, table, Path(args.report))
+            page = write_report(d, table, Path(args.report), d.to_json() | {"baseline": res_baseline})
             print(f"report: {page} and {page.with_suffix('.png')}", file=sys.stderr)
         res = d.to_json()
         if res_baseline is not None:
             res["baseline"] = res_baseline
+        res["summary"] = verdict_of(res).to_json()  # what every rendering states (monitor.diagnose.verdict)
         results.append(res)
         if progress is not None:
             progress.update(size)
         if not args.json:
-            print(format_text(d, baseline))
+            print(format_text(d, baseline, res))
             if baseline is not None and "deviation_spreads" in res["baseline"]:
                 b = res["baseline"]
                 print(

@@ -1,0 +1,172 @@
+"""One verdict, five renderings: text, JSON, HTML, PNG and the fleet row state the same propellers, confidence and
+next step, for every demo flight (offline/demo.py's) and every real log in ../shared/data (the PNG and HTML for
+every one but the CrazyPAD flights, of which the first of each condition: a picture costs a third of a second).
+
+Also what a pilot must never read: a propeller the fault classifier flags at the FAULTY level left out of the
+next step (PX4's sample_px4_events.ulg: P = 0.997 on propellers 3 and 4 under "no faulty propeller"), "replace"
+without a confident verdict, or internal names (label numbers, conformal, windows) outside ``--json``.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import html
+import io
+import json
+import re
+from pathlib import Path
+
+import pytest
+
+from fleet.report import row_verdict, verdict_cells
+from monitor.diagnose.cli import main as diagnose
+from monitor.diagnose.cli import render_text
+from monitor.resources import shipped
+
+DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
+JARGON = re.compile(r"\blabel\b|conformal|\bwindows?\b|boot time", re.I)
+
+
+@pytest.fixture(scope="module")
+def demo_logs(tmp_path_factory) -> list[Path]:
+    pytest.importorskip("torch")  # simulate's LSTM propellers
+    from offline.demo import DEMO_CASES, simulate_args
+    from offline.sim.cli import main as simulate
+
+    out = tmp_path_factory.mktemp("demo")
+    for case in DEMO_CASES:
+        with contextlib.redirect_stdout(io.StringIO()):
+            assert simulate(simulate_args(out, case, 40.0)) == 0
+    return [out / name / "flight_000.tlog" for name, _, _ in DEMO_CASES]
+
+
+def _run(args: list, report: Path | None) -> list[dict]:
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(io.StringIO()):
+        diagnose([*map(str, args), "--json"] + (["--report", str(report)] if report else []))
+    res = json.loads(out.getvalue())
+    return res.get("results", [res])
+
+
+@pytest.fixture(scope="module")
+def diagnosed(demo_logs, tmp_path_factory) -> tuple[list[dict], Path]:
+    report = tmp_path_factory.mktemp("report")
+    own = [*demo_logs, DATA / "ardupilot_log171" / "log171.bin", *sorted(DATA.glob("px4_ulog/*.ulg"))]
+    crazypad = sorted(DATA.glob("crazypad/*/*/*.csv.gz"))
+    if not crazypad or not shipped("crazyflie-classifier.onnx").is_file():
+        pytest.skip("real data or the Crazyflie model not found")
+    results = _run(own, report)
+    # Pictures cost a third of a second each: the first CrazyPAD flight of every condition gets its PNG and HTML
+    # (26 logs), every CrazyPAD flight its text, JSON and fleet row.
+    pictured = sorted({min(p.parent.glob("*.csv.gz")) for p in crazypad})
+    cf = ["--format", "crazypad", "--vehicle", shipped("crazyflie.yaml")]
+    results += [r for r in _run([*cf, *crazypad], None) if Path(r["log"]) not in pictured]
+    results += _run([*cf, *pictured], report)
+    assert len(results) == len(own) + len(crazypad)
+    return results, report
+
+
+def _report_files(report: Path) -> dict[str, Path]:
+    """log path -> its HTML page (the page prints the log path)."""
+    out = {}
+    for page in report.glob("*.html"):
+        m = re.search(r"</h1><p>(.*?)</p>", page.read_text(encoding="utf-8"))
+        out[html.unescape(m.group(1))] = page
+    return out
+
+
+def _attrs(fragment: str) -> dict:
+    tag = re.search(r"<(?:section|td) class='verdict[^>]*>", fragment).group(0)
+    return {k: html.unescape(v) for k, v in re.findall(r"data-([a-z]+)='([^']*)'", tag)}
+
+
+def _status_from_props(propellers: str, replace: str) -> list[str]:
+    bad, rep = {int(x) for x in propellers.split(",") if x}, {int(x) for x in replace.split(",") if x}
+    return ["replace" if i in rep else "inspect" if i in bad else "ok" for i in range(1, 5)]
+
+
+def renderings(res: dict, pages: dict[str, Path]) -> dict[str, dict]:
+    """What each rendering states: {name: {"status": [4], "confidence", "headline", "next_step"}}."""
+    s = res["summary"]
+    out = {"json": {"status": s["status"], "confidence": s["confidence"], "headline": s["headline"], "next": s["next_step"]}}
+    text = render_text(res).splitlines()
+    props = next((ln for ln in text if ln.startswith("  propellers: ")), "")
+    status = [m.lower() for m in re.findall(r"\b(REPLACE|INSPECT|ok)\b", props)] or ["ok"] * 4
+    nxt = next(ln for ln in text if ln.startswith("  next step: ")).removeprefix("  next step: ")
+    out["text"] = {"status": status, "confidence": s["confidence"], "headline": text[1], "next": nxt}
+    if res["log"] in pages:  # a pictured log (every one of ours, log171, PX4's; a CrazyPAD flight per condition)
+        page = pages[res["log"]].read_text(encoding="utf-8")
+        a = _attrs(page)
+        out["html"] = {
+            "status": _status_from_props(a["propellers"], a["replace"]),
+            "confidence": a["confidence"],
+            "headline": html.unescape(re.search(r"<h2 class='headline'>(.*?)</h2>", page).group(1)),
+            "next": html.unescape(re.search(r"<b>Next step:</b> (.*?)</p>", page).group(1)),
+        }
+        from PIL import Image
+
+        drawn = json.loads(Image.open(pages[res["log"]].with_suffix(".png")).text["Description"])
+        out["png"] = {
+            "status": [r.rsplit(": ", 1)[1].lower() for r in drawn["rotors"]],
+            "confidence": s["confidence"],  # the picture states confidence by its words (checked below)
+            "headline": drawn["headline"],
+            "next": drawn["next_step"],
+        }
+    row = {"diagnosis": json.dumps({k: v for k, v in res.items() if k != "summary"}), "path": res["log"]}
+    cells = verdict_cells(row_verdict(row))
+    a = _attrs(cells)
+    out["fleet"] = {
+        "status": _status_from_props(a["propellers"], a["replace"]),
+        "confidence": a["confidence"],
+        "headline": html.unescape(re.search(r"'>([^<]*)</td><td>", cells).group(1)),
+        "next": html.unescape(re.search(r"<td class='next'>(.*?)</td>", cells).group(1)),
+    }
+    return out
+
+
+def test_every_rendering_states_the_same_verdict(diagnosed):
+    results, report = diagnosed
+    pages = _report_files(report)
+    disagree, flagged_missing, jargon, unsure_replace, pictured = [], [], [], [], 0
+    for res in results:
+        if "error" in res:
+            continue
+        s = res["summary"]
+        v = res["verdict"]
+        if v is not None:  # the classifier's own FAULTY-level flags reach the next step
+            p = v.get("network_fault_probability") or v["fault_probability"]
+            level = v["faulty_probability_required"]
+            missed = [i + 1 for i, x in enumerate(p) if x >= level and i + 1 not in s["propellers"]]
+            if missed:
+                flagged_missing.append((res["log"], missed, s["headline"]))
+            if s["replace"] and v["confidence"] != "confident":
+                unsure_replace.append(res["log"])
+            if ("replace it" in s["headline"] or "replace them" in s["headline"]) != (s["state"] == "damaged"):
+                unsure_replace.append(res["log"])
+        seen = renderings(res, pages)
+        pictured += "png" in seen
+        want = seen["json"]
+        for name, got in seen.items():
+            if got != want:
+                disagree.append((res["log"], name, got, want))
+        words = " ".join([s["headline"], s["next_step"], s["why"] or "", *s["evidence"]])
+        if JARGON.search(words):
+            jargon.append((res["log"], JARGON.search(words).group(0)))
+    assert not flagged_missing, flagged_missing
+    assert not disagree, disagree[:3]
+    assert not unsure_replace, unsure_replace
+    assert not jargon, jargon[:3]
+    assert pictured >= 7 + 20  # ours, log171 and PX4's three, and the read CrazyPAD conditions
+    states = {r["summary"]["state"] for r in results if "summary" in r}
+    assert {"damaged", "inspect", "healthy", "no verdict"} <= states  # the logs cover every kind of verdict
+
+
+def test_sample_px4_events_names_the_flagged_propellers(diagnosed):
+    results, _ = diagnosed
+    res = next(r for r in results if r["log"].endswith("sample_px4_events.ulg"))
+    assert min(res["verdict"]["network_fault_probability"][2:]) > 0.99  # the classifier alone flags 3 and 4
+    s = res["summary"]
+    assert s["state"] == "inspect" and s["propellers"] == [3, 4] and s["replace"] == []
+    assert s["headline"] == "No damage or propellers 3+4: inspect 3 and 4."
+    assert "diagonally opposite and spin the same way" in s["why"]
+    assert any(e.startswith("Fault classifier") and "100 % on 3" in e for e in s["evidence"])
