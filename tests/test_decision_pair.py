@@ -146,7 +146,7 @@ def test_a_small_single_with_a_large_torque_change_is_named_first_when_the_yaw_b
 
 
 def test_a_yaw_alone_alert_names_every_single_its_rises_cannot_tell_apart():
-    # Our simulator, seed 601 (session 16): rotor 4 lost 3.2-3.3 % with a large torque change, the yaw balance
+    # Our simulator, seed 601: rotor 4 lost 3.2-3.3 % with a large torque change, the yaw balance
     # alone raised a FAULT, and rotor 1's 10-s yaw-free rise was 0.003-0.008 above rotor 4's (a pitch trim the
     # baseline had not caught up with): it was alerted "PROP 1 or 3+4 or 1+2?", no hypothesis within the truth.
     # Here: rotor 4 loses 3.3 % (rise +f/2 = 0.0165 against its neighbours) with its torque per thrust up 29 %,

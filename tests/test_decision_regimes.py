@@ -64,7 +64,7 @@ def test_payload_pick_up_mid_flight_re_learns_the_baseline_and_raises_nothing():
 
 
 def test_a_payload_whose_trim_is_a_large_loss_is_held_until_the_step_rule_re_learns(monkeypatch):
-    # Our simulator, seed 601 (session 16): a 38 % payload picked up off-centre moved the trims at once and the
+    # Our simulator, seed 601: a 38 % payload picked up off-centre moved the trims at once and the
     # shares called rotor 3 FAULT 4.8 s later, 1.7 s before the 10-s median rule saw the step. Here the payload
     # moves rotor 1's share 6 % up (a 12 % loss's pattern, beyond the reference): while the last 2 s of mean RPM
     # stand apart from the 10 s before, windows are held; the step rule then re-learns. Nothing is raised.
@@ -274,7 +274,7 @@ def test_a_battery_sag_does_not_hide_a_loss_from_the_omega2_shares():
     out, d = _loss_with_a_sag(0.12, sag_at_s=60.5)
     assert d.regime.counts["battery_sag"] >= 1
     faults = [a for a in out if a.level == "fault"]
-    # named within 5 s of the onset (64.2 s); held and halved for the sag, as before session 13, it came at 69.4 s
+    # named within 5 s of the onset (64.2 s); with the shares held and halved for the sag it came at 69.4 s
     assert faults and faults[0].propellers == (4,) and faults[0].t_s <= 66.0, [(a.t_s, a.text) for a in out]
     healthy, d = _loss_with_a_sag(0.0, sag_at_s=60.5)
     assert d.regime.counts["battery_sag"] >= 1 and healthy == []

@@ -5,8 +5,8 @@ evalsim's healthy set, seed 300, flight 19 (its nuisance: IMU noise) brakes hard
 sample of the mixer's transient (rotor 2 at 1432 RPM, rotor 4 at 2463, rotors 1 and 3 at 4790 and 4102, held for
 two samples by the telemetry) fell inside the 10 s the shares' plane is learnt on. Learnt from plain 2-s means, the
 plane took it as a slope in the specific force and mispredicted the cruise trim by 0.05 along rotor 2's direction:
-a false FAULT 24 s into a healthy flight (session 14's one false FAULT in 10 evalsim hours). The plane learns from
-10 %-trimmed means (monitor.decision.rotor_share.PLANE_CUT); the evidence is unchanged. Since session 17 it also learns
+a false FAULT 24 s into a healthy flight (the one false FAULT in 10 evalsim hours of the rule then). The plane learns from
+10 %-trimmed means (monitor.decision.rotor_share.PLANE_CUT); the evidence is unchanged. It also learns
 while every statistic is below QUIET_NATS, which re-learns the slope as well: either alone keeps the flight quiet.
 """
 
@@ -36,7 +36,7 @@ def test_a_snapshot_of_a_sharp_stop_in_the_first_seconds_raises_nothing(braking_
     assert [a for a in rule(braking_flight) if a[1] == "fault"] == []
     # Two things keep it out, each alone (rotor 2's physics peak 6.0 with the trimmed mean, 6.3 with the plane
     # learning below QUIET_NATS, fault threshold 9.2): with neither, the plane learning plain means only while
-    # every statistic is exactly 0 (session 14's rule), the same flight faults on rotor 2.
+    # every statistic is exactly 0, the same flight faults on rotor 2.
     monkeypatch.setattr(rs, "PLANE_CUT", 0.0)
     assert [a for a in rule(braking_flight) if a[1] == "fault"] == []
     monkeypatch.setattr(dec, "QUIET_NATS", 0.0)

@@ -121,7 +121,7 @@ def _gust_beyond_what_was_learnt(duration_s: float = 120.0) -> list:
     """Hovering with a side wind that wanders between 0 and 2 m/s for a minute, then a 10-s gust of 3.7 m/s.
     The flapping roll trim is linear in the airspeed (2 t air), the drag quadratic (specific force -0.08 air |air|,
     what RotorPy's parasitic drag does): a plane learnt on the small wind extrapolates the gust's trim wrong by
-    ~0.2 in roll (healthy-r200-381's false FAULT, session 12: the lateral specific force swung to -1.1 m/s^2)."""
+    ~0.2 in roll (healthy-r200-381's false FAULT without it: the lateral specific force swung to -1.1 m/s^2)."""
 
     def inputs(t, rng):
         air = 1.0 + math.sin(t / 7.0) if t < 70.0 or t >= 80.0 else 3.7
@@ -198,7 +198,7 @@ def _learns_new_speed(stuck_nats: float) -> float:
 
 def test_a_statistic_left_at_a_few_hundredths_of_a_nat_does_not_stop_the_plane_learning(monkeypatch):
     """The plane learns only while no evidence gathers. Where it doubts (a speed it has not flown) each window's
-    evidence is tiny either way, so a CUSUM entering at 0.05 nat neither grows nor drains (session 17, ours
+    evidence is tiny either way, so a CUSUM entering at 0.05 nat neither grows nor drains (ours
     `single-r801-26`: rotor 1 at 0.05-0.07 for 9 s). It learns the new speed; entering with 1 nat (evidence) it does
     not; and had "quiet" meant exactly 0 (monitor.decision.rotor_share.QUIET_NATS), the 0.05 would have stopped it too."""
     assert _learns_new_speed(0.05) > 7.0

@@ -33,7 +33,9 @@ class DecisionConfig:
     # healthy flights of our simulator manoeuvres moved it by at most 6.1 % (99 % of flights < 4.4 %); payload steps
     # of >= 20 % of the mass by >= 10.6 % (bench/alerts_flights.py data; 0.07 ~ a 15 % mass step).
     collective_step_fraction: float = 0.07
-    battery_sag_fraction: float = 0.04  # pack voltage lost within one window
+    # Pack voltage lost within one window that counts as a sag. Not measured: chosen by hand above the few-percent
+    # voltage steps of a pack under changing load; no command in the repository measures its false-sag rate.
+    battery_sag_fraction: float = 0.04
     # The smallest per-rotor thrust loss the omega^2-share evidence must call (issue 13: >= 8 % alerted): the
     # CUSUM's reference is half of its share shift, so smaller excursions (manoeuvres, gusts) add nothing.
     min_thrust_loss: float = 0.08

@@ -17,13 +17,15 @@ import numpy as np
 from monitor.decision.config import DecisionConfig
 
 COLLECTIVE_MEDIAN_S = 10.0  # a collective step compares the median mean RPM of two such spans (manoeuvres average out)
-# The step rule above sees a payload step only once the last 10 s are mostly after it: 5-7 s late. On our simulator
-# (seed 601, healthy-r601-227, session 16) a 38 % payload picked up off-centre moved the trims at once, and the
-# omega^2 shares called rotor 3 FAULT 4.8 s after the pick-up, 1.7 s before the step rule fired. So while the
+# The step rule above sees a payload step only once the last 10 s are mostly after it: 5-7 s late. A payload picked
+# up off-centre moves the trims at once: on flight healthy-r601-227 of our simulator's randomised healthy set
+# (`python -m bench.alerts_flights --set ours-healthy --seed 601 --flights 228`) a 38 % payload made the omega^2
+# shares call rotor 3 FAULT 4.8 s after the pick-up, 1.7 s before the step rule fired. So while the
 # median mean RPM of the last COLLECTIVE_SHIFT_S differs from that of the COLLECTIVE_MEDIAN_S before it by more than
 # alerts.collective_step_fraction, windows are held (nothing is discounted: a climb does it too, and comes back);
 # a step that lasts is then caught by the step rule, which re-learns. On 120 healthy flights of ours without a
-# payload (seed 100) that holds 1.5 % of the airborne time (48 flights, a hard climb or descent); it starts
+# payload (`python -m bench.alerts_flights --set ours-healthy --seed 100 --flights 120 --pickup-fraction 0`, counting
+# RegimeTracker.shift_steps) that holds 1.5 % of the airborne time (48 flights, a hard climb or descent); it starts
 # 0.25-2.5 s after pick-ups and drops of 15-40 % of the mass (one of 11 % after 13.8 s, 10 % not at all); single
 # and pair onsets (a propeller's loss raises the collective RPM by ~1-2 %) are held 2.6 % of their time after it.
 COLLECTIVE_SHIFT_S = 2.0
@@ -178,6 +180,8 @@ class RegimeTracker:
         """No network evidence: ``holding``, or a battery sag. A sag scales every rotor's speed for its command
         alike, so the omega^2 shares and the yaw balance (ratios) do not see it, while the network's inputs (RPM from
         the ESC curve, at the trained voltage) do. A thrust loss itself draws more current and can sag a weak pack:
-        on one of our onsets (rotor 4 losing 13 %) the sag was detected 9 times after the onset, and with the
-        shares held and halved each time no alert came (session 13)."""
+        on one of our onsets (rotor 4 losing 13 %) the sag was detected 9 times after the onset. So a sag never
+        holds or halves the shares (tests/test_decision_regimes.py,
+        test_a_battery_sag_does_not_hide_a_loss_from_the_omega2_shares: a 12 % loss that sags the pack is named
+        within 5 s; held and halved it came 5 s later)."""
         return self.holding or self.step < self.sag_until_step

@@ -57,15 +57,17 @@ SHARE_BASELINE_TAU_S = 60.0  # slow drifts (battery sag, motor warm-up) enter th
 # at only 1.1x), never on the evaluation-only simulator.
 SHARE_AVERAGE_S = 2.0
 # What the baseline's plane learns from: each span's trims as a 10 %-trimmed mean (``trimmed_mean``), not the mean.
-# 20-Hz snapshots of a 200-Hz motor command can catch one controller tick of a transient: evalsim's one false FAULT
-# in 10 healthy hours (seed 300, healthy_0019, session 14) was a single snapshot of a sharp stop (rotor 2 at
+# 20-Hz snapshots of a 200-Hz motor command can catch one controller tick of a transient: evalsim's healthy flight
+# seed 300 healthy_0019 (replayed by tests/test_decision_snapshot.py) gave a false FAULT from a single snapshot of a
+# sharp stop (rotor 2 at
 # 1432 RPM, the others 2463-4790, held for two samples) inside the first 10 s: it put a pitch trim of -0.07 into
 # five 2-s means, and a least-squares plane over 10 s took it as a slope in the specific force (-0.27 where the
 # flight's other windows give -0.005), which then mispredicted the cruise trim by 0.05 (rotor 2's direction) for
 # the rest of the flight. A fit must not be set by one snapshot; 4 of 40 cut at each end leave a span of our
-# simulator's healthy flights within 1 % of its mean (rms of 2-s steps, seed 100). The evidence keeps the mean:
-# its noise is what the thresholds were calibrated on (a trimmed mean there lowered the calibrated fault threshold
-# from 8.05 to 6.37 nat-s and let one of 10 held-out healthy hours of ours cross it: a plane misfit, not noise).
+# simulator's healthy flights within 1 % of its mean (rms of 2-s steps, seed 100; not re-measured by a command in
+# the repository). The evidence keeps the mean: its noise is what the thresholds were calibrated on (a trimmed mean
+# there lowered the calibrated fault threshold from 8.05 to 6.37 nat-s and let one of 10 held-out healthy hours of
+# ours cross it: a plane misfit, not noise; `make calibrate-alerts evaluate-alerts` with the evidence trimmed).
 PLANE_CUT = 0.1
 # The pair statistic: a same-spin diagonal pair (1+2 CCW or 3+4 CW) that loses thrust f on both rotors keeps roll
 # and pitch balanced (T1 = T2, T3 = T4 still hold), so the yaw-free shares do not move. What moves is the yaw
@@ -88,18 +90,21 @@ YAW_SIGMA = 0.022
 # rose most over the same YAW_AVERAGE_S: it is always one of the alert's hypotheses, first when its rise exceeds
 # what healthy flights reach. YAW_FREE_RISE: the 99 % quantile of the largest rotor's rise (10-s mean against the
 # flight's first 10 s) on 96 randomised healthy flights of our simulator, the calibration seed
-# (`bench/alerts_flights.py --seed 100 --flights 96 --share-spread`: 0.0116; 99.9 %: 0.0159). Measured as the
-# decision forms it (against the plane, every 0.5 s of the 10 calibration hours; session 16) 0.012 is the 96.5 %
-# quantile (99 %: 0.021): "beyond healthy" orders the hypotheses, YAW_FREE_GAP below decides who is named.
+# (`python -m bench.alerts_flights --seed 100 --flights 96 --share-spread`: 0.0116; 99.9 %: 0.0159). Measured as
+# the decision forms it (against the plane, every 0.5 s of the 10 calibration hours) 0.012 is the 96.5 % quantile
+# (99 %: 0.021); that measurement is not reproducible from the repository (its script was never committed):
+# "beyond healthy" orders the hypotheses, YAW_FREE_GAP below decides who is named.
 YAW_FREE_RISE = 0.012
 # Which single a yaw-balance alert names is only as sure as the rises differ. A loss f moves its rotor's rise by
 # f/2 against its neighbours' (0.0165 at 3.3 %), and two neighbours' healthy 10-s rises differ by up to 0.033
 # (99 % quantile of the largest adjacent difference, the decision's own rise every 0.5 s over the 10 calibration
-# hours of seed 100, out/s16/rise_spread.py in session 16) and 0.069 (99.9 %). So every rotor whose rise is within
+# hours of seed 100) and 0.069 (99.9 %). Not reproducible from the repository: the script that measured these
+# quantiles was never committed, and no command here re-measures them. So every rotor whose rise is within
 # YAW_FREE_GAP of the largest is a hypothesis too, after the pairs: two rotor-4 losses of 3.2-3.3 % on our
-# simulator (seed 601) were alerted "PROP 1 or 3+4 or 1+2?", rotor 1's rise 0.003-0.008 above rotor 4's. The
+# simulator (`python -m bench.alerts_flights --set ours-single --seed 601`) were alerted "PROP 1 or 3+4 or 1+2?",
+# rotor 1's rise 0.003-0.008 above rotor 4's. The
 # 99.9 % quantile, not the 99 %: an alert is raised at one instant, and at speed, where the plane misfits, the
-# rises stray most: with 0.033 a 2.7 % rotor-4 loss (ours seed 201, 4 m/s, -2.3 m/s^2) still read rotor 1 0.036
+# rises stray most: with 0.033 a 2.7 % rotor-4 loss (`--set ours-single --seed 201`, 4 m/s, -2.3 m/s^2) read rotor 1 0.036
 # above rotor 4. A yaw shift alone says "a same-spin pair or one propeller"; the rises only order the singles.
 YAW_FREE_GAP = 0.069
 # The trims follow the airspeed. Blade flapping tilts each disc back in edgewise flow (blowback) and the rotors
@@ -122,28 +127,31 @@ YAW_FREE_GAP = 0.069
 # FLAP_SLOPE_Q: how fast the slopes may drift, as a random walk: ~0.005 per m/s in ten minutes (the specific-force
 # slope ten times that per m/s^2, in proportion to the priors). The plane stops learning while evidence gathers, so
 # after an onset what it does not know at a speed it has flown grows by this drift for as long as the loss is being
-# heard. At 0.005 per m/s a minute (sessions 12-16) that was 0.002-0.006 at 3-4 m/s^2 within 10-20 s, 10-30 times
-# one sample's noise, and the 8-12 % losses flown at speed were heard that much less: p95 latency 10.8-12.9 s on our
-# held-out seeds 300, 600, 700. Measured on those (calibration re-fitted each time on seed 100), one drift per
-# minute of 0.005 / 0.0027 / 0.0016 / 0.0009 / 0 per m/s: fault threshold 7.37 / 8.53 / 9.45 / 10.44 / 20.46 nat-s,
-# median / p95 latency on seed 300 6.05 / 10.77, 5.2 / 9.22, 4.65 / 9.44, 4.8 / 9.7, 8.55 / 14.96 s (with none the
-# healthy flights' slow changes are misfits the threshold must absorb). A tenth of the variance, the middle of the
-# flat part: healthy slopes do move (payload, sag), but by far less than the former rate allowed.
+# heard: at 0.005 per m/s a minute that is 0.002-0.006 at 3-4 m/s^2 within 10-20 s, 10-30 times one sample's noise,
+# and 8-12 % losses flown at speed are heard that much less (p95 latency 10.8-12.9 s on our held-out seeds 300, 600,
+# 700). Measured by setting FLAP_SLOPE_Q and running `make calibrate-alerts evaluate-alerts` (calibration on seed
+# 100, onsets on seed 300), one drift per minute of 0.005 / 0.0027 / 0.0016 / 0.0009 / 0 per m/s: fault threshold
+# 7.37 / 8.53 / 9.45 / 10.44 / 20.46 nat-s, median / p95 latency 6.05 / 10.77, 5.2 / 9.22, 4.65 / 9.44, 4.8 / 9.7,
+# 8.55 / 14.96 s (with none the healthy flights' slow changes are misfits the threshold must absorb). 0.0016 per m/s
+# a minute (a tenth of the variance) is the middle of the flat part: healthy slopes do move (payload, sag), but
+# slowly.
 FLAP_SLOPE_PRIOR_SD = 0.03  # a_pitch / a_roll per m/s
 DRAG_SLOPE_PRIOR_SD = 0.3  # a_pitch / a_roll per m/s^2 of specific force
 FLAP_SLOPE_Q = 0.005**2 / 600.0  # per s (the specific-force slope drifts in proportion: x DRAG/FLAP prior sd)
 # The plane is linear; the trims need not be (quadratic drag against a speed-linear flapping trim, a wind the
 # velocity does not see). So beyond the box of (v, f) the plane was learnt on, what it does not know grows by a
 # slope's prior sd per unit beyond the box (per m/s, per m/s^2): a trim there is heard less until the plane has
-# learnt it while quiet. Our one false FAULT of 10 held-out healthy hours (session 12, healthy-r200-381): the roll
-# trim left the plane by 0.09-0.12 when the lateral specific force swung to -1.1 m/s^2, twice what it had seen.
+# learnt it while quiet. Without it, flight healthy-r200-381 (`python -m bench.alerts_flights --set ours-healthy
+# --seed 200 --flights 382`) gave a false FAULT: the roll trim left the plane by 0.09-0.12 when the lateral specific
+# force swung to -1.1 m/s^2, twice what it had seen.
 NOVEL_FLAP_SD = FLAP_SLOPE_PRIOR_SD
 NOVEL_DRAG_SD = DRAG_SLOPE_PRIOR_SD
 BASELINE_PRIOR_VAR = 1.0  # the intercept before any window (diffuse)
 # The plane learns while no physics statistic holds more than QUIET_NATS (the decision's ``quiet``). At 0, a statistic
 # left at a few hundredths of a nat stopped it for many seconds: where the plane's doubt is large (a speed or drag
 # it has not flown) every window's evidence is tiny in both directions, so a CUSUM at 0.05 neither grows nor drains,
-# and the plane could not learn the very regime it doubted. Our seed 800 `single-r801-26`: rotor 1's statistic
+# and the plane could not learn the very regime it doubted. Flight `single-r801-26` (`python -m bench.alerts_flights
+# --set ours-single --seed 801 --flights 27`, with QUIET_NATS = 0): rotor 1's statistic
 # stood at 0.05-0.07 from 19.6 s, the box did not widen to the lateral specific force of -2 m/s^2 the vehicle then
 # flew, and a rotor-2 loss at 28.5 s was heard 17.6 s later. 0.1 nat is 1 % of the fault threshold and a sixtieth of
 # one 2-s sample of an 8 % loss heard at noise weight (8 nats): a loss heard at all passes it within a step or two.
@@ -387,8 +395,9 @@ class RotorShare:
             self._base.append(y)
             self._base_s += dt_s
             # BASELINE_S of windows that were evidence, not of flight: windows held for a manoeuvre never reach
-            # here, and a baseline finalised on the half second after a hold took a transient for the airframe's
-            # trim (session 7: a false rotor-2 fault 14 s before an onset, from 10 windows after a 7-s hold).
+            # here; a baseline finalised on the half second after a hold takes a transient for the airframe's trim
+            # (a false rotor-2 fault 14 s before an onset, from 10 windows after a 7-s hold:
+            # tests/test_decision_regimes.py, test_the_share_baseline_spans_ten_seconds_of_evidence_not_the_half_second_after_a_hold).
             if self._base_s >= BASELINE_S and len(self._base) >= 3:
                 self._wording_b = self._intercepts()
                 self.baseline = _U @ self._wording_b

@@ -270,8 +270,11 @@ class Decision:
             return
         self.share.push(s.motor_rpm, s.vel_heading_m_s, s.accel_xy_frd_m_s2)
         if event == "collective_step":
+            # Gathered about another vehicle state: keep half; the hold stops new evidence. Half is not measured:
+            # chosen by hand between keeping all (evidence about the old mass) and none (a fault hidden by a
+            # payload step); no command in the repository compares other factors.
             for v in self.S.values():
-                v *= 0.5  # gathered about another vehicle state: keep half; the hold stops new evidence
+                v *= 0.5
             self._last_window_t = None
             self._forget_baseline()  # another mass: what the network says about it is learnt again
             self.share.reset()
@@ -279,7 +282,7 @@ class Decision:
                 self.trace.append(("scale", 0.5))
         elif event == "battery_sag":  # the network's statistics only (RegimeTracker.network_holding)
             for k in NETWORK_STATISTICS:
-                self.S[k] *= 0.5
+                self.S[k] *= 0.5  # as for a collective step: half, chosen by hand, not measured
             if self.trace is not None:
                 self.trace.append(("scale", {k: 0.5 for k in NETWORK_STATISTICS}))
 

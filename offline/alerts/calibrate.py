@@ -20,7 +20,7 @@ flights crossed. The file says from how many hours and crossings it was drawn.
 
 A point fit of a thin tail is fragile: 5 and 10 calibration hours of the same simulator put the physics fault
 threshold at 7.24 and 6.54 nat-s, and the lower one gave 17 false FAULTs in 10 h of the evaluation-only
-simulator where the higher gave none (session 12, models/decision-evaluation.md). So the file also keeps a
+simulator where the higher gave none (models/decision-evaluation.md). So the file also keeps a
 bootstrap over *flights* (a flight's excursions are not independent of each other; flights are): each draw
 resamples the calibration flights with replacement and fits the tail again (``BOOTSTRAP_DRAWS``, seeded by the
 calibration seed, so the file is reproducible). The decision takes, for each rate, the ``CONFIDENCE`` quantile of

@@ -103,11 +103,11 @@ EXPERIMENTS: dict[str, tuple[tuple[str, ...], dict]] = {
         ("RN-varied", "RR-varied"),
         {**_YAW_ROBUST_20, "dropout": 0.3, "train_stride": 64},
     ),
-    # Candidate, not shipped (issue 12, session 7): the same pooling with RQ-varied, the airframe terms drawn over a
+    # Candidate, not shipped (issue 12): the same pooling with RQ-varied, the airframe terms drawn over a
     # quarter of the register's ranges (motors +-1-2 %, CG +-2.5 mm: `make dataset-randomised AIRFRAME=drawn NAME=RQ
-    # SEED=57 ASSUME="..."` with the ranges of offline.sim.assumptions.scaled_airframe(0.25)). Measured against the
-    # shipped model in the session-7 note: singles under mild spread up, exact labels and set sizes on the nominal
-    # airframe worse.
+    # SEED=57 ASSUME="..."` with the ranges of offline.sim.assumptions.scaled_airframe(0.25)). Against the shipped
+    # model (`python -m bench.bench_generalisation`): singles under mild spread up, exact labels and set sizes on the
+    # nominal airframe worse.
     "randomised physics, airframes nominal+quarter x60 +yaw robust dropout": (
         ("RN-varied", "RQ-varied"),
         {**_YAW_ROBUST_20, "dropout": 0.3, "train_stride": 64},

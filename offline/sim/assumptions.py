@@ -233,8 +233,8 @@ def _default_register() -> tuple[Assumption, ...]:
             0.0,
             "body-axis parasitic drag quadratic in the airspeed, |v| v per axis (the body and arms as bluff bodies: "
             "0.5 rho C_d A, C_d ~1 on 0.02-0.08 m^2 of a 1-2 kg quad's frontal or top area gives 0.01-0.05 N/(m/s)^2); "
-            "beside the linear rotor drag, which dominates at low speed. Until session 13 fixed at 0, a guess: the "
-            "specific force then grew only linearly with airspeed. Not measured for this airframe.",
+            "beside the linear rotor drag, which dominates at low speed; at 0 the specific force grows only linearly "
+            "with airspeed. Not measured for this airframe.",
             (3,),
             group="healthy airframe",
         ),
