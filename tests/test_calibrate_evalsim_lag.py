@@ -74,6 +74,58 @@ def test_no_hidden_lag_names_no_lag(tables):
     assert "from about 60 ms" in note and "rotor_time_constant alone fits" in note, note
 
 
+@pytest.fixture(scope="module")
+def common_lag_tables(tmp_path_factory):
+    """Issue 40's case: two 80-s flights, a 60 ms lag on all four rotors (the vehicle file says 20 ms)."""
+    from offline.evalsim.flight import simulate_flights
+    from offline.evalsim.sets import motor_lag_specs
+    from offline.sim.io_tlog import write_tlog
+
+    specs = motor_lag_specs([0.060] * 4, 2, 0, 80.0)
+    d = tmp_path_factory.mktemp("evalsim-lag60")
+    return [read_log(write_tlog(d / f"lag60-{i}.tlog", log, 0), esc=NOM.esc) for i, log in enumerate(simulate_flights(specs))]
+
+
+@pytest.mark.slow
+def test_a_60_ms_lag_on_all_rotors_is_named_and_every_verdict_says_its_gate(common_lag_tables):
+    r = calibrate(common_lag_tables, NOM)
+    found = {f["effect"]: f["params"] for f in r.findings}
+    lag = set(found) & {"motor_time_constant", "rotor_time_constant"}
+    assert lag, (r.cause, r.notes, {n: c["verdict"] for n, c in r.candidates.items()})
+    for v in found[lag.pop()].values():
+        assert 0.045 <= v <= 0.075, found
+    # No silent veto: every candidate carries its verdict, the gate that decided it and that gate's numbers.
+    for name, c in r.candidates.items():
+        v = c["verdict"]
+        assert v["decided_by"] in v["gates"] or v["decided_by"] == "best", (name, v)
+        assert v["why"] and "heldout_bic_gain" in v["gates"] and "gain" in v["gates"]["heldout_bic_gain"], (name, v)
+    # The notes never contradict the candidates: no "no motor lag named" while a lag is named.
+    assert not [n for n in r.notes if "no motor lag named" in n], r.notes
+
+
+def test_a_gate_that_rejects_the_largest_gain_says_so_in_one_line():
+    """Selection's verdicts, by hand: the term with the largest held-out gain fails the consistency gate, a
+    smaller one passes; the report names the rejected leader, the gate, its why, and what was named instead."""
+    from offline.calibrate.calibrate import vetoed_leader_notes
+    from offline.calibrate.fit import GateCheck, Selection, Step, Verdict
+
+    ok = GateCheck("heldout_bic_gain", True, {"gain": 381.0, "threshold": 60.0}, "held-out BIC gain 381.0 > 60")
+    bad = GateCheck("consistency", False, {"worsened_signals": 1}, "fits accel_d_m_s2 worse")
+    verdicts = {
+        "motor_time_constant": Verdict("motor_time_constant", False, "consistency", bad.why, 381.0, [ok, bad]),
+        "cg_offset": Verdict("cg_offset", True, "best", "passes every gate", 80.0, [ok]),
+        "esc_curve": Verdict("esc_curve", False, "heldout_bic_gain", "held-out BIC gain -11.0 <= 60", -11.0, [ok]),
+    }
+    step = Step(0.0, {}, "cg_offset", 0.9, verdicts)
+    assert step.vetoed_leader().term == "motor_time_constant"
+    (line,) = vetoed_leader_notes(Selection([], 0.0, {}, [step], None))
+    assert "motor_time_constant has the largest held-out BIC gain (381.0)" in line
+    assert "consistency gate rejects it: fits accel_d_m_s2 worse; cg_offset is named instead" in line
+    # The leader outranked by nothing and named: no such line.
+    verdicts["motor_time_constant"] = Verdict("motor_time_constant", True, "best", "passes", 381.0, [ok])
+    assert vetoed_leader_notes(Selection([], 0.0, {}, [Step(0.0, {}, "motor_time_constant", 0.9, verdicts)], None)) == []
+
+
 def test_per_rotor_lag_filters_each_column_like_the_scalar_lag():
     u = np.cumsum(np.random.default_rng(0).normal(size=(200, 4)), axis=0)
     taus = np.array([0.02, 0.075, 0.02, 0.03])

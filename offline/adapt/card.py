@@ -12,19 +12,23 @@ def _row(name: str, s: dict) -> str:
     return f"| {name} | {exact} | {fa} |"
 
 
-def card_markdown(m: dict) -> str:
-    cal, base, cfg = m["calibration"], m["baseline"], m["config"]
+def calibration_text(cal: dict) -> str:
+    """One paragraph: the view used, the cause, the fit before and after, what is left unexplained or inseparable."""
+    if cal.get("view") == "dynamic":
+        g = cal["gain"]
+        text = (
+            f"**Calibration** (dynamic view of `offline/calibrate`, as `propwatch calibrate`; {cal['split']}): cause "
+            f"`{cal['cause']}` ({cal['why']}); held-out residual RMS {g['heldout_residual_rms_before']} -> "
+            f"{g['heldout_residual_rms_after']}."
+        )
+        un = cal.get("unexplained_residual")
+        if un:
+            text += f" Unexplained residual: {un['summary']}."
+        return text + "".join(f" Note: {n}." for n in cal.get("notes", []))
     un = cal.get("unexplained_residual", {})
-    lines = [
-        "# propwatch adapted classifier card",
-        "",
-        f"Written by `offline/adapt/card.py` from `adapt.manifest.json` (`propwatch adapt`, git revision "
-        f"{m.get('git_revision')}, seed {m.get('seed')}).",
-        "",
-        f"**Healthy logs** ({len(m['healthy'])}): " + ", ".join(f"`{Path(p).name}`" for p in m["healthy"]) + ".",
-        f"Held out from calibration and scored: {len(m['held_out_healthy'])}.",
-        "",
-        f"**Calibration** (steady-state view, `offline/calibrate/fit.py`): cause `{cal['cause']}` ({cal['why']}); "
+    return (
+        f"**Calibration** (steady-state view of `offline/calibrate/fit.py`: {cal.get('view_why', 'per-motor mean commands')}): "
+        f"cause `{cal['cause']}` ({cal['why']}); "
         f"held-out RMS command error {cal['holdout_rms_cmd']['nominal']} -> {cal['holdout_rms_cmd']['calibrated']}; "
         f"unexplained residual {un.get('rms_cmd')} command units ("
         + (
@@ -32,7 +36,31 @@ def card_markdown(m: dict) -> str:
             if un.get("in_standard_errors") is not None
             else "no flight-to-flight spread to measure it against: one fit flight"
         )
-        + ").",
+        + ")."
+        + (
+            " This view cannot separate "
+            + "; ".join(" from ".join(f"`{t}`" for t in pair) for pair in cal["cannot_separate"])
+            + ", and cannot see "
+            + ", ".join(f"`{t}`" for t in cal.get("not_observable", []))
+            + "."
+            if cal.get("cannot_separate")
+            else ""
+        )
+    )
+
+
+def card_markdown(m: dict) -> str:
+    cal, base, cfg = m["calibration"], m["baseline"], m["config"]
+    lines = [
+        "# propwatch adapted classifier card",
+        "",
+        f"Written by `offline/adapt/card.py` from `adapt.manifest.json` (`propwatch adapt`, git revision "
+        f"{m.get('git_revision')}, seed {m.get('seed')}).",
+        "",
+        f"**Healthy logs** ({len(m['healthy'])}): " + ", ".join(f"`{Path(p).name}`" for p in m["healthy"]) + ".",
+        f"Healthy logs scored as held out (never trained on): {len(m['held_out_healthy'])}.",
+        "",
+        calibration_text(cal),
         "",
         f"**Healthy baseline** ({base['basis']} shares, PX4 order, names {', '.join(base['motor_names'])}): mean "
         + ", ".join(f"{x:.3f}" for x in base["shares_mean"])

@@ -5,14 +5,12 @@ Stages (one progress bar each):
 1. **read** every healthy log; refuse, by name, a log of another vehicle type, a log with no
    airborne time, and a log whose per-motor share lies beyond 3 spreads of the others
    (``offline.adapt.checks``);
-2. **calibrate** the vehicle on them with the steady-state view of ``offline.calibrate.fit``
-   (every log format has motor commands; not every one has body rates): logs with an even index
-   fit, odd ones are held out (one log: fit and scored on itself, said in the manifest);
-3. **simulate** a labelled training set from the calibrated vehicle with the randomised
-   assumptions around it. The assumption register of issue 12 (``offline/sim/assumptions.py``) is
-   not on this branch: the spread comes from ``offline.dataset``'s options (per-variant motor
-   efficiency +-3 measured spreads of the airframe, CG +-5 mm; the CrazyPAD recipe's healthy jitter
-   for the ``crazypad`` mission), and the manifest says so;
+2. **calibrate** the vehicle on them with the one calibrator, ``offline.calibrate``: its dynamic view
+   (equation error on body rates, held-out 5-s blocks; it tells a CG offset from a motor spread) when every
+   log carries attitude and body rates, else its steady-state view on the per-motor mean commands (logs with
+   an even index fit, odd ones are held out), which says which terms it cannot separate;
+3. **simulate** a labelled training set from the calibrated vehicle with a spread around it
+   (``TRAINING_SPREAD``, recorded in the manifest);
 4. **train** the same small CNN on it, and on the same recipe around the *nominal* vehicle, so the
    card shows what adaptation buys;
 5. **export** both to ONNX; **score** both on the held-out healthy logs and on any ``--labelled``
@@ -40,6 +38,7 @@ from monitor.logs import read_raw
 from monitor.logs.raw import to_flight_table
 from monitor.vehicle import VehicleConfig, load_vehicle_with_sources
 from offline.adapt.checks import NotHealthyError, check_airborne, check_consistent, vehicle_type_problem
+from offline.calibrate.terms import TERMS
 from offline.manifest import make_manifest, write_manifest
 
 MODEL_FILE = "classifier.onnx"
@@ -50,6 +49,11 @@ CARD_FILE = "card.md"
 MISSIONS = ("random", "crazypad")
 RPM_REL = ("rpm_rel_1", "rpm_rel_2", "rpm_rel_3", "rpm_rel_4")
 OPTIONAL_FEATURES = ("roll_rate_rad_s", "pitch_rate_rad_s", "yaw_rate_rad_s")
+TRAINING_SPREAD = (
+    "spread around the calibrated vehicle: for the random mission offline.dataset's options (per vehicle variant, "
+    "motor efficiency +-3 measured airframe spreads capped at 10 %, CG +-5 mm); for the crazypad mission the CrazyPAD "
+    "recipe's healthy jitter (offline.crazypad.simdata); the assumption register (offline/sim/assumptions.py) is not drawn"
+)
 
 
 @dataclass(frozen=True)
@@ -130,20 +134,64 @@ def features_for(logs: list[HealthyLog]) -> tuple[str, ...]:
     return RPM_REL + tuple(extra)
 
 
-def calibrate(nominal: VehicleConfig, logs: list[HealthyLog]):
+# What the steady-state view (per-motor mean commands only) cannot tell apart, and what it cannot see at all.
+STEADY_CANNOT_SEPARATE = (
+    ("cg_offset", "motor_efficiency"),  # both move thrust between motors at trim; motor_efficiency absorbs any static pattern
+    ("mass", "esc_curve"),  # both scale every motor's command alike
+)
+STEADY_NOT_OBSERVABLE = ("inertia", "motor_time_constant", "rotor_time_constant", "drag", "gyro_bias")
+
+
+@dataclass
+class AirframeCalibration:
+    """The calibration stage's result, from the one calibrator (``offline.calibrate``) in either of its views."""
+
+    view: str  # "dynamic" (offline.calibrate.calibrate: equation error on body rates) or "steady-state"
+    calibrated: VehicleConfig
+    cause: str | None
+    fit_files: list[str]
+    record: dict  # JSON for the manifest and the card
+    result: object = None  # the CalibrationResult (dynamic view), for the cited vehicle writer
+
+
+def has_body_rates(logs: list[HealthyLog]) -> bool:
+    """The dynamic view needs attitude and body rates through the airborne time of every log."""
+    names = ("roll_rad", "pitch_rad", "yaw_rad", *OPTIONAL_FEATURES)
+    return all(np.isfinite(getattr(h.table, n)[h.table.airborne]).mean() > 0.9 for h in logs for n in names)
+
+
+def calibrate(nominal: VehicleConfig, logs: list[HealthyLog]) -> tuple[AirframeCalibration, list[int]]:
+    """Calibrate with ``offline.calibrate``: its dynamic view where the logs carry body rates (it separates a CG
+    offset from a motor spread), else its steady-state view, which says which terms it cannot separate. Returns
+    the calibration and the indices of the healthy logs scored as held out (odd ones; one log: itself)."""
+    held_i = list(range(1, len(logs), 2)) or [0]
+    if has_body_rates(logs):
+        from offline.calibrate.calibrate import calibrate as calibrate_dynamic
+
+        r = calibrate_dynamic([h.table for h in logs], nominal)
+        rec = {
+            "view": "dynamic",
+            "why": TERMS[r.cause].why if r.cause else "no term beats the nominal model on the held-out blocks",
+            "fit_files": [h.path for h in logs],
+            "split": "every healthy log; alternating 5-s blocks fit and score (offline.calibrate.fit.BLOCK_S)",
+            **r.to_json(),
+        }
+        return AirframeCalibration("dynamic", r.calibrated, r.cause, rec["fit_files"], rec, r), held_i
     from offline.calibrate.fit import calibrate_steady
 
     means = np.array([np.nanmean(h.table.motor_cmd[h.table.airborne], axis=0) for h in logs])
     fit_i = list(range(0, len(logs), 2))
-    held_i = list(range(1, len(logs), 2)) or fit_i
-    return calibrate_steady(
-        "airframe",
-        nominal,
-        means[fit_i],
-        means[held_i],
-        [logs[i].path for i in fit_i],
-        [logs[i].path for i in held_i],
-    ), held_i
+    cal = calibrate_steady(
+        "airframe", nominal, means[fit_i], means[held_i], [logs[i].path for i in fit_i], [logs[i].path for i in held_i]
+    )
+    rec = {
+        "view": "steady-state",
+        "view_why": "the logs carry no body rates: only the per-motor mean commands can be fitted",
+        "cannot_separate": [list(p) for p in STEADY_CANNOT_SEPARATE],
+        "not_observable": list(STEADY_NOT_OBSERVABLE),
+        **cal.to_dict(),
+    }
+    return AirframeCalibration("steady-state", cal.calibrated, cal.cause, cal.fit_files, rec), held_i
 
 
 def training_set(vehicle: VehicleConfig, cfg: AdaptConfig, spread: float, name: str, on_step=None):
@@ -209,19 +257,24 @@ def summary(rows: list[dict]) -> dict:
     }
 
 
-def write_vehicle(vehicle: VehicleConfig, sources: dict, calibration: dict, path: Path) -> Path:
+def write_vehicle(cal: AirframeCalibration, sources: dict, path: Path, nominal_path: str) -> Path:
+    """The calibrated vehicle, cited; the dynamic view through ``offline.calibrate.writer`` (as ``propwatch calibrate``)."""
+    if cal.result is not None:
+        from offline.calibrate.writer import write_calibrated
+
+        return write_calibrated(path, cal.result, sources, nominal_path)
     import yaml
 
     from monitor.vehicle import load_vehicle_with_sources as reload
 
     src = dict(sources)
-    why = f"propwatch adapt: steady-state calibration on {', '.join(Path(f).name for f in calibration['fit_files'])}"
+    why = f"propwatch adapt: steady-state calibration on {', '.join(Path(f).name for f in cal.fit_files)}"
     for name in ("motor_efficiency", "cg_offset_frd_m", "mass_kg", "esc"):
         src[name] = why
-    for f in dataclasses.fields(vehicle):
+    for f in dataclasses.fields(cal.calibrated):
         src.setdefault(f.name, "neutral default of monitor.vehicle.VehicleConfig (not calibrated)")
-    data = to_mapping(vehicle, src)
-    data["provenance"] = make_manifest("adapt-calibrated-vehicle", calibration, None)
+    data = to_mapping(cal.calibrated, src)
+    data["provenance"] = make_manifest("adapt-calibrated-vehicle", cal.record, None)
     path.write_text(yaml.safe_dump(data, sort_keys=False), encoding="utf-8")
     reload(path)  # the project's loader must read back what was written
     return path
@@ -294,7 +347,7 @@ def adapt(
             scores[kind] = {"summary": summary(rows), "logs": rows}
             bar.update()
     baseline.save(out / BASELINE_FILE)
-    write_vehicle(cal.calibrated, loaded.sources, cal.to_dict(), out / VEHICLE_FILE)
+    write_vehicle(cal, loaded.sources, out / VEHICLE_FILE, str(vehicle_path))
     manifest = make_manifest(
         "adapt",
         {**dataclasses.asdict(cfg), "features": list(features), "format": fmt, "vehicle": str(vehicle_path)},
@@ -302,12 +355,9 @@ def adapt(
         healthy=[h.path for h in logs],
         labelled=list(labelled),
         held_out_healthy=[logs[i].path for i in held_i] if len(logs) > 1 else [],
-        calibration=cal.to_dict(),
+        calibration=cal.record,
         baseline=baseline.to_dict(),
-        assumptions=(
-            "offline/sim/assumptions.py (issue 12) is not on this branch: spread from offline.dataset options "
-            "(motor efficiency +-3 airframe spreads per variant, CG +-5 mm) or the CrazyPAD recipe's healthy jitter"
-        ),
+        assumptions=TRAINING_SPREAD,
         training={k: {"recipe": recipes[k], "history": histories[k]} for k in recipes},
         scores=scores,
         files={"model": MODEL_FILE, "nominal_model": NOMINAL_MODEL_FILE, "vehicle": VEHICLE_FILE, "baseline": BASELINE_FILE},
@@ -323,7 +373,11 @@ def adapt(
         "baseline": str(out / BASELINE_FILE),
         "card": str(card),
         "manifest": str(out / MANIFEST_FILE),
-        "calibration": {"cause": cal.cause, "unexplained_residual": cal.to_dict()["unexplained_residual"]},
+        "calibration": {
+            "view": cal.view,
+            "cause": cal.cause,
+            "unexplained_residual": cal.record.get("unexplained_residual"),
+        },
         "features": list(features),
         "scores": {k: v["summary"] for k, v in scores.items()},
     }

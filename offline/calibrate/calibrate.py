@@ -66,6 +66,10 @@ class CalibrationResult:
             "unbalance_ratio": self.unbalance,
             "logs": self.sources,
             "notes": self.notes,
+            "selection_rounds": [
+                {"chosen": step.chosen, "verdicts": {n: v.to_dict() for n, v in step.verdicts.items()}}
+                for step in self.selection.steps
+            ],
         }
 
 
@@ -98,6 +102,21 @@ def _evidence(
         lines.append(f"next best alternative {runner_up[0]} is {runner_up[1]:.1f} BIC worse")
     lines.append(term.why)
     return lines
+
+
+def vetoed_leader_notes(sel: Selection) -> list[str]:
+    """One line per round in which a gate, not a better candidate, kept out the term with the largest held-out gain."""
+    out = []
+    for k, step in enumerate(sel.steps):
+        v = step.vetoed_leader()
+        if v is None:
+            continue
+        named = f"; {step.chosen} is named instead" if step.chosen else "; nothing is named in this round"
+        out.append(
+            f"round {k + 1}: {v.term} has the largest held-out BIC gain ({v.gain:.1f}) but the {v.gate} gate rejects it: "
+            f"{v.why}{named}"
+        )
+    return out
 
 
 def calibrate(tables: list[FlightTable], nominal: VehicleConfig, candidates: list[str] | None = None) -> CalibrationResult:
@@ -151,6 +170,7 @@ def calibrate(tables: list[FlightTable], nominal: VehicleConfig, candidates: lis
             "std": _round(fit.stds(term), 3) if ident else None,
             "residual_rms_after": round(combined_rms(fit.held_rms, sigma), 6) if ident else None,
             "reason": fit.reasons.get(name, ""),
+            "verdict": first.verdicts[name].to_dict(),
         }
 
     # The paper's unbalance ratio against the fitted motor_efficiency, same held-out data.
@@ -189,7 +209,7 @@ def calibrate(tables: list[FlightTable], nominal: VehicleConfig, candidates: lis
     gain["heldout_residual_reduction_pct"] = round(
         100.0 * (1.0 - gain["heldout_residual_rms_after"] / gain["heldout_residual_rms_before"]), 3
     )
-    notes = []
+    notes = vetoed_leader_notes(sel)
     if not {f["effect"] for f in findings} & set(LAG_TERMS) and set(LAG_TERMS) & set(candidates_out):
         note = LAG_RESOLUTION_NOTE.format(**LAG_RESOLUTION_MS)
         rate_hz = 1.0 / segments[0].dt_s
@@ -199,7 +219,8 @@ def calibrate(tables: list[FlightTable], nominal: VehicleConfig, candidates: lis
             c = candidates_out.get(name)
             if c and c["identifiable"]:
                 fitted = ", ".join(f"{1000 * v:.0f}" for v in c["params"].values())
-                note += f"; {name} alone fits {fitted} ms, held-out BIC gain {c['score']:.1f}"
+                v = first.verdicts[name]
+                note += f"; {name} alone fits {fitted} ms, held-out BIC gain {c['score']:.1f}, not named: {v.why}"
         notes.append(note)
     return CalibrationResult(
         sources=[t.source or f"flight {i}" for i, t in enumerate(tables)],

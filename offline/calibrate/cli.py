@@ -51,9 +51,10 @@ def summary(r) -> str:
             f"  {f['effect']}: {params}; held-out residual {f['residual_rms_before']:.4g} -> "
             f"{f['residual_rms_after']:.4g}; BIC gain {f['score']:.1f}"
         )
-    bad = [n for n, c in r.candidates.items() if not c["identifiable"]]
-    if bad:
-        lines.append("not identifiable from these logs: " + ", ".join(bad))
+    lines.append("candidates (first round; every verdict with the gate that decided it):")
+    for n, c in sorted(r.candidates.items(), key=lambda kv: -kv[1]["verdict"]["heldout_bic_gain"]):
+        v = c["verdict"]
+        lines.append(f"  {n}: {'named' if v['named'] else 'not named'} [{v['decided_by']}] {v['why']}")
     lines += [f"note: {n}" for n in r.notes]
     g = r.gain
     lines.append(

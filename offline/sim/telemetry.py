@@ -45,12 +45,14 @@ def degrade_flight(
     jitter_std_s: float,
     drop_prob: float,
     rng: np.random.Generator,
+    groups: tuple[tuple[str, ...], ...] = GROUPS,
 ) -> dict[str, np.ndarray]:
-    """One flight's signals (each (T,) or (T, 4)) -> the degraded copy."""
+    """One flight's signals (each (T,) or (T, k)) -> the degraded copy. ``groups``: message groups, the first
+    (the motor outputs) undelayed, the others read ``delay_s`` earlier."""
     out = dict(signals)
-    n = len(signals["motor_rpm"])
+    n = len(signals[groups[0][0]])
     grid = np.arange(n, dtype=np.float64)
-    for g, names in enumerate(GROUPS):
+    for g, names in enumerate(groups):
         shift = np.clip(rng.normal(0.0, jitter_std_s * rate_hz, n), -1.0, 1.0) if jitter_std_s > 0 else np.zeros(n)
         if g > 0:
             shift -= delay_s * rate_hz

@@ -1,0 +1,108 @@
+"""Set the selection gates of ``offline.calibrate.fit`` on OUR simulator's nominal flights, to a stated false-naming rate.
+
+    nice python -m offline.calibrate.derive_gates --pairs 40 --duration-s 40 --seed 11 --out out/gates.json
+
+Each calibration gets two healthy flights of the nominal vehicle (``offline.calibrate.nominal_flights``: every
+register entry drawn except the ones the term library fits), so any term named there is named wrongly. For every
+pair the first selection round's numbers of every candidate are kept (held-out BIC gain, pooled RMS cut, whether
+it is identifiable and consistent); a pair is wrongly named under thresholds (gain, cut) when some identifiable,
+consistent candidate clears both. The held-out BIC threshold is the smallest on the grid that keeps the wrongly
+named pairs at or below ``--target``, with a pooled-RMS floor at each value of ``--rms-floors`` (the floor is not
+a gate in force: this shows what one would change); the figures are printed beside the gates in force. Never run on the evaluation-only simulator:
+those flights measure the gates (``bench/evalsim_calibration.py``), they do not set them.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+from monitor.vehicle import DEFAULT_VEHICLE, load_vehicle
+
+BIC_GRID = (10.0, 15.0, 20.0, 25.0, 30.0, 40.0, 50.0, 60.0, 80.0, 100.0, 150.0, 200.0)
+
+
+def first_round(tables, vehicle) -> dict:
+    """The first round's verdict per candidate, as ``calibrate`` reports it."""
+    from offline.calibrate.calibrate import calibrate
+
+    r = calibrate(tables, vehicle)
+    return {"cause": r.cause, "candidates": {n: c["verdict"] for n, c in r.candidates.items()}}
+
+
+def wrongly_named(rows: list[dict], gain_min: float, cut_min_pct: float) -> list[str | None]:
+    """Per pair: the term that thresholds (gain, cut) would name first, or None."""
+    out = []
+    for row in rows:
+        ok = {
+            n: v["heldout_bic_gain"]
+            for n, v in row["candidates"].items()
+            if v["gates"]["identifiable"]["passed"]
+            and v["gates"]["consistency"]["passed"]
+            and v["heldout_bic_gain"] > gain_min
+            and v["gates"]["heldout_bic_gain"]["pooled_rms_cut_pct"] >= cut_min_pct
+        }
+        out.append(max(ok, key=ok.get) if ok else None)
+    return out
+
+
+def derive(rows: list[dict], target: float, rms_floors_pct: list[float]) -> dict:
+    table = {}
+    for floor in rms_floors_pct:
+        rates = {g: sum(x is not None for x in wrongly_named(rows, g, floor)) for g in BIC_GRID}
+        chosen = next((g for g in BIC_GRID if rates[g] <= target * len(rows)), None)
+        table[f"{floor:g}"] = {"wrong_pairs_by_gain": rates, "smallest_gain_at_target": chosen}
+    return table
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m offline.calibrate.derive_gates", description=__doc__.split("\n\n")[0])
+    ap.add_argument("--pairs", type=int, default=40)
+    ap.add_argument("--duration-s", type=float, default=40.0)
+    ap.add_argument("--seed", type=int, default=11)
+    ap.add_argument("--target", type=float, default=0.025, help="largest share of wrongly named pairs (default 0.025)")
+    ap.add_argument("--rms-floors", type=float, nargs="+", default=[0.0, 1.0, 2.0], help="pooled RMS cut floors, %%")
+    ap.add_argument("--out", type=Path, default=None)
+    a = ap.parse_args(argv)
+    from offline.calibrate.fit import MIN_DELTA_BIC
+    from offline.calibrate.nominal_flights import nominal_flights
+
+    vehicle = load_vehicle(DEFAULT_VEHICLE)
+    rows = []
+    for p in range(a.pairs):
+        tabs = nominal_flights(vehicle, 2, a.seed * 1000 + p, a.duration_s)
+        row = {"pair": p, **first_round(tabs, vehicle)}
+        rows.append(row)
+        print(json.dumps({"pair": p, "cause": row["cause"]}), file=sys.stderr, flush=True)
+    in_force = wrongly_named(rows, MIN_DELTA_BIC, 0.0)
+    out = {
+        "config": vars(a) | {"out": str(a.out)},
+        "gates_in_force": {"heldout_bic_gain": MIN_DELTA_BIC},
+        "wrong_pairs_in_force": sum(x is not None for x in in_force),
+        "named_in_force": {n: in_force.count(n) for n in set(in_force) if n},
+        "derived": derive(rows, a.target, a.rms_floors),
+        "largest_consistent_identifiable_gain_per_pair": [
+            max(
+                [
+                    v["heldout_bic_gain"]
+                    for v in r["candidates"].values()
+                    if v["gates"]["identifiable"]["passed"] and v["gates"]["consistency"]["passed"]
+                ]
+                or [float("-inf")]
+            )
+            for r in rows
+        ],
+        "rows": rows,
+    }
+    text = json.dumps(out, indent=1, default=float)
+    if a.out:
+        a.out.parent.mkdir(parents=True, exist_ok=True)
+        a.out.write_text(text + "\n", encoding="utf-8")
+    print(json.dumps({k: out[k] for k in ("gates_in_force", "wrong_pairs_in_force", "named_in_force", "derived")}, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
