@@ -19,6 +19,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 from fleet.discover import content_hash, find_logs
+from fleet.memory import judge_store
 from fleet.raycluster import cluster_cpus, ray_session
 from fleet.schema import (
     export_parquet,
@@ -57,6 +58,7 @@ class IngestSummary:
     total_s: float = 0.0
     worker_pids: list[int] = field(default_factory=list)
     export: str | None = None
+    memory_judged: int = 0  # rows judged against their vehicle's healthy flights before them (fleet.memory)
 
     def to_json(self) -> dict:
         out = asdict(self)
@@ -149,6 +151,7 @@ def ingest(
                 _run_serial(con, todo, settings, summary, batch_rows, progress, mtime_of)
             else:
                 _run_ray(con, todo, settings, summary, batch_rows, progress, mtime_of, ray_address, workers, logs_per_call)
+        summary.memory_judged = judge_store(con, rediagnose)
         if export:
             summary.export = str(export_parquet(con, export))
     finally:

@@ -1,6 +1,7 @@
 """The fleet database (DuckDB): one row per flight log, keyed by the hash of its content.
 
-Schema version 1. ``fleet_meta`` holds ``schema_version``; a database written by
+Schema version 2 (version 1 stores are migrated in place: vehicle-memory columns added, NULL until judged).
+``fleet_meta`` holds ``schema_version``; a database written by
 a newer propwatch is refused by its version, one that is not a fleet database
 is refused by name. Rows are inserted per batch inside one transaction, so a
 run that dies leaves whole batches only, and a re-run does the rest.
@@ -16,7 +17,7 @@ from pathlib import Path
 
 from fleet.errors import FleetError, need
 
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2
 
 # (name, DuckDB type): the insert order of a row.
 COLUMNS: tuple[tuple[str, str], ...] = (
@@ -49,7 +50,19 @@ COLUMNS: tuple[tuple[str, str], ...] = (
     ("ingested_at", "TIMESTAMP"),
     ("process_s", "DOUBLE"),  # worker wall-clock seconds spent on this log
     ("process_cpu_s", "DOUBLE"),  # worker CPU seconds (user + system) spent on this log
+) + (
+    # Vehicle memory (fleet.memory): each flight judged against its vehicle's healthy flights before it.
+    ("confidence", "VARCHAR"),  # the verdict's: confident | ambiguous | suspect | uncertain (NULL: no verdict)
+    ("baseline_flights", "INTEGER"),  # healthy flights of this vehicle it was compared with (0: none yet)
+    ("compared_with_first", "VARCHAR"),  # their first and last dates (YYYY-MM-DD), NULL where unknown
+    ("compared_with_last", "VARCHAR"),
+    ("compared_with_logs", "VARCHAR[]"),  # their log hashes
+    ("time_known", "BOOLEAN"),  # the log carries its own clock (false: judged against the baseline at ingest)
+    ("memory_summary", "VARCHAR"),  # JSON monitor.memory.summary.FlightSummary of the flight
+    ("memory", "VARCHAR"),  # JSON: the judgement (monitor.memory.judge) or why there is none
 )
+# Columns a version-1 store lacks (added by migration).
+V2_COLUMNS = COLUMNS[-8:]
 COLUMN_NAMES = tuple(c for c, _ in COLUMNS)
 
 
@@ -105,7 +118,16 @@ def check_version(con, path) -> int:
             f"{path}: fleet database schema version {version} is newer than this propwatch's {SCHEMA_VERSION}; "
             "use the propwatch that wrote it (or a newer one)"
         )
-    if version < SCHEMA_VERSION:  # no older versions exist yet
+    if version == 1 and SCHEMA_VERSION == 2:
+        if con.execute("SELECT current_setting('access_mode')").fetchone()[0] == "read_only":
+            raise FleetError(f"{path}: fleet database schema version 1: open it once writable (fleet ingest) to migrate it")
+        con.execute("BEGIN TRANSACTION")
+        for name, typ in V2_COLUMNS:
+            con.execute(f"ALTER TABLE flights ADD COLUMN {name} {typ}")
+        con.execute("UPDATE fleet_meta SET value = '2' WHERE key = 'schema_version'")
+        con.execute("COMMIT")
+        return SCHEMA_VERSION
+    if version < SCHEMA_VERSION:
         raise FleetError(f"{path}: fleet database schema version {version} is older than {SCHEMA_VERSION} and cannot be read")
     return version
 

@@ -18,9 +18,10 @@ from pathlib import Path
 
 import numpy as np
 
-from monitor.logs.identity import identify
 from monitor import __version__ as PROPWATCH_VERSION
 from monitor.errors import PropwatchError
+from monitor.logs.identity import identify
+from monitor.memory.summary import summarize
 from monitor.vehicle import REPO_ROOT
 
 SHIPPED_MODELS = (REPO_ROOT / "models" / "classifier.onnx", REPO_ROOT / "models" / "crazyflie-classifier.onnx")
@@ -168,6 +169,7 @@ def process_log(path: str, log_hash: str, size_bytes: int, settings: IngestSetti
         row.update(status="error", error=f"{p}: cannot be read ({type(exc).__name__}: {exc})")
     if row["vehicle_id"] is None and (vid := vehicle_from_dir(p, settings.vehicle_from_dir)):
         row.update(vehicle_id=vid, vehicle_id_source=f"dir:{settings.vehicle_from_dir}")
+    row["time_known"] = row["start_time_utc"] is not None
     if row["start_time_utc"] is None:
         try:
             row.update(start_time_utc=utc_naive(p.stat().st_mtime * 1e6), start_time_source="file:mtime")
@@ -213,8 +215,11 @@ def _diagnose_into(row: dict, path: Path, settings: IngestSettings) -> None:
         diagnosis=json.dumps(out, allow_nan=False),
     )
     row["warnings"] = row["warnings"] + list(d.warnings)
+    summary = summarize(table)
+    row["memory_summary"] = json.dumps(summary.to_dict(), allow_nan=False) if summary.n > 0 else None
     if d.verdict is not None:  # PX4 rotor order (the JSON may be in the vehicle's own numbering)
         row.update(
+            confidence=str(d.verdict.get("confidence", "confident")),
             verdict_label=int(d.verdict["label"]),
             faulty_propellers=[int(i) for i in d.verdict["faulty_propellers"]],
             p_faulty=[float(x) for x in d.verdict["fault_probability"]],

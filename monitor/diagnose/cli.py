@@ -79,11 +79,13 @@ from pathlib import Path
 
 from monitor.decision.rotor_share import BASELINE_S
 from monitor.diagnose.engine import Diagnosis, diagnose_table, name_verdict, round_floats
+from monitor.diagnose.memory import judge_flight, log_vehicle_id
 from monitor.diagnose.verdict import POSITION, flight_seconds, set_words, verdict_of
 from monitor.errors import PropwatchError
 from monitor.esc import EscCurve
 from monitor.logs import read_raw, to_flight_table
 from monitor.logs.guards import DEFAULT_MAX_SECONDS, check_size, check_time_advances
+from monitor.memory.baseline import VehicleBaseline, is_vehicle_baseline
 from monitor.model import Classifier, choose_esc
 from monitor.progress import bar
 from monitor.resources import shipped
@@ -140,6 +142,12 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         default=DEFAULT_MAX_SECONDS,
         help=f"longest log accepted, in seconds of its own clock (default {DEFAULT_MAX_SECONDS:g} = 3 h); "
         "also bounds the file size read (1 MB per second)",
+    )
+    p.add_argument(
+        "--baseline",
+        metavar="B.json",
+        default=None,
+        help="judge each log against this vehicle's healthy history (propwatch baseline learn); wins over --vehicle DIR's",
     )
     p.add_argument("--json", action="store_true", help="print JSON to stdout")
     p.add_argument(
@@ -292,6 +300,14 @@ def fuse_verdict(d: Diagnosis, comparison: dict, motor_names, cg_damage_separabl
             p["suspect"] = p["propeller"] in imb["imbalance_rotors"]
 
 
+def memory_text(b: dict) -> str:
+    """The vehicle-memory comparison in two lines: what the flight was compared with, and what it showed."""
+    if "deviation_sigma" not in b:
+        return f"  vehicle memory: {b['compared_with_text']}: {b['note']}"
+    dev = ", ".join(f"{i + 1}: {x:+.1f}" for i, x in enumerate(b["deviation_sigma"]))
+    return f"  vehicle memory: {b['compared_with_text']}\n    each rotor's share against its normal (spreads) {dev}; {b['rule']}"
+
+
 EXIT_NOT_CONFIDENT = 3
 _EXIT_RANK = {0: 0, EXIT_NOT_CONFIDENT: 1, 1: 2, 2: 3}
 
@@ -309,7 +325,7 @@ def main(argv: list[str] | None = None) -> int:
     if not 0 < args.max_seconds <= 7 * 86400:
         print("propwatch diagnose: --max-seconds must be in (0, 604800]", file=sys.stderr)
         return 2
-    baseline = None
+    baseline = memory = None
     if args.vehicle and Path(args.vehicle).is_dir():
         # A `propwatch adapt` folder: its calibrated vehicle, its model, its airframe's healthy baseline.
         from monitor.baseline import BASELINE_FILE, HealthyBaseline
@@ -317,7 +333,16 @@ def main(argv: list[str] | None = None) -> int:
         folder = Path(args.vehicle)
         args.vehicle = str(folder / "vehicle.yaml")
         args.model = args.model or str(folder / "classifier.onnx")
-        baseline = HealthyBaseline.load(folder / BASELINE_FILE)
+        if is_vehicle_baseline(folder / BASELINE_FILE):
+            memory = VehicleBaseline.load(folder / BASELINE_FILE)
+        else:  # an adapt folder written before vehicle memory: its fused classifier-and-shares baseline
+            baseline = HealthyBaseline.load(folder / BASELINE_FILE)
+    if args.baseline:
+        try:
+            memory, baseline = VehicleBaseline.load(args.baseline), None
+        except PropwatchError as exc:
+            print(f"propwatch diagnose: error: {exc}", file=sys.stderr)
+            return 2
     clf = Classifier(args.model or default_model(args.vehicle))
     # The daemon's rule, so both convert commands identically: --vehicle, else the model's own ESC curve.
     esc = choose_esc(clf, args.vehicle or "")
@@ -353,6 +378,14 @@ def main(argv: list[str] | None = None) -> int:
         if baseline is not None:
             res_baseline = baseline.compare(table)
             fuse_verdict(d, res_baseline, table.motor_names, baseline.cg_damage_separable)
+        if memory is not None:
+            try:
+                res_baseline = judge_flight(d, table, memory, log_vehicle_id(path, args.fmt))
+            except PropwatchError as exc:
+                results.append({"log": path, "error": str(exc)})
+                print(f"propwatch diagnose: error: {exc}", file=sys.stderr)
+                code = worse(code, 2)
+                continue
         if d.verdict is None:
             code = worse(code, 1)
         elif d.verdict.get("confidence") != "confident":
@@ -378,6 +411,8 @@ def main(argv: list[str] | None = None) -> int:
                     + ", ".join(f"{x:+.1f}" for x in b["deviation_spreads"])
                     + f" -> {b['verdict']}"
                 )
+            if memory is not None:
+                print(memory_text(res["baseline"]))
             if baseline is not None and "fusion" in res["baseline"]:
                 f = res["baseline"]["fusion"]
                 print(f"  verdict from the baseline and the classifier (label {f['classifier_label']} alone): {f['rule']}")

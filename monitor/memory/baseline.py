@@ -148,6 +148,8 @@ class VehicleBaseline:
                 int(f["epoch"])
         except (KeyError, TypeError, ValueError) as exc:
             raise BaselineError(f"{origin}: corrupt vehicle baseline: {exc!r}") from exc
+        except ConfigError as exc:  # a flight's summary
+            raise BaselineError(f"corrupt vehicle baseline: {exc}") from exc
         return b
 
     def save(self, path: str | Path) -> Path:
@@ -185,3 +187,11 @@ def write_atomic(path: Path, text: str) -> Path:
         if tmp.exists():
             tmp.unlink()
     return path
+
+
+def is_vehicle_baseline(path: str | Path) -> bool:
+    """Whether ``path`` holds this format (an older adapt folder's ``baseline.json`` does not)."""
+    try:
+        return json.loads(Path(path).read_text(encoding="utf-8")).get("format") == FORMAT
+    except (OSError, ValueError, AttributeError):
+        return True  # unreadable: let VehicleBaseline.load say why

@@ -1,0 +1,91 @@
+"""Each flight of the store judged against its vehicle's healthy flights before it (``monitor.memory``).
+
+After the workers have written their rows (each with its flight's share summary), ``judge_store`` walks every
+vehicle's flights in order of the logs' own clocks. A flight is compared with the vehicle's flights before it that
+raised nothing (no FAULTY, not suspect) once there are ``MIN_FLIGHTS`` of them: the same ``VehicleBaseline``,
+normal and ``judge`` as ``propwatch diagnose LOG --baseline B.json`` with B learnt from those flights, so both give
+the same verdict. A log without a clock of its own is judged against the baseline as it stands (every timed flight)
+and never becomes history. A flight judged before keeps its verdict unless ``rediagnose``: a log older than flights
+already judged changes them only then.
+"""
+
+from __future__ import annotations
+
+import json
+
+from monitor.labels import LABEL_TABLE
+from monitor.memory.baseline import MIN_FLIGHTS, VehicleBaseline
+from monitor.memory.judge import judge
+from monitor.memory.summary import FlightSummary
+
+_COLS = (
+    "log_hash, vehicle_id, start_time_utc, time_known, status, memory_summary, memory, verdict_label, confidence, "
+    "propeller_names, path, diagnosis"
+)
+
+
+def _raised_nothing(label, confidence, memory, diagnosis) -> bool:
+    """Whether a flight may become history: against a ready baseline, judged healthy (not even suspect); before
+    one, no in-flight alert and no confident fault from the nominal comparison (the daemon's rule)."""
+    if memory is not None and "label" in json.loads(memory):
+        return label == 1 and confidence != "suspect"
+    alerts = ((json.loads(diagnosis) if diagnosis else {}).get("decision") or {}).get("alerts") or []
+    return not alerts and not (label not in (1, None) and confidence == "confident")
+
+
+def judge_store(con, rediagnose: bool = False) -> int:
+    """Judge every unjudged flight (every flight with ``rediagnose``); returns how many rows changed."""
+    rows = con.execute(f"SELECT {_COLS} FROM flights WHERE vehicle_id IS NOT NULL AND memory_summary IS NOT NULL").fetchall()
+    by: dict[str, list[tuple]] = {}
+    for r in rows:
+        by.setdefault(r[1], []).append(r)
+    updates = []
+    for vid, fl in by.items():
+        timed = sorted((r for r in fl if r[3]), key=lambda r: (r[2], r[10]))
+        untimed = sorted((r for r in fl if not r[3]), key=lambda r: r[10])
+        history: list[tuple] = []
+        for r in timed + untimed:
+            log_hash, _, start, time_known, status, summ, memory, label, conf, names, path, diagnosis = r
+            if memory is None or rediagnose:
+                upd = _judge_row(vid, names, history, FlightSummary.from_dict(json.loads(summ), path), time_known)
+                updates.append((log_hash, upd))
+                label, conf, memory = upd.get("verdict_label", label), upd.get("confidence", conf), upd["memory"]
+                status = upd.get("status", status)
+            if time_known and status == "ok" and _raised_nothing(label, conf, memory, diagnosis):
+                history.append(r)
+    if updates:
+        con.execute("BEGIN TRANSACTION")
+        for h, upd in updates:
+            cols = ", ".join(f"{k} = ?" for k in upd)
+            con.execute(f"UPDATE flights SET {cols} WHERE log_hash = ?", [*upd.values(), h])
+        con.execute("COMMIT")
+    return len(updates)
+
+
+def _judge_row(vid, names, history, summary: FlightSummary, time_known) -> dict:
+    b = VehicleBaseline(vid, None, tuple(names), summary.basis)
+    for h in history:
+        b.add(h[0], h[2].date().isoformat() if h[2] is not None else None, FlightSummary.from_dict(json.loads(h[5])), "no fault")
+    cw = b.compared_with()
+    upd = {
+        "baseline_flights": cw["flights"],
+        "compared_with_first": cw["first"],
+        "compared_with_last": cw["last"],
+        "compared_with_logs": [h[0] for h in history],
+    }
+    if not b.ready:
+        upd["memory"] = json.dumps({"note": f"no vehicle baseline yet ({cw['flights']} of {MIN_FLIGHTS} flights)"})
+        return upd
+    v = judge(b.normal(), summary)
+    v["compared_with"] = cw
+    v["compared_with_text"] = b.compared_with_text() + (
+        "" if time_known else "; time unknown: judged against the baseline at ingest"
+    )
+    upd.update(
+        memory=json.dumps(v, allow_nan=False),
+        verdict_label=int(v["label"]),
+        faulty_propellers=list(LABEL_TABLE[v["label"]]),
+        confidence=v["confidence"],
+        status="ok",
+    )
+    return upd

@@ -1,0 +1,79 @@
+"""A diagnosed flight judged against its vehicle's own healthy history (``monitor.memory``).
+
+``judge_flight`` is the one place a log's ``Diagnosis`` meets a ``VehicleBaseline``: ``propwatch diagnose
+--baseline`` and ``fleet ingest`` both call it, so both give the same verdict on the same log against the same
+history. The vehicle's normal needs no classifier: a log the network's envelope refuses still gets the comparison.
+Where the baseline is ready, its judgement is the verdict (``verdict.source`` "vehicle memory"); what the nominal
+comparison said stays in ``verdict.nominal``.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from monitor.diagnose.engine import Diagnosis
+from monitor.labels import LABEL_TABLE
+from monitor.memory.baseline import MIN_FLIGHTS, VehicleBaseline
+from monitor.memory.judge import judge
+from monitor.memory.summary import summarize
+
+
+def log_vehicle_id(path: str | Path, fmt: str | None) -> str | None:
+    """The vehicle id the log carries (``monitor.logs.identity``), None where it carries none or cannot say."""
+    from monitor.logs import detect_format
+    from monitor.logs.identity import identify
+
+    try:
+        return identify(Path(path), fmt or detect_format(Path(path))).vehicle_id
+    except Exception:  # noqa: BLE001 - a log readable for shares without a readable id is still judged
+        return None
+
+
+def judge_flight(d: Diagnosis, table, baseline: VehicleBaseline, vehicle_id: str | None) -> dict:
+    """The ``baseline`` object of the diagnose JSON; replaces ``d.verdict`` by the vehicle-memory verdict where the
+    baseline is ready. Raises ``BaselineError`` where the log is another vehicle's (identity or rotors)."""
+    s = summarize(table)
+    baseline.check_vehicle(vehicle_id, table.motor_names, s.basis, str(table.source or "log"))
+    out = {"compared_with": baseline.compared_with(), "compared_with_text": baseline.compared_with_text()}
+    if not baseline.ready:
+        out["note"] = f"no vehicle baseline yet ({len(baseline.active())} of {MIN_FLIGHTS} flights): not compared"
+        return out
+    if s.n == 0:
+        out["note"] = "no airborne step past take-off to compare"
+        return out
+    v = judge(baseline.normal(), s)
+    out.update(v)
+    _apply(d, v, table.motor_names, out["compared_with_text"])
+    return out
+
+
+def _apply(d: Diagnosis, v: dict, motor_names, compared: str) -> None:
+    nominal = d.verdict
+    label = v["label"]
+    d.verdict = {
+        "label": label,
+        "faulty_propellers": list(LABEL_TABLE[label]),
+        "faulty_names": [motor_names[i - 1] for i in LABEL_TABLE[label]],
+        "confidence": v["confidence"],
+        "source": "vehicle memory",
+        "compared_with": compared,
+        "fault_probability": None if nominal is None else nominal.get("fault_probability"),
+        "nominal": nominal,
+    }
+    d.reason = None
+    suspect = set(v.get("suspect_propellers", [])) | {k for h in v["hypotheses"] for k in h["faulty_propellers"]}
+    for p in d.propellers:
+        bad = p["propeller"] in LABEL_TABLE[label]
+        p["faulty"] = bad and v["confidence"] == "confident"
+        p["suspect"] = not p["faulty"] and p["propeller"] in suspect
+    d.hypotheses = [
+        {
+            "faulty_propellers": h["faulty_propellers"],
+            "statistic": h["statistic"],
+            "cause": "as this vehicle's healthy flights"
+            if not h["faulty_propellers"]
+            else "damaged propeller " + "+".join(map(str, h["faulty_propellers"])),
+        }
+        for h in v["hypotheses"]
+    ]
+    d.hypothesis_rule = None
