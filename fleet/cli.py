@@ -16,6 +16,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from pathlib import Path
 
 
 def _positive(text: str) -> int:
@@ -94,6 +95,26 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
+def drop_if_empty(db: Path) -> None:
+    """Remove a database this run created and filled with no flight (a run that failed before its first batch):
+    a later run, or a reader, should not find an empty store that looks like a fleet with no logs."""
+    if not db.is_file():
+        return
+    from fleet.errors import need
+
+    try:
+        con = need("duckdb").connect(str(db), read_only=True)
+        try:
+            n = con.execute("SELECT count(*) FROM flights").fetchone()[0]
+        finally:
+            con.close()
+    except Exception:  # noqa: BLE001 - no flights table (created half-way): nothing worth keeping
+        n = 0
+    if n == 0:
+        for p in (db, db.with_name(db.name + ".wal")):
+            p.unlink(missing_ok=True)
+
+
 def _ingest(a: argparse.Namespace) -> int:
     from fleet.ingest import ingest
     from fleet.worker import IngestSettings
@@ -101,19 +122,25 @@ def _ingest(a: argparse.Namespace) -> int:
     settings = IngestSettings(
         models=tuple(a.model or ()), vehicle_yaml=a.vehicle, csv_format=a.fmt, hop=a.hop, vehicle_from_dir=a.vehicle_from_dir
     )
-    s = ingest(
-        a.paths,
-        a.db,
-        settings,
-        ray_address=a.ray,
-        workers=a.workers,
-        batch_rows=a.batch,
-        progress=not a.no_progress,
-        export=a.export,
-        retry_errors=a.retry_errors,
-        rehash=a.rehash,
-        rediagnose=a.rediagnose,
-    )
+    fresh = not Path(a.db).exists()
+    try:
+        s = ingest(
+            a.paths,
+            a.db,
+            settings,
+            ray_address=a.ray,
+            workers=a.workers,
+            batch_rows=a.batch,
+            progress=not a.no_progress,
+            export=a.export,
+            retry_errors=a.retry_errors,
+            rehash=a.rehash,
+            rediagnose=a.rediagnose,
+        )
+    except BaseException:
+        if fresh:
+            drop_if_empty(Path(a.db))
+        raise
     if a.json:
         json.dump(s.to_json(), sys.stdout)
         sys.stdout.write("\n")

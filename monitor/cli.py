@@ -9,6 +9,8 @@ exit code 2; nothing else is caught.
 from __future__ import annotations
 
 import importlib
+import os
+import signal
 import sys
 
 from monitor.errors import PropwatchError
@@ -38,7 +40,7 @@ def usage() -> str:
     width = max(map(len, COMMANDS))
     lines = ["usage: propwatch COMMAND [ARGS...]", "", "commands:"]
     lines += [f"  {name:<{width}}  {help_}" for name, (_, help_) in COMMANDS.items()]
-    lines += ["", "'propwatch COMMAND --help' for a command's options; 'propwatch --version' (also after a COMMAND)."]
+    lines += ["", "'propwatch COMMAND --help' for a command's options; 'propwatch --version' (anywhere on the line)."]
     return "\n".join(lines)
 
 
@@ -47,7 +49,7 @@ def main(argv: list[str] | None = None) -> int:
     if not argv or argv[0] in ("-h", "--help"):
         print(usage())
         return 0 if argv else 2
-    if argv[0] == "--version" or "--version" in argv[1:2]:
+    if "--version" in argv:  # anywhere: before or after a command and its arguments
         from monitor import version
 
         print(f"propwatch {version()}")
@@ -65,12 +67,17 @@ def main(argv: list[str] | None = None) -> int:
             return 2
         raise
     try:
-        return int(module.main(rest) or 0)
+        code = int(module.main(rest) or 0)
+        sys.stdout.flush()  # here, where a reader that went away is caught, not at interpreter exit
+        return code
     except PropwatchError as exc:
         print(f"propwatch {name}: error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         return 130
+    except BrokenPipeError:  # `propwatch ... | head`: the reader closed the pipe; stop quietly as a shell tool does
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # what is still buffered goes nowhere
+        return 128 + signal.SIGPIPE
 
 
 if __name__ == "__main__":

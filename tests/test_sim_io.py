@@ -119,6 +119,8 @@ def test_cli_writes_flights_and_ground_truth(tmp_path):
             "4",
             "--waypoints-seed",
             "8",
+            "--format",
+            "npz",
         ]
     )
     assert rc == 0

@@ -45,7 +45,28 @@ def detect_format(path: str | Path) -> str:
 
         names = ", ".join(sorted(load_formats()))
         raise LogFormatError(f"{path}: CSV logs need --format NAME, one of: {names} (column mappings in monitor/formats.yaml)")
+    named = NAMED_BY_SUFFIX.get(path.suffix.lower())
+    if named is not None:  # the name promises a format the bytes do not hold
+        raise LogFormatError(f"{path}: unknown log format: named as {named} but not one, it starts with {_looks_like(head)}")
     raise LogFormatError(f"{path}: unknown log format (expected .tlog, .ulg, DataFlash .bin, or CSV with --format)")
+
+
+NAMED_BY_SUFFIX = {
+    ".tlog": "a MAVLink telemetry log (.tlog)",
+    ".ulg": "a PX4 ULog (.ulg)",
+    ".bin": "an ArduPilot DataFlash log (.bin)",
+}
+
+
+def _looks_like(head: bytes) -> str:
+    """What a file's first bytes are, for an error message: text (quoted) or binary (in hex)."""
+    try:
+        text = head.decode("utf-8")
+    except UnicodeDecodeError:
+        text = None
+    if text is not None and all(c.isprintable() or c in "\r\n\t" for c in text):
+        return f"text ({text.splitlines()[0][:16]!r}...)"
+    return f"bytes {head[:8].hex(' ')} (none of the three formats' headers)"
 
 
 def read_raw(path: str | Path, fmt: str | None = None, extras: bool = True) -> RawFlight:

@@ -40,7 +40,7 @@ def _pyulog():
     try:
         from pyulog import ULog
     except ImportError as exc:  # optional dependency
-        raise LogFormatError("reading .ulg needs pyulog (pip install 'propwatch[logs]')") from exc
+        raise LogFormatError("reading .ulg needs pyulog, a base dependency: pip install pyulog") from exc
     return ULog
 
 
@@ -96,14 +96,19 @@ def read_ulog(path: str | Path) -> RawFlight:
     except Exception as exc:  # pyulog raises plain exceptions on bad headers
         raise LogFormatError(f"{path}: not a readable ULog file: {exc}") from exc
     warnings = []
+    damage = None  # what a missing topic may be owed to
     if getattr(ulog, "file_corruption", False):
         warnings.append(f"{path.name}: ULog file is corrupted: damaged data skipped")
+        damage = "damaged ULog (pyulog found corrupt data and skipped it)"
     cut = _cut_off_bytes(path)
     if cut:
         warnings.append(f"{path.name}: last message cut off ({cut} bytes; truncated log): read up to the damage")
+        damage = f"truncated ULog ({path.stat().st_size} bytes, the last message cut off)"
 
     def need(name: str, fields: list[str]) -> Stream:
         d = _topic(ulog, name)
+        if d is None and damage:
+            raise LogFormatError(f"{path}: {damage}: topic {name} is not in what could be read: cannot diagnose")
         if d is None:
             raise LogFormatError(f"{path}: topic {name} not logged: cannot diagnose")
         v = _cols(d, fields)

@@ -5,8 +5,8 @@
                        [--duration-s 80] [--format tlog|npz]
                        [--vehicle PATH] [--propellers lstm|quadratic] [--waypoint-set A|B]
 
-Writes ``flights.npz`` (all flights) or ``flight_000.tlog``... plus
-``sidecar.json`` (ground truth and provenance) into DIR. Files are written
+Writes ``flight_000.tlog``... (what ``propwatch diagnose`` reads; the default) or ``flights.npz`` (all flights,
+for training) plus ``sidecar.json`` (ground truth and provenance) into DIR. Files are written
 under temporary names and renamed, and the sidecar last, so a failed run
 leaves no sidecar describing missing flights.
 """
@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import json
 from pathlib import Path
 
 import numpy as np
@@ -46,8 +47,8 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument(
         "--format",
         choices=("npz", "tlog"),
-        default="npz",
-        help="npz: arrays with ground truth; tlog: a PX4-like MAVLink log that diagnose reads (default npz)",
+        default="tlog",
+        help="tlog: a PX4-like MAVLink log that diagnose reads (default); npz: arrays with ground truth for training",
     )
     p.add_argument("--vehicle", type=Path, default=DEFAULT_VEHICLE, help="vehicle YAML (default models/vehicle.yaml)")
     p.add_argument(
@@ -124,8 +125,25 @@ def run(args: argparse.Namespace) -> list[Path]:
     return files + [args.out / "sidecar.json"]
 
 
+def flight_summary(name: str, flight: dict, duration_s: float) -> str:
+    """One line per simulated flight: file, length, which propellers are damaged and how, payload."""
+    bad = flight["faulty_propellers"]
+    what = (
+        "healthy"
+        if not bad
+        else "propeller"
+        + ("s " if len(bad) > 1 else " ")
+        + "+".join(map(str, bad))
+        + " "
+        + flight["propeller_conditions"][bad[0] - 1]
+    )
+    return f"{name}: {duration_s:g} s, {what}, payload {flight['payload_kg']:g} kg"
+
+
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
-    for f in run(args):
-        print(f)
+    files = run(args)
+    for flight in json.loads(files[-1].read_text())["flights"]:
+        print(flight_summary(str(args.out / flight["file"]), flight, args.duration_s))
+    print(f"ground truth: {files[-1]}")
     return 0
