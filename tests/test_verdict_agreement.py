@@ -89,7 +89,7 @@ def renderings(res: dict, pages: dict[str, Path]) -> dict[str, dict]:
     """What each rendering states: {name: {"status": [4], "confidence", "headline", "next_step"}}."""
     s = res["summary"]
     out = {"json": {"status": s["status"], "confidence": s["confidence"], "headline": s["headline"], "next": s["next_step"]}}
-    text = render_text(res).splitlines()
+    text = re.sub(r"\n    ", " ", render_text(res)).splitlines()  # a wrapped sentence continues indented 4 spaces
     props = next((ln for ln in text if ln.startswith("  propellers: ")), "")
     status = [m.lower() for m in re.findall(r"\b(REPLACE|INSPECT|ok)\b", props)] or ["ok"] * 4
     nxt = next(ln for ln in text if ln.startswith("  next step: ")).removeprefix("  next step: ")

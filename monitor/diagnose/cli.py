@@ -1,71 +1,6 @@
-"""``propwatch diagnose LOG [LOG...] [--json] [--report DIR]``.
+"""Diagnose flight logs: which propeller is damaged, how sure, and what to do next.
 
-Numbering, one for every output (text, HTML, PNG, JSON): propellers are in PX4
-quad-X order (1 front-right CCW, 2 rear-left CCW, 3 front-left CW, 4 rear-right
-CW); ``label`` is 1..16 over PX4 rotor sets (1 none, 2-5 rotor 1..4 alone, 6-11
-pairs, 12-15 triples, 16 all; monitor/labels.py). Each rotor is shown by the
-vehicle's own name with its PX4 number beside it, e.g. CrazyPAD's
-``M3 (PX4 rotor 2)``.
-
-Output with ``--json`` (stdout), for one LOG (every key: docs/diagnose-json.md)::
-
-    {"log": PATH,
-     "verdict": {"label": N, "faulty_propellers": [PX4 numbers], "faulty_names": [...],
-                 "fault_probability": [p1, p2, p3, p4],
-                 "confidence": "confident" | "ambiguous" | "suspect" | "uncertain",
-                 "label_probability_of_verdict": p,
-                 "agreeing_windows": share, "faulty_probability_required": 0.9} | null,
-     "windows": n, "warnings": [...], "reason": null | "why there is no verdict",
-     "propellers": [{"propeller": 1, "px4_rotor": 1, "name": "M1", "fault_probability": p, "faulty": bool,
-                     "suspect": bool}, ...],
-     "label_probability": [16 values] | null,
-     "airborne_segments": [{"start_boot_s", "stop_boot_s", "steps"}, ...],
-     "timeline": {"t_boot_s": [...], "fault_probability": [[p1..p4], ...], "label": [...]},
-     "hop_steps": k,
-     "envelope": {"airborne_mean_rpm", "trained_mean_rpm", "rpm_ratio", "rpm_z", "large_attitude_fraction"},
-     "decision": {"alerts": [{"t_boot_s", "level": "suspect" | "fault", "propellers", "text"}, ...],
-                  "final": {...}},
-     "hypotheses": [{"faulty_propellers": [...], "probability": p}, ...] | null,
-     "hypothesis_rule": {"score", "threshold", "coverage", "calibration_flights"} | null,
-     "rotor_effectiveness": [4 values] | null, "rotor_effectiveness_std": [4 values] | null,
-     "baseline": {"basis", "shares", "deviation_spreads", "rotors_beyond_3_spreads", "t_spreads_required",
-                  "rotors_beyond_t_spreads", "verdict",
-                  "fusion": {"rule", "classifier_label", "classifier_confidence", "spreads_required"}}}
-                  (--vehicle DIR only; there ``verdict`` is the classifier fused with the airframe's baseline,
-                  monitor.baseline.fuse: a rotor beyond 3 healthy spreads is named, none is healthy unless
-                  the classifier alone is confident; where the baseline says a CG offset and damage look alike
-                  (cg_damage_separable false) a fault becomes an imbalance: "imbalance_rotors",
-                  "imbalance_names" in ``verdict``, no faulty propeller, both causes in ``hypotheses``)
-
-Confidence: a model shipped with a conformal rule (``classifier.sets.json``,
-monitor/decision/hypotheses.py) gives a set of hypotheses: every propeller set whose
-score (the classifier's mean label probability times the moment balance's
-likelihood) reaches the threshold that held the truth in 95 % of randomised
-calibration flights. One set: ``confident``, its propellers FAULTY. More:
-``ambiguous`` (physics cannot tell them apart), the most probable set's
-propellers only ``suspect``. A model without a rule is ``confident`` when the
-label's mean probability is >= 0.9, else ``suspect`` (at least half the
-windows agree on its label) or ``uncertain``. ``decision`` is the onboard daemon's own rule (monitor.decision: a
-CUSUM whose thresholds follow alerts.false_alarms_per_hour) replayed over the
-log: when in the flight it would have said suspect / fault, on which propeller. Where it reached fault level,
-the verdict is its answer (``verdict.source`` "in-flight change", ``verdict.change_boot_s``; the whole flight's
-verdict in ``verdict.whole_flight``): a propeller damaged mid-flight is outvoted in a whole-flight mean by the
-healthy part before it, while the rule tests the flight against its own start.
-
-For several LOGs: ``{"results": [one object as above per LOG, in order]}``;
-a log that cannot be read appears as ``{"log": PATH, "error": "..."}``.
-Times are seconds on the autopilot's boot clock; a timeline point is the end of
-its window. Floats are rounded to 6 decimals.
-
-Exit code: 0 every log got a confident verdict; 3 some log got a verdict that
-is not confident (ambiguous, suspect or uncertain: no confident verdict); 1 some log got
-no verdict at all (the reason says why: outside the model's envelope, no
-airborne flight, ...); 2 some log could not be read (unknown format, missing
-messages, damaged beyond reading, larger or longer than ``--max-seconds``
-allows, messages that stop advancing time) or bad arguments. The highest
-applies: 2 > 1 > 3 > 0. Whatever a reader raises ends in one of these codes.
-With ``--json`` stdout holds only the JSON: anything a library prints while
-reading goes to stderr (at most a few lines, then a count).
+Exit 0 confident, 3 not sure, 1 no verdict, 2 unreadable. More: docs/diagnose-json.md.
 """
 
 from __future__ import annotations
@@ -75,6 +10,7 @@ import contextlib
 import io
 import json
 import sys
+import textwrap
 from pathlib import Path
 
 from monitor.decision.rotor_share import BASELINE_S
@@ -113,48 +49,47 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p = argparse.ArgumentParser(
         prog="propwatch diagnose", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
-    p.add_argument("logs", nargs="+", metavar="LOG", help=".tlog, .ulg, DataFlash .bin, or CSV (with --format)")
+    p.add_argument("logs", nargs="+", metavar="LOG", help=".tlog, .ulg, DataFlash .bin, or CSV with --format")
     p.add_argument(
         "--format",
         dest="fmt",
         default=None,
-        help="log format: tlog, ulog, dataflash, or a CSV mapping name from monitor/formats.yaml (e.g. crazypad)",
+        help="tlog, ulog, dataflash, or a CSV mapping (e.g. crazypad)",
     )
     p.add_argument(
         "--model",
         default=None,
-        help="classifier ONNX file (default: models/NAME-classifier.onnx for --vehicle .../NAME.yaml when "
-        "that file exists, else models/classifier.onnx)",
+        metavar="ONNX",
+        help="classifier (default: the vehicle's own, else the paper quad's)",
     )
     p.add_argument(
         "--vehicle",
         default=None,
-        help="vehicle YAML whose ESC curve converts motor commands to RPM "
-        "(default: the model's metadata vehicle.esc, else the paper's fit = models/vehicle.yaml), or a "
-        "`propwatch adapt` output folder: its vehicle.yaml, classifier.onnx and healthy baseline",
+        metavar="YAML|DIR",
+        help="vehicle YAML (ESC curve), or a `propwatch adapt` folder",
     )
     # Windows are 5 s long; at a 1 s hop consecutive ones share 4 s: a finer hop costs
     # inference time without adding information to a post-flight verdict.
-    p.add_argument("--hop", type=int, default=20, help="classify one window every HOP grid steps (default 20 = 1 s)")
+    p.add_argument("--hop", type=int, default=20, help="one 5-s stretch every HOP x 50 ms (default 20)")
     p.add_argument(
         "--max-seconds",
         type=float,
         default=DEFAULT_MAX_SECONDS,
-        help=f"longest log accepted, in seconds of its own clock (default {DEFAULT_MAX_SECONDS:g} = 3 h); "
-        "also bounds the file size read (1 MB per second)",
+        metavar="S",
+        help=f"longest log accepted in s (default {DEFAULT_MAX_SECONDS:g})",
     )
     p.add_argument(
         "--baseline",
         metavar="B.json",
         default=None,
-        help="judge each log against this vehicle's healthy history (propwatch baseline learn); wins over --vehicle DIR's",
+        help="compare with this vehicle's healthy flights",
     )
-    p.add_argument("--json", action="store_true", help="print JSON to stdout")
+    p.add_argument("--json", action="store_true", help="print JSON (for programs) to stdout")
     p.add_argument(
         "--report",
         metavar="DIR",
         default=None,
-        help="write a PNG + HTML report per log into DIR (their paths are printed on stderr)",
+        help="write a picture (PNG) and page (HTML) per log into DIR",
     )
     return p.parse_args(argv)
 
@@ -222,6 +157,7 @@ def in_flight_summary(decision: dict) -> str:
 
 
 STATUS_WORD = {"replace": "REPLACE", "inspect": "INSPECT", "ok": "ok"}
+TEXT_WIDTH = 110  # a long sentence continues on the next line, indented four spaces
 
 
 def format_text(d: Diagnosis, baseline=None, result: dict | None = None) -> str:
@@ -252,7 +188,7 @@ def render_text(result: dict) -> str:
         a, b = flight_seconds(s["start_boot_s"], v.takeoff_boot_s), flight_seconds(s["stop_boot_s"], v.takeoff_boot_s)
         lines.append(f"  airborne {a:.0f}-{b:.0f} s after take-off ({b - a:.0f} s)")
     lines += [f"  warning: {w}" for w in result.get("warnings") or []]
-    return "\n".join(lines)
+    return "\n".join(textwrap.fill(ln, TEXT_WIDTH, subsequent_indent="    ", break_on_hyphens=False) for ln in lines)
 
 
 def fuse_verdict(d: Diagnosis, comparison: dict, motor_names, cg_damage_separable: bool | None = None) -> None:
