@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import collections
 import functools
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -90,8 +91,19 @@ def x25_crc(rows: np.ndarray, extra: int) -> np.ndarray:
     return crc
 
 
-def unpack_frames(buf: bytes, starts: np.ndarray, mavlink_map: dict) -> list | None:
-    """Message objects for the frames starting at ``starts`` (offsets of the magic byte), in order."""
+@dataclass(frozen=True)
+class Group:
+    """The frames of one (message id, version, payload length), CRC-checked and unpacked together."""
+
+    cls: type  # pymavlink's message class
+    rows: np.ndarray  # (n,) their indices in ``starts`` (file order)
+    values: np.ndarray  # (n,) structured: pymavlink's fields in wire order (a short v2 payload zero-filled)
+    sys_id: np.ndarray  # (n,) sender system id
+    comp_id: np.ndarray  # (n,) sender component id
+
+
+def unpack_groups(buf: bytes, starts: np.ndarray, mavlink_map: dict) -> list[Group] | None:
+    """The frames starting at ``starts`` (offsets of the magic byte), grouped; None on any CRC failure or unknown id."""
     data = np.frombuffer(buf, dtype=np.uint8)
     p = np.asarray(starts, dtype=np.int64)
     v2 = data[p] == V2_MAGIC
@@ -103,9 +115,9 @@ def unpack_frames(buf: bytes, starts: np.ndarray, mavlink_map: dict) -> list | N
         | (data[np.minimum(p + 9, len(data) - 1)].astype(np.int64) << 16),
         data[p + 5],
     )
-    sys_id = np.where(v2, data[p + 5], data[p + 3]).tolist()
-    comp_id = np.where(v2, data[p + 6], data[p + 4]).tolist()
-    out: list = [None] * len(p)
+    sys_id = np.where(v2, data[p + 5], data[p + 3])
+    comp_id = np.where(v2, data[p + 6], data[p + 4])
+    groups = []
     key = (msgid << 10) | (v2.astype(np.int64) << 9) | plen
     for k in np.unique(key):
         rows = np.flatnonzero(key == k)
@@ -122,8 +134,21 @@ def unpack_frames(buf: bytes, starts: np.ndarray, mavlink_map: dict) -> list | N
         payload = np.zeros((len(rows), dt.itemsize), dtype=np.uint8)
         m = min(n, dt.itemsize)
         payload[:, :m] = frame[:, h : h + m]
-        values = payload.view(dt).reshape(len(rows)).tolist()
-        make = message_class(cls.msgname, tuple(dt.names))
-        for r, vals in zip(rows.tolist(), values):
-            out[r] = make(*vals, sys_id[r], comp_id[r])
+        groups.append(Group(cls, rows, payload.view(dt).reshape(len(rows)), sys_id[rows], comp_id[rows]))
+    return groups
+
+
+def messages(groups: list[Group], n: int) -> list:
+    """Message objects for ``n`` frames' groups, in file order (a frame in no group stays None)."""
+    out: list = [None] * n
+    for g in groups:
+        make = message_class(g.cls.msgname, tuple(g.values.dtype.names))
+        for r, vals, s, c in zip(g.rows.tolist(), g.values.tolist(), g.sys_id.tolist(), g.comp_id.tolist()):
+            out[r] = make(*vals, s, c)
     return out
+
+
+def unpack_frames(buf: bytes, starts: np.ndarray, mavlink_map: dict) -> list | None:
+    """Message objects for the frames starting at ``starts`` (offsets of the magic byte), in order."""
+    groups = unpack_groups(buf, starts, mavlink_map)
+    return None if groups is None else messages(groups, len(starts))

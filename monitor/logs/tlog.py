@@ -20,8 +20,9 @@ from pathlib import Path
 from monitor import mavlink_decode as md
 from monitor.errors import LogFormatError
 from monitor.logs.guards import check_marker_gaps
-from monitor.logs.mavbulk import unpack_frames
+from monitor.logs.mavbulk import messages, unpack_groups
 from monitor.logs.raw import RawFlight, Stream
+from monitor.logs.tlog_columns import decode_columns
 from monitor.logs.units import US_PER_MS
 
 TS_BYTES = 8
@@ -147,8 +148,11 @@ class _Collector:
 
 
 def _stream(items) -> Stream | None:
+    """A list of (t_us, values), or the (t_us, values) arrays of ``tlog_columns``."""
     if not items:
         return None
+    if isinstance(items, tuple):
+        return Stream.build(*items)
     return Stream.build([i[0] for i in items], [i[1] for i in items])
 
 
@@ -170,7 +174,8 @@ def read_tlog(path: str | Path, system_id: int | None = None, extras: bool = Tru
     """``extras=False`` skips ESC telemetry, position and IMU frames (a diagnosis does not use them).
 
     ``bulk``: unpack clean files with ``monitor.logs.mavbulk`` (same messages, several
-    times faster); a file with skipped bytes or a bad CRC is always read frame by frame.
+    times faster) and, without ``extras``, decode their 50 Hz streams as columns (``monitor.logs.tlog_columns``,
+    same samples); a file with skipped bytes or a bad CRC is always read frame by frame.
     """
     path = Path(path)
     if not path.is_file():
@@ -182,11 +187,17 @@ def read_tlog(path: str | Path, system_id: int | None = None, extras: bool = Tru
     col = _Collector()
     wanted = WANTED_IDS if extras else CORE_IDS
     bad_crc, skipped, truncated = 0, 0, False
-    msgs = None
+    msgs = columns = None
     if bulk:
         starts, skipped, truncated = frame_starts(buf, wanted)
-        msgs = unpack_frames(buf, starts, mavlink_map) if skipped == 0 else None
-    if msgs is not None:
+        groups = unpack_groups(buf, starts, mavlink_map) if skipped == 0 else None
+        if groups is not None and not extras:  # the 50 Hz streams as columns where the file allows
+            columns = decode_columns(groups, len(starts), dec, col.add)
+        if groups is not None and columns is None:
+            msgs = messages(groups, len(starts))
+    if columns is not None:
+        col.sessions[-1].update(columns)
+    elif msgs is not None:
         for msg in msgs:
             for s in dec.decode(msg):
                 col.add(s)
