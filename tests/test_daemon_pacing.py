@@ -18,7 +18,7 @@ from test_daemon_helpers import WALL_T0_S, synth_flight, toy_model
 from monitor.daemon import link as link_mod
 from monitor.daemon.config import monitor_config_from_mapping
 from monitor.daemon.events import EventWriter
-from monitor.daemon.link import Link
+from monitor.daemon.link import Link, LinkGuard
 from monitor.daemon.pacing import LATE_TOLERANCE_S, MIN_SAMPLES, ReadPacer
 from monitor.daemon.pipeline import Pipeline
 from monitor.daemon.sdnotify import Notifier
@@ -35,8 +35,10 @@ def free_port() -> int:
 @pytest.fixture
 def udpin():
     port = free_port()
-    link = Link(f"udpin:127.0.0.1:{port}", 191)
     tx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    tx.bind(("127.0.0.1", 0))
+    # The autopilot's system id and address configured: the pin is complete before the first datagram.
+    link = Link(f"udpin:127.0.0.1:{port}", 191, system_id=1, guard=LinkGuard(autopilot_address=tx.getsockname()))
     yield link, tx, ("127.0.0.1", port)
     tx.close()
     link.close()
@@ -98,28 +100,31 @@ def test_the_arrival_is_the_kernel_stamp_so_time_spent_waiting_counts(udpin):
     assert read - received >= 0.19
 
 
-def test_replies_go_to_the_address_of_the_autopilots_heartbeat_within_a_batch(udpin):
-    link, tx, addr = udpin
+def test_replies_go_to_the_address_of_the_autopilots_heartbeats_within_a_batch():
     from pymavlink.dialects.v20 import common as mavlink
 
     parser = mavlink.MAVLink(None)
-    heartbeats = {}  # system id -> its first HEARTBEAT frame: the autopilot (1) and a ground station (255)
-    for _, f in synth_flight(2.0):
+    heartbeats = {}  # system id -> its HEARTBEAT frames: the autopilot (1) and a ground station (255)
+    for _, f in synth_flight(3.0):
         (m,) = parser.parse_buffer(f)
         if m.get_type() == "HEARTBEAT":
-            heartbeats.setdefault(m.get_srcSystem(), f)
-    other = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+            heartbeats.setdefault(m.get_srcSystem(), []).append(f)
+    port = free_port()
+    link = Link(f"udpin:127.0.0.1:{port}", 191, guard=LinkGuard(pin_wait_s=0.0))  # pinned at its second heartbeat
+    tx, other = (socket.socket(socket.AF_INET, socket.SOCK_DGRAM) for _ in range(2))
     try:
-        other.sendto(heartbeats[255], addr)  # the ground station sends first, from another port
-        tx.sendto(heartbeats[1], addr)
+        other.sendto(heartbeats[255][0], ("127.0.0.1", port))  # the ground station sends first, from another port
+        for f in heartbeats[1][:2]:
+            tx.sendto(f, ("127.0.0.1", port))
+        other.sendto(heartbeats[255][1], ("127.0.0.1", port))
         time.sleep(0.1)
         batch = link.read(1.0)
-        gcs, ap = batch[0][0], batch[1][0]
-        assert gcs.get_srcSystem() == 255 and ap.get_srcSystem() == 1
-        link.autopilot_seen(ap)
+        assert [m.get_srcSystem() for m, _, _ in batch] == [1]  # the pinning heartbeat; nothing from elsewhere
         assert link.stats()["autopilot_address"] == f"127.0.0.1:{tx.getsockname()[1]}"
     finally:
-        other.close()
+        for s in (tx, other):
+            s.close()
+        link.close()
 
 
 # -- the pacer alone -------------------------------------------------------------------------
@@ -212,11 +217,14 @@ def test_a_paced_daemon_over_udp_computes_what_every_message_handled_alone_compu
     model = toy_model(tmp_path / "toy.onnx")
     flight = synth_flight(9.0, faulty=(3,), seed=2)
     port = free_port()
-    link = Link(f"udpin:127.0.0.1:{port}", 191)
+    tx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    tx.bind(("127.0.0.1", 0))
+    # The autopilot configured (system id and address): every message counts from the first, as fed alone.
+    link = Link(f"udpin:127.0.0.1:{port}", 191, system_id=1, guard=LinkGuard(autopilot_address=tx.getsockname()))
     live = daemon_for(model, {}, link)
 
     def send():
-        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as tx:
+        with tx:
             t0 = time.monotonic()
             for t, f in flight:
                 time.sleep(max(0.0, t0 + (t - WALL_T0_S) - time.monotonic()))

@@ -110,7 +110,12 @@ def fly_over_udp(tmp_path, model, frames, speed, config_text="", extra=()):
     """Daemon on udpin, replay stub on udpout; returns (daemon, replay, events, requests, received, report)."""
     port = free_udp_port()
     tlog = write_tlog(tmp_path / "flight.tlog", frames)
-    cfg = write_config(tmp_path / "monitor.yaml", with_consecutive_rule(config_text or "alerts:\n  refractory_s: 60\n"))
+    text = with_consecutive_rule(config_text or "alerts:\n  refractory_s: 60\n")
+    # The autopilot is pinned after 2 s of its heartbeats at real pace: the same boot time at the replay's speed.
+    pin = f"  pin_wait_s: {2.0 / speed:g}\n"
+    if "pin_wait_s" not in text:
+        text = text.replace("link:\n", "link:\n" + pin, 1) if "link:\n" in text else text + "link:\n" + pin
+    cfg = write_config(tmp_path / "monitor.yaml", text)
     paths = {k: tmp_path / f"{k}.jsonl" for k in ("events", "requests", "received")}
     report = tmp_path / "report.json"
     d = Proc(
@@ -200,12 +205,13 @@ def test_healthy_flight_raises_no_alert_and_no_requests_when_switched_off(tmp_pa
 
 
 def test_link_drop_and_return_and_a_stream_that_stops(tmp_path, model):
-    frames = synth_flight(9.0, faulty=(2,), hole_s=(2.0, 4.5))
+    # The hole starts after the autopilot was pinned (its heartbeats over 2 s of boot time, link.pin_wait_s).
+    frames = synth_flight(10.0, faulty=(2,), hole_s=(3.0, 5.5))
     servo = mavlink.MAVLink(None)
-    # SERVO_OUTPUT_RAW (id 36) stops for good at 6.5 s of flight.
-    cut = frames[0][0] + 6.5
+    # SERVO_OUTPUT_RAW (id 36) stops for good at 7.5 s of flight.
+    cut = frames[0][0] + 7.5
     frames = [(t, f) for t, f in frames if not (t > cut and servo.decode(bytearray(f)).get_type() == "SERVO_OUTPUT_RAW")]
-    cfg = "link:\n  link_timeout_s: 1.0\n  rate_check_period_s: 1.0\n"
+    cfg = "link:\n  link_timeout_s: 1.0\n  rate_check_period_s: 1.0\n  pin_wait_s: 0.5\n"
     d, *_, report = fly_over_udp(tmp_path, model, frames, speed=1.5, config_text=cfg)
     text = d.text
     assert "link lost" in text and text.count("link up") >= 2, text
@@ -372,7 +378,10 @@ def test_tcp_link_that_is_not_there_yet_then_comes_and_goes(tmp_path, model):
     # 20 s of flight: what is sent before the daemon's next connection attempt (<= 1 s) is lost, as with PX4.
     tlog = write_tlog(tmp_path / "f.tlog", synth_flight(20.0, faulty=(2,)))
     events = tmp_path / "ev.jsonl"
-    d = Proc(monitor_cmd("--connect", f"tcp:127.0.0.1:{port}", "--model", str(model), "--events", str(events)))
+    cfg = write_config(tmp_path / "monitor.yaml", CONSECUTIVE_RULE + "link:\n  pin_wait_s: 0.4\n")  # 2 s of boot at 5x
+    d = Proc(
+        monitor_cmd("--connect", f"tcp:127.0.0.1:{port}", "--model", str(model), "--events", str(events), "--config", str(cfg))
+    )
     try:
         assert d.wait_for("cannot open"), d.text
         r = subprocess.run(
@@ -401,7 +410,7 @@ def test_tcp_link_that_is_not_there_yet_then_comes_and_goes(tmp_path, model):
         rc = d.stop()
     assert rc == 0 and "Traceback" not in d.text, d.text
     ev = [json.loads(x) for x in events.read_text().splitlines()]
-    assert ev and ev[0]["faulty_propellers"] == [2]
+    assert ev and ev[0]["faulty_propellers"] == [2], d.text
 
 
 def test_serial_device_with_baud_rate(tmp_path, model):
@@ -413,7 +422,8 @@ def test_serial_device_with_baud_rate(tmp_path, model):
     tty.setraw(slave)
     dev = os.ttyname(slave)
     events = tmp_path / "ev.jsonl"
-    d = Proc(monitor_cmd("--connect", f"{dev},921600", "--model", str(model), "--events", str(events)))
+    cfg = write_config(tmp_path / "monitor.yaml", CONSECUTIVE_RULE + "link:\n  pin_wait_s: 0.4\n")  # 2 s of boot at 5x
+    d = Proc(monitor_cmd("--connect", f"{dev},921600", "--model", str(model), "--events", str(events), "--config", str(cfg)))
     heard = b""
     try:
         assert d.wait_for("ready:"), d.text
@@ -434,7 +444,8 @@ def test_serial_device_with_baud_rate(tmp_path, model):
         os.close(slave)
     assert rc == 0 and "Traceback" not in d.text, d.text
     ev = [json.loads(x) for x in events.read_text().splitlines()]
-    assert ev and ev[0]["faulty_propellers"] == [1]
+    alerts = [e for e in ev if e.get("event") == "alert"]
+    assert alerts and alerts[0]["faulty_propellers"] == [1], d.text
     p = mavlink.MAVLink(None)
     p.robust_parsing = True
     back = [m for m in (p.parse_buffer(heard) or []) if m.get_type() != "BAD_DATA"]

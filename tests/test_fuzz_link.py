@@ -51,12 +51,15 @@ def flight():
     return out
 
 
-def sign_and_pack(msgs, key: bytes | None, mavlink1: bool = False) -> list[tuple[float, bytes]]:
-    """Re-pack every message as its own sender would, signing with ``key`` (None: unsigned)."""
+def sign_and_pack(msgs, key: bytes | None, mavlink1: bool = False, sys_id: int | None = None) -> list[tuple[float, bytes]]:
+    """Re-pack every message as its own sender would, signing with ``key`` (None: unsigned); ``sys_id`` re-numbers
+    the vehicle (system 1) as another."""
     senders: dict[tuple[int, int], mavlink.MAVLink] = {}
     out = []
     for t, m in msgs:
         ids = (m.get_srcSystem(), m.get_srcComponent())
+        if sys_id is not None and ids[0] == 1:
+            ids = (sys_id, ids[1])
         mav = senders.get(ids)
         if mav is None:
             mav = senders[ids] = mavlink.MAVLink(None, srcSystem=ids[0], srcComponent=ids[1])
@@ -71,6 +74,14 @@ def sign_and_pack(msgs, key: bytes | None, mavlink1: bool = False) -> list[tuple
 
 def run_daemon(tmp_path, classifier, frames, config: dict, extra_senders: int = 0, sender_addr="127.0.0.1"):
     """Daemon on udpin in a thread; ``frames`` sent paced from one socket (the autopilot's)."""
+    daemon, got, others_got = run_senders(tmp_path, classifier, frames, config, [(sender_addr, 0)], extra_senders)
+    return daemon, got[0], others_got
+
+
+def run_senders(tmp_path, classifier, frames, config: dict, binds, extra_senders: int = 0):
+    """Daemon on udpin in a thread; ``frames`` are (time, frame) or (time, frame, k), sent paced from the socket
+    bound to ``binds[k]`` (k = 0 when not given). Returns the daemon, what each of those sockets received, and
+    how many datagrams the ``extra_senders`` (ground stations sending HEARTBEATs) received."""
     # The link is under test, not the rule: the consecutive rule alerts within a short flight whose fault is
     # present from take-off (the sequential rule's own tests are in test_decision*.py and test_fuzz_daemon.py).
     # Replayed at SPEED: the pin waits the same boot time as at real pace (PX4's 1 Hz heartbeats, two seconds).
@@ -80,30 +91,32 @@ def run_daemon(tmp_path, classifier, frames, config: dict, extra_senders: int = 
     rx.bind(("127.0.0.1", 0))
     port = rx.getsockname()[1]
     rx.close()
-    link = Link(f"udpin:127.0.0.1:{port}", cfg.link.component_id, guard=guard(cfg))
+    link = Link(f"udpin:127.0.0.1:{port}", cfg.link.component_id, system_id=cfg.link.system_id or None, guard=guard(cfg))
     events = EventWriter(tmp_path / "events.jsonl")
     daemon = Daemon(cfg, link, Pipeline(classifier, cfg, PAPER_ESC), events, RecordingNotifier())
     th = threading.Thread(target=daemon.run, daemon=True)
     th.start()
-    ap = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    ap.bind((sender_addr, 0))
+    socks = []
+    for addr in binds:
+        socks.append(socket.socket(socket.AF_INET, socket.SOCK_DGRAM))
+        socks[-1].bind(addr)
     others = [socket.socket(socket.AF_INET, socket.SOCK_DGRAM) for _ in range(extra_senders)]
     gcs_hb = bytes(mavlink.MAVLink_heartbeat_message(6, 8, 0, 0, 0, 3).pack(mavlink.MAVLink(None, 255, 190)))
     t0, w0 = frames[0][0], time.monotonic()
-    for i, (t, frame) in enumerate(frames):
+    for i, (t, frame, *k) in enumerate(frames):
         delay = w0 + (t - t0) / SPEED - time.monotonic()
         if delay > 0:
             time.sleep(delay)
-        ap.sendto(frame, ("127.0.0.1", port))
+        socks[k[0] if k else 0].sendto(frame, ("127.0.0.1", port))
         if others and i % 20 == 0:
             others[(i // 20) % len(others)].sendto(gcs_hb, ("127.0.0.1", port))
     time.sleep(0.5)
     daemon.stop.set()
     th.join(10)
     link.close()
-    got = _drain(ap)
+    got = [_drain(s) for s in socks]
     others_got = sum(len(_drain(s)) for s in others)
-    for s in [ap, *others]:
+    for s in [*socks, *others]:
         s.close()
     return daemon, got, others_got
 
@@ -180,7 +193,7 @@ def test_signing_key_file_and_allow_list_syntax_are_checked(tmp_path):
         monitor_config_from_mapping({"link": {"allow_addresses": ["127.0.0.1:99999"]}})
 
 
-def test_forged_signed_frames_from_many_streams_keep_pymavlink_signing_state_bounded(tmp_path):
+def test_forged_signed_frames_from_many_streams_leave_no_signing_state(tmp_path):
     from monitor.daemon.link import LinkGuard
     from monitor.daemon.signing import MAX_STREAMS
 

@@ -15,6 +15,7 @@ import pytest
 from pymavlink.dialects.v20 import common as mavlink
 from test_fuzz_link import KEY, WRONG_KEY, _key_file, flight, run_daemon, sign_and_pack, toy  # noqa: F401
 
+from monitor.daemon.link import read_signing_key
 from monitor.daemon.signing import FUTURE_SLACK_S, REANCHOR_S, TIMESTAMP_UNITS_PER_S, SignatureGate
 
 FAR_FUTURE = 2**48 - 2  # the largest signing timestamp but one
@@ -131,3 +132,16 @@ def test_a_missing_or_unreadable_signing_key_exits_2_naming_the_path(tmp_path, c
     )
     assert r.returncode == 2, r.stderr
     assert str(key_path) in r.stderr and "signing key" in r.stderr
+
+
+def test_keygen_writes_a_private_key_the_daemon_reads_and_never_overwrites_one(tmp_path):
+    path = tmp_path / "signing.key"
+    run = [sys.executable, "-m", "monitor.cli", "keygen", str(path)]
+    r = subprocess.run(run, capture_output=True, text=True, timeout=60)
+    assert r.returncode == 0, r.stderr
+    first = read_signing_key(path)
+    assert len(first) == 32 and (path.stat().st_mode & 0o777) == 0o600
+    r = subprocess.run(run, capture_output=True, text=True, timeout=60)
+    assert r.returncode == 2 and str(path) in r.stderr and read_signing_key(path) == first
+    r = subprocess.run([*run, "--force"], capture_output=True, text=True, timeout=60)
+    assert r.returncode == 0 and read_signing_key(path) != first

@@ -155,7 +155,13 @@ class Link:
         self.pin = (
             None
             if self.is_log
-            else AutopilotPin(system_id, self.guard.autopilot_component_id, self.guard.autopilot_address, self.guard.pin_wait_s)
+            else AutopilotPin(
+                system_id,
+                self.guard.autopilot_component_id,
+                self.guard.autopilot_address,
+                self.guard.pin_wait_s,
+                one_peer=not self.is_udpin,
+            )
         )
         self.unverified_frames = 0  # frames passed on without a verified signature (all of them with signing off)
         self._announced: set[tuple[str, str]] = set()

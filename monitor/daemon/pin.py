@@ -55,7 +55,10 @@ class AutopilotPin:
         address: Origin = None,
         wait_s: float = PIN_WAIT_S,
         clock: Callable[[], float] = time.monotonic,
+        one_peer: bool = False,
     ):
+        """``one_peer``: the link has a single peer (serial, TCP, udpout), so a configured system id pins at once,
+        as does a configured system id with a configured address."""
         self.configured_system_id = system_id
         self.component_id = component_id
         self.configured_address = address
@@ -67,6 +70,8 @@ class AutopilotPin:
         self._candidates: dict[tuple[int, Origin], list[float]] = {}  # -> heartbeat times (monotonic)
         self.refused: Counter = Counter()
         self.announced: set[tuple[str, str]] = set()
+        if system_id is not None and (one_peer or address is not None):
+            self.system_id = system_id  # nothing left to learn
 
     @property
     def pinned(self) -> bool:
@@ -77,19 +82,20 @@ class AutopilotPin:
         if not reason:
             return True
         self.refused[reason] += 1
-        self.announce(reason, who)
+        self.announce(reason, who, describe(msg.get_srcSystem(), origin))
         return False
 
-    def announce(self, reason: str, who: str) -> None:
+    def announce(self, reason: str, who: str, first: str) -> None:
+        """Once per (reason, who): ``who`` is the address for frames from elsewhere, else the system."""
         if (reason, who) in self.announced or len(self.announced) >= MAX_ANNOUNCED:
             return
         self.announced.add((reason, who))
-        log.warning("refused: %s (%s); counted from now on, not logged again", reason, who)
+        log.warning("refused: %s (%s, first from %s); counted from now on, not logged again", reason, who, first)
 
     def _why(self, msg: Any, origin: Origin) -> tuple[str, str]:
         sys_id, comp_id = msg.get_srcSystem(), msg.get_srcComponent()
         if self.address is not None and origin is not None and origin != self.address:
-            return "not the pinned autopilot link", describe(sys_id, origin)
+            return "not the pinned autopilot link", f"{origin[0]}:{origin[1]}"
         if self.pinned:
             if comp_id == self.component_id and sys_id != self.system_id:
                 return "another autopilot", describe(sys_id, origin)
