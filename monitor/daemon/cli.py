@@ -20,6 +20,7 @@ from pathlib import Path
 from monitor.daemon.config import MonitorConfig, load_monitor_config, parse_address, parse_endpoint, parse_source
 from monitor.daemon.events import EventWriter
 from monitor.daemon.link import Link, LinkGuard, read_signing_key
+from monitor.daemon.memory import VehicleMemory
 from monitor.daemon.pipeline import Pipeline
 from monitor.daemon.sdnotify import Notifier
 from monitor.daemon.service import Daemon
@@ -46,6 +47,12 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         "--vehicle", help="vehicle YAML whose ESC curve overrides the model's, or a `propwatch adapt` folder (its model too)"
     )
     p.add_argument("--report", help="write counters and latency percentiles as JSON at exit")
+    p.add_argument(
+        "--state-dir",
+        default=None,
+        help="vehicle memory: one healthy baseline per vehicle here (overrides state_dir; default /var/lib/propwatch); "
+        "'' turns it off",
+    )
     p.add_argument("--tlog-speed", type=float, help="for a .tlog: 1 = recorded pace, 0 = as fast as possible")
     p.add_argument(
         "--log-level", default="INFO", choices=["DEBUG", "INFO", "WARNING", "ERROR"], help="logging threshold (default INFO)"
@@ -85,7 +92,9 @@ def main(argv: list[str] | None = None) -> int:
     link = Link(args.connect, cfg.link.component_id, tlog_speed, cfg.link.system_id or None, guard(cfg))
     events = EventWriter(args.events or cfg.events_path or None, cfg.blind.events_retry_s, cfg.blind.events_backlog)
     # The geometry for the moment balance's rotor effectiveness: as diagnose, --vehicle else the default vehicle.
-    daemon = Daemon(cfg, link, pipeline, events, Notifier(), vehicle=load_vehicle(vehicle or DEFAULT_VEHICLE))
+    state_dir = cfg.state_dir if args.state_dir is None else args.state_dir
+    memory = VehicleMemory(state_dir, cfg.resample.rate_hz) if state_dir else None
+    daemon = Daemon(cfg, link, pipeline, events, Notifier(), vehicle=load_vehicle(vehicle or DEFAULT_VEHICLE), memory=memory)
 
     def on_signal(signum, _frame):
         log.info("signal %d: stopping", signum)

@@ -6,6 +6,7 @@ rejected by name. ``deploy/monitor.yaml`` lists them all with their meaning.
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -263,11 +264,17 @@ class BlindConfig:
         _within(self.events_backlog, 1, 100_000, "blind.events_backlog")
 
 
+DEFAULT_STATE_DIR = "/var/lib/propwatch"
+
+
 @dataclass(frozen=True)
 class MonitorConfig:
     model_path: str = str(shipped("classifier.onnx"))
     vehicle_path: str = ""  # optional vehicle YAML whose ESC curve overrides the model's
     events_path: str = ""  # JSON lines, one per alert ('' = none; --events overrides)
+    # Vehicle memory (monitor.daemon.memory): one healthy baseline per vehicle. Default /var/lib/propwatch, or
+    # $PROPWATCH_STATE_DIR where set; '' = no vehicle memory. --state-dir overrides.
+    state_dir: str = field(default_factory=lambda: os.environ.get("PROPWATCH_STATE_DIR", DEFAULT_STATE_DIR))
     link: LinkConfig = field(default_factory=LinkConfig)
     input: InputConfig = field(default_factory=InputConfig)
     resample: ResampleConfig = field(default_factory=ResampleConfig)

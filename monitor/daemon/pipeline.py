@@ -67,6 +67,8 @@ class StepResult:
     data_ok: bool = True  # attitude and motor data present and plausible (airborne or not)
     inputs: StepInputs | None = None  # flight state for the decision's regime tracker
     rates_rad_s: np.ndarray | None = None  # (3,) body rates FRD of this step (valid steps), for the moment balance
+    roll_rad: float = math.nan  # attitude of this step, for the vehicle memory's tilt regime
+    pitch_rad: float = math.nan
 
     @property
     def time_boot_ms(self) -> int:
@@ -330,6 +332,7 @@ class Pipeline:
         if math.isfinite(acc[0]) and math.isfinite(acc[1]):
             accel_xy = acc
             self.stats["imu_steps"] += 1
+        roll, pitch = float(att[0]), float(att[1])
         inputs = StepInputs(  # sum / size and .max(): np.mean and np.max bit for bit, without their wrappers
             airborne,
             float(motor.sum() / motor.size),
@@ -352,6 +355,8 @@ class Pipeline:
                 reason=self._why(v, airborne, g.timestamp_us),
                 data_ok=data_ok,
                 inputs=inputs,
+                roll_rad=roll,
+                pitch_rad=pitch,
             )
         self.stats["valid_steps"] += 1
         w = self.window
@@ -361,10 +366,22 @@ class Pipeline:
         self._count = min(self._count + 1, w)
         rates = att[3:6]
         if self._count < w:
-            return StepResult(g.timestamp_us, True, True, self._count, battery_v, inputs=inputs, rates_rad_s=rates)
+            return StepResult(
+                g.timestamp_us,
+                True,
+                True,
+                self._count,
+                battery_v,
+                inputs=inputs,
+                rates_rad_s=rates,
+                roll_rad=roll,
+                pitch_rad=pitch,
+            )
         self._since_inference -= 1
         if self._since_inference > 0:
-            return StepResult(g.timestamp_us, True, True, w, battery_v, inputs=inputs, rates_rad_s=rates)
+            return StepResult(
+                g.timestamp_us, True, True, w, battery_v, inputs=inputs, rates_rad_s=rates, roll_rad=roll, pitch_rad=pitch
+            )
         self._since_inference = self.config.inference.every_k_steps
         window = self._ring[self._head : self._head + w]  # oldest first
         labels, faults = self.classifier.predict(window[None])
@@ -380,4 +397,6 @@ class Pipeline:
             time.perf_counter() - received_s,
             inputs=inputs,
             rates_rad_s=rates,
+            roll_rad=roll,
+            pitch_rad=pitch,
         )

@@ -27,6 +27,7 @@ from monitor.daemon.config import MonitorConfig
 from monitor.daemon.events import EventWriter
 from monitor.daemon.latency import LatencyHistogram
 from monitor.daemon.link import MAV_CMD_SET_MESSAGE_INTERVAL, Link
+from monitor.daemon.memory import VehicleMemory
 from monitor.daemon.pacing import MAX_PAUSE_S
 from monitor.daemon.pipeline import Pipeline
 from monitor.daemon.rotor_evidence import RecentEffectiveness
@@ -91,9 +92,11 @@ class Daemon:
         events: EventWriter,
         notifier: Notifier | None = None,
         vehicle=None,
+        memory: VehicleMemory | None = None,
     ):
         self.cfg = config
         self.link = link
+        self.memory = memory  # the vehicle's healthy history (monitor.daemon.memory), None without a state dir
         self.pipeline = pipeline
         self.events = events
         self.notifier = notifier or Notifier({})
@@ -234,6 +237,8 @@ class Daemon:
             self._system_id = dec.system_id
             self.link.set_system_id(dec.system_id)
             log.info("autopilot: system %d component %d", dec.system_id, dec.component_id)
+            if self.memory is not None:
+                self.memory.identify(dec.system_id)
         if self._system_id is not None and msg.get_srcSystem() == self._system_id and msg.get_srcComponent() == dec.component_id:
             self._rates[kind] += 1
             now = time.monotonic()
@@ -242,7 +247,10 @@ class Daemon:
             if dec.clock_us != self._clock_seen:
                 self._clock_seen, self._clock_moved_at = dec.clock_us, now
             if kind == "HEARTBEAT":
-                self._armed = bool(getattr(msg, "base_mode", 0) & md.MAV_MODE_FLAG_SAFETY_ARMED)
+                armed = bool(getattr(msg, "base_mode", 0) & md.MAV_MODE_FLAG_SAFETY_ARMED)
+                if self._armed and not armed and self.memory is not None:
+                    self._disarmed()
+                self._armed = armed
                 self._last_autopilot_hb = now
                 self.link.autopilot_seen(msg)
                 if not self._link_up:
@@ -250,12 +258,16 @@ class Daemon:
                     self._link_up_at = now
                     log.info("link up: autopilot heartbeat received")
                     self._set_status(f"link up: autopilot {self._system_id}")
+            elif kind == "AUTOPILOT_VERSION" and self.memory is not None:
+                self.memory.identify(self._system_id, int(getattr(msg, "uid", 0) or 0) or None)
             elif kind == "COMMAND_ACK" and msg.command == MAV_CMD_SET_MESSAGE_INTERVAL:
                 self.counters.acks[int(msg.result)] += 1
                 if msg.result != 0:
                     log.warning("stream-rate request refused by the autopilot (MAV_RESULT %d)", msg.result)
         while self.pipeline.clock_events:  # reboot or clock step: blind until good data flows again
             what = self.pipeline.clock_events.popleft()
+            if self.memory is not None:
+                self.memory.discard(what)
             self._transition(self.blind.enter("autopilot rebooted" if "reboot" in what else "clock stepped back", what))
         for step in steps:
             self._on_step(step)
@@ -294,7 +306,8 @@ class Daemon:
         """While the flight's omega^2 shares learn their baseline, nothing they say is tested yet: no FAULT can come
         from them (the first BASELINE_S of evidence windows after each take-off or collective step)."""
         learnt = self.decision.share.learning_s
-        return "" if learnt is None else f"; shares learning baseline ({int(learnt)} of {BASELINE_S:.0f} s)"
+        own = "" if learnt is None else f"; shares learning baseline ({int(learnt)} of {BASELINE_S:.0f} s)"
+        return own + (self.memory.status() if self.memory is not None else "")
 
     def _decide(self, step) -> None:
         """The shared decision rule on one grid step (pause when a stream stopped, never freeze it)."""
@@ -326,7 +339,7 @@ class Daemon:
                 f"airborne: deciding; evidence live: {', '.join(live)}{self._context_status()}{self._learning_status()}"
             )
         elif not step.airborne and not self._paused:
-            self._set_status(f"not deciding: {step.reason}")
+            self._set_status(f"not deciding: {step.reason}" + (self.memory.status() if self.memory is not None else ""))
         self._blind_step(step)  # after the step's own pause state, so a recovered line says whether it runs
         self._apply_pause()
         if not step.valid or step.fault_probability is None:
@@ -383,6 +396,8 @@ class Daemon:
 
     def _announce(self, a: Announcement, time_boot_ms: int, step=None) -> None:
         self.counters.alerts += 1
+        if self.memory is not None:
+            self.memory.alert_raised()  # a flight that raised anything never becomes the vehicle's history
         event = {"event": "alert", **a.event(), "time_boot_ms": time_boot_ms}
         if step is not None and step.fault_probability is not None:
             event["probabilities"] = [round(float(p), 4) for p in step.fault_probability]
@@ -426,8 +441,24 @@ class Daemon:
                 airborne=bool(inputs.airborne) if inputs is not None else True,
             )
 
+    def _memory_step(self, step) -> None:
+        """The flight so far against the vehicle's history (from take-off), one grid step."""
+        rpm = step.inputs.motor_rpm if step.inputs is not None else None
+        a = self.memory.step(step.timestamp_us / US_PER_S, step.airborne, rpm, step.roll_rad, step.pitch_rad)
+        if a is not None:
+            self._announce(a, step.time_boot_ms)
+
+    def _disarmed(self) -> None:
+        """Landing and disarm: the flight may become the vehicle's history (monitor.daemon.memory)."""
+        auth = self.link.flight_authenticated if getattr(self.link, "gate", None) is not None else None
+        what = self.memory.disarmed(auth)
+        if what != "no flight":
+            self.events.write_record({"event": "vehicle_memory", "flight": what, "status": self.memory.status().lstrip("; ")})
+
     def _on_step(self, step) -> None:
         self._rotor_step(step)
+        if self.memory is not None:
+            self._memory_step(step)
         if self.sequential:
             self._decide(step)
             return

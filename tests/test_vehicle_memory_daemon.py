@@ -1,0 +1,157 @@
+"""The daemon's vehicle memory (monitor.daemon.memory): learns landed, disarmed, quiet flights; judges from take-off."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+
+import numpy as np
+
+from monitor.daemon.memory import MIN_LEARN_S, VehicleMemory
+from monitor.memory.baseline import VehicleBaseline
+
+RATE_HZ = 20.0
+QUIRKY = np.array([1.03, 0.97, 0.95, 1.05])
+
+
+def fly(mem: VehicleMemory, share, seconds=60.0, seed=0, ground_s=2.0):
+    """Steps of one flight (ground, airborne ``seconds``, ground); returns the announcements."""
+    rng = np.random.default_rng(seed)
+    out = []
+    n_air, n_gnd = int(seconds * RATE_HZ), int(ground_s * RATE_HZ)
+    t = 0.0
+    for i in range(n_gnd + n_air + n_gnd):
+        air = n_gnd <= i < n_gnd + n_air
+        s = np.asarray(share) * (1 + 0.01 * rng.standard_normal(4))
+        rpm = 6000.0 * np.sqrt(s) if air else np.full(4, 1000.0)
+        a = mem.step(t, air, rpm, 0.01 * rng.standard_normal(), 0.01 * rng.standard_normal())
+        if a is not None:
+            out.append((t - n_gnd / RATE_HZ, a))
+        t += 1 / RATE_HZ
+    return out
+
+
+def healthy_share(k):
+    return QUIRKY + np.random.default_rng(100 + k).normal(0, 0.003, 4)
+
+
+def test_learns_three_flights_then_names_damage_present_at_take_off(tmp_path):
+    mem = VehicleMemory(tmp_path / "state", RATE_HZ)
+    mem.identify(sysid=1)
+    assert mem.status() == "; no vehicle baseline yet (0 of 3 flights)"
+    for k in range(3):
+        assert fly(mem, healthy_share(k), seed=k) == []
+        assert mem.disarmed(None) == "learnt"
+        assert mem.status() == f"; no vehicle baseline yet ({k + 1} of 3 flights)" or k == 2
+    assert "against 3 healthy flights of this vehicle" in mem.status()
+    assert (tmp_path / "state" / "vehicles" / "sysid-1" / "baseline.json").is_file()
+    share = QUIRKY.copy()
+    share[2] /= 1 - 0.08  # propeller 3 damaged before take-off
+    alerts = fly(mem, share, seed=50)
+    assert alerts, "no alert on a flight damaged from take-off"
+    t, a = alerts[0]
+    assert a.level == "fault" and a.propellers == (3,) and t <= 15.0, (t, a.text)
+    assert mem.disarmed(None) == "not learnt: it raised an alert"
+    assert len(VehicleBaseline.load(mem.path).active()) == 3
+    for k in range(3, 8):  # later healthy flights stay quiet and are learnt
+        assert fly(mem, healthy_share(k), seed=k) == []
+        assert mem.disarmed(None) == "learnt"
+
+
+def test_never_learns_a_stopped_stream_a_short_or_an_unverified_flight(tmp_path):
+    mem = VehicleMemory(tmp_path, RATE_HZ)
+    mem.identify(sysid=7)
+    fly(mem, healthy_share(0), seconds=MIN_LEARN_S - 5)
+    assert mem.disarmed(None).startswith("not learnt: too short")
+    fly(mem, healthy_share(1), seed=1)
+    assert mem.disarmed(False) == "not learnt: not every frame was signed and verified"
+    # a stream that stops in the air: no landing, no disarm of a landed flight
+    for i in range(int(60 * RATE_HZ)):
+        mem.step(i / RATE_HZ, True, 6000 * np.sqrt(healthy_share(2)), 0.0, 0.0)
+    mem.discard("autopilot rebooted")
+    assert mem.disarmed(None) == "no flight"
+    assert not (tmp_path / "vehicles").exists()
+
+
+def test_each_vehicle_its_own_baseline_and_notes_are_kept(tmp_path):
+    mem = VehicleMemory(tmp_path, RATE_HZ)
+    mem.identify(sysid=1)
+    fly(mem, healthy_share(0))
+    assert mem.disarmed(None) == "learnt"
+    mem.identify(sysid=1, uid=0x5057000000000002)
+    assert mem.status() == "; no vehicle baseline yet (0 of 3 flights)"  # by uid: another vehicle's file
+    fly(mem, healthy_share(1), seed=1)
+    assert mem.disarmed(None) == "learnt"
+    p = tmp_path / "vehicles" / "uid-5057000000000002" / "baseline.json"
+    r = subprocess.run(
+        [sys.executable, "-m", "monitor.cli", "baseline", "note", str(p), "--event", "props-replaced"],
+        capture_output=True,
+        text=True,
+    )
+    assert r.returncode == 0, r.stderr
+    fly(mem, healthy_share(2), seed=2)
+    assert mem.disarmed(None) == "learnt"
+    b = VehicleBaseline.load(p)
+    assert [e["event"] for e in b.events] == ["props-replaced"] and len(b.active()) == 1 and len(b.flights) == 2
+
+
+def test_a_state_dir_that_cannot_be_written_is_said_and_monitoring_goes_on(tmp_path):
+    (tmp_path / "file").write_text("not a folder")
+    mem = VehicleMemory(tmp_path / "file", RATE_HZ)
+    mem.identify(sysid=1)
+    fly(mem, healthy_share(0))
+    what = mem.disarmed(None)
+    assert what.startswith("not learnt: state dir not writable") and "state dir not writable" in mem.status()
+    assert fly(mem, healthy_share(1), seed=1) == []  # still judging (nothing to judge against), no exception
+
+
+def test_a_failed_write_leaves_the_old_baseline(tmp_path, monkeypatch):
+    mem = VehicleMemory(tmp_path, RATE_HZ)
+    mem.identify(sysid=1)
+    fly(mem, healthy_share(0))
+    assert mem.disarmed(None) == "learnt"
+    before = mem.path.read_bytes()
+
+    def power_cut(fd):
+        raise OSError(5, "Input/output error")
+
+    monkeypatch.setattr(os, "fsync", power_cut)
+    fly(mem, healthy_share(1), seed=1)
+    assert mem.disarmed(None).startswith("not learnt: state dir not writable")
+    assert mem.path.read_bytes() == before and [p.name for p in mem.path.parent.iterdir()] == ["baseline.json"]
+
+
+def test_daemon_process_learns_and_alerts_from_take_off(tmp_path):
+    """The real daemon over replayed logs: 3 references learnt at landing and disarm, then a flight damaged from
+    take-off alerted by the vehicle memory within 15 s, naming its propeller; STATUS before the baseline exists."""
+    from offline.vehicles.ours import write_fleet
+
+    fleet = tmp_path / "fleet"
+    write_fleet(fleet, 5, seed=5, duration_s=45.0)  # 3 references, a healthy later flight, rotor 2 damaged
+    state = tmp_path / "state"
+
+    def replay(i):
+        ev = tmp_path / f"ev{i}.jsonl"
+        cmd = [sys.executable, "-m", "monitor.cli", "monitor", "--connect", str(fleet / f"ours_vehicles_{i:04d}.tlog")]
+        r = subprocess.run(
+            [*cmd, "--tlog-speed", "0", "--state-dir", str(state), "--events", str(ev)],
+            capture_output=True,
+            text=True,
+            timeout=300,
+        )
+        assert r.returncode == 0, r.stderr[-2000:]
+        return r.stderr, [json.loads(x) for x in ev.read_text().splitlines()] if ev.exists() else []
+
+    err, _ = replay(0)
+    assert "no vehicle baseline yet (1 of 3 flights)" in err
+    for i in (1, 2, 3):
+        err, events = replay(i)
+        assert not [e for e in events if e.get("event") == "alert"], events
+    err, events = replay(4)
+    faults = [e for e in events if e.get("level") == "fault"]
+    assert faults and faults[0]["faulty_propellers"] == [2] and faults[0]["evidence"] == "vehicle memory"
+    assert faults[0]["time_boot_ms"] / 1000 < 5.1 + 15  # take-off at the log's first airborne step (boot 5.05 s)
+    b = VehicleBaseline.load(state / "vehicles" / "sysid-1" / "baseline.json")
+    assert len(b.active()) == 4  # the references and the healthy later flight, never the damaged one
