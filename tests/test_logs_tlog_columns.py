@@ -135,3 +135,30 @@ def test_what_only_the_decoder_reads_is_left_to_it(tmp_path, monkeypatch, damage
         assert any("rebooted" in w for w in raw.warnings)
     if damage == "wrap":
         assert raw.motor_cmd.t_us[-1] > 1 << 32
+
+
+@pytest.mark.parametrize("damage", ["none", "cut mid-frame", "trailing bytes", "garbage", "receive clock jump"])
+def test_the_numpy_frame_walk_finds_what_the_byte_walk_finds_or_leaves_it(tmp_path, monkeypatch, damage):
+    data = bytearray(write_tlog(tmp_path / "f.tlog", duration_s=20.0).read_bytes())
+    if damage == "cut mid-frame":
+        data = data[: len(data) // 2 + 7]
+    elif damage == "trailing bytes":
+        data += b"\x00\x01\x02"
+    elif damage == "garbage":
+        data[len(data) // 3 : len(data) // 3 + 300] = bytes(range(256)) + bytes(44)
+    elif damage == "receive clock jump":
+        at = len(data) // 2
+        at = data.index(bytes([0xFD]), at) - 8  # a record's receive time
+        data[at : at + 8] = struct.pack(">Q", 1 << 62)
+    buf = bytes(data)
+    for wanted in (tlog.CORE_IDS, tlog.WANTED_IDS):
+        clean = tlog.clean_frame_starts(buf, wanted)
+        with monkeypatch.context() as m:
+            m.setattr(tlog, "clean_frame_starts", lambda *args: None)
+            starts, skipped, truncated = tlog.frame_starts(buf, wanted)
+        if damage == "none":
+            assert clean is not None and clean.tolist() == starts and (skipped, truncated) == (0, False)
+        elif damage == "receive clock jump":  # followed by frames, the byte walk keeps it; the numpy one leaves it
+            assert clean is None and (skipped, truncated) == (0, False)
+        else:
+            assert clean is None and (skipped or truncated)

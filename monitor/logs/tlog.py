@@ -17,6 +17,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
+
 from monitor import mavlink_decode as md
 from monitor.errors import LogFormatError
 from monitor.logs.guards import check_marker_gaps
@@ -156,8 +158,52 @@ def _stream(items) -> Stream | None:
     return Stream.build([i[0] for i in items], [i[1] for i in items])
 
 
+def clean_frame_starts(buf: bytes, wanted) -> np.ndarray | None:
+    """``frame_starts`` of a clean file, found with numpy: every [time][magic] record position is a candidate, each
+    candidate's frame length says where the next record starts, and the chain from the first byte is followed
+    through them. None where that chain is not the whole file (a broken record, a cut-off end, a receive time
+    jumping by more than MAX_TS_JUMP_US): ``iter_frames`` walks such a file and says what it skipped."""
+    n = len(buf)
+    data = np.frombuffer(buf, dtype=np.uint8)
+    padded = np.concatenate([data, np.zeros(TS_BYTES + 16, dtype=np.uint8)])
+    magic = padded[TS_BYTES : TS_BYTES + n]
+    cand = np.flatnonzero((magic == V2_MAGIC) | (magic == V1_MAGIC))  # record offsets whose frame may start there
+    if len(cand) == 0 or cand[0] != 0:
+        return None
+    p = cand + TS_BYTES
+    v2 = padded[p] == V2_MAGIC
+    plen = padded[p + 1].astype(np.int64)
+    signed = np.where(v2 & (padded[p + 2] & MAVLINK_IFLAG_SIGNED != 0), V2_SIGNATURE, 0)
+    nxt = p + plen + np.where(v2, V2_OVERHEAD, V1_OVERHEAD) + signed  # the next record's offset
+    k = np.searchsorted(cand, nxt)
+    k[(k >= len(cand)) | (cand[np.minimum(k, len(cand) - 1)] != nxt)] = -1  # not a candidate: the chain breaks
+    k[nxt == n] = len(cand)  # unless the file ends exactly there
+    chain, follow, i, end = [], k.tolist(), 0, len(cand)
+    append = chain.append
+    while 0 <= i < end:
+        append(i)
+        i = follow[i]
+    if i != end:
+        return None
+    idx = np.asarray(chain, dtype=np.int64)
+    rec = cand[idx]
+    ts = padded[rec[:, None] + np.arange(TS_BYTES)].view(">u8").ravel().astype(np.int64)  # big-endian µs
+    if len(ts) > 1 and np.any(np.abs(np.diff(ts)) > MAX_TS_JUMP_US):
+        return None
+    pp = p[idx]
+    msgid = np.where(
+        v2[idx],
+        padded[pp + 7].astype(np.int64) | (padded[pp + 8].astype(np.int64) << 8) | (padded[pp + 9].astype(np.int64) << 16),
+        padded[pp + 5],
+    )
+    return pp[np.isin(msgid, list(wanted))]
+
+
 def frame_starts(buf: bytes, wanted) -> tuple[list[int], int, bool]:
     """Offsets of the wanted frames' magic bytes, bytes skipped, and whether the end is cut off."""
+    clean = clean_frame_starts(buf, wanted)
+    if clean is not None:
+        return clean, 0, False
     starts: list[int] = []
     frames = iter_frames(buf, wanted)
     try:
