@@ -42,9 +42,34 @@ def judge_flight(d: Diagnosis, table, baseline: VehicleBaseline, vehicle_id: str
         out["note"] = "no airborne step past take-off to compare"
         return out
     v = judge(baseline.normal(), s)
+    if baseline.cg_damage_separable is False and v["faulty_propellers"]:
+        v = as_imbalance(v)
     out.update(v)
     _apply(d, v, table.motor_names, out["compared_with_text"])
     return out
+
+
+def as_imbalance(v: dict) -> dict:
+    """A propeller verdict on an airframe whose flights were measured not to tell a CG offset from damage: the rotors
+    that work harder are an imbalance near them, both causes named, no propeller called faulty (never confident)."""
+    rotors = sorted({k for h in v["hypotheses"] for k in h["faulty_propellers"]})
+    where = "+".join(map(str, rotors))
+    return v | {
+        "label": 1,
+        "faulty_propellers": [],
+        "suspect_propellers": rotors,
+        "imbalance_rotors": rotors,
+        "confidence": "ambiguous",
+        "hypotheses": [{"faulty_propellers": h["faulty_propellers"], "statistic": h["statistic"]} for h in v["hypotheses"]]
+        + [
+            {
+                "faulty_propellers": [],
+                "statistic": v["fault_statistic"],
+                "cause": f"CG offset toward rotor {where}, propellers intact",
+            }
+        ],
+        "rule": v["rule"] + "; a CG offset and damage look alike on this airframe: an imbalance, no propeller named",
+    }
 
 
 def _apply(d: Diagnosis, v: dict, motor_names, compared: str) -> None:
@@ -70,9 +95,12 @@ def _apply(d: Diagnosis, v: dict, motor_names, compared: str) -> None:
         {
             "faulty_propellers": h["faulty_propellers"],
             "statistic": h["statistic"],
-            "cause": "as this vehicle's healthy flights"
-            if not h["faulty_propellers"]
-            else "damaged propeller " + "+".join(map(str, h["faulty_propellers"])),
+            "cause": h.get("cause")
+            or (
+                "as this vehicle's healthy flights"
+                if not h["faulty_propellers"]
+                else "damaged propeller " + "+".join(map(str, h["faulty_propellers"]))
+            ),
         }
         for h in v["hypotheses"]
     ]

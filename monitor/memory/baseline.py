@@ -4,7 +4,7 @@
 
     {"format": "propwatch-vehicle-baseline", "version": 1,
      "vehicle": {"id": "uid:0x...", "id_source": "tlog AUTOPILOT_VERSION uid", "motor_names": ["1","2","3","4"],
-                 "basis": "omega2"},
+                 "basis": "omega2", "cg_damage_separable": null | true | false},
      "epoch": 2,                         # restarts so far (a maintenance event that changes the airframe)
      "flights": [{"name": "flight_03.tlog", "date": "2026-05-01" | null, "epoch": 2,
                   "source": "declared" | "no fault", "summary": {...monitor.memory.summary}}, ...],
@@ -55,6 +55,10 @@ class VehicleBaseline:
     epoch: int = 0
     flights: list[dict] = field(default_factory=list)
     events: list[dict] = field(default_factory=list)
+    # Whether this kind of airframe's flights tell a CG offset toward a rotor from damage on it: False where measured
+    # not to (CrazyPAD: offline/crazypad/README.md), None where nobody measured it. False turns a propeller verdict
+    # into an imbalance near its rotors, never a confident fault.
+    cg_damage_separable: bool | None = None
 
     # -- the history
     def active(self) -> list[dict]:
@@ -116,6 +120,7 @@ class VehicleBaseline:
                 "id_source": self.id_source,
                 "motor_names": list(self.motor_names),
                 "basis": self.basis,
+                "cg_damage_separable": self.cg_damage_separable,
             },
             "epoch": self.epoch,
             "flights": self.flights,
@@ -140,6 +145,7 @@ class VehicleBaseline:
                 epoch=int(d["epoch"]),
                 flights=list(d["flights"]),
                 events=list(d["events"]),
+                cg_damage_separable=None if v.get("cg_damage_separable") is None else bool(v["cg_damage_separable"]),
             )
             if len(b.motor_names) != 4:
                 raise ValueError(f"motor_names: 4 rotors, got {len(b.motor_names)}")

@@ -94,14 +94,28 @@ def learn_baseline(
     id_source: str | None = None,
     dates: list[str | None] | None = None,
     source: str = "declared",
+    cg_damage_separable: bool | None = None,
+    check_healthy: bool = True,
 ) -> VehicleBaseline:
     """The baseline of flights declared healthy, in the order given. Raises ``BaselineError`` (fewer than
-    ``MIN_FLIGHTS`` flights with airborne steps, mixed airframes) or ``HealthyOutlierError``."""
+    ``MIN_FLIGHTS`` flights with airborne steps, mixed airframes) or, with ``check_healthy``, ``HealthyOutlierError``.
+    ``cg_damage_separable``: ``VehicleBaseline``'s (False where CG and damage were measured alike)."""
     summaries = [summarize(t) for t in tables]
-    return _build(files, summaries, [t.motor_names for t in tables], vehicle_id, id_source, dates or [None] * len(tables), source)
+    b = _build(
+        files,
+        summaries,
+        [t.motor_names for t in tables],
+        vehicle_id,
+        id_source,
+        dates or [None] * len(tables),
+        source,
+        check_healthy,
+    )
+    b.cg_damage_separable = cg_damage_separable
+    return b
 
 
-def _build(names, summaries, motor_names, vehicle_id, id_source, dates, source) -> VehicleBaseline:
+def _build(names, summaries, motor_names, vehicle_id, id_source, dates, source, check_healthy=True) -> VehicleBaseline:
     flown = [i for i, s in enumerate(summaries) if s.n > 0]
     if len(flown) < MIN_FLIGHTS:
         empty = [names[i] for i in range(len(names)) if i not in flown]
@@ -109,7 +123,8 @@ def _build(names, summaries, motor_names, vehicle_id, id_source, dates, source) 
         raise BaselineError(f"a baseline needs at least {MIN_FLIGHTS} flights with airborne steps, got {len(flown)}{why}")
     if len({tuple(motor_names[i]) for i in flown}) != 1 or len({summaries[i].basis for i in flown}) != 1:
         raise BaselineError("the flights mix airframes (rotor names or share basis differ): give one vehicle's flights")
-    check_outliers([names[i] for i in flown], [summaries[i] for i in flown])
+    if check_healthy:
+        check_outliers([names[i] for i in flown], [summaries[i] for i in flown])
     b = VehicleBaseline(vehicle_id, id_source, tuple(motor_names[flown[0]]), summaries[flown[0]].basis)
     for i in flown:
         b.add(names[i], dates[i], summaries[i], source)

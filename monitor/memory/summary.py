@@ -1,6 +1,6 @@
 """A flight's rotor shares and regime as sufficient statistics (``FlightSummary``), fed one step or a whole table.
 
-Per accepted step t (airborne, all four values finite, past the take-off settle time): x_t the four rotors'
+Per accepted step t (airborne, all four values finite, past the take-off settle time; an unknown tilt reads 0): x_t the four rotors'
 omega^2 (kRPM^2, from the ESC fit or ESC telemetry), or the raw command where no RPM is known (``basis``); the
 share s_t = x_t / mean(x_t); the regime f_t = (1, roll_rad, pitch_rad). Kept: sums of s, f f^T and f s^T (the
 regression of shares on tilt: forward flight into wind tilts the vehicle and shifts load between front and rear
@@ -113,10 +113,9 @@ class ShareAccumulator:
             return False
         self._since_takeoff += 1
         x = np.asarray(x, dtype=np.float64)
-        if self._since_takeoff <= self._settle or not (
-            np.all(np.isfinite(x)) and np.isfinite(roll_rad) and np.isfinite(pitch_rad)
-        ):
+        if self._since_takeoff <= self._settle or not np.all(np.isfinite(x)):
             return False
+        roll_rad, pitch_rad = _tilt(roll_rad), _tilt(pitch_rad)
         mean = float(np.mean(x))
         if not mean > 0:
             return False
@@ -134,11 +133,11 @@ class ShareAccumulator:
         self._since_takeoff = since
         with np.errstate(invalid="ignore"):
             mean = np.mean(x, axis=1)
-            ok &= np.all(np.isfinite(x), axis=1) & np.isfinite(roll_rad) & np.isfinite(pitch_rad) & (mean > 0)
+            ok &= np.all(np.isfinite(x), axis=1) & (mean > 0)
         if not ok.any():
             return
         s = x[ok] / mean[ok, None]
-        f = np.column_stack([np.ones(int(ok.sum())), np.asarray(roll_rad)[ok], np.asarray(pitch_rad)[ok]])
+        f = np.column_stack([np.ones(int(ok.sum())), _tilt(np.asarray(roll_rad)[ok]), _tilt(np.asarray(pitch_rad)[ok])])
         self._add(s, f, mean[ok])
 
     def _add(self, s: np.ndarray, f: np.ndarray, collective: np.ndarray) -> None:
@@ -161,6 +160,13 @@ class ShareAccumulator:
                 sm.sum_block = sm.sum_block + m
                 sm.sum_block_outer = sm.sum_block_outer + np.outer(m, m)
                 self._blk_n, self._blk_sum = 0, np.zeros(4)
+
+
+def _tilt(a):
+    """A tilt angle for the regime; unknown (a log without it, CrazyPAD's pitch) reads 0: no tilt regime is learnt."""
+    if isinstance(a, np.ndarray):
+        return np.nan_to_num(a, nan=0.0, posinf=0.0, neginf=0.0)
+    return float(a) if np.isfinite(a) else 0.0
 
 
 def rotor_values(table: FlightTable) -> tuple[np.ndarray, str]:
