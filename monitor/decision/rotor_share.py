@@ -158,6 +158,9 @@ BASELINE_PRIOR_VAR = 1.0  # the intercept before any window (diffuse)
 QUIET_NATS = 0.1
 
 
+_finite = math.isfinite
+
+
 def _floats(x) -> list[float]:
     """A short vector as Python floats (the plane's filter runs in floats: numpy's small-array calls cost more)."""
     return x.tolist() if isinstance(x, np.ndarray) else list(x)
@@ -276,12 +279,15 @@ class RotorShare:
     ) -> None:
         if rpm is None:
             return
-        w2 = np.asarray(rpm, dtype=np.float64) ** 2
-        m = w2.sum() / w2.size  # w2.mean() bit for bit, without its wrapper: this runs at every step
-        if not (np.isfinite(w2).all() and m > 0):
+        # In Python floats, numpy's arithmetic step by step (this runs at every step): omega^2, their mean
+        # (numpy sums four values left to right, as here) and the shares.
+        r1, r2, r3, r4 = rpm.tolist() if isinstance(rpm, np.ndarray) else map(float, rpm)
+        w1, w2, w3, w4 = r1 * r1, r2 * r2, r3 * r3, r4 * r4
+        m = (w1 + w2 + w3 + w4) / 4.0
+        if not (_finite(w1) and _finite(w2) and _finite(w3) and _finite(w4) and m > 0):
             self._n = self._yn = 0  # a gap: the window starts again
             return
-        share = w2 / m
+        share = (w1 / m, w2 / m, w3 / m, w4 / m)
         self._ring[self._i] = share
         v = self._vring[self._i]
         if vel_heading_m_s is None:
@@ -294,7 +300,7 @@ class RotorShare:
             v[2:] = accel_xy_frd_m_s2
         self._i = (self._i + 1) % self.window
         self._n += 1
-        s1, s2, s3, s4 = share.tolist()  # Python floats: the same double arithmetic as numpy scalars, cheaper
+        s1, s2, s3, s4 = share
         self._yring[self._yi] = 0.5 * (s1 + s2 - s3 - s4)
         self._sring[self._yi] = share
         self._svring[self._yi] = v
