@@ -42,6 +42,7 @@ from typing import Any
 import numpy as np
 
 from monitor import mavlink_decode as md
+from monitor.daemon.clockguard import GuardedDecoder
 from monitor.daemon.config import MonitorConfig
 from monitor.daemon.pacing import ReadPacer
 from monitor.daemon.plausible import Plausibility
@@ -100,7 +101,7 @@ class Pipeline:
         self._compute_features = step_feature_function(self.features)  # = feature_function on one step, bit for bit
         self._feats = np.empty(len(self.features), dtype=np.float32)  # this step's row, reused
         self.window = inf.window
-        self.decoder = md.MavlinkDecoder(
+        self.decoder = GuardedDecoder(  # boot clock moved only by a plausible sequence (monitor.daemon.clockguard)
             system_id=config.link.system_id or None,
             component_id=config.link.autopilot_component_id,
             battery_id=config.input.battery_id,
@@ -143,6 +144,7 @@ class Pipeline:
             "velocity_late": 0,  # LOCAL_POSITION_NED at or before an instant already emitted (dropped)
             "imu_steps": 0,  # grid steps with a horizontal specific force
             "imu_late": 0,  # IMU samples at or before an instant already emitted (dropped)
+            "clock_jumps": 0,  # confirmed forward jumps of the boot clock (the grid restarted)
         }
         self._max_gap_us = fast
         self._highres_us: int | None = None  # boot time of the latest HIGHRES_IMU (SCALED_IMU is used without one)
@@ -171,7 +173,10 @@ class Pipeline:
     def feed_sample(self, s: md.Sample, received_s: float) -> list[StepResult]:
         if isinstance(s, md.ClockReset):
             back_us = s.previous_us - s.timestamp_us
-            if back_us > REBOOT_BACK_US or s.timestamp_us < REBOOT_BOOT_US:
+            if back_us < 0:  # a confirmed forward jump (GuardedDecoder): the grid starts again, no empty catch-up
+                self.stats["clock_jumps"] += 1
+                self.clock_events.append(f"autopilot clock jumped {-back_us / US_PER_S:+.1f} s")
+            elif back_us > REBOOT_BACK_US or s.timestamp_us < REBOOT_BOOT_US:
                 self.stats["clock_resets"] += 1
                 self.clock_events.append(
                     f"autopilot rebooted (boot clock {s.previous_us / US_PER_S:.1f} -> {s.timestamp_us / US_PER_S:.1f} s)"

@@ -34,8 +34,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-# Beyond this many instants in one go (a link that returns after a long drop),
-# the instants in between are skipped: a window spanning them is invalid anyway.
+# Beyond this many instants in one go (a link that returns after a long drop), the instants in between are
+# skipped: a window spanning them is invalid anyway. Fewer still where every stream is stale sooner: past the
+# longest max_age every instant is empty, so at most that many (plus one) are emitted per sample.
 MAX_CATCH_UP_STEPS = 1200
 # Hard size of each stream's pending samples. A sample at the same boot time as the newest one
 # replaces it (the batch hold keeps the last written among equal times, so nothing changes); this
@@ -104,6 +105,8 @@ class StreamingHold:
         # instant after which it is final whatever they hold.
         self._pacing = [s for s in self._streams.values() if s.spec.paces]
         self._horizon_us = max((s.spec.max_age_us for s in self._pacing), default=0) + self.reorder_us
+        oldest_us = max((s.spec.max_age_us for s in self._streams.values()), default=0) + self.reorder_us
+        self._catch_up = min(MAX_CATCH_UP_STEPS, -(-oldest_us // self.period_us) + 1)
         self.next_g: int | None = None
         self.last_emitted: int | None = None
         self.clock_us: int | None = None
@@ -152,8 +155,8 @@ class StreamingHold:
             return out
         skipped = 0
         backlog = (self.clock_us - self.next_g) // self.period_us
-        if backlog > MAX_CATCH_UP_STEPS:
-            jump = backlog - MAX_CATCH_UP_STEPS
+        if backlog > self._catch_up:
+            jump = backlog - self._catch_up
             self.next_g += jump * self.period_us
             skipped = int(jump)
         while self.next_g <= self.clock_us and (not final_only or self._is_final(self.next_g)):
