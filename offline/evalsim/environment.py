@@ -33,6 +33,8 @@ class Sensors:
 
     gyro_noise_std_rad_s: float = 0.004  # after PX4's gyro low-pass, per sample
     gyro_bias_std_rad_s: float = 0.003  # per-flight constant bias, per axis
+    # The airframe's own gyro offset, added to the per-flight draw (the calibration matrix's gyro-bias effect).
+    gyro_bias_frd_rad_s: tuple[float, float, float] = (0.0, 0.0, 0.0)
     accel_noise_std_m_s2: float = 0.08
     attitude_noise_std_rad: float = np.deg2rad(0.15)
     attitude_bias_std_rad: float = np.deg2rad(0.4)  # per-flight estimator tilt error (roll, pitch)

@@ -431,7 +431,7 @@ def _plan(spec: FlightSpec) -> dict:
     sens = spec.sensors
     return {
         "log_steps": steps,
-        "gyro_bias": rng.normal(0.0, sens.gyro_bias_std_rad_s, 3),
+        "gyro_bias": rng.normal(0.0, sens.gyro_bias_std_rad_s, 3) + np.asarray(sens.gyro_bias_frd_rad_s),
         "att_bias": np.array([*rng.normal(0.0, sens.attitude_bias_std_rad, 2), 0.0]),
         "phase": rng.uniform(0.0, 2 * np.pi, 4),
         "gust0": rng.standard_normal(3),

@@ -1,0 +1,522 @@
+"""The hidden-effect matrix: does ``propwatch calibrate`` name what is hidden, and only that? (issue 40)
+
+    nice python -m bench.evalsim_calibration --out out/evaluate-calibration          # make evaluate-calibration
+    nice python -m bench.evalsim_calibration --out DIR --seeds 2 --nominal 10 --outside-seeds 2   # reduced
+
+Each run is what a user has: 2 healthy flights of ``--duration-s`` at 20 Hz with telemetry jitter and drops,
+read back through a .tlog, calibrated against the nominal vehicle (``offline.calibrate.calibrate``) with the
+whole term library and the gates in force.
+
+1. **Resolution, stated beforehand, on OUR simulator** (``offline.calibrate.nominal_flights``: the register
+   drawn, the hidden effect on the vehicle): every effect at three sizes, ``--own-seeds`` seeds; an effect's
+   resolution is the smallest size named in every own-simulator run ("not identifiable below X").
+2. **The matrix on the evaluation-only simulator** (``offline/evalsim``, never tuned on): every effect at the
+   same three sizes, ``--seeds`` seeds; per cell the share of runs naming the hidden effect's term, the share
+   naming another term, and the fitted value against the truth with its standard error.
+3. **Wrong naming**: ``--nominal`` runs with nothing hidden (evalsim's own small motor spread aside).
+4. **Outside the library**: a damaged propeller in a "healthy" flight, a telemetry delay between the motor
+   outputs and the estimator, coloured (AR(1)) noise on the rates and attitude: the share of runs reporting an
+   "unexplained residual", and what was named instead.
+
+Writes ``matrix.json`` (every run) and ``matrix.md`` (the tables); prints one JSON line per run.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import math
+import tempfile
+import time
+import zlib
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from monitor.logs import read_log
+from monitor.vehicle import DEFAULT_VEHICLE, VehicleConfig, load_vehicle
+
+NOM = load_vehicle(DEFAULT_VEHICLE)
+
+
+@dataclass(frozen=True)
+class Effect:
+    name: str
+    terms: tuple[str, ...]  # the library terms that name it
+    sizes: tuple[float, float, float]
+    unit: str
+    own: Callable  # (vehicle, size, rng) -> vehicle
+    evalsim: Callable  # (spec, size, rng) -> spec
+    truth: Callable  # (size, rng) -> value in the fitted value's unit
+    fitted: Callable  # (findings by term) -> (value, standard error) or None
+
+
+def _rotor(rng) -> int:
+    return int(rng.integers(4))
+
+
+def _direction(rng) -> np.ndarray:
+    a = rng.uniform(0, 2 * np.pi)
+    return np.array([np.cos(a), np.sin(a)])
+
+
+def _af(spec, **kw):
+    return dataclasses.replace(spec, airframe=spec.airframe.with_(**kw))
+
+
+def _pair(f: dict, name: str, keys) -> tuple[float, float] | None:
+    if name not in f:
+        return None
+    p, s = f[name]
+    return keys(p), keys(s)
+
+
+def _spread(rng, size) -> np.ndarray:
+    """Four thrust efficiencies spread +-size, mean 1."""
+    e = 1.0 + size * np.array([1.0, -1.0, 0.5, -0.5])[rng.permutation(4)]
+    return e
+
+
+def _lag_all_fitted(f):
+    if "motor_time_constant" in f:
+        p, s = f["motor_time_constant"]
+        return p["motor_time_constant_s"], s["motor_time_constant_s"]
+    if "rotor_time_constant" in f:
+        p, s = f["rotor_time_constant"]
+        return float(np.mean(list(p.values()))), float(np.mean(list(s.values())))
+    return None
+
+
+def _lag_one_fitted(rotor_of):
+    def fitted(f, rng):
+        if "rotor_time_constant" not in f:
+            return None
+        p, s = f["rotor_time_constant"]
+        k = rotor_of(rng)
+        return p[f"tau_{k + 1}_s"], s[f"tau_{k + 1}_s"]
+
+    return fitted
+
+
+def _esc_scaled(esc, gain):
+    from monitor.esc import EscCurve
+
+    return EscCurve(esc.a_rpm_per_cmd2 * gain, esc.b_rpm_per_cmd * gain, esc.c_rpm * gain, esc.cmd_min, esc.cmd_max, esc.cmd_unit)
+
+
+def _effects() -> dict[str, Effect]:
+    from offline.calibrate.terms import TERMS
+
+    def taus(size, rng, one):
+        t = np.full(4, NOM.motor_time_constant_s)
+        if one:
+            t[_rotor(rng)] = size
+        else:
+            t[:] = size
+        return t
+
+    def cg(size, rng):
+        return tuple(float(x) for x in size * _direction(rng)) + (0.0,)
+
+    eff_rotor = _rotor  # the weak motor is drawn first from the run's rng
+    effects = [
+        Effect(
+            "cg_offset",
+            ("cg_offset",),
+            (0.005, 0.010, 0.020),
+            "m (|offset|)",
+            lambda v, s, r: dataclasses.replace(v, cg_offset_frd_m=cg(s, r)),
+            lambda sp, s, r: _af(sp, cg_offset_frd_m=cg(s, r)),
+            lambda s, r: s,
+            lambda f, r: _pair(f, "cg_offset", lambda p: float(np.hypot(p["cg_x_m"], p["cg_y_m"]))),
+        ),
+        Effect(
+            "weak_motor",
+            ("motor_efficiency",),
+            (0.03, 0.06, 0.12),
+            "thrust loss of the weak rotor (1 - eff^2 relative to the others)",
+            lambda v, s, r: dataclasses.replace(
+                v, motor_efficiency=tuple(math.sqrt(1 - s) if i == eff_rotor(r) else 1.0 for i in range(4))
+            ),
+            lambda sp, s, r: _af(
+                sp,
+                motor_thrust_efficiency=tuple(
+                    e * (1 - s) if i == eff_rotor(r) else e for i, e in enumerate(sp.airframe.motor_thrust_efficiency)
+                ),
+            ),
+            lambda s, r: s,
+            lambda f, r: _weak_fitted(f, eff_rotor(r)),
+        ),
+        Effect(
+            "motor_spread",
+            ("motor_efficiency",),
+            (0.02, 0.04, 0.08),
+            "half-range of the thrust efficiencies",
+            lambda v, s, r: dataclasses.replace(v, motor_efficiency=tuple(float(x) for x in np.sqrt(_spread(r, s)))),
+            lambda sp, s, r: _af(
+                sp,
+                motor_thrust_efficiency=tuple(float(a * b) for a, b in zip(sp.airframe.motor_thrust_efficiency, _spread(r, s))),
+            ),
+            lambda s, r: s,
+            lambda f, r: _spread_fitted(f),
+        ),
+        Effect(
+            "lag_one_rotor",
+            ("rotor_time_constant",),
+            (0.045, 0.060, 0.090),
+            "s (the slow rotor's time constant)",
+            lambda v, s, r: TERMS["rotor_time_constant"].set(v, taus(s, r, True)),
+            lambda sp, s, r: _af(sp, motor_time_constant_s=tuple(float(x) for x in taus(s, r, True))),
+            lambda s, r: s,
+            lambda f, r: _lag_one_fitted(_rotor)(f, r),
+        ),
+        Effect(
+            "lag_all_rotors",
+            ("motor_time_constant", "rotor_time_constant"),
+            (0.035, 0.045, 0.060),
+            "s",
+            lambda v, s, r: dataclasses.replace(v, motor_time_constant_s=s),
+            lambda sp, s, r: _af(sp, motor_time_constant_s=(s,) * 4),
+            lambda s, r: s,
+            lambda f, r: _lag_all_fitted(f),
+        ),
+        Effect(
+            "esc_curve",
+            ("esc_curve",),
+            (0.02, 0.04, 0.08),
+            "RPM gain error (fitted rpm_gain - 1, sign removed)",
+            lambda v, s, r: TERMS["esc_curve"].set(v, np.array([1.0 - s, 0.0])),
+            lambda sp, s, r: _af(sp, esc=_esc_scaled(sp.airframe.esc, 1.0 - s)),
+            lambda s, r: s,
+            lambda f, r: _pair(f, "esc_curve", lambda p: abs(1.0 - p["rpm_gain"])),
+        ),
+        Effect(
+            "drag",
+            ("drag",),
+            (0.1, 0.3, 0.6),
+            "N per m/s (horizontal; evalsim: rotor H-force 4 k_d w_hover)",
+            lambda v, s, r: dataclasses.replace(v, linear_drag_n_per_m_s=(s, s, 0.5 * s)),
+            lambda sp, s, r: _af(sp, rotor_drag_kg_per_rad=s / (4 * NOM.hover_omega_rad_s)),
+            lambda s, r: s,
+            lambda f, r: _pair(f, "drag", lambda p: 0.5 * (p["drag_x_n_per_m_s"] + p["drag_y_n_per_m_s"])),
+        ),
+        Effect(
+            "inertia",
+            ("inertia",),
+            (0.15, 0.30, 0.60),
+            "relative error of Ixx",
+            lambda v, s, r: dataclasses.replace(v, inertia_diag_kg_m2=tuple(x * (1 + s) for x in v.inertia_diag_kg_m2)),
+            lambda sp, s, r: _af(sp, inertia_diag_kg_m2=tuple(x * (1 + s) for x in sp.airframe.inertia_diag_kg_m2)),
+            lambda s, r: s,
+            lambda f, r: _pair(f, "inertia", lambda p: p["ixx_kg_m2"] / NOM.inertia_diag_kg_m2[0] - 1.0),
+        ),
+        Effect(
+            "mass",
+            ("mass",),
+            (0.05, 0.10, 0.20),
+            "relative extra mass",
+            lambda v, s, r: dataclasses.replace(v, mass_kg=v.mass_kg * (1 + s)),
+            lambda sp, s, r: _af(sp, payload_kg=NOM.mass_kg * s),
+            lambda s, r: s,
+            lambda f, r: _pair(f, "mass", lambda p: p["mass_kg"] / NOM.mass_kg - 1.0),
+        ),
+        Effect(
+            "gyro_bias",
+            ("gyro_bias",),
+            (0.005, 0.010, 0.020),
+            "rad/s (|bias|)",
+            lambda v, s, r: dataclasses.replace(v, gyro_bias_frd_rad_s=_bias(s, r)),
+            lambda sp, s, r: dataclasses.replace(sp, sensors=dataclasses.replace(sp.sensors, gyro_bias_frd_rad_s=_bias(s, r))),
+            lambda s, r: s,
+            lambda f, r: _pair(f, "gyro_bias", lambda p: float(np.linalg.norm(list(p.values())))),
+        ),
+    ]
+    return {e.name: e for e in effects}
+
+
+def _bias(size, rng) -> tuple[float, float, float]:
+    d = rng.normal(size=3)
+    return tuple(float(x) for x in size * d / np.linalg.norm(d))
+
+
+def _weak_fitted(f, k):
+    if "motor_efficiency" not in f:
+        return None
+    p, s = f["motor_efficiency"]
+    e = np.array([p[f"eff_{i + 1}"] for i in range(4)])
+    others = np.delete(e, k).mean()
+    return float(1.0 - (e[k] / others) ** 2), float(2.0 * s[f"eff_{k + 1}"])
+
+
+def _spread_fitted(f):
+    if "motor_efficiency" not in f:
+        return None
+    p, s = f["motor_efficiency"]
+    e2 = np.array([p[f"eff_{i + 1}"] for i in range(4)]) ** 2
+    return float((e2.max() - e2.min()) / 2 / e2.mean()), float(2.0 * np.mean(list(s.values())))
+
+
+def _rng(*key) -> np.random.Generator:
+    return np.random.default_rng([zlib.crc32(str(k).encode()) for k in key])
+
+
+def calibrate_tables(tabs) -> dict:
+    from offline.calibrate.calibrate import calibrate
+
+    r = calibrate(tabs, NOM)
+    return {
+        "cause": r.cause,
+        "named": [f["effect"] for f in r.findings],
+        "findings": {f["effect"]: (f["params"], f["std"]) for f in r.findings},
+        "unexplained": r.unexplained["found"],
+        "unexplained_summary": r.unexplained["summary"],
+        "vetoed": [n for n in r.notes if n.startswith("round ")],
+    }
+
+
+def own_tables(vehicle: VehicleConfig, seed: int, duration_s: float):
+    from offline.calibrate.nominal_flights import nominal_flights
+
+    return nominal_flights(vehicle, 2, 50_000 + seed, duration_s)
+
+
+def eval_tables(specs, post=None):
+    from offline.evalsim.flight import simulate_flights
+    from offline.sim.io_tlog import write_tlog
+
+    logs = simulate_flights(specs)
+    with tempfile.TemporaryDirectory() as d:
+        tabs = [read_log(write_tlog(Path(d) / f"{i}.tlog", lg, 0), esc=NOM.esc) for i, lg in enumerate(logs)]
+    return [post(t, i) for i, t in enumerate(tabs)] if post else tabs
+
+
+def eval_specs(seed: int, duration_s: float):
+    from offline.evalsim.sets import motor_lag_specs
+
+    # evalsim's airframes carry a +-1 % thrust spread (a real, small effect); the matrix starts from none.
+    return [
+        _af(sp, motor_thrust_efficiency=(1.0,) * 4)
+        for sp in motor_lag_specs([NOM.motor_time_constant_s] * 4, 2, 70_000 + seed, duration_s)
+    ]
+
+
+def _outside() -> dict[str, tuple[Callable, Callable | None]]:
+    """name -> (spec modifier, table post-processor)."""
+    from offline.calibrate.nominal_flights import degrade_table
+    from offline.evalsim.airframe import Damage
+
+    def damaged(sp, r):
+        k = _rotor(r)
+        one = lambda x: tuple(x if i == k else 0.0 for i in range(4))  # noqa: E731
+        return _af(
+            sp,
+            damage=Damage(
+                thrust_loss_at_hover=one(float(r.uniform(0.08, 0.15))),
+                torque_per_thrust_change=one(float(r.uniform(-0.10, -0.04))),
+                flutter_thrust_std=one(0.01),
+                vibration_1p_m_s2=one(0.6),
+            ),
+        )
+
+    def delay(t, i):
+        return degrade_table(t, 0.08, 0.0, 0.0, np.random.default_rng(i))
+
+    def coloured(t, i):
+        rng = np.random.default_rng([i, 3])
+        n, a = len(t.timestamp_us), 0.95  # AR(1) at 20 Hz: correlation time ~1 s
+        z = np.zeros((n, 6))
+        e = rng.normal(size=(n, 6)) * np.sqrt(1 - a**2)
+        for k in range(1, n):
+            z[k] = a * z[k - 1] + e[k]
+        return dataclasses.replace(
+            t,
+            roll_rate_rad_s=t.roll_rate_rad_s + 0.02 * z[:, 0],
+            pitch_rate_rad_s=t.pitch_rate_rad_s + 0.02 * z[:, 1],
+            yaw_rate_rad_s=t.yaw_rate_rad_s + 0.02 * z[:, 2],
+            roll_rad=t.roll_rad + 0.005 * z[:, 3],
+            pitch_rad=t.pitch_rad + 0.005 * z[:, 4],
+        )
+
+    return {
+        "damaged_propeller": (damaged, None),
+        "telemetry_delay_80ms": (lambda sp, r: sp, delay),
+        "coloured_noise": (lambda sp, r: sp, coloured),
+    }
+
+
+def _cell(rows: list[dict], terms: tuple[str, ...]) -> dict:
+    named = sum(bool(set(r["named"]) & set(terms)) for r in rows)
+    wrong = sum(bool(set(r["named"]) - set(terms)) for r in rows)
+    vals = [(r["fitted"], r["fitted_se"], r["truth"]) for r in rows if r.get("fitted") is not None]
+    return {
+        "runs": len(rows),
+        "named": named,
+        "wrong_named": wrong,
+        "fitted_mean": float(np.mean([v[0] for v in vals])) if vals else None,
+        "fitted_se_mean": float(np.mean([v[1] for v in vals])) if vals else None,
+        "truth": rows[0]["truth"] if rows else None,
+    }
+
+
+def markdown(res: dict) -> str:
+    cfg = res["config"]
+    lines = [
+        "# Hidden-effect matrix (`python -m bench.evalsim_calibration`)",
+        "",
+        f"Config: {json.dumps(cfg)}",
+        "",
+        "## Resolution on our own simulator (stated before the evaluation runs)",
+        "",
+        "| effect | unit | " + " | ".join(f"size {i + 1}" for i in range(3)) + " | resolution |",
+        "|---|---|---|---|---|---|",
+    ]
+    for name, e in res["own"].items():
+        cells = " | ".join(f"{c['size']:g}: {c['named']}/{c['runs']}" for c in e["cells"])
+        lines.append(
+            f"| {name} | {e['unit']} | {cells} | {e['resolution'] if e['resolution'] is not None else 'none of the sizes'} |"
+        )
+    lines += [
+        "",
+        "## Evaluation-only simulator",
+        "",
+        "| effect | size | above resolution | named | wrong-named | fitted (mean) | SE (mean) | truth |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    f = lambda x: "-" if x is None else f"{x:.4g}"  # noqa: E731
+    for name, e in res["evalsim"].items():
+        for c in e["cells"]:
+            lines.append(
+                f"| {name} | {c['size']:g} | {'yes' if c['above_resolution'] else 'no'} | {c['named']}/{c['runs']} | "
+                f"{c['wrong_named']}/{c['runs']} | {f(c['fitted_mean'])} | {f(c['fitted_se_mean'])} | {f(c['truth'])} |"
+            )
+    n = res["nominal"]
+    lines += [
+        "",
+        f"**Nothing hidden**: {n['wrong_named']} of {n['runs']} runs ({2 * n['runs']} flights) named a term "
+        f"({json.dumps(n['named_terms'])}); {n['unexplained']} reported an unexplained residual.",
+        "",
+        "## Outside the library",
+        "",
+        "| effect | runs | unexplained residual | named instead |",
+        "|---|---|---|---|",
+    ]
+    for name, o in res["outside"].items():
+        lines.append(f"| {name} | {o['runs']} | {o['unexplained']} | {json.dumps(o['named_terms'])} |")
+    return "\n".join(lines) + "\n"
+
+
+def _count(rows) -> dict:
+    out: dict[str, int] = {}
+    for r in rows:
+        for t in r["named"]:
+            out[t] = out.get(t, 0) + 1
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m bench.evalsim_calibration", description=__doc__.split("\n\n")[0])
+    ap.add_argument("--out", type=Path, required=True)
+    ap.add_argument("--duration-s", type=float, default=40.0)
+    ap.add_argument("--own-seeds", type=int, default=5)
+    ap.add_argument("--seeds", type=int, default=5)
+    ap.add_argument("--nominal", type=int, default=60, help="evalsim runs with nothing hidden (2 flights each)")
+    ap.add_argument("--outside-seeds", type=int, default=10)
+    ap.add_argument("--effects", nargs="+", default=None)
+    a = ap.parse_args(argv)
+    a.out.mkdir(parents=True, exist_ok=True)
+    effects = _effects()
+    if a.effects:
+        effects = {k: effects[k] for k in a.effects}
+    res: dict = {"config": {k: (str(v) if isinstance(v, Path) else v) for k, v in vars(a).items()}}
+    t0 = time.time()
+
+    def log(row):
+        print(json.dumps(row | {"wall_s": round(time.time() - t0)}, default=float), flush=True)
+
+    # 1. Resolution on our own simulator.
+    res["own"] = {}
+    for name, e in effects.items():
+        cells = []
+        for size in e.sizes:
+            rows = []
+            for seed in range(a.own_seeds):
+                r = _rng("own", name, size, seed)
+                v = e.own(NOM, size, r)
+                row = {"sim": "own", "effect": name, "size": size, "seed": seed} | calibrate_tables(
+                    own_tables(v, seed, a.duration_s)
+                )
+                log({k: row[k] for k in ("sim", "effect", "size", "seed", "named", "unexplained")})
+                rows.append(row)
+            cells.append({"size": size, **_cell([r | {"truth": size} for r in rows], e.terms)})
+        ok = [c["size"] for c in cells if c["named"] == c["runs"]]
+        res["own"][name] = {"unit": e.unit, "cells": cells, "resolution": min(ok) if ok else None}
+    # 2. The matrix on the evaluation-only simulator.
+    res["evalsim"], runs = {}, []
+    for name, e in effects.items():
+        cells = []
+        resolution = res["own"][name]["resolution"]
+        for size in e.sizes:
+            rows = []
+            for seed in range(a.seeds):
+                r_spec = _rng("evalsim", name, size, seed)
+                specs = [e.evalsim(sp, size, _rng("evalsim", name, size, seed)) for sp in eval_specs(seed, a.duration_s)]
+                del r_spec
+                out = calibrate_tables(eval_tables(specs))
+                fitted = e.fitted(out["findings"], _rng("evalsim", name, size, seed))
+                row = {"sim": "evalsim", "effect": name, "size": size, "seed": seed, **out}
+                row |= {
+                    "truth": e.truth(size, None),
+                    "fitted": fitted[0] if fitted else None,
+                    "fitted_se": fitted[1] if fitted else None,
+                }
+                log({k: row[k] for k in ("sim", "effect", "size", "seed", "named", "fitted", "unexplained")})
+                rows.append(row)
+                runs.append(row)
+            above = resolution is not None and size >= resolution
+            cells.append({"size": size, "above_resolution": above, **_cell(rows, e.terms)})
+        res["evalsim"][name] = {"unit": e.unit, "terms": list(e.terms), "cells": cells}
+    # 3. Nothing hidden.
+    rows = []
+    for seed in range(a.nominal):
+        row = {
+            "sim": "evalsim",
+            "effect": "none",
+            "seed": seed,
+            **calibrate_tables(eval_tables(eval_specs(1000 + seed, a.duration_s))),
+        }
+        log({k: row[k] for k in ("sim", "effect", "seed", "named", "unexplained")})
+        rows.append(row)
+        runs.append(row)
+    res["nominal"] = {
+        "runs": len(rows),
+        "wrong_named": sum(bool(r["named"]) for r in rows),
+        "named_terms": _count(rows),
+        "unexplained": sum(r["unexplained"] for r in rows),
+    }
+    # 4. Outside the library.
+    res["outside"] = {}
+    for name, (mod, post) in _outside().items():
+        rows = []
+        for seed in range(a.outside_seeds):
+            specs = [mod(sp, _rng("outside", name, seed)) for sp in eval_specs(2000 + seed, a.duration_s)]
+            row = {"sim": "evalsim", "effect": name, "seed": seed, **calibrate_tables(eval_tables(specs, post))}
+            log({k: row[k] for k in ("sim", "effect", "seed", "named", "unexplained", "unexplained_summary")})
+            rows.append(row)
+            runs.append(row)
+        res["outside"][name] = {
+            "runs": len(rows),
+            "unexplained": sum(r["unexplained"] for r in rows),
+            "named_terms": _count(rows),
+        }
+    res["runs"] = runs
+    (a.out / "matrix.json").write_text(json.dumps(res, indent=1, default=float) + "\n", encoding="utf-8")
+    (a.out / "matrix.md").write_text(markdown(res), encoding="utf-8")
+    print(markdown(res))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
