@@ -1,15 +1,15 @@
 """CSV logs through a named column mapping (``monitor/formats.yaml``) -> ``RawFlight``.
 
 A mapping says, per signal, which column holds it (or that it is not
-logged), in which unit, and with which sign/frame flip. Plain or gzip CSV;
-a damaged gzip stream or a cut-off last line is read up to the damage with a
-warning.
+logged), in which unit, and with which sign/frame flip. Plain or gzip CSV,
+streamed (time and memory follow the rows, not the file's size); a damaged
+gzip stream, a cut-off last line or a tail of zeros or junk is read up to the
+damage with a warning.
 """
 
 from __future__ import annotations
 
 import csv
-import io
 import zlib
 from dataclasses import dataclass, fields
 from pathlib import Path
@@ -157,37 +157,78 @@ def get_format(name: str, path: str | Path = FORMATS_FILE) -> CsvFormat:
     return formats[name]
 
 
-def _read_text(path: Path) -> tuple[str, str | None]:
-    """The file's text and a damage warning (gzip cut short or corrupt: keep what decoded)."""
-    raw = path.read_bytes()
-    if raw[:2] != b"\x1f\x8b":
-        return raw.decode("utf-8", errors="replace"), None
-    d = zlib.decompressobj(wbits=31)
-    try:
-        text = d.decompress(raw)
-        if not d.eof:
-            return text.decode("utf-8", errors="replace"), f"{path.name}: gzip stream ends early: read up to the damage"
-        return text.decode("utf-8", errors="replace"), None
-    except zlib.error as exc:
-        # Decompress block by block to keep what precedes the corrupt block.
+READ_CHUNK_BYTES = 1 << 16
+# A line longer than this is not a log row (PX4 / CrazyPAD rows are a few hundred bytes): the file's junk tail.
+MAX_LINE_BYTES = 1 << 16
+
+
+def _chunks(path: Path) -> tuple[list[str], object]:
+    """(damage warnings, an iterator of byte chunks): plain or gzip, decompressed as it is read, so a huge file
+    costs what its lines cost. A gzip stream cut short or corrupt ends the chunks with a warning."""
+    damage: list[str] = []
+
+    def plain(fh):
+        while chunk := fh.read(READ_CHUNK_BYTES):
+            yield chunk
+
+    def gunzip(fh):
         d = zlib.decompressobj(wbits=31)
-        parts = []
-        for i in range(0, len(raw), 4096):
+        while raw := fh.read(READ_CHUNK_BYTES):
             try:
-                parts.append(d.decompress(raw[i : i + 4096]))
-            except zlib.error:
-                break
-        return b"".join(parts).decode("utf-8", errors="replace"), f"{path.name}: corrupt gzip data ({exc}): read up to the damage"
+                out = d.decompress(raw, READ_CHUNK_BYTES)
+                while True:
+                    if out:
+                        yield out
+                    if not d.unconsumed_tail:
+                        break
+                    out = d.decompress(d.unconsumed_tail, READ_CHUNK_BYTES)
+            except zlib.error as exc:
+                damage.append(f"{path.name}: corrupt gzip data ({exc}): read up to the damage")
+                return
+            if d.eof:
+                return
+        if not d.eof:
+            damage.append(f"{path.name}: gzip stream ends early: read up to the damage")
+
+    def chunks():
+        with open(path, "rb") as fh:
+            gz = fh.read(2) == b"\x1f\x8b"
+            fh.seek(0)
+            yield from (gunzip if gz else plain)(fh)
+
+    return damage, chunks()
 
 
-def _parse(text: str, delimiter: str, path: Path) -> tuple[list[str], np.ndarray, list[str]]:
-    warnings = []
-    reader = csv.reader(io.StringIO(text), delimiter=delimiter)
+def _lines(path: Path, damage: list[str], chunks) -> object:
+    """Text lines of the file, streamed; stops at the first line holding a NUL byte or longer than
+    ``MAX_LINE_BYTES`` (a zero-filled or junk tail), with a warning saying where."""
+    pending = b""
+    offset = 0  # bytes of (decompressed) text before ``pending``
+    for chunk in chunks:
+        pending += chunk
+        *complete, pending = pending.split(b"\n")
+        for line in complete:
+            if b"\x00" in line or len(line) > MAX_LINE_BYTES:
+                damage.append(f"{path.name}: zeros or junk from byte {offset} on: cut there (read up to it)")
+                return
+            offset += len(line) + 1
+            yield line.decode("utf-8", errors="replace")
+        if len(pending) > MAX_LINE_BYTES or b"\x00" in pending:
+            damage.append(f"{path.name}: zeros or junk from byte {offset} on: cut there (read up to it)")
+            return
+    if pending:
+        yield pending.decode("utf-8", errors="replace")
+
+
+def _parse(path: Path, delimiter: str) -> tuple[list[str], np.ndarray, list[str]]:
+    """Header, rows and warnings (damage first), the file streamed line by line."""
+    damage, chunks = _chunks(path)
+    reader = csv.reader(_lines(path, damage, chunks), delimiter=delimiter)
     try:
         header = [h.strip() for h in next(reader)]
     except StopIteration:
-        raise LogFormatError(f"{path}: empty CSV file") from None
-    except csv.Error as exc:  # binary junk: NUL bytes, a bare CR inside a field
+        raise LogFormatError(f"{path}: empty CSV file" if not damage else f"{path}: {damage[0]}") from None
+    except csv.Error as exc:  # binary junk: a bare CR inside a field
         raise LogFormatError(f"{path}: not a CSV file: {exc}") from None
     rows, bad = [], 0
     while True:
@@ -205,6 +246,7 @@ def _parse(text: str, delimiter: str, path: Path) -> tuple[list[str], np.ndarray
             rows.append([float(v) if v.strip() else np.nan for v in row])
         except ValueError:
             bad += 1
+    warnings = list(damage)
     if bad:
         warnings.append(f"{path.name}: {bad} malformed row(s) skipped (truncated or corrupted)")
     return header, np.array(rows, dtype=np.float64).reshape(-1, len(header)), warnings
@@ -215,10 +257,7 @@ def read_csv(path: str | Path, fmt: str | CsvFormat, formats_path: str | Path = 
     spec = get_format(fmt, formats_path) if isinstance(fmt, str) else fmt
     if not path.is_file():
         raise LogFormatError(f"{path}: no such file")
-    text, damage = _read_text(path)
-    header, data, warnings = _parse(text, spec.delimiter, path)
-    if damage:
-        warnings.insert(0, damage)
+    header, data, warnings = _parse(path, spec.delimiter)
     missing = [c for c in spec.required_columns() if c not in header]
     if missing:
         hint = _matching_formats(header, formats_path)

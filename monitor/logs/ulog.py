@@ -7,12 +7,19 @@ esc_status (``esc[i].esc_rpm``), and for the airborne rule and calibration
 vehicle_status (arming_state), vehicle_land_detected (landed),
 vehicle_local_position (NED) and sensor_combined (accelerometer).
 ULog timestamps are µs on the boot clock already.
+
+The file's message framing is walked first (``_extent``, on a memory map:
+cost linear in the messages, not the file): a last message cut off by the end
+of the file, or a tail of zeros or junk (a header whose type is no ULog
+message type), is cut with a warning, and pyulog reads only what precedes it
+(it would scan a zero-filled tail byte by byte for a sync marker).
 """
 
 from __future__ import annotations
 
 import contextlib
 import io
+import mmap
 import struct
 from pathlib import Path
 
@@ -48,17 +55,44 @@ ULOG_HEADER_BYTES = 16
 MSG_HEADER = struct.Struct("<HB")
 
 
-def _cut_off_bytes(path: Path) -> int:
-    """Bytes of a final message that runs past the end of the file (0 if it ends cleanly).
+def _message_types(ULog) -> frozenset[int]:
+    return frozenset(v for k, v in vars(ULog).items() if k.startswith("MSG_TYPE_") and isinstance(v, int))
 
-    pyulog stops silently at a cut-off message; walking the message headers tells.
+
+def _extent(path: Path, types: frozenset[int]) -> tuple[int, str]:
+    """(bytes worth reading, why the rest is not: '' when the file ends on a whole message).
+
+    Walks the message headers (uint16 size, uint8 type) from the file header on: a type that is no ULog
+    message (zeros, junk: the next header is none either) or a message running past the end stops the walk there.
     """
-    data = path.read_bytes()
-    off, n = ULOG_HEADER_BYTES, len(data)
-    while off + MSG_HEADER.size <= n:
-        size, _ = MSG_HEADER.unpack_from(data, off)
-        off += MSG_HEADER.size + size
-    return max(0, off - n) if off > n else (n - off)
+    n = path.stat().st_size
+    if n <= ULOG_HEADER_BYTES:
+        return n, ""
+    with open(path, "rb") as fh, mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_READ) as data:
+        off = ULOG_HEADER_BYTES
+        while off + MSG_HEADER.size <= n:
+            size, kind = MSG_HEADER.unpack_from(data, off)
+            if kind not in types and not _known_next(data, off + MSG_HEADER.size + size, n, types):
+                return off, f"{n - off} bytes of zeros or junk after the last message (byte {off} on)"
+            if off + MSG_HEADER.size + size > n:
+                return off, f"last message cut off ({n - off} bytes; truncated log)"
+            off += MSG_HEADER.size + size
+        if off < n:
+            return off, f"last message cut off ({n - off} bytes; truncated log)"
+        return n, ""
+
+
+def _known_next(data, off: int, n: int, types: frozenset[int]) -> bool:
+    """A message type newer than pyulog is skipped when the framing goes on after it; zeros and junk do not."""
+    return off + MSG_HEADER.size <= n and MSG_HEADER.unpack_from(data, off)[1] in types
+
+
+def _open_ulog(ULog, path: Path, end: int):
+    """pyulog on the file's first ``end`` bytes (a copy of the real content only when there is a tail)."""
+    if end >= path.stat().st_size:
+        return ULog(str(path), TOPICS)
+    with open(path, "rb") as fh:
+        return ULog(io.BytesIO(fh.read(end)), TOPICS)
 
 
 def mav_type_name(mav_type) -> str:
@@ -89,10 +123,14 @@ def read_ulog(path: str | Path) -> RawFlight:
     if not path.is_file():
         raise LogFormatError(f"{path}: no such file")
     ULog = _pyulog()
+    try:
+        end, tail = _extent(path, _message_types(ULog))
+    except (OSError, ValueError) as exc:
+        raise LogFormatError(f"{path}: cannot read: {exc}") from None
     chatter = io.StringIO()
     try:
         with contextlib.redirect_stdout(chatter):  # pyulog prints its corruption notices
-            ulog = ULog(str(path), TOPICS)
+            ulog = _open_ulog(ULog, path, end)
     except Exception as exc:  # pyulog raises plain exceptions on bad headers
         raise LogFormatError(f"{path}: not a readable ULog file: {exc}") from exc
     warnings = []
@@ -100,10 +138,9 @@ def read_ulog(path: str | Path) -> RawFlight:
     if getattr(ulog, "file_corruption", False):
         warnings.append(f"{path.name}: ULog file is corrupted: damaged data skipped")
         damage = "damaged ULog (pyulog found corrupt data and skipped it)"
-    cut = _cut_off_bytes(path)
-    if cut:
-        warnings.append(f"{path.name}: last message cut off ({cut} bytes; truncated log): read up to the damage")
-        damage = f"truncated ULog ({path.stat().st_size} bytes, the last message cut off)"
+    if tail:
+        warnings.append(f"{path.name}: {tail}: read up to the damage")
+        damage = f"truncated ULog ({path.stat().st_size} bytes: {tail})"
 
     def need(name: str, fields: list[str]) -> Stream:
         d = _topic(ulog, name)
