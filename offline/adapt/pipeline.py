@@ -134,14 +134,6 @@ def features_for(logs: list[HealthyLog]) -> tuple[str, ...]:
     return RPM_REL + tuple(extra)
 
 
-# What the steady-state view (per-motor mean commands only) cannot tell apart, and what it cannot see at all.
-STEADY_CANNOT_SEPARATE = (
-    ("cg_offset", "motor_efficiency"),  # both move thrust between motors at trim; motor_efficiency absorbs any static pattern
-    ("mass", "esc_curve"),  # both scale every motor's command alike
-)
-STEADY_NOT_OBSERVABLE = ("inertia", "motor_time_constant", "rotor_time_constant", "drag", "gyro_bias")
-
-
 @dataclass
 class AirframeCalibration:
     """The calibration stage's result, from the one calibrator (``offline.calibrate``) in either of its views."""
@@ -184,13 +176,7 @@ def calibrate(nominal: VehicleConfig, logs: list[HealthyLog]) -> tuple[AirframeC
     cal = calibrate_steady(
         "airframe", nominal, means[fit_i], means[held_i], [logs[i].path for i in fit_i], [logs[i].path for i in held_i]
     )
-    rec = {
-        "view": "steady-state",
-        "view_why": "the logs carry no body rates: only the per-motor mean commands can be fitted",
-        "cannot_separate": [list(p) for p in STEADY_CANNOT_SEPARATE],
-        "not_observable": list(STEADY_NOT_OBSERVABLE),
-        **cal.to_dict(),
-    }
+    rec = {"view_why": "the logs carry no body rates: only the per-motor mean commands can be fitted", **cal.to_dict()}
     return AirframeCalibration("steady-state", cal.calibrated, cal.cause, cal.fit_files, rec), held_i
 
 

@@ -477,6 +477,12 @@ def select_terms(data: Data, nominal: VehicleConfig, candidates: list[Term]) -> 
 
 
 STEADY_CANDIDATES = ("motor_efficiency", "cg_offset", "mass", "esc_curve")
+# What per-motor mean commands cannot tell apart, and what they cannot see at all (said in every steady result).
+STEADY_CANNOT_SEPARATE = (
+    ("cg_offset", "motor_efficiency"),  # both move thrust between motors at trim; motor_efficiency absorbs any static pattern
+    ("mass", "esc_curve"),  # both scale every motor's command alike
+)
+STEADY_NOT_OBSERVABLE = ("inertia", "motor_time_constant", "rotor_time_constant", "drag", "gyro_bias")
 
 
 def predicted_commands(vehicle: VehicleConfig) -> np.ndarray:
@@ -572,6 +578,9 @@ class SteadyCalibration:
     def to_dict(self) -> dict:
         return {
             "airframe": self.airframe,
+            "view": "steady-state",
+            "cannot_separate": [list(p) for p in STEADY_CANNOT_SEPARATE],
+            "not_observable": list(STEADY_NOT_OBSERVABLE),
             "unexplained_residual": {k: None if v is None else round(v, 3) for k, v in self.unexplained.items()},
             "cause": self.cause,
             "why": TERMS[self.cause].why if self.cause else "no term beats the nominal model",

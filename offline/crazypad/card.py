@@ -55,6 +55,16 @@ def card_markdown(manifest: dict, model_name: str = "crazyflie-classifier.onnx")
         eff = c["calibrated_terms"]["motor_efficiency"]
         h = c["holdout_rms_cmd"]
         lines.append(f"| {af} | {c['cause']} | {_bitcraze(eff)} | {h['nominal']} -> {h['calibrated']} |")
+    first = next(iter(cal.values()), {})
+    if first.get("cannot_separate"):  # the motor logs carry no body rates: what the steady view cannot tell apart
+        lines += [
+            "",
+            "The motor logs carry no body rates, so this view cannot separate "
+            + "; ".join(" from ".join(f"`{t}`" for t in pair) for pair in first["cannot_separate"])
+            + ", and cannot see "
+            + ", ".join(f"`{t}`" for t in first["not_observable"])
+            + ".",
+        ]
     lines += [
         "",
         f"**Training.** Simulated CrazyPAD missions only, labels {recipe['labels'][0]}-{recipe['labels'][-1]}, "
