@@ -20,6 +20,7 @@ Issue 37's target: >= 1,000x real time for the whole command.
 from __future__ import annotations
 
 import argparse
+import json
 import resource
 import subprocess
 import sys
@@ -167,7 +168,12 @@ def main(argv=None) -> int:
     for name, wall, cpu, _ in rows:
         print(f"{name:<44}{wall:9.3f}{log_s / wall:8.0f}{cpu:9.3f}{log_s / max(cpu, 1e-9):8.0f}")
     if same is not None:
-        print(f"JSON identical to {args.against}'s: {'yes' if same else 'NO'}")
+        print(f"JSON identical to {args.against}'s: {'yes' if same else 'NO'}", end="")
+        if not same:
+            ours, theirs = (json.loads(r[3]) for r in rows[:2])
+            keys = sorted(k for k in set(ours) | set(theirs) if ours.get(k) != theirs.get(k))
+            print(f" (top-level keys that differ: {', '.join(keys)})", end="")
+        print()
     if profile:
         total = rows[0][2]
         print(f"where this tree's CPU goes (of {total:.3f} s):")
