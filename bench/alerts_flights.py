@@ -46,10 +46,11 @@ def replay_listing(f, d: Decision) -> list[dict]:
     """Every announcement with the statistic that crossed, and the regime events around it."""
     rows, events = [], []
     w = f.window
+    steps = f.steps()
     for j in range(len(f.mean_rpm)):
         t = (j + 1) / f.rate_hz
         before = dict(d.regime.counts)
-        d.step(t, f.inputs(j))
+        d.step(t, steps.inputs(j))
         for k, v in d.regime.counts.items():
             if v > before[k]:
                 events.append((round(t, 1), k))

@@ -338,13 +338,12 @@ class Pipeline:
             accel_xy = acc
             self.stats["imu_steps"] += 1
         roll, pitch = float(att[0]), float(att[1])
-        inputs = StepInputs(  # sum / size and .max(): np.mean and np.max bit for bit, without their wrappers
+        inputs = StepInputs.of_state(  # .max(): np.max bit for bit, without its wrapper
             airborne,
-            float(motor.sum() / motor.size),
-            float(max(abs(att[0]), abs(att[1]))),
-            float(np.abs(att[3:6]).max()),
-            battery_v,
             motor,
+            max(abs(att[0]), abs(att[1])),
+            np.abs(att[3:6]).max(),
+            battery_v,
             vel_heading_m_s=vel_heading,
             accel_xy_frd_m_s2=accel_xy,
         )

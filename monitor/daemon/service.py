@@ -315,7 +315,7 @@ class Daemon:
         if self._airborne and not step.airborne and self.flight_sets:
             self.flight_sets.reset()  # landed: the next flight gets a new set
         self._airborne = step.airborne
-        self.decision.step(t, step.inputs or StepInputs(step.airborne))
+        self.decision.step(t, step.inputs or StepInputs.of_state(step.airborne))
         if step.valid:
             self._evidence_t["classifier"] = t
         if step.inputs is not None:

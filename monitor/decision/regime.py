@@ -48,6 +48,31 @@ class StepInputs:
     # Thrust is along body z, so this is the air's drag on the body: a measure of the airspeed, wind included.
     accel_xy_frd_m_s2: np.ndarray | None = None
 
+    @classmethod
+    def of_state(
+        cls,
+        airborne: bool,
+        motor_rpm: np.ndarray | None = None,
+        tilt_rad: float = math.nan,
+        rate_rad_s: float = math.nan,
+        battery_v: float = math.nan,
+        vel_heading_m_s: np.ndarray | None = None,
+        accel_xy_frd_m_s2: np.ndarray | None = None,
+    ) -> StepInputs:
+        """The one place a step's inputs are made, live (the daemon's pipeline) and replayed (``monitor.decision
+        .replay``): the mean RPM as sum / size, np.mean bit for bit without its wrapper."""
+        mean = math.nan if motor_rpm is None else float(motor_rpm.sum() / motor_rpm.size)
+        return cls(
+            bool(airborne),
+            mean,
+            float(tilt_rad),
+            float(rate_rad_s),
+            float(battery_v),
+            motor_rpm,
+            vel_heading_m_s=vel_heading_m_s,
+            accel_xy_frd_m_s2=accel_xy_frd_m_s2,
+        )
+
 
 def heading_velocity(vel_ned_m_s, yaw_rad) -> np.ndarray | None:
     """(T, 2) (or (2,)) horizontal velocity in the heading frame (forward, right) from NED velocity and yaw (rad);

@@ -39,7 +39,7 @@ import numpy as np
 from monitor.decision.config import DecisionConfig
 from monitor.decision.effectiveness import PRE_CHANGE_MARGIN_S
 from monitor.decision.hypotheses import SetRule, flight_score, hypothesis_set, load_rule
-from monitor.decision.regime import StepInputs, heading_velocity
+from monitor.decision.replay import FlightSteps, replay
 from monitor.decision.rule import Decision, WindowEvidence
 from monitor.decision.thresholds import file_sha256
 from monitor.diagnose.physics import SET_PRIOR, PhysicsEvidence, own_baseline, physics_evidence
@@ -460,50 +460,30 @@ def verdict_confidence(labels: np.ndarray, label: int, cfg: DecisionConfig) -> t
 def replay_decision(
     table: FlightTable, clf: Classifier, cfg: DecisionConfig, ends: np.ndarray, labels: np.ndarray, faults: np.ndarray
 ) -> dict:
-    """The daemon's decision rule over the log, step by step, with the windows classified at ``ends``."""
+    """The daemon's decision rule over the log, step by step, with the windows classified at ``ends``
+    (``monitor.decision.replay``: the same replay as every offline evaluation)."""
     dec = Decision(cfg, table.rate_hz, clf.info.window, model_sha256=file_sha256(clf.path))
     t_s = _t_s(table, np.arange(len(table.timestamp_us)))
-    rpm = np.asarray(table.motor_rpm, dtype=np.float64)
-    mean_rpm = rpm.mean(axis=1)
-    tilt = np.maximum(np.abs(table.roll_rad), np.abs(table.pitch_rad))
-    rates = np.abs(np.stack([table.roll_rate_rad_s, table.pitch_rate_rad_s, table.yaw_rate_rad_s], axis=1)).max(axis=1)
-    battery = np.asarray(table.battery_v, dtype=np.float64)
-    vel = heading_velocity(table.vel_ned_m_s, table.yaw_rad)  # None in a log without velocity
-    acc = None if table.accel_frd_m_s2 is None else np.asarray(table.accel_frd_m_s2, dtype=np.float64)[:, :2]
-    at = {int(e): k for k, e in enumerate(ends)}
-    alerts = []
     fault = None  # the last window at fault level: {"t_boot_s", "hypothesis_sets"} (a landing later resets the levels)
-    for j in range(len(t_s)):
-        air = bool(table.airborne[j])
-        dec.step(
-            float(t_s[j]),
-            StepInputs(
-                air,
-                mean_rpm[j],
-                tilt[j],
-                rates[j],
-                battery[j],
-                rpm[j],
-                None if vel is None else vel[j],
-                None if acc is None else acc[j],
-            ),
-        )
-        k = at.get(j)
-        if k is not None:
-            for a in dec.window_evidence(float(t_s[j]), WindowEvidence(faults[k], labels[k])):
-                alerts.append(
-                    {
-                        "t_boot_s": round(a.t_s, 2),
-                        "level": a.level,
-                        "propellers": list(a.propellers),
-                        "text": a.text,
-                        "hypothesis_sets": [list(s) for s in a.sets],
-                    }
-                )
-            if "fault" in dec.level or dec.pair_level == "fault":
-                sets = [list(s) for s in dec.hypothesis_sets("fault") if s]
-                if sets:
-                    fault = {"t_boot_s": round(float(t_s[j]), 2), "hypothesis_sets": sets}
+
+    def after_window(j: int, t: float) -> None:
+        nonlocal fault
+        if "fault" in dec.level or dec.pair_level == "fault":
+            sets = [list(s) for s in dec.hypothesis_sets("fault") if s]
+            if sets:
+                fault = {"t_boot_s": round(t, 2), "hypothesis_sets": sets}
+
+    evidence = {int(e): WindowEvidence(faults[k], labels[k]) for k, e in enumerate(ends)}
+    alerts = [
+        {
+            "t_boot_s": round(a.t_s, 2),
+            "level": a.level,
+            "propellers": list(a.propellers),
+            "text": a.text,
+            "hypothesis_sets": [list(s) for s in a.sets],
+        }
+        for a in replay(dec, FlightSteps.of_table(table), t_s, evidence, after_window)
+    ]
     out = {"alerts": alerts, "final": dec.verdict()}
     first = next((a for a in alerts if a["level"] == "fault"), None)
     if fault is not None and first is not None:

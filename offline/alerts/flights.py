@@ -31,7 +31,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from monitor.decision.regime import StepInputs, heading_velocity
+from monitor.decision.regime import heading_velocity
+from monitor.decision.replay import FlightSteps
 from monitor.esc import RPM_PER_RAD_S
 from monitor.labels import LABEL_MASKS
 from monitor.model import Classifier
@@ -88,12 +89,16 @@ class AlertFlight:
     # flights cached before it was kept (ALERT_FLIGHT_FIELDS). The share baseline's line follows it.
     vel_heading_m_s: np.ndarray | None = None
 
-    def inputs(self, j: int) -> StepInputs:
-        """Step ``j``'s flight state as the decision reads it (airborne: every step of these flights is)."""
-        v = None if self.vel_heading_m_s is None else self.vel_heading_m_s[j]
-        f = None if self.accel_frd_m_s2 is None else self.accel_frd_m_s2[j, :2]
-        return StepInputs(
-            True, self.mean_rpm[j], self.tilt_rad[j], self.rate_rad_s[j], self.battery_v[j], self.motor_rpm[j], v, f
+    def steps(self) -> FlightSteps:
+        """The flight's steps as the decision's replay reads them (airborne: every step of these flights is)."""
+        return FlightSteps(
+            airborne=np.ones(len(self.mean_rpm), dtype=bool),
+            motor_rpm=self.motor_rpm,
+            tilt_rad=self.tilt_rad,
+            rate_rad_s=self.rate_rad_s,
+            battery_v=self.battery_v,
+            vel_heading_m_s=self.vel_heading_m_s,
+            accel_xy_frd_m_s2=None if self.accel_frd_m_s2 is None else self.accel_frd_m_s2[:, :2],
         )
 
     @property

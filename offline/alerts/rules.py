@@ -24,6 +24,7 @@ import numpy as np
 from monitor.daemon.alerts import AlertRule
 from monitor.daemon.config import AlertConfig
 from monitor.decision.config import DecisionConfig
+from monitor.decision.replay import replay
 from monitor.decision.rule import Decision, WindowEvidence
 from offline.alerts.flights import AlertFlight
 
@@ -32,17 +33,15 @@ PX4_IMB_LPF_TAU_S = 5.0  # FailureDetector _imbalanced_prop_lpf_time_constant
 
 
 def replay_decision(f: AlertFlight, decision: Decision, with_sets: bool = False) -> list[tuple]:
-    """``[(t_s, level, propellers)]``, with each alert's candidate sets as a fourth element when ``with_sets``."""
-    out = []
+    """``[(t_s, level, propellers)]``, with each alert's candidate sets as a fourth element when ``with_sets``: the
+    flight through ``monitor.decision.replay`` (window k ends at step k + window - 1; step j at (j + 1) / rate)."""
     w = f.window
-    for j in range(len(f.mean_rpm)):
-        t = (j + 1) / f.rate_hz
-        decision.step(t, f.inputs(j))
-        k = j - w + 1
-        if k >= 0:
-            for a in decision.window_evidence(t, WindowEvidence(f.fault_probability[k])):
-                sets = tuple(getattr(a, "sets", ())) or (a.propellers,)
-                out.append((t, a.level, a.propellers, sets) if with_sets else (t, a.level, a.propellers))
+    t_s = (np.arange(len(f.mean_rpm)) + 1) / f.rate_hz
+    evidence = {k + w - 1: WindowEvidence(p) for k, p in enumerate(f.fault_probability)}
+    out = []
+    for a in replay(decision, f.steps(), t_s, evidence):
+        sets = tuple(getattr(a, "sets", ())) or (a.propellers,)
+        out.append((a.t_s, a.level, a.propellers, sets) if with_sets else (a.t_s, a.level, a.propellers))
     return out
 
 
