@@ -104,7 +104,7 @@ card: $(STAMP)
 	$(MAKE) dataset-randomised RANDOMISED_OUT=$(CARD)/dataTSdown FLIGHTS=48 DURATION=60 SEED=24 NAME=TSdown ASSUME='*_torque_per_thrust_change_*=-0.10,-0.02'
 	$(MAKE) dataset-randomised RANDOMISED_OUT=$(CARD)/dataRQcal FLIGHTS=10 SEED=8 NAME=RQcal AIRFRAME=drawn \
 		ASSUME='motor_efficiency_spread_frac=0.01,0.02 cg_offset_frd_m=-0.0025,0.0025 arm_position_error_m=-0.00075,0.00075 esc_offset_rpm=-37.5,37.5 healthy_torque_per_thrust_spread_frac=-0.0075,0.0075'
-	$(BIN)/python -m offline.classifier.conformal --model models/classifier.onnx --data $(CARD)/dataRNcal/RNcal-varied.npz \
+	$(BIN)/propwatch tune sets --model models/classifier.onnx --data $(CARD)/dataRNcal/RNcal-varied.npz \
 		--data $(CARD)/dataRNfall/RNfall-varied.npz --data $(CARD)/dataRNrise/RNrise-varied.npz \
 		--beyond $(CARD)/dataRNsevere/RNsevere-varied.npz \
 		--check $(CARD)/dataRNbelow/RNbelow-varied.npz --check $(CARD)/dataRNabove/RNabove-varied.npz \
@@ -129,10 +129,10 @@ crazypad: $(STAMP)
 HOURS ?= 10
 ALERT_ARGS ?=
 calibrate-alerts: $(STAMP)
-	$(BIN)/python -m offline.alerts.evaluate --calibrate --calibration-hours $(HOURS) --healthy-hours 0.05 --onset-flights 4 --out $(OUT)/alerts-calibration
+	$(BIN)/propwatch tune alerts --calibration-hours $(HOURS) --healthy-hours 0.05 --onset-flights 4 --out $(OUT)/alerts-calibration
 
 evaluate-alerts: $(STAMP)
-	$(BIN)/python -m offline.alerts.evaluate --out $(OUT)/alerts $(ALERT_ARGS)
+	$(BIN)/propwatch evaluate alerts --out $(OUT)/alerts $(ALERT_ARGS)
 
 # Issue 12's torque-sign check: the damaged blade's torque-per-thrust change up (+2..+10 %) vs down (-10..-2 %),
 # 192 singles each; fails when the shipped system's single-propeller accuracy moves by more than 2 points (~6 min).

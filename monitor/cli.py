@@ -22,9 +22,9 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "dataset": ("offline.dataset.cli", "generate labelled fault data sets (A, B, C, ...)"),
     "train": ("offline.classifier.train_cli", "train the CNN fault classifier"),
     "export": ("offline.classifier.export_cli", "export a trained classifier to ONNX"),
-    "evaluate": ("offline.classifier.evaluate_cli", "evaluate a classifier on data sets"),
-    "evalsim": ("offline.evalsim.cli", "write an evaluation-only set from the second simulator (never for training)"),
+    "evaluate": ("offline.evaluate", "evaluation suites: classifier, alerts, evalsim (evaluation-only sets)"),
     "calibrate": ("offline.calibrate.cli", "fit model extensions to measured flights"),
+    "tune": ("offline.tune.cli", "fit beside a shipped model: set coverage (sets), alert thresholds (alerts)"),
     "crazypad": ("offline.crazypad.cli", "sim-to-real experiment on CrazyPAD"),
     "adapt": ("offline.adapt.cli", "calibrate, simulate, train and baseline a new airframe from its healthy logs"),
     "diagnose": ("monitor.diagnose.cli", "diagnose recorded flight logs"),
@@ -35,6 +35,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "fleet": ("fleet.cli", "fleet: ingest many logs into a health database (Ray), web report"),
     "baseline": ("monitor.memory.cli", "a vehicle's healthy normal from its own flights: learn, show, note"),
 }
+# Former commands: each still runs as its new form, after a line on stderr naming it.
+DEPRECATED: dict[str, tuple[str, ...]] = {"evalsim": ("evaluate", "evalsim")}
 
 
 def usage() -> str:
@@ -56,6 +58,10 @@ def main(argv: list[str] | None = None) -> int:
         print(f"propwatch {version()}")
         return 0
     name, rest = argv[0], argv[1:]
+    if name in DEPRECATED:
+        new_form = DEPRECATED[name]
+        print(f"propwatch {name} is deprecated: use 'propwatch {' '.join(new_form)}'", file=sys.stderr)
+        name, rest = new_form[0], [*new_form[1:], *rest]
     if name not in COMMANDS:
         print(f"propwatch: unknown command {name!r}\n\n{usage()}", file=sys.stderr)
         return 2

@@ -50,7 +50,7 @@ EVALSIM_SAMPLES_SHORT = 1
 
 
 def parse_args(argv):
-    p = argparse.ArgumentParser(prog="python -m offline.alerts.evaluate", description=__doc__.split("\n")[0])
+    p = argparse.ArgumentParser(prog="propwatch evaluate alerts", description=__doc__.split("\n")[0])
     p.add_argument("--model", default=str(REPO_ROOT / "models" / "classifier.onnx"))
     p.add_argument("--vehicle", default=str(REPO_ROOT / "models" / "vehicle.yaml"))
     p.add_argument("--out", default="out/alerts", help="where alerts.json and alerts.md go")
@@ -394,4 +394,8 @@ def markdown(r: dict) -> str:
 
 
 if __name__ == "__main__":
+    if "--calibrate" in sys.argv[1:]:
+        print("python -m offline.alerts.evaluate --calibrate is deprecated: use 'propwatch tune alerts'", file=sys.stderr)
+    else:
+        print("python -m offline.alerts.evaluate is deprecated: use 'propwatch evaluate alerts'", file=sys.stderr)
     sys.exit(main())

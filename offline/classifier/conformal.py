@@ -33,6 +33,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import math
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -415,7 +416,7 @@ def fmt(m: dict) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="python -m offline.classifier.conformal", description=__doc__.splitlines()[0])
+    p = argparse.ArgumentParser(prog="propwatch tune sets", description=__doc__.splitlines()[0])
     p.add_argument("--model", type=Path, default=Path("models/classifier.onnx"), help="classifier ONNX")
     p.add_argument(
         "--data",
@@ -493,4 +494,5 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
+    print("python -m offline.classifier.conformal is deprecated: use 'propwatch tune sets'", file=sys.stderr)
     raise SystemExit(main())

@@ -40,7 +40,7 @@ class LoadedModel:
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="propwatch evaluate", description=__doc__)
+    p = argparse.ArgumentParser(prog="propwatch evaluate classifier", description=__doc__)
     p.add_argument("model", type=Path, help=".onnx or .pt")
     p.add_argument("datasets", nargs="*", type=Path, help="data set .npz files")
     p.add_argument("--out", type=Path, default=Path("out/evaluate"), help="folder for PNGs and results.json")

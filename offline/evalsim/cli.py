@@ -1,4 +1,4 @@
-"""``propwatch evalsim``: write a named evaluation-only set (tlog + truth JSON per flight + manifest).
+"""``propwatch evaluate evalsim``: write a named evaluation-only set (tlog + truth JSON per flight + manifest).
 
 NEVER for training or model selection.
 """
@@ -12,7 +12,7 @@ from offline.evalsim.names import DEFAULT_DURATION_S, SET_NAMES
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="propwatch evalsim", description=__doc__)
+    p = argparse.ArgumentParser(prog="propwatch evaluate evalsim", description=__doc__)
     p.add_argument("--set", required=True, choices=SET_NAMES, help="named set")
     p.add_argument("--out", required=True, type=Path, help="output folder")
     p.add_argument("--flights", type=int, default=None, help="number of flights (default: one cycle of the set's labels)")

@@ -1,0 +1,33 @@
+"""``propwatch tune``: fit what sits beside a shipped model to its outputs on our simulator's flights.
+
+    propwatch tune sets [ARGS]    the conformal set rule (<model>.sets.json): offline.classifier.conformal
+    propwatch tune alerts [ARGS]  the decision thresholds (models/decision-calibration.json):
+                                  offline.alerts.evaluate --calibrate
+
+``propwatch tune WHAT --help`` lists that tool's options. Neither changes the simulator or the model: fitting the
+simulator to measured flights is ``propwatch calibrate``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+
+# what -> (module with main(argv), arguments put first, one line)
+TOOLS = {
+    "sets": ("offline.classifier.conformal", (), "set coverage: the conformal rule beside the model"),
+    "alerts": ("offline.alerts.evaluate", ("--calibrate",), "alert thresholds: the decision's calibration file"),
+}
+
+
+def run(what: str, argv: list[str]) -> int:
+    module, first, _ = TOOLS[what]
+    return int(importlib.import_module(module).main([*first, *argv]) or 0)
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(prog="propwatch tune", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("what", choices=sorted(TOOLS), help="; ".join(f"{k}: {v[2]}" for k, v in TOOLS.items()))
+    p.add_argument("args", nargs=argparse.REMAINDER, help="that tool's own options (propwatch tune WHAT --help)")
+    a = p.parse_args(argv)
+    return run(a.what, a.args)
