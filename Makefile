@@ -6,7 +6,7 @@ STAMP := $(VENV)/.installed
 DATA ?= ../shared/data
 OUT ?= out
 
-.PHONY: setup demo test lint bench bench-measure models propellers classifier crazypad clean calibrate-physics evaluate-physics dataset-randomised card card-text calibrate-alerts evaluate-alerts evaluate-torque-sign evaluate-calibration
+.PHONY: setup demo test lint bench bench-measure models propellers classifier crazypad clean calibrate-physics evaluate-physics dataset-randomised card card-text calibrate-alerts evaluate-alerts evaluate-torque-sign evaluate-calibration calibrate-memory evaluate-memory
 
 $(STAMP): pyproject.toml
 	$(PY) -m venv $(VENV)
@@ -151,6 +151,17 @@ calibrate-physics: $(STAMP)
 # 2 cores). The calibrator's gates come from our simulator: python -m offline.calibrate.derive_gates.
 evaluate-calibration: $(STAMP)
 	nice -n 10 $(BIN)/python -m bench.evalsim_calibration --out $(OUT)/evaluate-calibration
+
+# Vehicle memory (docs/VEHICLE_MEMORY.md). calibrate-memory: our simulator's same-airframe fleet (seed 1, 24 airframes,
+# about 3 min) and the constants of monitor/memory/thresholds.py from it. evaluate-memory: diagnose, daemon and cost on
+# the evaluation-only simulator's set `vehicles` and our fleet of seed 0, beside the references (about 30 min).
+calibrate-memory: $(STAMP)
+	$(BIN)/python -c "from offline.vehicles.ours import write_fleet; write_fleet('$(OUT)/ours_cal', 288, seed=1)"
+	$(BIN)/python -m offline.vehicles.calibrate --fleet $(OUT)/ours_cal
+
+evaluate-memory: $(STAMP)
+	nice -n 10 $(BIN)/python -m bench.bench_vehicle_memory --out $(OUT)/vehicle-memory
+	nice -n 10 $(BIN)/python -m bench.crazypad_memory --root $(DATA)/crazypad
 
 # Localisation on our paper sets (physics, CNN, omega^2-share side by side; a few minutes).
 evaluate-physics: $(STAMP)
