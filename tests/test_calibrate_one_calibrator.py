@@ -62,11 +62,11 @@ def test_steady_view_says_what_it_cannot_separate():
 
     tabs = _cg_flights_own_sim()
     no_rates = [dataclasses.replace(t, roll_rate_rad_s=np.full_like(t.roll_rate_rad_s, np.nan)) for t in tabs]
-    cal, _ = calibrate(NOM, [HealthyLog(f"f{i}", t, None) for i, t in enumerate(no_rates)])
+    cal, _ = calibrate(NOM, [HealthyLog(f"f{i}", t) for i, t in enumerate(no_rates)])
     assert cal.view == "steady-state"
     assert ["cg_offset", "motor_efficiency"] in cal.record["cannot_separate"]
     assert "motor_time_constant" in cal.record["not_observable"]
-    dyn, _ = calibrate(NOM, [HealthyLog(f"f{i}", t, None) for i, t in enumerate(tabs)])
+    dyn, _ = calibrate(NOM, [HealthyLog(f"f{i}", t) for i, t in enumerate(tabs)])
     assert dyn.view == "dynamic" and "cannot_separate" not in dyn.record
 
 

@@ -49,6 +49,26 @@ def calibration_text(cal: dict) -> str:
     )
 
 
+def baseline_text(base: dict) -> str:
+    """The vehicle-memory baseline (``monitor.memory.cli.describe``) that ``diagnose --vehicle DIR`` judges with."""
+    head = (
+        f"**Healthy baseline** (vehicle memory, `baseline.json`; {base['basis']} shares, PX4 order, names "
+        f"{', '.join(base['motor_names'])}; {len(base['flights'])} flights)"
+    )
+    if not base["ready"]:
+        return (
+            head + f": not ready ({len(base['flights'])} of {base['flights_needed']} flights), so diagnose does not compare yet."
+        )
+    return (
+        head
+        + ": normal share "
+        + ", ".join(f"{x:.3f}" for x in base["normal_share"])
+        + "; flight-to-flight spread "
+        + ", ".join(f"{x:.4f}" for x in base["spread_share"])
+        + "."
+    )
+
+
 def card_markdown(m: dict) -> str:
     cal, base, cfg = m["calibration"], m["baseline"], m["config"]
     lines = [
@@ -62,14 +82,7 @@ def card_markdown(m: dict) -> str:
         "",
         calibration_text(cal),
         "",
-        f"**Healthy baseline** ({base['basis']} shares, PX4 order, names {', '.join(base['motor_names'])}): mean "
-        + ", ".join(f"{x:.3f}" for x in base["shares_mean"])
-        + "; flight-to-flight std "
-        + ", ".join(f"{x:.4f}" for x in base["shares_std"])
-        + "; within-flight noise "
-        + ", ".join(f"{x:.4f}" for x in base["noise_std"])
-        + ("; native-rate command activity " + ", ".join(f"{x:.4f}" for x in base["activity"]) if base.get("activity") else "")
-        + ".",
+        baseline_text(base),
         *(
             [
                 "",

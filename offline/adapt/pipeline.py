@@ -14,7 +14,7 @@ Stages (one progress bar each):
 4. **train** the same small CNN on it, and on the same recipe around the *nominal* vehicle, so the
    card shows what adaptation buys;
 5. **export** both to ONNX; **score** both on the held-out healthy logs and on any ``--labelled``
-   log; write the **baseline** (``monitor.baseline``), the calibrated vehicle, the manifest and the
+   log; write the **baseline** (vehicle memory, ``monitor.memory``), the calibrated vehicle, the manifest and the
    card (``offline.adapt.card``, from the manifest).
 
 ``propwatch diagnose LOG --vehicle DIR`` then uses DIR's vehicle, model and baseline.
@@ -29,19 +29,20 @@ from pathlib import Path
 
 import numpy as np
 
-from monitor.baseline import BASELINE_FILE, baseline_from_tables
+from monitor.baseline import SPREAD_FLOOR
 from monitor.config import to_mapping
 from monitor.errors import ConfigError
-from monitor.features import NATIVE_MIN_RATE_HZ, motor_command_activity
 from monitor.labels import LABEL_TABLE, label_from_mask
 from monitor.logs import read_raw
 from monitor.logs.raw import to_flight_table
+from monitor.memory.cli import describe
 from monitor.vehicle import VehicleConfig, load_vehicle_with_sources
 from offline.adapt.checks import NotHealthyError, check_airborne, check_consistent, vehicle_type_problem
 from offline.calibrate.terms import TERMS
 from offline.manifest import make_manifest, write_manifest
 
 MODEL_FILE = "classifier.onnx"
+BASELINE_FILE = "baseline.json"  # read by propwatch diagnose --vehicle DIR
 NOMINAL_MODEL_FILE = "nominal-classifier.onnx"
 VEHICLE_FILE = "vehicle.yaml"
 MANIFEST_FILE = "adapt.manifest.json"
@@ -80,12 +81,6 @@ class AdaptConfig:
 class HealthyLog:
     path: str
     table: object  # FlightTable at 20 Hz
-    activity: np.ndarray | None  # native-rate activity, when the log is fast enough
-
-
-def native_grid_hz(native_hz: float) -> float:
-    """A grid at (about) the log's own rate with a whole number of µs per step: CrazyPAD's 100.9 Hz -> 100 Hz."""
-    return max(r for r in (50.0, 100.0, 200.0, 250.0, 500.0, 1000.0) if r <= 1.05 * native_hz)
 
 
 def _progress(total: int, desc: str, enabled: bool):
@@ -105,15 +100,46 @@ def read_healthy(paths: list[str], fmt: str | None, vehicle: VehicleConfig, prog
             raw = read_raw(p, fmt)
             tab = to_flight_table(raw, esc=vehicle.esc, rate_hz=20.0)
             check_airborne(tab, p)
-            act = None
-            native = raw.motor_cmd.rate_hz()
-            if native >= NATIVE_MIN_RATE_HZ:
-                fast = to_flight_table(raw, esc=vehicle.esc, rate_hz=native_grid_hz(native))
-                act = motor_command_activity(fast.motor_cmd, fast.rate_hz, fast.airborne)
-            out.append(HealthyLog(p, tab, act))
+            out.append(HealthyLog(p, tab))
             bar.update()
     check_consistent([h.table for h in out], [h.path for h in out])
     return out
+
+
+def healthy_baseline(logs: list[HealthyLog], fmt: str | None, cg_damage_separable: bool | None):
+    """The vehicle's normal in vehicle memory's format (``monitor.memory``), from its healthy flights: what
+    ``propwatch diagnose LOG --vehicle DIR`` judges a flight against. Fewer than ``MIN_FLIGHTS`` logs give a baseline
+    that is not ready yet (diagnose says so and does not compare)."""
+    from monitor.diagnose.memory import log_vehicle_id
+    from monitor.memory.baseline import MIN_FLIGHTS, VehicleBaseline
+    from monitor.memory.learn import learn_baseline
+    from monitor.memory.summary import summarize
+
+    ids = {i for i in (log_vehicle_id(h.path, fmt) for h in logs) if i is not None}
+    if len(ids) > 1:
+        raise NotHealthyError(f"the healthy logs are of {len(ids)} vehicles ({', '.join(sorted(ids))}): adapt one vehicle")
+    vehicle_id = ids.pop() if ids else None
+    id_source = "the logs" if vehicle_id else None
+    tables, files = [h.table for h in logs], [h.path for h in logs]
+    if len(logs) >= MIN_FLIGHTS:
+        # check_healthy=False: read_healthy has refused, by name, a log beyond the others' spread (offline.adapt.checks);
+        # vehicle memory's own check refuses CrazyPAD's E9_log03 among E9's four healthy logs (statistic 12.8 >= 12).
+        return learn_baseline(tables, files, vehicle_id, id_source, cg_damage_separable=cg_damage_separable, check_healthy=False)
+    first = summarize(tables[0])
+    b = VehicleBaseline(vehicle_id, id_source, tuple(tables[0].motor_names), first.basis)
+    for f, t in zip(files, tables):
+        b.add(f, None, summarize(t), "declared")
+    b.cg_damage_separable = cg_damage_separable
+    return b
+
+
+def share_spread(logs: list[HealthyLog]) -> float:
+    """Mean flight-to-flight spread of the rotors' shares (floored at ``SPREAD_FLOOR``): the training set's spread."""
+    from monitor.memory.normal import normal_of
+    from monitor.memory.summary import summarize
+
+    own = normal_of([summarize(h.table) for h in logs]).own_cov
+    return max(float(np.mean(np.sqrt(np.clip(np.diag(own), 0.0, None)))), SPREAD_FLOOR)
 
 
 def parse_labelled(spec: str) -> tuple[str, int | None]:
@@ -289,19 +315,16 @@ def adapt(
     for spec in labelled:
         path, truth = parse_labelled(spec)
         items.append((path, to_flight_table(read_raw(path, fmt), esc=nominal.esc, rate_hz=20.0), truth))
-    with _progress(1, "calibrate", progress) as bar:
-        cal, held_i = calibrate(nominal, logs)
-        bar.update()
-    activity = None
-    if all(h.activity is not None for h in logs):
-        activity = np.mean([h.activity for h in logs], axis=0)
-    separable = {}
+    separable = evidence = None
     if cfg.mission == "crazypad":  # measured on the shared CrazyPAD flights: CG offset and damage look alike
         from offline.crazypad.evidence import CG_DAMAGE_EVIDENCE, CG_DAMAGE_SEPARABLE
 
-        separable = {"cg_damage_separable": CG_DAMAGE_SEPARABLE, "cg_damage_evidence": CG_DAMAGE_EVIDENCE}
-    baseline = baseline_from_tables([h.table for h in logs], [h.path for h in logs], activity, **separable)
-    spread = float(np.mean(baseline.spread()))
+        separable, evidence = CG_DAMAGE_SEPARABLE, CG_DAMAGE_EVIDENCE
+    baseline = healthy_baseline(logs, fmt, separable)
+    spread = share_spread(logs)
+    with _progress(1, "calibrate", progress) as bar:
+        cal, held_i = calibrate(nominal, logs)
+        bar.update()
     features = features_for(logs)
     tcfg = TrainConfig(
         features=features,
@@ -342,7 +365,7 @@ def adapt(
         labelled=list(labelled),
         held_out_healthy=[logs[i].path for i in held_i] if len(logs) > 1 else [],
         calibration=cal.record,
-        baseline=baseline.to_dict(),
+        baseline=describe(baseline) | {"cg_damage_separable": baseline.cg_damage_separable, "cg_damage_evidence": evidence},
         assumptions=TRAINING_SPREAD,
         training={k: {"recipe": recipes[k], "history": histories[k]} for k in recipes},
         scores=scores,
