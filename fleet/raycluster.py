@@ -11,9 +11,11 @@ from __future__ import annotations
 
 import contextlib
 import logging
+import os
 import socket
 import time
 
+from fleet import reaper
 from fleet.errors import FleetError, need
 
 CONNECT_DEADLINE_S = 20.0
@@ -55,11 +57,13 @@ def ray_session(address: str = "auto", workers: int | None = None):
     if ray.is_initialized():  # the embedding program (or a test session) already connected
         yield ray
         return
+    watcher = None  # fleet.reaper: Ray's helpers go with this process, even when it is killed
     kwargs = dict(include_dashboard=False, log_to_driver=False, logging_level=logging.WARNING)
     if address == "auto":
         if workers:
             kwargs["num_cpus"] = int(workers)
         ray.init(address="local", **kwargs)
+        watcher = reaper.start(os.getpid())  # what this instance started goes with this process, even killed
     else:
         try:
             ray.init(address=address, **kwargs)
@@ -69,6 +73,9 @@ def ray_session(address: str = "auto", workers: int | None = None):
         yield ray
     finally:
         ray.shutdown()
+        if watcher is not None:  # shut down in order: the reaper's work is done
+            watcher.terminate()
+            watcher.wait()
 
 
 def cluster_cpus(ray) -> int:
