@@ -1,12 +1,21 @@
-"""``fleet report``: the fleet database -> a static web site (no JavaScript library, no CDN).
+"""``fleet report``: the fleet database -> a static web site (no JavaScript library, no CDN), sized for 1,000 vehicles.
 
-    site/index.html              every vehicle: latest per-propeller health, flags
-    site/vehicles/<id>.html      trend of each rotor's P(faulty) and effectiveness over flights and dates
-    site/flights/<hash>.html     one flight's diagnosis: verdict, propeller table, timeline plot, warnings
+    site/index.html              every vehicle: its latest verdict (headline, confidence, next step), "compared with",
+                                 flags; sortable, paged, filtered by text and by date
+    site/flights.html            every flight of the fleet, the same way
+    site/vehicles/<slug>.html    one vehicle: its latest verdict, trends over its flights, every flight; each
+                                 flight a section (#f-<hash>): the verdict as ``propwatch diagnose`` words it, its
+                                 evidence in pictures
     site/problems.html           logs without a verdict and logs that could not be read, with the reason
+    site/table.js                the one script: renders, sorts, pages and filters each table from the JSON its page
+                                 embeds (a page holds data, not 20,000 rows of markup)
+
+Every verdict is ``monitor.diagnose.verdict`` applied to the row's stored diagnosis (``row_verdict``), so a row says
+what ``propwatch diagnose`` says of the same log. A flight's time is the log's own (GPS or the log's header clock:
+``time_known``); a log without one reads "time unknown", never its file's date.
 
 Flags on the index (per vehicle):
-- *recent faults*: a propeller was called faulty in any of its last ``RECENT_FLIGHTS`` flights with a verdict;
+- *recent*: a propeller to replace or inspect in any of its last ``RECENT_FLIGHTS`` flights with a verdict;
 - *effectiveness trending down*: over its last ``TREND_FLIGHTS`` flights that carry rotor
   effectiveness (at least ``TREND_MIN_FLIGHTS``), the least-squares line of a rotor's
   effectiveness against flight number falls by ``TREND_DROP`` or more from first to last.
@@ -29,7 +38,8 @@ import numpy as np
 from fleet.errors import FleetError
 from fleet.schema import open_db
 from fleet.svg import COLORS, Series, line_chart
-from monitor.diagnose.verdict import Verdict, compared_with_words, verdict_of
+from monitor.diagnose.report import verdict_html
+from monitor.diagnose.verdict import POSITION, Verdict, compared_with_words, flight_seconds, set_words, verdict_of
 
 RECENT_FLIGHTS = 3
 TREND_FLIGHTS = 10
@@ -37,13 +47,112 @@ TREND_MIN_FLIGHTS = 3
 TREND_DROP = 0.05  # effectiveness is 1.0 for an intact rotor: 5 points lost across the window
 MARKER = ".propwatch-fleet-site"
 UNIDENTIFIED = "(unidentified)"
+ROWS_PER_PAGE = 50
+EVIDENCE_POINTS = 40  # at most this many windows drawn per flight's evidence chart (a 20-s flight: every one)
+STATE_ORDER = {"damaged": 0, "imbalance": 1, "inspect": 2, "unreadable": 3, "no verdict": 4, "healthy": 5}  # TABLE_JS's RANK
 
 CSS = """
-body{font-family:system-ui,-apple-system,Segoe UI,Roboto,sans-serif;margin:1.5em;color:#222;max-width:1100px}
+body{font-family:system-ui,-apple-system,Segoe UI,Roboto,sans-serif;margin:1.5em;color:#222;max-width:1200px}
 table{border-collapse:collapse;margin:0.6em 0}th,td{border:1px solid #ccc;padding:3px 7px;font-size:13px;text-align:left}
 th{background:#f3f3f3}td.num{text-align:right;font-variant-numeric:tabular-nums}
+table.data th{cursor:pointer;user-select:none}table.data th.asc:after{content:" \\25B2"}table.data th.desc:after{content:" \\25BC"}
 .flag{color:#a40000;font-weight:bold}.ok{color:#2a7a2a}.muted{color:#777}
-nav a{margin-right:1em}svg.chart{display:block;margin:0.8em 0;background:#fff}
+td.damaged,.damaged .headline{color:#b00;font-weight:bold}td.inspect,td.imbalance,.inspect .headline,.imbalance .headline{color:#a50}
+td.healthy,.healthy .headline{color:#070}tr.replace{background:#fdd}tr.inspect{background:#fed}
+nav a{margin-right:1em}svg.chart{display:block;margin:0.8em 0;background:#fff}.controls input{margin-right:0.8em}
+"""
+
+# Renders a table from <script type="application/json" id=DATA>: {"cols": [{"h": header, "t": kind}], "rows": [...],
+# "strings": [...]}. Kinds: "t" text (or an index into strings when "s"), "n" number, "a" [text, href], "v" [state,
+# headline index, propellers] (a verdict cell), "d" a time "YYYY-MM-DD HH:MM" or "" (time unknown; the date filter).
+TABLE_JS = r"""(function () {
+  function esc(s) {
+    return String(s).replace(/[&<>"']/g, function (c) {
+      return {"&": "&amp;", "<": "&lt;", ">": "&gt;", '"': "&quot;", "'": "&#39;"}[c];
+    });
+  }
+  var RANK = {"damaged": 0, "imbalance": 1, "inspect": 2, "unreadable": 3, "no verdict": 4, "healthy": 5};
+  window.pwTable = function (dataId, mountId) {
+    var data = JSON.parse(document.getElementById(dataId).textContent);
+    var S = data.strings, cols = data.cols, all = data.rows, per = data.per;
+    var key = data.sort, dir = data.dir, page = 0, shown = all;
+    var dcol = cols.findIndex(function (c) { return c.t === "d"; });
+    function text(r, i) {
+      var c = cols[i], v = r[i];
+      if (c.t === "a") return v[0];
+      if (c.t === "v") return S[v[1]];
+      if (c.t === "d") return v || "time unknown";
+      if (c.s) return S[v];
+      return v === null ? "" : String(v);
+    }
+    function sortKey(r, i) {
+      var c = cols[i], v = r[i];
+      if (c.t === "n") return v === null ? -Infinity : v;
+      if (c.t === "v") return (RANK[v[0]] === undefined ? 9 : RANK[v[0]]) + ":" + S[v[1]];  // who needs action first
+      if (c.t === "d") return v || "0";
+      return text(r, i).toLowerCase();
+    }
+    var hay = all.map(function (r) { return cols.map(function (c, i) { return text(r, i); }).join(" ").toLowerCase(); });
+    all.forEach(function (r, k) { r.k = k; });
+    var mount = document.getElementById(mountId);
+    var dateInputs = dcol < 0 ? "" : '<label>from <input type="date" class="from"></label><label>to <input type="date" class="to"></label>';
+    mount.innerHTML = '<p class="controls"><label>filter <input type="search" class="q" placeholder="id, verdict, propeller..."></label>' +
+      dateInputs + '<button class="prev">&larr; previous</button> <span class="count"></span> <button class="next">next &rarr;</button></p>' +
+      '<table class="data"><thead><tr>' + cols.map(function (c, i) { return '<th data-i="' + i + '">' + esc(c.h) + "</th>"; }).join("") +
+      "</tr></thead><tbody></tbody></table>";
+    var q = mount.querySelector(".q"), from = mount.querySelector(".from"), to = mount.querySelector(".to");
+    var body = mount.querySelector("tbody"), count = mount.querySelector(".count");
+    function cell(r, i) {
+      var c = cols[i], v = r[i];
+      if (c.t === "a") return '<td><a href="' + esc(v[1]) + '">' + esc(v[0]) + "</a></td>";
+      if (c.t === "v") return '<td class="verdict ' + esc(v[0].replace(" ", "-")) + '" data-state="' + esc(v[0]) +
+        '" data-propellers="' + esc(v[2]) + '">' + esc(S[v[1]]) + "</td>";
+      if (c.t === "n") return '<td class="num">' + (v === null ? "" : esc(v)) + "</td>";
+      if (c.t === "d") return "<td" + (v ? "" : ' class="muted"') + ">" + esc(text(r, i)) + "</td>";
+      return "<td>" + esc(text(r, i)) + "</td>";
+    }
+    function render() {
+      var n = shown.length, pages = Math.max(1, Math.ceil(n / per));
+      page = Math.min(page, pages - 1);
+      var rows = shown.slice(page * per, page * per + per);
+      body.innerHTML = rows.map(function (r) { return "<tr>" + cols.map(function (c, i) { return cell(r, i); }).join("") + "</tr>"; }).join("");
+      count.textContent = n ? "rows " + (page * per + 1) + "-" + (page * per + rows.length) + " of " + n : "no rows";
+      mount.querySelectorAll("th").forEach(function (th) {
+        th.className = +th.dataset.i === key ? (dir > 0 ? "asc" : "desc") : "";
+      });
+    }
+    function apply() {
+      var s = q.value.toLowerCase(), f = from && from.value, t = to && to.value;
+      shown = all.filter(function (r) {
+        if (s && hay[r.k].indexOf(s) < 0) return false;
+        if ((f || t) && dcol >= 0) {
+          var d = (r[dcol] || "").slice(0, 10);
+          if (!d || (f && d < f) || (t && d > t)) return false;
+        }
+        return true;
+      });
+      shown.sort(function (a, b) {
+        var x = sortKey(a, key), y = sortKey(b, key);
+        return (x < y ? -1 : x > y ? 1 : a.k - b.k) * dir;
+      });
+      page = 0;
+      render();
+    }
+    mount.querySelector("thead").addEventListener("click", function (ev) {
+      var i = +ev.target.dataset.i;
+      if (isNaN(i)) return;
+      dir = i === key ? -dir : 1;
+      key = i;
+      apply();
+    });
+    [q, from, to].forEach(function (el) { if (el) el.addEventListener("input", apply); });
+    mount.querySelector(".prev").addEventListener("click", function () { page = Math.max(0, page - 1); render(); });
+    mount.querySelector(".next").addEventListener("click", function () { page += 1; render(); });
+    apply();
+    document.body.setAttribute("data-ready", String(all.length));
+    document.body.setAttribute("data-ready-ms", performance.now().toFixed(1));  // since navigation began
+  };
+})();
 """
 
 
@@ -52,21 +161,31 @@ class Vehicle:
     vid: str
     slug: str
     flights: list[dict] = field(default_factory=list)  # by start time
+    verdicts: list[Verdict] = field(default_factory=list)  # row_verdict of each flight, same order
 
     @property
-    def judged(self) -> list[dict]:
-        return [f for f in self.flights if f["status"] == "ok"]
+    def judged(self) -> list[tuple[dict, Verdict]]:
+        return [(f, v) for f, v in zip(self.flights, self.verdicts) if f["status"] == "ok"]
+
+    def latest(self) -> tuple[dict, Verdict]:
+        return self.flights[-1], self.verdicts[-1]
 
     def flags(self) -> list[str]:
         out = []
         recent = self.judged[-RECENT_FLIGHTS:]
-        hits: dict[int, int] = {}
-        for f in recent:
-            for p in f["faulty_propellers"] or []:
-                hits[p] = hits.get(p, 0) + 1
-        for p, k in sorted(hits.items()):
+        hits: dict[tuple[int, str], int] = {}
+        for _, v in recent:
+            for p in v.replace:
+                hits[(p, "damaged")] = hits.get((p, "damaged"), 0) + 1
+            for p in v.inspect:
+                hits[(p, "to inspect")] = hits.get((p, "to inspect"), 0) + 1
+        grouped: dict[tuple[str, int], list[int]] = {}
+        for (p, what), k in sorted(hits.items()):
+            grouped.setdefault((what, k), []).append(p)
+        for (what, k), props in sorted(grouped.items(), key=lambda x: (x[0][0] != "damaged", -x[0][1])):
             plural = "s" if len(recent) != 1 else ""
-            out.append(f"propeller {self.prop_name(p)} faulty in {k} of the last {len(recent)} flight{plural}")
+            who = ("propeller " if len(props) == 1 else "propellers ") + ", ".join(self.prop_name(p) for p in props)
+            out.append(f"{who} {what} in {k} of the last {len(recent)} flight{plural}")
         for p, drop, n in effectiveness_trends(self.flights):
             out.append(f"propeller {self.prop_name(p)} effectiveness down {100 * drop:.1f} points over {n} flights")
         return out
@@ -89,15 +208,28 @@ def _day(t) -> str | None:
     return t.strftime("%Y-%m-%d") if hasattr(t, "strftime") else str(t)[:10]
 
 
+def _judged_by_memory(f: dict) -> bool:
+    """Whether the vehicle memory compared this flight with its vehicle's healthy flights (not "no baseline yet")."""
+    if "memory" not in f:
+        return True  # a store without the memory's judgement column: the counts alone say it
+    try:
+        memory = json.loads(f["memory"]) if f["memory"] else None
+    except (TypeError, ValueError):
+        return False
+    return isinstance(memory, dict) and "note" not in memory
+
+
 def row_verdict(f: dict) -> Verdict:
     """The verdict of one database row: its stored diagnosis through ``monitor.diagnose.verdict``, exactly as
     ``propwatch diagnose`` prints it, with "compared with" from the vehicle memory's columns (``baseline_flights``,
-    ``compared_with_first``, ``compared_with_last``; absent or NULL: none)."""
+    ``compared_with_first``, ``compared_with_last``; absent, NULL or not judged: none)."""
     if f.get("diagnosis"):
         res = json.loads(f["diagnosis"])
     else:
         res = {"log": f.get("path"), "error": f.get("error") or "not diagnosed"}
     v = verdict_of(res)
+    if not _judged_by_memory(f):
+        return v
     said = compared_with_words(f.get("baseline_flights"), _day(f.get("compared_with_first")), _day(f.get("compared_with_last")))
     return dataclasses.replace(v, compared_with=said) if said else v
 
@@ -110,6 +242,15 @@ def verdict_cells(v: Verdict) -> str:
         f" data-propellers='{','.join(map(str, v.propellers))}' data-replace='{','.join(map(str, v.replace))}'>"
         f"{e(v.headline)}</td><td>{e(v.confidence)}</td><td class='next'>{e(v.next_step)}</td>"
     )
+
+
+def when(f: dict) -> str:
+    """``YYYY-MM-DD HH:MM`` (UTC) from the log's own clock, or "" when the log has none (its file's date is no
+    flight's time). ``time_known`` says which; a store without it counts a ``file:mtime`` source as unknown."""
+    t, known = f.get("start_time_utc"), f.get("time_known")
+    if known is None:
+        known = t is not None and f.get("start_time_source") != "file:mtime"
+    return t.strftime("%Y-%m-%d %H:%M") if known and t is not None else ""
 
 
 def effectiveness_trends(flights: list[dict]) -> list[tuple[int, float, int]]:
@@ -146,7 +287,9 @@ def load(db: str | Path) -> tuple[list[Vehicle], list[dict]]:
     vehicles: dict[str, Vehicle] = {}
     for r in rows:
         vid = r["vehicle_id"] or UNIDENTIFIED
-        vehicles.setdefault(vid, Vehicle(vid, slug(vid))).flights.append(r)
+        v = vehicles.setdefault(vid, Vehicle(vid, slug(vid)))
+        v.flights.append(r)
+        v.verdicts.append(row_verdict(r))
     return list(vehicles.values()), rows
 
 
@@ -159,14 +302,13 @@ def write_site(db: str | Path, out: str | Path) -> dict:
     tmp = out.with_name(out.name + ".tmp-site")
     shutil.rmtree(tmp, ignore_errors=True)
     (tmp / "vehicles").mkdir(parents=True)
-    (tmp / "flights").mkdir()
     (tmp / MARKER).write_text("written by propwatch fleet report\n", encoding="utf-8")
+    (tmp / "table.js").write_text(TABLE_JS, encoding="utf-8")
     (tmp / "index.html").write_text(index_page(vehicles, rows, str(db)), encoding="utf-8")
+    (tmp / "flights.html").write_text(flights_page(vehicles), encoding="utf-8")
     (tmp / "problems.html").write_text(problems_page(rows), encoding="utf-8")
-    for v in vehicles:
+    for v in vehicles:  # one file per vehicle, its flights as sections: 1,000 files for 20,000 flights, not 21,000
         (tmp / "vehicles" / f"{v.slug}.html").write_text(vehicle_page(v), encoding="utf-8")
-        for f in v.flights:
-            (tmp / "flights" / f"{f['log_hash'][:16]}.html").write_text(flight_page(f, v), encoding="utf-8")
     if out.exists():
         old = out.with_name(out.name + ".old-site")
         shutil.rmtree(old, ignore_errors=True)
@@ -180,7 +322,10 @@ def write_site(db: str | Path, out: str | Path) -> dict:
 
 def _page(title: str, body: str, depth: int, script: str = "") -> str:
     up = "../" * depth
-    nav = f'<nav><a href="{up}index.html">fleet</a><a href="{up}problems.html">problem logs</a></nav>'
+    nav = (
+        f'<nav><a href="{up}index.html">vehicles</a><a href="{up}flights.html">all flights</a>'
+        f'<a href="{up}problems.html">problem logs</a></nav>'
+    )
     return (
         f"<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'><title>{html.escape(title)}</title>"
         f"<meta name='viewport' content='width=device-width'><style>{CSS}</style></head><body>{nav}"
@@ -188,85 +333,122 @@ def _page(title: str, body: str, depth: int, script: str = "") -> str:
     )
 
 
-def _date(f: dict) -> str:
-    t = f["start_time_utc"]
-    return t.strftime("%Y-%m-%d %H:%M") if t is not None else "?"
+class _Strings:
+    """Deduplicated strings of a page's table data (20,000 rows share a few hundred headlines)."""
+
+    def __init__(self) -> None:
+        self.index: dict[str, int] = {}
+
+    def __call__(self, s: str) -> int:
+        return self.index.setdefault(s, len(self.index))
+
+    def to_list(self) -> list[str]:
+        return list(self.index)
 
 
-def _p_cells(ps, faulty=()) -> str:
-    if ps is None:
-        return "<td class='muted' colspan=4>no verdict</td>"
-    cells = []
-    for i, p in enumerate(ps):
-        shade = f"rgba(214,39,40,{min(1.0, p):.2f})"
-        bold = " class='num flag'" if (i + 1) in (faulty or ()) else " class='num'"
-        cells.append(f"<td{bold} style='background:linear-gradient(90deg,{shade} {100 * p:.0f}%,transparent 0)'>{p:.3f}</td>")
-    return "".join(cells)
+def _table(cols: list[dict], rows: list[list], strings: _Strings, sort: int, direction: int, depth: int) -> str:
+    """A paged, sortable, filterable table: its data as JSON in the page, drawn by table.js."""
+    data = {"cols": cols, "rows": rows, "strings": strings.to_list(), "per": ROWS_PER_PAGE, "sort": sort, "dir": direction}
+    payload = json.dumps(data, separators=(",", ":")).replace("</", "<\\/")
+    return (
+        f"<div id='tbl'><noscript>This table needs JavaScript.</noscript></div>"
+        f"<script type='application/json' id='data'>{payload}</script>"
+        f"<script src='{'../' * depth}table.js'></script><script>pwTable('data', 'tbl');</script>"
+    )
 
 
-def _eff_cells(eff) -> str:
-    if eff is None:
-        return "<td class='muted' colspan=4>not estimated</td>"
-    return "".join(f"<td class='num'>{e:.3f}</td>" for e in eff)
-
-
-FILTER_JS = """<script>
-(function () {
-  var box = document.getElementById('filter');
-  var rows = document.querySelectorAll('#vehicles tbody tr');
-  box.addEventListener('input', function () {
-    var q = box.value.toLowerCase();
-    rows.forEach(function (r) { r.style.display = r.textContent.toLowerCase().indexOf(q) >= 0 ? '' : 'none'; });
-  });
-  document.body.setAttribute('data-ready', String(rows.length));
-})();
-</script>"""
+def _verdict_value(v: Verdict, strings: _Strings) -> list:
+    return [v.state, strings(v.headline), ",".join(map(str, v.propellers))]
 
 
 def index_page(vehicles: list[Vehicle], rows: list[dict], db: str) -> str:
     e = html.escape
     n_err = sum(r["status"] == "error" for r in rows)
     n_nov = sum(r["status"] == "no_verdict" for r in rows)
-    order = sorted(vehicles, key=lambda v: (not v.flags(), v.vid == UNIDENTIFIED, v.vid))
-    trs = []
-    for v in order:
-        last = v.judged[-1] if v.judged else None
-        last_eff = next((f["rotor_effectiveness"] for f in reversed(v.flights) if f["rotor_effectiveness"] is not None), None)
-        flags = v.flags()
-        flag_html = "<br>".join(f"<span class='flag'>{e(x)}</span>" for x in flags) or "<span class='ok'>none</span>"
-        trs.append(
-            f"<tr><td><a href='vehicles/{v.slug}.html'>{e(v.vid)}</a></td><td class='num'>{len(v.flights)}</td>"
-            f"<td>{e(_date(v.flights[-1]))}</td>"
-            + (_p_cells(last["p_faulty"], last["faulty_propellers"]) if last else _p_cells(None))
-            + _eff_cells(last_eff)
-            + f"<td>{flag_html}</td></tr>"
+    s = _Strings()
+    data = []
+    for v in vehicles:
+        f, latest = v.latest()
+        data.append(
+            [
+                [v.vid, f"vehicles/{v.slug}.html"],
+                len(v.flights),
+                when(f),
+                _verdict_value(latest, s),
+                s(latest.confidence),
+                s(latest.next_step),
+                s(latest.compared_with or "not yet compared"),
+                s("; ".join(v.flags()) or "none"),
+            ]
         )
+    cols = [
+        {"h": "vehicle", "t": "a"},
+        {"h": "flights", "t": "n"},
+        {"h": "last flight (UTC)", "t": "d"},
+        {"h": "latest verdict", "t": "v"},
+        {"h": "confidence", "t": "t", "s": True},
+        {"h": "next step", "t": "t", "s": True},
+        {"h": "compared with", "t": "t", "s": True},
+        {"h": "flags", "t": "t", "s": True},
+    ]
+    data.sort(key=lambda r: (STATE_ORDER.get(r[3][0], 9), r[0][0]))  # who needs action first
     body = (
         f"<p>{len(vehicles)} vehicles, {len(rows)} logs ({n_nov} without a verdict, {n_err} unreadable: "
-        f"<a href='problems.html'>problem logs</a>). Database <code>{e(db)}</code>.</p>"
-        "<p><label>filter vehicles <input id='filter' type='search' placeholder='id, date, flag...'></label></p>"
-        "<table id='vehicles'><thead><tr><th rowspan=2>vehicle</th><th rowspan=2>logs</th><th rowspan=2>last log (UTC)</th>"
-        "<th colspan=4>latest P(faulty), propeller 1-4 (PX4 order)</th><th colspan=4>latest rotor effectiveness 1-4</th>"
-        "<th rowspan=2>flags</th></tr><tr>" + "<th>1</th><th>2</th><th>3</th><th>4</th>" * 2 + "</tr></thead>"
-        f"<tbody>{''.join(trs)}</tbody></table>"
-        f"<p class='muted'>Flags: a propeller called faulty in the last {RECENT_FLIGHTS} flights with a verdict; "
-        f"a rotor's effectiveness falling by {TREND_DROP:.2f} or more along a line fitted over its last "
-        f"{TREND_FLIGHTS} flights (at least {TREND_MIN_FLIGHTS}).</p>"
+        f"<a href='problems.html'>problem logs</a>; <a href='flights.html'>every flight</a>). Database "
+        f"<code>{e(db)}</code>. Vehicles needing action first; click a column to sort.</p>"
+        + _table(cols, data, s, 3, 1, 0)
+        + f"<p class='muted'>Flags: a propeller to replace or inspect in the last {RECENT_FLIGHTS} flights with a "
+        f"verdict; a rotor's effectiveness falling by {TREND_DROP:.2f} or more along a line fitted over its last "
+        f"{TREND_FLIGHTS} flights (at least {TREND_MIN_FLIGHTS}). Times are the logs' own; a log without a clock "
+        "reads 'time unknown'.</p>"
     )
-    return _page("propwatch fleet", body, 0, FILTER_JS)
+    return _page("propwatch fleet", body, 0)
+
+
+FLIGHT_COLS = [
+    {"h": "time (UTC)", "t": "d"},
+    {"h": "vehicle", "t": "a"},
+    {"h": "log", "t": "a"},
+    {"h": "verdict", "t": "v"},
+    {"h": "confidence", "t": "t", "s": True},
+    {"h": "compared with", "t": "t", "s": True},
+]
+
+
+def _flight_row(f: dict, v: Vehicle, verdict: Verdict, s: _Strings, up: str) -> list:
+    return [
+        when(f),
+        [v.vid, f"{up}vehicles/{v.slug}.html"],
+        [Path(f["path"]).name, f"{up}{flight_href(v, f)}"],
+        _verdict_value(verdict, s),
+        s(verdict.confidence),
+        s(verdict.compared_with or "-"),
+    ]
+
+
+def flights_page(vehicles: list[Vehicle]) -> str:
+    s = _Strings()
+    data = [_flight_row(f, v, verdict, s, "") for v in vehicles for f, verdict in zip(v.flights, v.verdicts)]
+    n = len(data)
+    return _page(
+        "every flight",
+        f"<p>{n} flights of {len(vehicles)} vehicles, newest first; filter by text or date, click a column to sort.</p>"
+        + _table(FLIGHT_COLS, data, s, 0, -1, 0),
+        0,
+    )
 
 
 def vehicle_page(v: Vehicle) -> str:
     e = html.escape
     fl = v.flights
-    labels = [(f["start_time_utc"].strftime("%m-%d") if f["start_time_utc"] else "?") for f in fl]
-    links = [f"../flights/{f['log_hash'][:16]}.html" for f in fl]
+    labels = [(when(f)[5:10] or "?") for f in fl]
+    links = [f"#{flight_anchor(f)}" for f in fl]
 
     def col(key: str, i: int):
         return tuple((f[key][i] if f[key] is not None else None) for f in fl)
 
     p_series = [Series(f"propeller {v.prop_name(i + 1)}", col("p_faulty", i), COLORS[i]) for i in range(4)]
-    charts = line_chart(p_series, labels, "P(faulty) per propeller over flights", "P(faulty)", (0.0, 1.0), links)
+    charts = line_chart(p_series, labels, "probability of damage per propeller over flights", "probability", (0.0, 1.0), links)
     if any(f["rotor_effectiveness"] is not None for f in fl):
         eff_series = []
         for i in range(4):
@@ -277,110 +459,175 @@ def vehicle_page(v: Vehicle) -> str:
             )
             eff_series.append(Series(f"rotor {v.prop_name(i + 1)}", mid, COLORS[i], band))
         charts += line_chart(
-            eff_series, labels, "rotor effectiveness (1 = intact) over flights, band = ±1 std", "effectiveness", None, links
+            eff_series, labels, "thrust each rotor gives (1 = intact) over flights, band = +-1 std", "thrust", None, links
         )
     else:
-        charts += "<p class='muted'>Rotor effectiveness: not estimated by the model that diagnosed these flights.</p>"
+        charts += "<p class='muted'>Rotor thrust: not estimated by the model that diagnosed these flights.</p>"
     flags = v.flags()
-    rows = "".join(
-        f"<tr><td><a href='../flights/{f['log_hash'][:16]}.html'>{e(_date(f))}</a></td><td>{e(Path(f['path']).name)}</td>"
-        f"<td>{e(f['status'])}</td><td>{e(str(f['faulty_propellers'] if f['status'] == 'ok' else (f['error'] or '')))}</td>"
-        + _p_cells(f["p_faulty"], f["faulty_propellers"])
-        + "</tr>"
-        for f in reversed(fl)
-    )
+    s = _Strings()
+    data = [_flight_row(f, v, verdict, s, "../") for f, verdict in zip(fl, v.verdicts)]
+    sections = "".join(flight_section(f, verdict) for f, verdict in reversed(list(zip(fl, v.verdicts))))
     src = sorted({f["vehicle_id_source"] or "none" for f in fl})
+    _, latest = v.latest()
     body = (
-        f"<p>{len(fl)} logs; id from {e(', '.join(src))}.</p>"
+        f"<p>{len(fl)} logs; id from {e(', '.join(src))}.</p><h2>Latest flight</h2>{verdict_html(latest)}"
         + ("<ul>" + "".join(f"<li class='flag'>{e(x)}</li>" for x in flags) + "</ul>" if flags else "<p class='ok'>No flags.</p>")
-        + f"<div id='trend'>{charts}</div>"
-        "<h2>Flights (newest first)</h2><table><tr><th>start (UTC)</th><th>file</th><th>status</th><th>faulty / reason</th>"
-        f"<th>P1</th><th>P2</th><th>P3</th><th>P4</th></tr>{rows}</table>"
+        + f"<div id='trend'>{charts}</div><h2>Flights</h2>"
+        + _table(FLIGHT_COLS, data, s, 0, -1, 1)
+        + sections
     )
     return _page(f"vehicle {v.vid}", body, 1)
 
 
-def flight_page(f: dict, v: Vehicle) -> str:
+def evidence_chart(d: dict, verdict: Verdict, names) -> str:
+    """The fault classifier's probability of damage per 5 s of flight (seconds after take-off), with the moment the
+    evidence changed marked."""
+    tl = d.get("timeline") or {}
+    if not tl.get("t_boot_s"):
+        return "<p class='muted'>No stretch of this flight was classified.</p>"
+    every = -(-len(tl["t_boot_s"]) // EVIDENCE_POINTS)  # a long flight drawn from every k-th window
+    probs = np.asarray(tl["fault_probability"], dtype=np.float64)[::every]
+    t = [flight_seconds(x, verdict.takeoff_boot_s) for x in tl["t_boot_s"][::every]]
+    series = [Series(f"{names[i]} {POSITION[i + 1]}", tuple(probs[:, i].tolist()), COLORS[i]) for i in range(4)]
+    marks = ()
+    if verdict.change_s is not None:
+        k = int(np.searchsorted(np.asarray(t), verdict.change_s))
+        marks = ((min(k, len(t) - 1), f"evidence changed at {verdict.change_s:.0f} s"),)
+    return line_chart(
+        series,
+        [f"{x:.0f}" for x in t],
+        "evidence: the fault classifier's probability of damage per 5 s of flight",
+        "probability",
+        (0, 1),
+        x_label="seconds after take-off",
+        marks=marks,
+        points=False,
+    )
+
+
+def sets_chart(d: dict, verdict: Verdict) -> str:
+    """The propeller sets the verdict could not tell apart, as bars of their probability (ranked where none is stated)."""
+    if not verdict.sets:
+        return ""
+    probs = {tuple(h["faulty_propellers"]): h.get("probability") for h in (d.get("hypotheses") or []) if "faulty_propellers" in h}
+    rows = []
+    for k, s in enumerate(verdict.sets[:8]):
+        p = probs.get(tuple(s))
+        width = 300 * (p if p is not None else 1.0 / len(verdict.sets))
+        label = f"{set_words(s, list(verdict.names))}: " + (f"{100 * p:.0f} %" if p is not None else "ranked, not weighed")
+        y = 8 + 22 * k
+        rows.append(
+            f'<rect x="0" y="{y}" width="{width:.1f}" height="16" fill="#bbb"/>'
+            f'<text x="4" y="{y + 12}" font-size="12">{html.escape(label)}</text>'
+        )
+    more = len(verdict.sets) - 8
+    h = 16 + 22 * min(8, len(verdict.sets))
+    return (
+        "<h3>What the damage could be</h3>"
+        f'<svg class="sets" xmlns="http://www.w3.org/2000/svg" width="420" height="{h}">'
+        + "".join(rows)
+        + "</svg>"
+        + (f"<p class='muted'>and {more} more</p>" if more > 0 else "")
+    )
+
+
+def shares_chart(f: dict, names) -> str:
+    """Each rotor's thrust share this flight against this vehicle's normal (the vehicle memory's judgement, in
+    healthy spreads), where the memory compared it."""
+    try:
+        memory = json.loads(f.get("memory") or "null")
+    except ValueError:
+        memory = None
+    dev = (memory or {}).get("deviation_sigma") if isinstance(memory, dict) else None
+    if not dev:
+        return ""
+    bars = []
+    for i, x in enumerate(dev):
+        w = min(abs(x), 6.0) * 30
+        x0 = 210 if x >= 0 else 210 - w
+        colour = "#c00" if abs(x) > 3 else "#888"
+        bars.append(
+            f'<text x="0" y="{20 + 22 * i}" font-size="12">{html.escape(f"{names[i]} {POSITION[i + 1]}")}</text>'
+            f'<rect x="{x0:.1f}" y="{8 + 22 * i}" width="{w:.1f}" height="16" fill="{colour}"/>'
+            f'<text x="{x0 + w + 4 if x >= 0 else x0 - 40:.1f}" y="{20 + 22 * i}" font-size="11">{x:+.1f}</text>'
+        )
+    band = '<rect x="120" y="2" width="180" height="92" fill="#2a7a2a" fill-opacity="0.08"/>'  # +-3 spreads
+    return (
+        "<h3>Each rotor's thrust share against this vehicle's normal</h3>"
+        f'<svg class="shares" xmlns="http://www.w3.org/2000/svg" width="420" height="100">{band}'
+        + "".join(bars)
+        + '<line x1="210" x2="210" y1="2" y2="94" stroke="#444"/></svg>'
+        "<p class='muted'>In spreads of its healthy flights; shaded: within 3 (normal).</p>"
+    )
+
+
+def flight_anchor(f: dict) -> str:
+    return f"f-{f['log_hash'][:16]}"
+
+
+def flight_href(v: Vehicle, f: dict) -> str:
+    """A flight's section, on its vehicle's page (relative to the site's root)."""
+    return f"vehicles/{v.slug}.html#{flight_anchor(f)}"
+
+
+def flight_section(f: dict, verdict: Verdict | None = None) -> str:
+    """One flight: the verdict as ``propwatch diagnose`` words it, its evidence in pictures, where it came from."""
     e = html.escape
+    verdict = verdict or row_verdict(f)
     d = json.loads(f["diagnosis"]) if f["diagnosis"] else {}
+    names = f["propeller_names"] or ["1", "2", "3", "4"]
     meta = [
         ("log", f["path"]),
         ("content sha256", f["log_hash"]),
-        ("vehicle", f"{v.vid} ({f['vehicle_id_source'] or 'no id'})"),
-        ("start (UTC)", f"{_date(f)} ({f['start_time_source'] or 'unknown'})"),
+        ("vehicle id from", f["vehicle_id_source"] or "no id"),
+        ("time (UTC)", f"{when(f)} ({f['start_time_source']})" if when(f) else "time unknown (the log carries no clock)"),
         ("duration / airborne", f"{f['duration_s'] or 0:.1f} s / {f['airborne_s'] or 0:.1f} s" if f["duration_s"] else "?"),
         ("format", f["format"] or "?"),
         ("model", f"{f['model_id'] or '?'} version {f['model_version'] or '?'}"),
         ("propwatch", f["propwatch_version"] or "?"),
     ]
-    body = (
-        f"<p><a href='../vehicles/{v.slug}.html'>vehicle {e(v.vid)}</a></p><table>"
-        + "".join(f"<tr><th>{e(k)}</th><td>{e(str(val))}</td></tr>" for k, val in meta)
-        + "</table>"
-    )
+    title = f"{Path(f['path']).name}, {when(f) or 'time unknown'}"
+    body = f"<article class='flight' id='{flight_anchor(f)}'><h2>flight {e(title)}</h2>{verdict_html(verdict)}"
     if f["status"] == "ok":
-        names = f["propeller_names"] or ["1", "2", "3", "4"]
-        eff, sd = f["rotor_effectiveness"], f["rotor_effectiveness_std"]
-        rows = "".join(
-            f"<tr><td>{i + 1}</td><td>{e(names[i])}</td><td class='num'>{f['p_faulty'][i]:.3f}</td>"
-            f"<td>{'<b class=flag>FAULTY</b>' if (i + 1) in f['faulty_propellers'] else 'ok'}</td>"
-            f"<td class='num'>{'' if eff is None else f'{eff[i]:.3f}'}{'' if sd is None else f' ± {sd[i]:.3f}'}</td></tr>"
-            for i in range(4)
-        )
-        body += (
-            f"<h2>Verdict: label {f['verdict_label']}, faulty propellers {e(str(f['faulty_propellers'] or 'none'))}</h2>"
-            f"<p>{f['windows']} windows.</p><table><tr><th>propeller (PX4)</th><th>name</th><th>P(faulty)</th><th>verdict</th>"
-            f"<th>effectiveness</th></tr>{rows}</table>"
-        )
-        if f["hypotheses"]:
-            hyp = json.loads(f["hypotheses"])
-            body += (
-                "<h2>Hypotheses</h2><table><tr><th>faulty propellers</th><th>probability</th></tr>"
-                + "".join(
-                    f"<tr><td>{e(str(h.get('faulty_propellers')))}</td><td class='num'>{_probability(h)}</td></tr>" for h in hyp
-                )
-                + "</table>"
-            )
-        tl = d.get("timeline") or {}
-        if tl.get("t_boot_s"):
-            probs = np.asarray(tl["fault_probability"], dtype=np.float64)
-            numbering = "vehicle's own numbering" if d.get("propeller_numbering") else "PX4 order"
-            series = [Series(f"propeller {i + 1}", tuple(probs[:, i].tolist()), COLORS[i]) for i in range(4)]
-            xl = [f"{t:.0f}" for t in tl["t_boot_s"]]
-            body += line_chart(
-                series, xl, f"P(faulty) per 5 s window ({numbering}); x: window end, s boot time", "P(faulty)", (0, 1)
-            ).replace("flight (date UTC)", "window end (s, autopilot boot clock)")
-    else:
-        what = "No verdict" if f["status"] == "no_verdict" else "Unreadable log"
-        body += f"<h2>{what}</h2><p class='flag'>{e(f['error'] or '')}</p>"
+        body += "<h3>The flight</h3>" + evidence_chart(d, verdict, names) + sets_chart(d, verdict) + shares_chart(f, names)
     fmt_arg = f" --format {f['format']}" if f["format"] not in (None, "tlog", "ulog", "dataflash") else ""
     body += (
-        "<p class='muted'>Motor, attitude and rate signals of this flight: "
+        "<p class='muted'>Each rotor's thrust share, the motor outputs and the attitude over this flight: "
         f"<code>propwatch diagnose {e(f['path'])}{e(fmt_arg)} --report DIR</code> (the log itself is not kept here).</p>"
     )
+    body += "<table>" + "".join(f"<tr><th>{e(k)}</th><td>{e(str(val))}</td></tr>" for k, val in meta) + "</table>"
     warns = f["warnings"] or []
-    body += "<h2>Warnings</h2><ul>" + ("".join(f"<li>{e(w)}</li>" for w in warns) or "<li>none</li>") + "</ul>"
+    body += "<h3>Warnings</h3><ul>" + ("".join(f"<li>{e(w)}</li>" for w in warns) or "<li>none</li>") + "</ul>"
     segs = d.get("airborne_segments") or []
     if segs:
         body += (
-            "<h2>Airborne segments</h2><ul>"
-            + "".join(f"<li>{s['start_boot_s']:.1f} - {s['stop_boot_s']:.1f} s boot time ({s['steps']} steps)</li>" for s in segs)
+            "<h3>Airborne</h3><ul>"
+            + "".join(
+                f"<li>{flight_seconds(s['start_boot_s'], verdict.takeoff_boot_s):.0f} - "
+                f"{flight_seconds(s['stop_boot_s'], verdict.takeoff_boot_s):.0f} s after take-off</li>"
+                for s in segs
+            )
             + "</ul>"
         )
-    if d.get("envelope"):
+    if f["hypotheses"]:
+        hyp = json.loads(f["hypotheses"])
         body += (
-            "<h2>Envelope</h2><table>"
-            + "".join(f"<tr><th>{e(k)}</th><td>{e(str(val))}</td></tr>" for k, val in d["envelope"].items())
-            + "</table>"
+            "<details><summary>hypothesis sets as stored</summary><table><tr><th>propellers</th><th>probability</th></tr>"
+            + "".join(
+                f"<tr><td>{e(set_words(h.get('faulty_propellers') or [], names))}</td><td class='num'>{_probability(h)}</td></tr>"
+                for h in hyp
+            )
+            + "</table></details>"
         )
-    return _page(f"flight {Path(f['path']).name}", body, 1)
+    return body + "</article>"
 
 
 def problems_page(rows: list[dict]) -> str:
     e = html.escape
     bad = [r for r in rows if r["status"] != "ok"]
     trs = "".join(
-        f"<tr><td><a href='flights/{r['log_hash'][:16]}.html'>{e(r['path'])}</a></td><td>{e(r['vehicle_id'] or UNIDENTIFIED)}</td>"
+        f"<tr><td><a href='vehicles/{slug(r['vehicle_id'] or UNIDENTIFIED)}.html#{flight_anchor(r)}'>{e(r['path'])}</a></td>"
+        f"<td>{e(r['vehicle_id'] or UNIDENTIFIED)}</td>"
         f"<td>{e(r['status'])}</td><td>{e(r['error'] or '')}</td></tr>"
         for r in bad
     )

@@ -6,6 +6,8 @@ import html
 import math
 from dataclasses import dataclass
 
+import numpy as np
+
 # Colour per propeller (PX4 rotor order), matplotlib's tab10 first four.
 COLORS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728")
 
@@ -32,6 +34,9 @@ def line_chart(
     width: int = 760,
     height: int = 280,
     css_class: str = "chart",
+    x_label: str = "flight (date UTC)",
+    marks: tuple[tuple[float, str], ...] = (),
+    points: bool = True,
 ) -> str:
     """An inline ``<svg>``: x = flight index (labelled ``x_labels``), one polyline + markers per series."""
     e = html.escape
@@ -69,7 +74,14 @@ def line_chart(
     step = max(1, math.ceil(n / 12))
     for i in range(0, n, step):
         out.append(f'<text x="{_fmt(px(i))}" y="{top + ph + 16}" font-size="10" text-anchor="middle">{e(x_labels[i])}</text>')
-    out.append(f'<text x="{left + pw / 2:.0f}" y="{height - 8}" font-size="11" text-anchor="middle">flight (date UTC)</text>')
+    out.append(f'<text x="{left + pw / 2:.0f}" y="{height - 8}" font-size="11" text-anchor="middle">{e(x_label)}</text>')
+    for i, what in marks:  # a moment to point at (x in point index units, fractional allowed): a red line
+        x = left + (pw * (i + 0.5) / n if n else 0)
+        out.append(
+            f'<line class="mark" x1="{_fmt(x)}" x2="{_fmt(x)}" y1="{top}" y2="{top + ph}" stroke="#c00" stroke-width="2"/>'
+        )
+        out.append(f'<text x="{_fmt(x + 4)}" y="{top + 12}" font-size="11" fill="#c00">{e(what)}</text>')
+    xs = [_fmt(px(i)) for i in range(n)]  # every series shares the x positions
     for k, s in enumerate(series):
         if s.band is not None:
             pts = [(i, lo_, hi_) for i, (lo_, hi_) in enumerate(zip(*s.band)) if lo_ is not None and hi_ is not None]
@@ -80,11 +92,13 @@ def line_chart(
                 out.append(f'<polygon points="{" ".join(poly)}" fill="{s.color}" fill-opacity="0.15" stroke="none"/>')
         pts = [(i, y) for i, y in enumerate(s.ys) if y is not None and math.isfinite(y)]
         if len(pts) >= 2:
+            idx, yv = zip(*pts)
+            ypx = np.round(top + ph * (1 - (np.clip(yv, y0, y1) - y0) / (y1 - y0)), 1).tolist()
+            xy = " ".join(map("{},{}".format, [xs[i] for i in idx], ypx))
             out.append(
-                f'<polyline class="series" data-name="{e(s.name)}" points="{" ".join(f"{_fmt(px(i))},{_fmt(py(y))}" for i, y in pts)}" '
-                f'fill="none" stroke="{s.color}" stroke-width="1.6"/>'
+                f'<polyline class="series" data-name="{e(s.name)}" points="{xy}" fill="none" stroke="{s.color}" stroke-width="1.6"/>'
             )
-        for i, y in pts:
+        for i, y in pts if points else ():  # a marker (with its value) per point; a long timeline draws lines only
             dot = (
                 f'<circle class="point" cx="{_fmt(px(i))}" cy="{_fmt(py(y))}" r="3.2" fill="{s.color}">'
                 f"<title>{e(s.name)}: {y:.3f} ({e(x_labels[i])})</title></circle>"

@@ -29,6 +29,23 @@ def flight(vid: str, k: int, p_faulty=(0.01, 0.02, 0.01, 0.03), faulty=(), eff=N
     r.update(start_time_source="tlog:receive_time", status=status, error=error, format="tlog", ingested_at=T0)
     if status == "ok":
         timeline = {"t_boot_s": [5.0, 6.0, 7.0], "fault_probability": [list(p_faulty)] * 3, "label": [1, 1, 1]}
+        verdict = {
+            "label": 1 + (faulty[0] if faulty else 0),
+            "faulty_propellers": list(faulty),
+            "confidence": "confident",
+            "fault_probability": list(p_faulty),
+            "faulty_probability_required": 0.9,
+        }
+        diagnosis = {
+            "log": r["path"],
+            "verdict": verdict,
+            "timeline": timeline,
+            "airborne_segments": [{"start_boot_s": 1.0, "stop_boot_s": 19.0, "steps": 360}],
+            "propellers": [{"propeller": i + 1, "name": str(i + 1)} for i in range(4)],
+            "hypotheses": [{"faulty_propellers": list(faulty), "probability": 0.9}],
+            "hypothesis_rule": {"score": "classifier x moment balance"},
+            "envelope": {"rpm_ratio": 1.0},
+        }
         r.update(
             verdict_label=1,
             faulty_propellers=list(faulty),
@@ -37,7 +54,7 @@ def flight(vid: str, k: int, p_faulty=(0.01, 0.02, 0.01, 0.03), faulty=(), eff=N
             duration_s=20.0,
             airborne_s=18.0,
             propeller_names=["1", "2", "3", "4"],
-            diagnosis=json.dumps({"timeline": timeline, "airborne_segments": [], "envelope": {"rpm_ratio": 1.0}}),
+            diagnosis=json.dumps(diagnosis),
             rotor_effectiveness=None if eff is None else list(eff),
             rotor_effectiveness_std=None if eff is None else [0.01] * 4,
             hypotheses=json.dumps([{"faulty_propellers": list(faulty), "probability": 0.9}]),
@@ -87,36 +104,56 @@ def vehicle_page(site: Path, vid: str) -> Path:
     return next(p for p in (site / "vehicles").glob(f"{vid}-*.html"))
 
 
+def table_data(page: Path) -> tuple[list[dict], list[list], list[str]]:
+    """A page's table as table.js receives it: columns, rows, deduplicated strings."""
+    data = json.loads(re.search(r"id='data'>(.*?)</script>", page.read_text(encoding="utf-8")).group(1))
+    return data["cols"], data["rows"], data["strings"]
+
+
 def test_flags_name_the_trend_and_the_recent_fault(site):
-    index = (site / "index.html").read_text(encoding="utf-8")
-    rows = {m.group(1): m.group(0) for m in re.finditer(r"<tr><td><a href='vehicles/[^']+'>(\w+)</a>.*?</tr>", index)}
-    assert set(rows) == {"wear", "hit", "calm"}
-    assert "propeller 2 effectiveness down 12.0 points over 5 flights" in rows["wear"]
-    assert "propeller 4 faulty in 1 of the last 3 flights" in rows["hit"]
-    assert "flag'>" not in rows["calm"] and "not estimated" in rows["calm"]
+    cols, rows, strings = table_data(site / "index.html")
+    flags = [c["h"] for c in cols].index("flags")
+    by_vehicle = {r[0][0]: strings[r[flags]] for r in rows}
+    assert set(by_vehicle) == {"wear", "hit", "calm"}
+    assert "propeller 2 effectiveness down 12.0 points over 5 flights" in by_vehicle["wear"]
+    assert "propeller 4 damaged in 1 of the last 3 flights" in by_vehicle["hit"]
+    assert by_vehicle["calm"] == "none"
     # The sudden 0.2 loss on its last flight fits a line falling 0.18 over 4 flights: flagged too.
-    assert "propeller 4 effectiveness down 18.0 points over 4 flights" in rows["hit"]
-    assert rows["wear"].count("effectiveness down") == 1 and rows["hit"].count("effectiveness down") == 1
+    assert "propeller 4 effectiveness down 18.0 points over 4 flights" in by_vehicle["hit"]
+    assert by_vehicle["wear"].count("effectiveness down") == 1 and by_vehicle["hit"].count("effectiveness down") == 1
     assert TREND_DROP <= 0.12
+    # the vehicle that needs action comes first, with its verdict's own words
+    assert rows[0][0][0] == "hit" and strings[rows[0][3][1]] == "Propeller 4 (rear-right) is damaged: replace it."
 
 
 def test_every_link_resolves_and_no_page_reaches_outside(site):
     pages = list(site.rglob("*.html"))
-    assert len(pages) == 1 + 1 + 3 + 12  # index, problems, vehicles, flights
+    assert len(pages) == 1 + 1 + 1 + 3  # index, every flight, problems, vehicles (each holds its flights)
     for page in pages:
-        for ref in links_of(page):
+        refs = links_of(page)
+        if "id='data'" in page.read_text(encoding="utf-8"):  # the table's links travel in its data
+            cols, rows, _ = table_data(page)
+            refs += [r[i][1] for r in rows for i, c in enumerate(cols) if c["t"] == "a"]
+        for ref in refs:
             assert not re.match(r"^(https?:)?//", ref), f"{page.name} loads {ref} from the network"
-            assert (page.parent / ref).resolve().is_file(), f"{page} links to missing {ref}"
+            target, _, anchor = ref.partition("#")
+            path = (page.parent / target).resolve() if target else page
+            assert path.is_file(), f"{page} links to missing {ref}"
+            assert not anchor or f"id='{anchor}'" in path.read_text(encoding="utf-8"), f"{page}: no section {ref}"
 
 
-def test_vehicle_page_has_both_trends_and_flight_page_the_diagnosis(site):
+def test_vehicle_page_has_both_trends_and_each_flight_its_diagnosis(site):
     page = vehicle_page(site, "wear").read_text(encoding="utf-8")
-    assert page.count('<polyline class="series"') == 8  # 4 P(faulty) + 4 effectiveness series
-    assert page.count('class="point"') == 2 * 4 * 5
+    # 4 probability + 4 effectiveness trend series, and each of 5 flights' evidence over its own flight
+    assert page.count('<polyline class="series"') == 8 + 4 * 5
+    assert page.count('class="point"') == 2 * 4 * 5  # markers on the trends only
     calm = vehicle_page(site, "calm").read_text(encoding="utf-8")
     assert "not estimated by the model" in calm
-    hit_last = (site / "flights" / ("hit-03".ljust(64, "0")[:16] + ".html")).read_text(encoding="utf-8")
-    assert "FAULTY" in hit_last and "0.970" in hit_last and "Hypotheses" in hit_last and "<svg" in hit_last
+    hit = vehicle_page(site, "hit").read_text(encoding="utf-8")
+    last = hit[hit.index("id='f-" + "hit-03".ljust(64, "0")[:16] + "'") :]
+    last = last[: last.index("</article>")]
+    assert "Propeller 4 (rear-right) is damaged: replace it." in last and "<svg" in last
+    assert "What the damage could be" in last and "seconds after take-off" in last
     problems = (site / "problems.html").read_text(encoding="utf-8")
     assert "unknown log format" in problems and "1 of 12 logs" in problems
 
@@ -166,15 +203,14 @@ def chromium_dom(page: Path, profile: Path) -> tuple[str, list[str]]:
 def test_site_in_headless_chromium(site, tmp_path):
     dom, console = chromium_dom(site / "index.html", tmp_path / "profile")
     assert console == []
-    assert 'data-ready="3"' in dom  # the filter script ran to its end over the 3 vehicle rows
+    assert 'data-ready="3"' in dom  # the table script ran to its end over the 3 vehicle rows
     hrefs = re.findall(r'href="(vehicles/[^"]+)"', dom)
     assert len(hrefs) == 3
     wear = next(h for h in hrefs if "wear-" in h)
     vdom, console = chromium_dom(site / wear, tmp_path / "profile")
-    assert console == []
-    assert vdom.count('class="series"') == 8 and "P(faulty) per propeller over flights" in vdom
-    flight_href = re.findall(r'href="(\.\./flights/[^"]+)"', vdom)[0]
-    fdom, console = chromium_dom((site / wear).parent / flight_href, tmp_path / "profile")
-    assert console == [] and "Verdict: label 1" in fdom and "<svg" in fdom
-    back = re.findall(r'href="(\.\./vehicles/[^"]+)"', fdom)
-    assert back and ((site / "flights") / back[0]).resolve() == (site / wear).resolve()
+    assert console == [] and 'data-ready="5"' in vdom
+    assert "probability of damage per propeller over flights" in vdom and "rows 1-5 of 5" in vdom
+    anchors = re.findall(r'href="(\.\./vehicles/[^"#]+)#(f-[0-9a-z-]+)"', vdom)
+    assert len(anchors) == 5 and all((site / "vehicles" / Path(p).name).resolve() == (site / wear).resolve() for p, _ in anchors)
+    assert all(f'id="{a}"' in vdom for _, a in anchors)
+    assert "No damaged propeller found." in vdom

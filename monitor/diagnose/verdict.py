@@ -125,8 +125,7 @@ def compared_with_words(flights: int | None, first: str | None, last: str | None
         return None
     what = f"against {flights} healthy flight{'s' if flights != 1 else ''} of this vehicle"
     if first and last and first != last:
-        shared = 8 if first[:8] == last[:8] else 5 if first[:5] == last[:5] else 0
-        return f"{what}, {first} to {last[shared:] if shared else last}"
+        return f"{what}, {first} to {last[5:] if first[:5] == last[:5] else last}"  # the year once
     return f"{what}, {first or last}" if (first or last) else what
 
 
@@ -256,8 +255,8 @@ def verdict_of(result: dict) -> Verdict:
             (),
             names,
             "No verdict: " + plain_reason(result.get("reason") or ""),
-            "Nothing was judged: check the propellers as before any flight; to have them judged, fly at least "
-            "a minute of steady flight with motor outputs and attitude logged and diagnose that log.",
+            "Nothing was judged: check the propellers as before any flight; to have them judged, diagnose a log "
+            "of a minute of steady flight with motor outputs and attitude.",
             takeoff_boot_s=takeoff,
             compared_with=compared,
             warnings=warnings,
