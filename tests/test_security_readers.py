@@ -86,3 +86,15 @@ def test_junk_after_a_ulog_is_cut_but_a_newer_message_type_between_known_ones_is
     newer.write_bytes(data[:head] + b"\x03\x00Z" + b"abc" + data[head:])
     t = read_log(newer)
     assert len(t) == len(read_log(clean)) and not any("zeros or junk" in w for w in t.warnings)
+
+
+def test_nan_timestamps_are_named_not_read_as_a_span_of_billions_of_seconds(tmp_path):
+    from types import SimpleNamespace
+
+    from monitor.errors import LogFormatError
+    from monitor.logs.guards import check_time_advances
+
+    t = np.arange(2000, dtype=np.float64) * 10_000.0
+    t[100:110] = np.nan  # a stream's times as a reader hands them over (``t_us``)
+    with pytest.raises(LogFormatError, match=r"attitude: 10 of 2000 timestamps are not numbers"):
+        check_time_advances({"attitude": SimpleNamespace(t_us=t)}, tmp_path / "f.csv")

@@ -91,6 +91,10 @@ def check_time_advances(streams: dict[str, object], path: str | Path, max_second
         t = getattr(s, "t_us", None)
         if t is None or len(t) < 2:
             continue
+        t = np.asarray(t)
+        if t.dtype.kind == "f" and not np.isfinite(t).all():
+            bad = int((~np.isfinite(t)).sum())
+            raise LogFormatError(f"{path}: {name}: {bad} of {len(t)} timestamps are not numbers (NaN or infinite)")
         span_s = (int(np.max(t)) - int(np.min(t))) / 1e6
         if span_s > max_seconds:
             raise LogFormatError(f"{path}: {name} spans {span_s:.0f} s, more than --max-seconds {max_seconds:g}")
