@@ -4,7 +4,8 @@ After the workers have written their rows (each with its flight's share summary)
 vehicle's flights in order of the logs' own clocks. A flight is compared with the vehicle's flights before it that
 raised nothing (no FAULTY, not suspect) once there are ``MIN_FLIGHTS`` of them: the same ``VehicleBaseline``,
 normal and ``judge`` as ``propwatch diagnose LOG --baseline B.json`` with B learnt from those flights, so both give
-the same verdict. A log without a clock of its own is judged against the baseline as it stands (every timed flight)
+the same verdict. Flights that raised nothing before a normal existed are checked against each other once there are
+enough, and one the others call FAULTY is set aside (``monitor.memory.learn.set_aside_outliers``). A log without a clock of its own is judged against the baseline as it stands (every timed flight)
 and never becomes history. A flight judged before keeps its verdict unless ``rediagnose``: a log older than flights
 already judged changes them only then.
 """
@@ -16,6 +17,7 @@ import json
 from monitor.labels import LABEL_TABLE
 from monitor.memory.baseline import MIN_FLIGHTS, VehicleBaseline
 from monitor.memory.judge import judge
+from monitor.memory.learn import set_aside_outliers
 from monitor.memory.summary import FlightSummary
 
 _COLS = (
@@ -43,16 +45,23 @@ def judge_store(con, rediagnose: bool = False) -> int:
     for vid, fl in by.items():
         timed = sorted((r for r in fl if r[3]), key=lambda r: (r[2], r[10]))
         untimed = sorted((r for r in fl if not r[3]), key=lambda r: r[10])
-        history: list[tuple] = []
+        history = VehicleBaseline(vid, None, tuple(fl[0][9]), json.loads(fl[0][5])["basis"])
         for r in timed + untimed:
             log_hash, _, start, time_known, status, summ, memory, label, conf, names, path, diagnosis = r
+            summary = FlightSummary.from_dict(json.loads(summ), path)
             if memory is None or rediagnose:
-                upd = _judge_row(vid, names, history, FlightSummary.from_dict(json.loads(summ), path), time_known)
+                set_aside_outliers(history)
+                upd = _judge_row(history, summary, time_known)
                 updates.append((log_hash, upd))
                 label, conf, memory = upd.get("verdict_label", label), upd.get("confidence", conf), upd["memory"]
                 status = upd.get("status", status)
-            if time_known and status == "ok" and _raised_nothing(label, conf, memory, diagnosis):
-                history.append(r)
+            if (
+                time_known
+                and status == "ok"
+                and _raised_nothing(label, conf, memory, diagnosis)
+                and summary.basis == history.basis
+            ):
+                history.add(log_hash, start.date().isoformat() if start is not None else None, summary, "no fault")
     if updates:
         con.execute("BEGIN TRANSACTION")
         for h, upd in updates:
@@ -62,19 +71,17 @@ def judge_store(con, rediagnose: bool = False) -> int:
     return len(updates)
 
 
-def _judge_row(vid, names, history, summary: FlightSummary, time_known) -> dict:
-    b = VehicleBaseline(vid, None, tuple(names), summary.basis)
-    for h in history:
-        b.add(h[0], h[2].date().isoformat() if h[2] is not None else None, FlightSummary.from_dict(json.loads(h[5])), "no fault")
+def _judge_row(b: VehicleBaseline, summary: FlightSummary, time_known) -> dict:
     cw = b.compared_with()
     upd = {
         "baseline_flights": cw["flights"],
         "compared_with_first": cw["first"],
         "compared_with_last": cw["last"],
-        "compared_with_logs": [h[0] for h in history],
+        "compared_with_logs": [f["name"] for f in b.active()],
     }
-    if not b.ready:
-        upd["memory"] = json.dumps({"note": f"no vehicle baseline yet ({cw['flights']} of {MIN_FLIGHTS} flights)"})
+    if not b.ready or summary.basis != b.basis:
+        why = f"no vehicle baseline yet ({cw['flights']} of {MIN_FLIGHTS} flights)" if not b.ready else "another share basis"
+        upd["memory"] = json.dumps({"note": why})
         return upd
     v = judge(b.normal(), summary)
     v["compared_with"] = cw

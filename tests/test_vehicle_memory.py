@@ -255,3 +255,46 @@ def test_diagnose_refuses_another_vehicles_baseline(fleet, tmp_path):
     (tmp_path / "E.json").write_text("{")
     r = run("diagnose", str(fleet / "ours_vehicles_0005.tlog"), "--baseline", str(tmp_path / "E.json"))
     assert r.returncode == 2 and "E.json: corrupt vehicle baseline" in r.stderr
+
+
+def test_fleet_an_older_log_changes_judged_verdicts_only_with_rediagnose(fleet, tmp_path):
+    """Later flights first (two damaged from take-off among them, before any normal exists), then the three older
+    references: judged rows stand until --rediagnose; a damaged flight never stays in a history that is used."""
+    pytest.importorskip("duckdb")
+    import duckdb
+
+    from fleet.ingest import ingest
+
+    later, refs = tmp_path / "later", tmp_path / "refs"
+    later.mkdir()
+    refs.mkdir()
+    for i in range(8):
+        shutil.copy(fleet / f"ours_vehicles_{i:04d}.tlog", (refs if i < 3 else later) / f"f{i}.tlog")
+    damaged = {"f4.tlog": [2], "f5.tlog": [3], "f7.tlog": [1]}
+    db = tmp_path / "f.duckdb"
+
+    def rows():
+        con = duckdb.connect(str(db), read_only=True)
+        try:
+            q = "SELECT path, log_hash, baseline_flights, faulty_propellers, confidence, compared_with_logs FROM flights"
+            out = con.execute(q).fetchall()
+        finally:
+            con.close()
+        names = {h: Path(p).name for p, h, *_ in out}
+        return {Path(p).name: (n, fp, conf, sorted(names[x] for x in (hist or []))) for p, _, n, fp, conf, hist in out}
+
+    ingest([str(later)], db, ray_address="off", progress=False)
+    first = rows()
+    for name, (n, fp, conf, hist) in first.items():
+        if n >= 3:  # judged by the vehicle's memory (before: the nominal verdict, whatever it says)
+            assert not set(hist) & set(damaged), (name, hist)
+            assert not (conf == "confident" and fp) or fp == damaged.get(name), (name, fp)
+    ingest([str(refs)], db, ray_address="off", progress=False)  # three older flights arrive later
+    second = rows()
+    assert all(second[k] == first[k] for k in first)  # judged verdicts stand
+    ingest([str(refs), str(later)], db, ray_address="off", progress=False, rediagnose=True)
+    third = rows()
+    for name in ("f3.tlog", "f4.tlog", "f5.tlog", "f6.tlog", "f7.tlog"):
+        n, fp, conf, hist = third[name]
+        assert n >= 3 and not set(hist) & set(damaged), (name, hist)
+        assert (fp, conf) == (damaged.get(name, []), "confident") or (not fp and name not in damaged), (name, fp, conf)

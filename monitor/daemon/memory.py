@@ -27,6 +27,7 @@ from monitor.decision.rule import Announcement
 from monitor.errors import PropwatchError
 from monitor.memory.baseline import BASELINE_FILE, MIN_FLIGHTS, VehicleBaseline
 from monitor.memory.judge import judge
+from monitor.memory.learn import set_aside_outliers
 from monitor.memory.summary import ShareAccumulator
 
 log = logging.getLogger("propwatch.monitor")
@@ -184,6 +185,8 @@ class VehicleMemory:
                     return "not learnt: not healthy against the vehicle's history"
             b = self.baseline or VehicleBaseline(self.key, "daemon", self.motor_names, "omega2")
             b.add(f"flight {len(b.flights) + 1}", today_utc(), s, "no fault")
+            for name in set_aside_outliers(b):
+                log.warning("vehicle memory: %s set aside: unlike the vehicle's other flights", name)
             self.path.parent.mkdir(parents=True, exist_ok=True)
             b.save(self.path)
         except (OSError, PropwatchError) as exc:

@@ -7,7 +7,8 @@
                  "basis": "omega2", "cg_damage_separable": null | true | false},
      "epoch": 2,                         # restarts so far (a maintenance event that changes the airframe)
      "flights": [{"name": "flight_03.tlog", "date": "2026-05-01" | null, "epoch": 2,
-                  "source": "declared" | "no fault", "summary": {...monitor.memory.summary}}, ...],
+                  "source": "declared" | "no fault", "summary": {...monitor.memory.summary},
+                  "excluded": "why" (only where a flight that raised nothing proved unlike the others)}, ...],
      "events": [{"event": "props-replaced", "date": "2026-05-04", "epoch": 2}, ...]}
 
 The normal is computed from the flights of the current epoch (``active``); earlier ones stay as history. Saving is
@@ -62,7 +63,8 @@ class VehicleBaseline:
 
     # -- the history
     def active(self) -> list[dict]:
-        return [f for f in self.flights if f["epoch"] == self.epoch]
+        """The flights the normal rests on: this epoch's, less those set aside as unlike the others (``excluded``)."""
+        return [f for f in self.flights if f["epoch"] == self.epoch and not f.get("excluded")]
 
     def summaries(self) -> list[FlightSummary]:
         return [FlightSummary.from_dict(f["summary"], f"flight {f['name']}") for f in self.active()]

@@ -87,6 +87,26 @@ def check_outliers(names: list[str], summaries: list[FlightSummary]) -> None:
             )
 
 
+def set_aside_outliers(b: VehicleBaseline) -> list[str]:
+    """Flights that raised nothing before the vehicle had a normal may still carry damage nobody could see: once
+    there are ``MIN_FLIGHTS``, the one the others call FAULTY (the largest statistic against the rest) is set aside
+    (``excluded``, with why), and again until none is. Returns the names set aside."""
+    out = []
+    while len(act := b.active()) >= MIN_FLIGHTS:
+        sums = [FlightSummary.from_dict(f["summary"], f["name"]) for f in act]
+        worst, stat, rotors = None, 0.0, ""
+        for i, s in enumerate(sums):
+            v = judge(normal_of([x for j, x in enumerate(sums) if j != i]), s)
+            if v["faulty_propellers"] and v["fault_statistic"] > stat:
+                worst, stat = i, v["fault_statistic"]
+                rotors = " or ".join("+".join(map(str, h["faulty_propellers"])) for h in v["hypotheses"])
+        if worst is None:
+            break
+        act[worst]["excluded"] = f"unlike the other {len(act) - 1} flights: rotor {rotors} (statistic {stat:.1f})"
+        out.append(act[worst]["name"])
+    return out
+
+
 def learn_baseline(
     tables: list[FlightTable],
     files: list[str],
