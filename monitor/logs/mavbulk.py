@@ -126,7 +126,7 @@ def unpack_groups(buf: bytes, starts: np.ndarray, mavlink_map: dict) -> list[Gro
         if cls is None:
             return None
         h = V2_HEADER if is_v2 else V1_HEADER
-        frame = data[p[rows, None] + np.arange(h + n + 2)[None, :]]
+        frame = np.lib.stride_tricks.sliding_window_view(data, h + n + 2)[p[rows]]  # (rows, frame bytes), copied
         stored = frame[:, h + n].astype(np.uint32) | (frame[:, h + n + 1].astype(np.uint32) << 8)
         if np.any(x25_crc(frame[:, 1 : h + n], cls.crc_extra) != stored):
             return None

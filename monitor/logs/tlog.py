@@ -188,7 +188,7 @@ def clean_frame_starts(buf: bytes, wanted) -> np.ndarray | None:
         return None
     idx = np.asarray(chain, dtype=np.int64)
     rec = cand[idx]
-    ts = padded[rec[:, None] + np.arange(TS_BYTES)].view(">u8").ravel().astype(np.int64)  # big-endian µs
+    ts = np.lib.stride_tricks.sliding_window_view(padded, TS_BYTES)[rec].view(">u8").ravel().astype(np.int64)  # µs
     if len(ts) > 1 and np.any(np.abs(np.diff(ts)) > MAX_TS_JUMP_US):
         return None
     pp = p[idx]

@@ -106,12 +106,13 @@ def decode_columns(groups: list[Group], n_frames: int, dec: md.MavlinkDecoder, a
 
     # The other messages through the decoder, each with the clock it would have found there.
     others = [g for g in groups if g.cls.msgname in DECODER_TYPES]
-    msgs = messages(others, n_frames) if others else []
-    at = np.searchsorted(rows, np.arange(len(msgs)), side="left")  # timed messages before each frame
-    for r, msg in enumerate(msgs):
-        if msg is not None:
-            dec.clock_us = None if at[r] == 0 else int(clock[at[r] - 1])
-            for sample in dec.decode(msg):
+    if others:
+        msgs = messages(others, n_frames)
+        where = np.sort(np.concatenate([g.rows for g in others]))
+        before_each = np.searchsorted(rows, where, side="left").tolist()  # timed messages before each
+        for r, i in zip(where.tolist(), before_each):
+            dec.clock_us = None if i == 0 else int(clock[i - 1])
+            for sample in dec.decode(msgs[r]):
                 add(sample)
     dec.clock_us = int(clock[-1])
 
