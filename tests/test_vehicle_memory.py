@@ -298,3 +298,31 @@ def test_fleet_an_older_log_changes_judged_verdicts_only_with_rediagnose(fleet, 
         n, fp, conf, hist = third[name]
         assert n >= 3 and not set(hist) & set(damaged), (name, hist)
         assert (fp, conf) == (damaged.get(name, []), "confident") or (not fp and name not in damaged), (name, fp, conf)
+
+
+def _without_vehicle_id(src: Path, dst: Path) -> Path:
+    """A copy of ``src`` with its appended AUTOPILOT_VERSION record (the last one) cut off."""
+    data = src.read_bytes()
+    at = data.rfind(b"\xfd")
+    while at >= 0 and data[at + 7 : at + 10] != b"\x94\x00\x00":  # MAVLink 2 frame of message 148
+        at = data.rfind(b"\xfd", 0, at)
+    assert at > 8
+    dst.write_bytes(data[: at - 8])
+    return dst
+
+
+def test_cli_learn_needs_one_identified_vehicle(fleet, tmp_path):
+    from offline.fleet_sim import append_autopilot_version
+
+    logs = [fleet / f"ours_vehicles_{i:04d}.tlog" for i in range(3)]
+    anon = [_without_vehicle_id(p, tmp_path / f"anon{i}.tlog") for i, p in enumerate(logs)]
+    r = run("baseline", "learn", *map(str, anon), "--out", str(tmp_path / "A.json"))
+    assert r.returncode == 2 and "no vehicle identity in the log: give --vehicle-id" in r.stderr
+    assert not (tmp_path / "A.json").exists()
+    r = run("baseline", "learn", *map(str, anon), "--out", str(tmp_path / "A.json"), "--vehicle-id", "quad-7")
+    assert r.returncode == 0, r.stderr
+    assert json.loads((tmp_path / "A.json").read_text())["vehicle"]["id"] == "quad-7"
+    other = _without_vehicle_id(logs[2], tmp_path / "other.tlog")
+    append_autopilot_version(other, 0x1234)
+    r = run("baseline", "learn", str(logs[0]), str(logs[1]), str(other), "--out", str(tmp_path / "B.json"))
+    assert r.returncode == 2 and "the logs are of 2 vehicles" in r.stderr and not (tmp_path / "B.json").exists()
