@@ -75,7 +75,14 @@ def build_parser() -> argparse.ArgumentParser:
     i.add_argument("--no-progress", action="store_true", help="no progress bar")
     r = sub.add_parser("report", help="write the static fleet web site")
     r.add_argument("--db", required=True)
-    r.add_argument("--out", required=True, help="folder for index.html, vehicles/, flights/")
+    r.add_argument("--out", required=True, help="folder for index.html, flights.html, vehicles/")
+    r.add_argument(
+        "--pictures",
+        choices=("action", "latest", "all", "none"),
+        default="action",
+        help="flights drawn as diagnose --report draws them, from their logs: those to act on (default), "
+        "those and each vehicle's latest, all, none",
+    )
     r.add_argument("--json", action="store_true", help="print {index, vehicles, flights} as JSON")
     return p
 
@@ -86,12 +93,12 @@ def main(argv: list[str] | None = None) -> int:
         return _ingest(a)
     from fleet.report import write_site
 
-    res = write_site(a.db, a.out)
+    res = write_site(a.db, a.out, a.pictures)
     if a.json:
         json.dump(res, sys.stdout)
         sys.stdout.write("\n")
     else:
-        print(f"fleet report: {res['index']} ({res['vehicles']} vehicles, {res['flights']} flights)")
+        print(f"fleet report: {res['index']} ({res['vehicles']} vehicles, {res['flights']} flights, {res['pictures']} drawn)")
     return 0
 
 

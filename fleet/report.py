@@ -184,15 +184,20 @@ class Vehicle:
             grouped.setdefault((what, k), []).append(p)
         for (what, k), props in sorted(grouped.items(), key=lambda x: (x[0][0] != "damaged", -x[0][1])):
             plural = "s" if len(recent) != 1 else ""
-            who = ("propeller " if len(props) == 1 else "propellers ") + ", ".join(self.prop_name(p) for p in props)
+            who = (
+                f"propeller {self.prop_name(props[0])} ({POSITION[props[0]]})"
+                if len(props) == 1
+                else "propellers " + ", ".join(self.prop_name(p) for p in props)
+            )
             out.append(f"{who} {what} in {k} of the last {len(recent)} flight{plural}")
         for p, drop, n in effectiveness_trends(self.flights):
-            out.append(f"propeller {self.prop_name(p)} effectiveness down {100 * drop:.1f} points over {n} flights")
+            out.append(f"propeller {self.prop_name(p)} ({POSITION[p]}) thrust down {100 * drop:.1f} points over {n} flights")
         return out
 
     def prop_name(self, p: int) -> str:
+        """A rotor by the vehicle's own name (CrazyPAD's M3 for PX4 rotor 2), as the verdicts name it."""
         names = next((f["propeller_names"] for f in reversed(self.flights) if f["propeller_names"]), None)
-        return f"{p} ({names[p - 1]})" if names and names[p - 1] != str(p) else str(p)
+        return names[p - 1] if names else str(p)
 
 
 def _probability(h: dict) -> str:
@@ -293,8 +298,19 @@ def load(db: str | Path) -> tuple[list[Vehicle], list[dict]]:
     return list(vehicles.values()), rows
 
 
-def write_site(db: str | Path, out: str | Path) -> dict:
-    """Write the site for ``db`` into ``out`` (replacing an earlier fleet site there); returns its paths."""
+PICTURES = ("action", "latest", "all", "none")
+
+
+def write_site(db: str | Path, out: str | Path, pictures: str = "action") -> dict:
+    """Write the site for ``db`` into ``out`` (replacing an earlier fleet site there); returns its paths.
+
+    ``pictures``: which flights get the picture ``propwatch diagnose --report`` draws (each rotor's thrust share over
+    the flight against its normal band, the evidence, motor outputs, attitude), from their logs where those are
+    still on disk: ``action`` (default) the flights whose verdict asks to replace or inspect, ``latest`` those and
+    each vehicle's latest, ``all``, or ``none``. Each picture re-reads and re-diagnoses its log (about half a
+    second)."""
+    if pictures not in PICTURES:
+        raise FleetError(f"--pictures {pictures}: one of {', '.join(PICTURES)}")
     out = Path(out)
     if out.exists() and any(out.iterdir()) and not (out / MARKER).exists():
         raise FleetError(f"{out}: folder exists and is not a fleet site; give an empty or new folder")
@@ -302,13 +318,14 @@ def write_site(db: str | Path, out: str | Path) -> dict:
     tmp = out.with_name(out.name + ".tmp-site")
     shutil.rmtree(tmp, ignore_errors=True)
     (tmp / "vehicles").mkdir(parents=True)
+    drawn = draw_pictures(vehicles, tmp / "pictures", pictures)
     (tmp / MARKER).write_text("written by propwatch fleet report\n", encoding="utf-8")
     (tmp / "table.js").write_text(TABLE_JS, encoding="utf-8")
     (tmp / "index.html").write_text(index_page(vehicles, rows, str(db)), encoding="utf-8")
     (tmp / "flights.html").write_text(flights_page(vehicles), encoding="utf-8")
     (tmp / "problems.html").write_text(problems_page(rows), encoding="utf-8")
     for v in vehicles:  # one file per vehicle, its flights as sections: 1,000 files for 20,000 flights, not 21,000
-        (tmp / "vehicles" / f"{v.slug}.html").write_text(vehicle_page(v), encoding="utf-8")
+        (tmp / "vehicles" / f"{v.slug}.html").write_text(vehicle_page(v, drawn), encoding="utf-8")
     if out.exists():
         old = out.with_name(out.name + ".old-site")
         shutil.rmtree(old, ignore_errors=True)
@@ -317,7 +334,50 @@ def write_site(db: str | Path, out: str | Path) -> dict:
         shutil.rmtree(old)
     else:
         tmp.rename(out)
-    return {"index": str(out / "index.html"), "vehicles": len(vehicles), "flights": len(rows)}
+    return {
+        "index": str(out / "index.html"),
+        "vehicles": len(vehicles),
+        "flights": len(rows),
+        "pictures": sum(why == "" for why in drawn.values()),
+    }
+
+
+def draw_pictures(vehicles: list[Vehicle], folder: Path, which: str) -> dict[str, str]:
+    """log_hash -> why there is no picture, or "" where ``folder/<hash16>.png`` was drawn (``write_site``)."""
+    out: dict[str, str] = {}
+    for v in vehicles:
+        for k, (f, verdict) in enumerate(zip(v.flights, v.verdicts)):
+            wanted = which == "all" or (
+                which in ("action", "latest") and verdict.propellers or which == "latest" and k == len(v.flights) - 1
+            )
+            if wanted and f["status"] == "ok":
+                out[f["log_hash"]] = _picture(f, verdict, folder / f"{f['log_hash'][:16]}.png")
+    return out
+
+
+def _picture(f: dict, verdict: Verdict, png: Path) -> str:
+    """Draw one flight's picture from its log, as ``diagnose --report`` does; "" on success, else why not."""
+    from fleet.worker import IngestSettings, choose_model, log_format
+    from monitor.diagnose.engine import diagnose_table
+    from monitor.diagnose.report import plot
+    from monitor.logs import BINARY_FORMATS, read_raw, to_flight_table
+
+    path = Path(f["path"])
+    if not path.is_file():
+        return "its log is no longer where it was ingested from"
+    try:
+        settings = IngestSettings(csv_format=None if f["format"] in BINARY_FORMATS else f["format"])
+        raw = read_raw(path, log_format(path, settings.csv_format), extras=False)
+        clf, esc, _, version, vehicle = choose_model(settings, raw.cmd_unit)
+        if version != f["model_version"]:
+            return f"the model that would draw it ({version}) is not the one that judged it ({f['model_version']})"
+        table = to_flight_table(raw, esc=esc, rate_hz=clf.info.sample_rate_hz)
+        d = diagnose_table(table, clf, hop=20, esc=esc, vehicle=vehicle)
+        png.parent.mkdir(exist_ok=True)
+        plot(verdict, d, table, png, json.loads(f["memory"]) if f.get("memory") else None)
+    except Exception as exc:  # noqa: BLE001 - a picture is extra: the page says why it is missing
+        return f"its log could not be drawn ({type(exc).__name__}: {exc})"
+    return ""
 
 
 def _page(title: str, body: str, depth: int, script: str = "") -> str:
@@ -398,7 +458,7 @@ def index_page(vehicles: list[Vehicle], rows: list[dict], db: str) -> str:
         f"<code>{e(db)}</code>. Vehicles needing action first; click a column to sort.</p>"
         + _table(cols, data, s, 3, 1, 0)
         + f"<p class='muted'>Flags: a propeller to replace or inspect in the last {RECENT_FLIGHTS} flights with a "
-        f"verdict; a rotor's effectiveness falling by {TREND_DROP:.2f} or more along a line fitted over its last "
+        f"verdict; a rotor's thrust (effectiveness) falling by {TREND_DROP:.2f} or more along a line fitted over its last "
         f"{TREND_FLIGHTS} flights (at least {TREND_MIN_FLIGHTS}). Times are the logs' own; a log without a clock "
         "reads 'time unknown'.</p>"
     )
@@ -438,7 +498,7 @@ def flights_page(vehicles: list[Vehicle]) -> str:
     )
 
 
-def vehicle_page(v: Vehicle) -> str:
+def vehicle_page(v: Vehicle, drawn: dict[str, str] | None = None) -> str:
     e = html.escape
     fl = v.flights
     labels = [(when(f)[5:10] or "?") for f in fl]
@@ -447,7 +507,7 @@ def vehicle_page(v: Vehicle) -> str:
     def col(key: str, i: int):
         return tuple((f[key][i] if f[key] is not None else None) for f in fl)
 
-    p_series = [Series(f"propeller {v.prop_name(i + 1)}", col("p_faulty", i), COLORS[i]) for i in range(4)]
+    p_series = [Series(f"{v.prop_name(i + 1)} {POSITION[i + 1]}", col("p_faulty", i), COLORS[i]) for i in range(4)]
     charts = line_chart(p_series, labels, "probability of damage per propeller over flights", "probability", (0.0, 1.0), links)
     if any(f["rotor_effectiveness"] is not None for f in fl):
         eff_series = []
@@ -457,7 +517,7 @@ def vehicle_page(v: Vehicle) -> str:
                 tuple(m - s if m is not None and s is not None else None for m, s in zip(mid, sd)),
                 tuple(m + s if m is not None and s is not None else None for m, s in zip(mid, sd)),
             )
-            eff_series.append(Series(f"rotor {v.prop_name(i + 1)}", mid, COLORS[i], band))
+            eff_series.append(Series(f"{v.prop_name(i + 1)} {POSITION[i + 1]}", mid, COLORS[i], band))
         charts += line_chart(
             eff_series, labels, "thrust each rotor gives (1 = intact) over flights, band = +-1 std", "thrust", None, links
         )
@@ -466,7 +526,9 @@ def vehicle_page(v: Vehicle) -> str:
     flags = v.flags()
     s = _Strings()
     data = [_flight_row(f, v, verdict, s, "../") for f, verdict in zip(fl, v.verdicts)]
-    sections = "".join(flight_section(f, verdict) for f, verdict in reversed(list(zip(fl, v.verdicts))))
+    sections = "".join(
+        flight_section(f, verdict, (drawn or {}).get(f["log_hash"])) for f, verdict in reversed(list(zip(fl, v.verdicts)))
+    )
     src = sorted({f["vehicle_id_source"] or "none" for f in fl})
     _, latest = v.latest()
     body = (
@@ -514,7 +576,8 @@ def sets_chart(d: dict, verdict: Verdict) -> str:
     for k, s in enumerate(verdict.sets[:8]):
         p = probs.get(tuple(s))
         width = 300 * (p if p is not None else 1.0 / len(verdict.sets))
-        label = f"{set_words(s, list(verdict.names))}: " + (f"{100 * p:.0f} %" if p is not None else "ranked, not weighed")
+        what = f"{100 * p:.0f} %" if p is not None else "the only one" if len(verdict.sets) == 1 else "ranked, not weighed"
+        label = f"{set_words(s, list(verdict.names))}: {what}"
         y = 8 + 22 * k
         rows.append(
             f'<rect x="0" y="{y}" width="{width:.1f}" height="16" fill="#bbb"/>'
@@ -570,7 +633,7 @@ def flight_href(v: Vehicle, f: dict) -> str:
     return f"vehicles/{v.slug}.html#{flight_anchor(f)}"
 
 
-def flight_section(f: dict, verdict: Verdict | None = None) -> str:
+def flight_section(f: dict, verdict: Verdict | None = None, picture: str | None = None) -> str:
     """One flight: the verdict as ``propwatch diagnose`` words it, its evidence in pictures, where it came from."""
     e = html.escape
     verdict = verdict or row_verdict(f)
@@ -589,11 +652,20 @@ def flight_section(f: dict, verdict: Verdict | None = None) -> str:
     title = f"{Path(f['path']).name}, {when(f) or 'time unknown'}"
     body = f"<article class='flight' id='{flight_anchor(f)}'><h2>flight {e(title)}</h2>{verdict_html(verdict)}"
     if f["status"] == "ok":
-        body += "<h3>The flight</h3>" + evidence_chart(d, verdict, names) + sets_chart(d, verdict) + shares_chart(f, names)
+        body += "<h3>The flight</h3>"
+        if picture == "":
+            body += f"<img src='../pictures/{f['log_hash'][:16]}.png' alt='thrust shares, evidence and signals' width='960'>"
+        elif picture:
+            body += f"<p class='muted'>No picture of this flight: {e(picture)}.</p>"
+        body += evidence_chart(d, verdict, names) + sets_chart(d, verdict) + shares_chart(f, names)
     fmt_arg = f" --format {f['format']}" if f["format"] not in (None, "tlog", "ulog", "dataflash") else ""
     body += (
-        "<p class='muted'>Each rotor's thrust share, the motor outputs and the attitude over this flight: "
-        f"<code>propwatch diagnose {e(f['path'])}{e(fmt_arg)} --report DIR</code> (the log itself is not kept here).</p>"
+        ""
+        if picture == ""
+        else (
+            "<p class='muted'>Each rotor's thrust share, the motor outputs and the attitude over this flight: "
+            f"<code>propwatch diagnose {e(f['path'])}{e(fmt_arg)} --report DIR</code> (the log itself is not kept here).</p>"
+        )
     )
     body += "<table>" + "".join(f"<tr><th>{e(k)}</th><td>{e(str(val))}</td></tr>" for k, val in meta) + "</table>"
     warns = f["warnings"] or []

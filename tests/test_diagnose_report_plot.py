@@ -82,3 +82,19 @@ def test_report_names_empty_panels_not_logged(tmp_path, monkeypatch):
     assert page.is_file() and page.with_suffix(".png").stat().st_size > 10_000
     # No window (no verdict): the classifier's panel says so; shares, motor outputs and attitude (roll) are drawn.
     assert named == ["no stretch of flight classified, so the classifier's probability"]
+
+
+def test_the_share_band_follows_the_vehicle_memory_where_it_compared_the_flight():
+    share = np.tile([0.30, 0.25, 0.25, 0.20], (50, 1))  # rotor 1 works 5 points harder than rotor 4
+    # the memory: rotor 1 is 0.2 (shares summing to 4) above its normal, 4 of its healthy spreads
+    memory = {"deviation": [0.2, 0.0, 0.0, -0.2], "deviation_sigma": [4.0, 0.0, 0.0, -4.0]}
+    band = report.memory_band(share, memory)
+    assert band is None  # a rotor exactly at its normal says nothing of its spread: no band rather than a guess
+    memory["deviation_sigma"] = [4.0, 1.0, -1.0, -4.0]
+    memory["deviation"] = [0.2, 0.04, -0.04, -0.2]
+    band = report.memory_band(share, memory)
+    centre, half = band.mean(axis=1), (band[:, 1] - band[:, 0]) / 2
+    np.testing.assert_allclose(centre, [0.25, 0.24, 0.26, 0.25])  # the flight's share less its deviation
+    np.testing.assert_allclose(half, [3 * 0.0125, 3 * 0.01, 3 * 0.01, 3 * 0.0125])  # 3 spreads
+    assert not band[0, 0] <= share[0, 0] <= band[0, 1]  # rotor 1 is outside its normal, as the memory said
+    assert report.memory_band(share, None) is None and report.memory_band(share, {"note": "no baseline yet"}) is None

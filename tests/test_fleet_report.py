@@ -79,7 +79,7 @@ def site(tmp_path_factory) -> Path:
     con.close()
     out = root / "site"
     res = write_site(root / "fleet.duckdb", out)
-    assert res == {"index": str(out / "index.html"), "vehicles": 3, "flights": 12}
+    assert res == {"index": str(out / "index.html"), "vehicles": 3, "flights": 12, "pictures": 0}
     return out
 
 
@@ -115,12 +115,12 @@ def test_flags_name_the_trend_and_the_recent_fault(site):
     flags = [c["h"] for c in cols].index("flags")
     by_vehicle = {r[0][0]: strings[r[flags]] for r in rows}
     assert set(by_vehicle) == {"wear", "hit", "calm"}
-    assert "propeller 2 effectiveness down 12.0 points over 5 flights" in by_vehicle["wear"]
-    assert "propeller 4 damaged in 1 of the last 3 flights" in by_vehicle["hit"]
+    assert "propeller 2 (rear-left) thrust down 12.0 points over 5 flights" in by_vehicle["wear"]
+    assert "propeller 4 (rear-right) damaged in 1 of the last 3 flights" in by_vehicle["hit"]
     assert by_vehicle["calm"] == "none"
     # The sudden 0.2 loss on its last flight fits a line falling 0.18 over 4 flights: flagged too.
-    assert "propeller 4 effectiveness down 18.0 points over 4 flights" in by_vehicle["hit"]
-    assert by_vehicle["wear"].count("effectiveness down") == 1 and by_vehicle["hit"].count("effectiveness down") == 1
+    assert "propeller 4 (rear-right) thrust down 18.0 points over 4 flights" in by_vehicle["hit"]
+    assert by_vehicle["wear"].count("thrust down") == 1 and by_vehicle["hit"].count("thrust down") == 1
     assert TREND_DROP <= 0.12
     # the vehicle that needs action comes first, with its verdict's own words
     assert rows[0][0][0] == "hit" and strings[rows[0][3][1]] == "Propeller 4 (rear-right) is damaged: replace it."
@@ -214,3 +214,29 @@ def test_site_in_headless_chromium(site, tmp_path):
     assert len(anchors) == 5 and all((site / "vehicles" / Path(p).name).resolve() == (site / wear).resolve() for p, _ in anchors)
     assert all(f'id="{a}"' in vdom for _, a in anchors)
     assert "No damaged propeller found." in vdom
+
+
+def test_pictures_are_drawn_from_the_logs_with_the_rows_own_words(site, tmp_path):
+    # the fixture's logs are not on disk: the flight to act on says why it has no picture
+    hit = vehicle_page(site, "hit").read_text(encoding="utf-8")
+    assert "No picture of this flight: its log is no longer where it was ingested from." in hit
+    log = Path(__file__).resolve().parents[2] / "shared" / "data" / "px4_ulog" / "sample_px4_events.ulg"
+    if not log.is_file():
+        pytest.skip(f"{log} not found")
+    from PIL import Image
+
+    from fleet.report import row_verdict
+    from fleet.worker import IngestSettings, process_log
+
+    row = process_log(str(log), "e" * 64, log.stat().st_size, IngestSettings())
+    row.pop("worker_pid")
+    con = open_db(tmp_path / "one.duckdb")
+    insert_rows(con, [row])
+    con.close()
+    res = write_site(tmp_path / "one.duckdb", tmp_path / "site", pictures="action")
+    assert res["pictures"] == 1  # the classifier flags 3 and 4: a flight to act on
+    png = tmp_path / "site" / "pictures" / ("e" * 16 + ".png")
+    drawn = Image.open(png).text
+    assert drawn["Title"] == row_verdict(row).headline == "No damage or propellers 3+4: inspect 3 and 4."
+    page = next((tmp_path / "site" / "vehicles").glob("*.html")).read_text(encoding="utf-8")
+    assert f"src='../pictures/{'e' * 16}.png'" in page

@@ -80,7 +80,9 @@ def _attrs(fragment: str) -> dict:
     return {k: html.unescape(v) for k, v in re.findall(r"data-([a-z]+)='([^']*)'", tag)}
 
 
-def _status_from_props(propellers: str, replace: str) -> list[str]:
+def _status_from_props(propellers: str, replace: str, state: str) -> list[str]:
+    if state in ("no verdict", "unreadable"):
+        return ["not judged"] * 4
     bad, rep = {int(x) for x in propellers.split(",") if x}, {int(x) for x in replace.split(",") if x}
     return ["replace" if i in rep else "inspect" if i in bad else "ok" for i in range(1, 5)]
 
@@ -91,14 +93,14 @@ def renderings(res: dict, pages: dict[str, Path]) -> dict[str, dict]:
     out = {"json": {"status": s["status"], "confidence": s["confidence"], "headline": s["headline"], "next": s["next_step"]}}
     text = re.sub(r"\n    ", " ", render_text(res)).splitlines()  # a wrapped sentence continues indented 4 spaces
     props = next((ln for ln in text if ln.startswith("  propellers: ")), "")
-    status = [m.lower() for m in re.findall(r"\b(REPLACE|INSPECT|ok)\b", props)] or ["ok"] * 4
+    status = [m.lower() for m in re.findall(r"\b(REPLACE|INSPECT|ok)\b", props)] or ["not judged"] * 4
     nxt = next(ln for ln in text if ln.startswith("  next step: ")).removeprefix("  next step: ")
     out["text"] = {"status": status, "confidence": s["confidence"], "headline": text[1], "next": nxt}
     if res["log"] in pages:  # a pictured log (every one of ours, log171, PX4's; a CrazyPAD flight per condition)
         page = pages[res["log"]].read_text(encoding="utf-8")
         a = _attrs(page)
         out["html"] = {
-            "status": _status_from_props(a["propellers"], a["replace"]),
+            "status": _status_from_props(a["propellers"], a["replace"], a["state"]),
             "confidence": a["confidence"],
             "headline": html.unescape(re.search(r"<h2 class='headline'>(.*?)</h2>", page).group(1)),
             "next": html.unescape(re.search(r"<b>Next step:</b> (.*?)</p>", page).group(1)),
@@ -116,7 +118,7 @@ def renderings(res: dict, pages: dict[str, Path]) -> dict[str, dict]:
     cells = verdict_cells(row_verdict(row))
     a = _attrs(cells)
     out["fleet"] = {
-        "status": _status_from_props(a["propellers"], a["replace"]),
+        "status": _status_from_props(a["propellers"], a["replace"], a["state"]),
         "confidence": a["confidence"],
         "headline": html.unescape(re.search(r"'>([^<]*)</td><td>", cells).group(1)),
         "next": html.unescape(re.search(r"<td class='next'>(.*?)</td>", cells).group(1)),

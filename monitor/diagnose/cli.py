@@ -156,7 +156,7 @@ def in_flight_summary(decision: dict) -> str:
     )
 
 
-STATUS_WORD = {"replace": "REPLACE", "inspect": "INSPECT", "ok": "ok"}
+STATUS_WORD = {"replace": "REPLACE", "inspect": "INSPECT", "ok": "ok", "not judged": "not judged"}
 TEXT_WIDTH = 110  # a long sentence continues on the next line, indented four spaces
 
 

@@ -29,7 +29,7 @@ from monitor.resample import US_PER_S
 SHARE_BAND = 0.032
 # The verdict's FAULTY level on the classifier's P(faulty) (DecisionConfig.faulty_probability), drawn for reference.
 FLAG_LEVEL = 0.9
-STATUS = {"replace": "REPLACE", "inspect": "INSPECT", "ok": "ok"}
+STATUS = {"replace": "REPLACE", "inspect": "INSPECT", "ok": "ok", "not judged": "not judged"}
 COLOURS = ("tab:blue", "tab:orange", "tab:green", "tab:purple")
 
 
@@ -83,13 +83,29 @@ def thrust_shares(table: FlightTable) -> tuple[np.ndarray, np.ndarray | None]:
     return mean, np.stack([start - SHARE_BAND, start + SHARE_BAND], axis=1)
 
 
+def memory_band(share: np.ndarray, memory: dict | None) -> np.ndarray | None:
+    """(4, 2) each rotor's normal thrust-share band from the vehicle memory's comparison (``monitor.memory.judge``:
+    ``deviation``, the flight's mean share minus the vehicle's normal, in shares that sum to 4, and
+    ``deviation_sigma``, the same in its healthy spreads): normal +- 3 spreads, as shares of 1; None without one."""
+    dev, sig = (memory or {}).get("deviation"), (memory or {}).get("deviation_sigma")
+    if not dev or not sig or not np.isfinite(share).any():
+        return None
+    dev, sig = np.asarray(dev, dtype=np.float64) / 4, np.asarray(sig, dtype=np.float64)
+    spread = np.abs(dev / np.where(sig == 0, np.nan, sig))
+    normal = np.nanmean(share, axis=0) - dev
+    if not np.isfinite(normal).all() or not np.isfinite(spread).all():
+        return None
+    return np.stack([normal - 3 * spread, normal + 3 * spread], axis=1)
+
+
 def _not_logged(ax, what: str) -> None:
     ax.set_yticks([])
     ax.text(0.5, 0.5, f"{what}: not logged", transform=ax.transAxes, ha="center", va="center", color="0.4", fontsize=11)
 
 
-def figure(v: Verdict, d: Diagnosis, table: FlightTable):
-    """The report's matplotlib figure (the caller saves and closes it)."""
+def figure(v: Verdict, d: Diagnosis, table: FlightTable, memory: dict | None = None):
+    """The report's matplotlib figure (the caller saves and closes it). ``memory``: the vehicle memory's
+    comparison (the JSON's ``baseline``), whose normal then gives the share bands (``memory_band``)."""
     try:
         import matplotlib
 
@@ -97,7 +113,10 @@ def figure(v: Verdict, d: Diagnosis, table: FlightTable):
         import matplotlib.pyplot as plt
     except ImportError as exc:
         raise PropwatchError("--report needs matplotlib (pip install matplotlib)") from exc
-    t = flight_seconds(np.asarray(table.timestamp_us) / US_PER_S, v.takeoff_boot_s)
+    t_boot = np.asarray(table.timestamp_us) / US_PER_S
+    # seconds after take-off; a log that never took off counts from its own start
+    zero = v.takeoff_boot_s if v.takeoff_boot_s is not None else (float(t_boot[0]) if len(t_boot) else 0.0)
+    t = t_boot - zero
     fig = plt.figure(figsize=(12, 12))
     gs = fig.add_gridspec(
         7,
@@ -121,9 +140,17 @@ def figure(v: Verdict, d: Diagnosis, table: FlightTable):
     nxt = fig.text(0.07, 0.93, "\n".join(textwrap.wrap("Next step: " + v.next_step, 140)), fontsize=9.5, va="top")
     nxt.set_gid("verdict-next")
     share, band = thrust_shares(table)
+    vehicle_band = memory_band(share, memory)
+    basis = (
+        f" ({v.compared_with}, +-3 of its spreads)"
+        if vehicle_band is not None
+        else " (this flight's first 10 s +-3 points: blind to damage from take-off)"
+        if band is not None
+        else " (flight too short to learn it)"
+    )
+    band = vehicle_band if vehicle_band is not None else band
     ax[0].set_title(
-        "each rotor's share of the total thrust (2-s mean); shaded: its normal band"
-        + (" (this flight's first 10 s, +-3 points)" if band is not None else " (flight too short to learn it)"),
+        "each rotor's share of the total thrust (2-s mean); shaded: its normal band" + basis,
         fontsize=9,
         loc="left",
     )
@@ -138,7 +165,7 @@ def figure(v: Verdict, d: Diagnosis, table: FlightTable):
                 lo, hi = min(lo, band[i, 0]), max(hi, band[i, 1])
             a.set_ylim(100 * lo - 1, 100 * hi + 1)
         else:
-            _not_logged(a, "motor outputs")
+            _not_logged(a, "never airborne, so the share" if np.isfinite(table.motor_cmd).any() else "motor outputs")
         a.text(
             0.005,
             0.92,
@@ -179,7 +206,7 @@ def figure(v: Verdict, d: Diagnosis, table: FlightTable):
     _signals(ax[6], t, attitude, "attitude")
     ax[6].set_ylabel("degrees")
     ax[6].set_title("attitude", fontsize=9, loc="left")
-    ax[6].set_xlabel("seconds after take-off")
+    ax[6].set_xlabel("seconds after take-off" if v.takeoff_boot_s is not None else "seconds from the start of the log")
     segs = [
         (flight_seconds(s["start_boot_s"], v.takeoff_boot_s), flight_seconds(s["stop_boot_s"], v.takeoff_boot_s))
         for s in d.segments
@@ -218,13 +245,15 @@ def _sets_panel(ax, v: Verdict, d: Diagnosis) -> None:
         ax.axis("off")
         ax.text(0.0, 0.9, "no verdict", fontsize=10, transform=ax.transAxes)
         return
-    p = [probs.get(tuple(s)) for s in sets]
-    p = [1.0 / len(sets) if x is None else x for x in p]
+    stated = [probs.get(tuple(s)) for s in sets]
     y = np.arange(len(sets))[::-1]
-    ax.barh(y, [100 * x for x in p], color="0.8")
+    ax.barh(y, [100 * (1.0 / len(sets) if x is None else x) for x in stated], color="0.8")
     ax.set_yticks([])
-    for yy, s, x in zip(y, sets, p):
-        ax.text(1, yy, f"{set_words(s, list(v.names))}: {100 * x:.0f} %", va="center", fontsize=8, gid="verdict-set")
+    for yy, s, x in zip(y, sets, stated):
+        # a set without a stated probability (the in-flight rule's ranking, or a verdict without a set rule)
+        # is named without one, never given a made-up share
+        what = f"{100 * x:.0f} %" if x is not None else "the only one" if len(sets) == 1 else "ranked, not weighed"
+        ax.text(1, yy, f"{set_words(s, list(v.names))}: {what}", va="center", fontsize=8, gid="verdict-set")
     ax.set_xlim(0, 100)
     ax.set_xlabel("probability (%)", fontsize=8)
     if len(v.sets) > len(sets):
@@ -254,10 +283,10 @@ def _signals(ax, t: np.ndarray, series: list[tuple[np.ndarray, str]], what: str)
         ax.legend(loc="upper right", fontsize=8, ncol=4)
 
 
-def plot(v: Verdict, d: Diagnosis, table: FlightTable, png: Path) -> None:
+def plot(v: Verdict, d: Diagnosis, table: FlightTable, png: Path, memory: dict | None = None) -> None:
     import matplotlib.pyplot as plt
 
-    fig = figure(v, d, table)
+    fig = figure(v, d, table, memory)
     # What the picture states, as drawn, also in the PNG's text chunk: a reader (and the agreement test) checks it.
     fig.savefig(png, dpi=80, metadata={"Title": v.headline, "Description": json.dumps(drawn_verdict(fig))})
     plt.close(fig)
@@ -335,7 +364,7 @@ def write_report(d: Diagnosis, table: FlightTable, out_dir: Path, result: dict |
     out_dir.mkdir(parents=True, exist_ok=True)
     stem = _stem(d.source, out_dir)
     png = out_dir / f"{stem}.png"
-    plot(v, d, table, png)
+    plot(v, d, table, png, (result or {}).get("baseline"))
     page_path = out_dir / f"{stem}.html"
     page_path.write_text(page(v, d, png.name), encoding="utf-8")
     return page_path

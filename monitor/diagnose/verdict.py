@@ -58,7 +58,9 @@ class Verdict:
         return tuple(sorted(set(self.replace) | set(self.inspect)))
 
     def status(self, px4_rotor: int) -> str:
-        """``replace``, ``inspect`` or ``ok``: what the verdict asks of one propeller (every rendering shows it)."""
+        """``replace``, ``inspect``, ``ok``, or ``not judged`` (no verdict): what the verdict asks of one propeller."""
+        if self.state in ("no verdict", "unreadable"):
+            return "not judged"
         return "replace" if px4_rotor in self.replace else "inspect" if px4_rotor in self.inspect else "ok"
 
     def to_json(self) -> dict:
