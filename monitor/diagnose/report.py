@@ -150,8 +150,8 @@ def figure(v: Verdict, d: Diagnosis, table: FlightTable, memory: dict | None = N
     )
     band = vehicle_band if vehicle_band is not None else band
     ax[0].set_title(
-        "each rotor's share of the total thrust (2-s mean); shaded: its normal band" + basis,
-        fontsize=9,
+        "each rotor's share of the total thrust (2-s mean); shaded: its normal band\n" + basis.strip(" ()"),
+        fontsize=8,
         loc="left",
     )
     for i in range(4):
