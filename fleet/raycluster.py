@@ -65,10 +65,7 @@ def ray_session(address: str = "auto", workers: int | None = None):
         ray.init(address="local", **kwargs)
         watcher = reaper.start(os.getpid())  # what this instance started goes with this process, even killed
     else:
-        try:
-            ray.init(address=address, **kwargs)
-        except Exception as exc:  # noqa: BLE001 - Ray raises ConnectionError, RuntimeError, ... by version
-            raise FleetError(f"Ray cluster at {address}: cannot join: {exc}") from exc
+        join(ray, address, kwargs)
     try:
         yield ray
     finally:
@@ -76,6 +73,73 @@ def ray_session(address: str = "auto", workers: int | None = None):
         if watcher is not None:  # shut down in order: the reaper's work is done
             watcher.terminate()
             watcher.wait()
+
+
+# Seconds a join may wait for the head's GCS to accept it (Ray's own default is 20 tries a second apart; the
+# address already answered check_reachable, so what is left to wait for is the head accepting us).
+JOIN_DEADLINE_S = 3  # s: one try without a token, the rest with it
+TOKEN_SOURCES = ("RAY_AUTH_TOKEN", "RAY_AUTH_TOKEN_PATH")
+
+
+def auth_token_source() -> str | None:
+    """Where Ray would read this machine's authentication token from, or None: the ``RAY_AUTH_TOKEN`` variable,
+    the file ``RAY_AUTH_TOKEN_PATH`` names, or ``~/.ray/auth_token``."""
+    if os.environ.get("RAY_AUTH_TOKEN"):
+        return "RAY_AUTH_TOKEN"
+    path = os.environ.get("RAY_AUTH_TOKEN_PATH")
+    if path:
+        return f"RAY_AUTH_TOKEN_PATH ({path})" if os.path.isfile(path) else None
+    home = os.path.join(os.path.expanduser("~"), ".ray", "auth_token")
+    return home if os.path.isfile(home) else None
+
+
+def join(ray, address: str, kwargs: dict) -> None:
+    """``ray.init`` an existing cluster: as it is, then with token authentication where a token is at hand; within
+    about ``JOIN_DEADLINE_S`` in all, a refusal naming the token.
+
+    Ray (2.5x) heads require token authentication by default (where their machine has a token), and Ray sends the
+    token for an explicit address only when ``RAY_AUTH_MODE=token`` is set: without it a join is refused and Ray
+    retries for 20 s before a bare "cannot connect". Sending a token to a head without authentication breaks its
+    workers, so the token is sent only after a join without it was refused."""
+    source = auth_token_source()
+    tries = [None] + (["token"] if source and "RAY_AUTH_MODE" not in os.environ else [])
+    last = None
+    for k, mode in enumerate(tries):
+        if mode is not None:
+            os.environ["RAY_AUTH_MODE"] = mode  # for the whole session: every later call to the cluster sends it
+            _reload_ray_config()
+        wait_s = 1 if k + 1 < len(tries) else JOIN_DEADLINE_S - (len(tries) - 1)
+        saved = os.environ.get("RAY_gcs_server_port_wait_time_s")
+        os.environ["RAY_gcs_server_port_wait_time_s"] = str(wait_s)  # Ray's connect tries, one a second
+        try:
+            ray.init(address=address, **kwargs)
+            return
+        except Exception as exc:  # noqa: BLE001 - Ray raises ConnectionError, RuntimeError, ... by version
+            last = exc
+            ray.shutdown()
+        finally:
+            if saved is None:
+                os.environ.pop("RAY_gcs_server_port_wait_time_s", None)
+            else:
+                os.environ["RAY_gcs_server_port_wait_time_s"] = saved
+    if os.environ.get("RAY_AUTH_MODE") == "disabled":
+        token = "has RAY_AUTH_MODE=disabled: no token sent"
+    elif source:
+        token = f"sent the token from {source}; if the head requires one, it is not this one"
+    else:
+        token = "found no token (RAY_AUTH_TOKEN, RAY_AUTH_TOKEN_PATH or ~/.ray/auth_token) to send"
+    raise FleetError(
+        f"Ray cluster at {address}: cannot join within {JOIN_DEADLINE_S} s ({last}); Ray heads require token "
+        f"authentication by default and this run {token}: `ray get-auth-token` on the head prints its token, "
+        "give it as RAY_AUTH_TOKEN"
+    ) from last
+
+
+def _reload_ray_config() -> None:
+    """Ray's core reads RAY_AUTH_MODE once, at import: re-read it as Ray's own token set-up does."""
+    config = getattr(getattr(__import__("ray"), "_raylet", None), "Config", None)
+    if config is not None and hasattr(config, "initialize"):
+        config.initialize("")
 
 
 def cluster_cpus(ray) -> int:
