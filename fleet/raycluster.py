@@ -78,7 +78,6 @@ def ray_session(address: str = "auto", workers: int | None = None):
 # Seconds a join may wait for the head's GCS to accept it (Ray's own default is 20 tries a second apart; the
 # address already answered check_reachable, so what is left to wait for is the head accepting us).
 JOIN_DEADLINE_S = 3  # s: one try without a token, the rest with it
-TOKEN_SOURCES = ("RAY_AUTH_TOKEN", "RAY_AUTH_TOKEN_PATH")
 
 
 def auth_token_source() -> str | None:
