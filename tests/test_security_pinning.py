@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 import yaml
 from pymavlink.dialects.v20 import common as mavlink
-from test_fuzz_link import KEY, SPEED, _key_file, flight, run_senders, sign_and_pack, toy  # noqa: F401
+from test_fuzz_link import FLIGHT_S, KEY, SPEED, _key_file, flight, run_senders, sign_and_pack, toy  # noqa: F401
 
 from monitor.daemon.link import Link, LinkGuard
 
@@ -111,7 +111,7 @@ def _two_vehicles(flight):  # noqa: F811
     p = mavlink.MAVLink(None)
     healthy = [
         (t, m)
-        for t, frame in synth_flight(11.0, faulty=(), seed=9)
+        for t, frame in synth_flight(FLIGHT_S, faulty=(), seed=9)
         for m in p.parse_buffer(frame) or []
         if not m.get_type().startswith("UNKNOWN") and m.get_msgId() <= 255
     ]
