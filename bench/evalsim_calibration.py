@@ -40,6 +40,7 @@ from monitor.logs import read_log
 from monitor.vehicle import DEFAULT_VEHICLE, VehicleConfig, load_vehicle
 
 NOM = load_vehicle(DEFAULT_VEHICLE)
+HOVER_RPM = NOM.hover_omega_rad_s * 60.0 / (2 * math.pi)
 
 
 @dataclass(frozen=True)
@@ -67,11 +68,12 @@ def _af(spec, **kw):
     return dataclasses.replace(spec, airframe=spec.airframe.with_(**kw))
 
 
-def _pair(f: dict, name: str, keys) -> tuple[float, float] | None:
+def _pair(f: dict, name: str, value, se) -> tuple[float, float] | None:
+    """(fitted value, its standard error) of term ``name`` where it was named: ``value(params)``, ``se(params, stds)``."""
     if name not in f:
         return None
     p, s = f[name]
-    return keys(p), keys(s)
+    return float(value(p)), float(se(p, s))
 
 
 def _spread(rng, size) -> np.ndarray:
@@ -131,22 +133,20 @@ def _effects() -> dict[str, Effect]:
             lambda v, s, r: dataclasses.replace(v, cg_offset_frd_m=cg(s, r)),
             lambda sp, s, r: _af(sp, cg_offset_frd_m=cg(s, r)),
             lambda s, r: s,
-            lambda f, r: _pair(f, "cg_offset", lambda p: float(np.hypot(p["cg_x_m"], p["cg_y_m"]))),
+            lambda f, r: _pair(
+                f,
+                "cg_offset",
+                lambda p: np.hypot(p["cg_x_m"], p["cg_y_m"]),
+                lambda p, s: np.hypot(s["cg_x_m"], s["cg_y_m"]) / 2**0.5,
+            ),
         ),
         Effect(
             "weak_motor",
             ("motor_efficiency",),
             (0.03, 0.06, 0.12),
             "thrust loss of the weak rotor (1 - eff^2 relative to the others)",
-            lambda v, s, r: dataclasses.replace(
-                v, motor_efficiency=tuple(math.sqrt(1 - s) if i == eff_rotor(r) else 1.0 for i in range(4))
-            ),
-            lambda sp, s, r: _af(
-                sp,
-                motor_thrust_efficiency=tuple(
-                    e * (1 - s) if i == eff_rotor(r) else e for i, e in enumerate(sp.airframe.motor_thrust_efficiency)
-                ),
-            ),
+            lambda v, s, r: dataclasses.replace(v, motor_efficiency=_weak(np.ones(4), math.sqrt(1 - s), eff_rotor(r))),
+            lambda sp, s, r: _af(sp, motor_thrust_efficiency=_weak(sp.airframe.motor_thrust_efficiency, 1 - s, eff_rotor(r))),
             lambda s, r: s,
             lambda f, r: _weak_fitted(f, eff_rotor(r)),
         ),
@@ -191,7 +191,9 @@ def _effects() -> dict[str, Effect]:
             lambda v, s, r: TERMS["esc_curve"].set(v, np.array([1.0 - s, 0.0])),
             lambda sp, s, r: _af(sp, esc=_esc_scaled(sp.airframe.esc, 1.0 - s)),
             lambda s, r: s,
-            lambda f, r: _pair(f, "esc_curve", lambda p: abs(1.0 - p["rpm_gain"])),
+            lambda f, r: _pair(
+                f, "esc_curve", lambda p: abs(1.0 - p["rpm_gain"] - p["rpm_offset"] / HOVER_RPM), lambda p, s: s["rpm_gain"]
+            ),
         ),
         Effect(
             "drag",
@@ -201,7 +203,12 @@ def _effects() -> dict[str, Effect]:
             lambda v, s, r: dataclasses.replace(v, linear_drag_n_per_m_s=(s, s, 0.5 * s)),
             lambda sp, s, r: _af(sp, rotor_drag_kg_per_rad=s / (4 * NOM.hover_omega_rad_s)),
             lambda s, r: s,
-            lambda f, r: _pair(f, "drag", lambda p: 0.5 * (p["drag_x_n_per_m_s"] + p["drag_y_n_per_m_s"])),
+            lambda f, r: _pair(
+                f,
+                "drag",
+                lambda p: 0.5 * (p["drag_x_n_per_m_s"] + p["drag_y_n_per_m_s"]),
+                lambda p, s: 0.5 * np.hypot(s["drag_x_n_per_m_s"], s["drag_y_n_per_m_s"]),
+            ),
         ),
         Effect(
             "inertia",
@@ -211,7 +218,12 @@ def _effects() -> dict[str, Effect]:
             lambda v, s, r: dataclasses.replace(v, inertia_diag_kg_m2=tuple(x * (1 + s) for x in v.inertia_diag_kg_m2)),
             lambda sp, s, r: _af(sp, inertia_diag_kg_m2=tuple(x * (1 + s) for x in sp.airframe.inertia_diag_kg_m2)),
             lambda s, r: s,
-            lambda f, r: _pair(f, "inertia", lambda p: p["ixx_kg_m2"] / NOM.inertia_diag_kg_m2[0] - 1.0),
+            lambda f, r: _pair(
+                f,
+                "inertia",
+                lambda p: p["ixx_kg_m2"] / NOM.inertia_diag_kg_m2[0] - 1.0,
+                lambda p, s: s["ixx_kg_m2"] / NOM.inertia_diag_kg_m2[0],
+            ),
         ),
         Effect(
             "mass",
@@ -221,7 +233,7 @@ def _effects() -> dict[str, Effect]:
             lambda v, s, r: dataclasses.replace(v, mass_kg=v.mass_kg * (1 + s)),
             lambda sp, s, r: _af(sp, payload_kg=NOM.mass_kg * s),
             lambda s, r: s,
-            lambda f, r: _pair(f, "mass", lambda p: p["mass_kg"] / NOM.mass_kg - 1.0),
+            lambda f, r: _pair(f, "mass", lambda p: p["mass_kg"] / NOM.mass_kg - 1.0, lambda p, s: s["mass_kg"] / NOM.mass_kg),
         ),
         Effect(
             "gyro_bias",
@@ -231,10 +243,17 @@ def _effects() -> dict[str, Effect]:
             lambda v, s, r: dataclasses.replace(v, gyro_bias_frd_rad_s=_bias(s, r)),
             lambda sp, s, r: dataclasses.replace(sp, sensors=dataclasses.replace(sp.sensors, gyro_bias_frd_rad_s=_bias(s, r))),
             lambda s, r: s,
-            lambda f, r: _pair(f, "gyro_bias", lambda p: float(np.linalg.norm(list(p.values())))),
+            lambda f, r: _pair(
+                f, "gyro_bias", lambda p: np.linalg.norm(list(p.values())), lambda p, s: np.mean(list(s.values()))
+            ),
         ),
     ]
     return {e.name: e for e in effects}
+
+
+def _weak(eff, factor: float, k: int) -> tuple[float, ...]:
+    """``eff`` with rotor k's entry times ``factor`` (k drawn once per run by the caller)."""
+    return tuple(float(e) * factor if i == k else float(e) for i, e in enumerate(eff))
 
 
 def _bias(size, rng) -> tuple[float, float, float]:
