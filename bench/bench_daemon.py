@@ -3,9 +3,6 @@
     python -m bench.bench_daemon                      # 10-minute flight at real pace (the issue's measure)
     python -m bench.bench_daemon --minutes 1 --speed 10   # quick run (6 s)
 
-``--rule consecutive`` runs the older alert rule instead of the decision
-layer (``monitor/decision/rule.py``, the default), to see what the layer costs.
-
 Two processes, as deployed: ``propwatch replay`` plays the flight as PX4 would
 (udpout) and ``propwatch monitor`` listens (udpin) and classifies at every
 20 Hz step. Printed figures, with the issue's targets:
@@ -108,9 +105,9 @@ def build_inputs(args, work: Path) -> tuple[Path, Path]:
     return model, write_tlog(work / "flight.tlog", frames)
 
 
-def rule_config(work: Path, rule: str, pace_reads: bool = True) -> Path:
+def rule_config(work: Path, pace_reads: bool = True) -> Path:
     path = work / "monitor.yaml"
-    text = f"alerts:\n  rule: {rule}\n"
+    text = "alerts:\n  rule: sequential\n"
     if not pace_reads:  # only when asked: a tree older than the key refuses it
         text += "link:\n  pace_reads: false\n"
     path.write_text(text)
@@ -138,7 +135,7 @@ def run(args) -> dict:
             "--events",
             str(work / "events.jsonl"),
             "--config",
-            str(rule_config(work, args.rule, not args.no_pace_reads)),
+            str(rule_config(work, not args.no_pace_reads)),
         ]
         t_spawn = time.monotonic()
         d = subprocess.Popen(cmd, cwd=REPO, stderr=subprocess.PIPE, text=True)
@@ -195,7 +192,6 @@ def run(args) -> dict:
             "classified_steps": rep["pipeline"]["classified"],
             "velocity_steps": rep["pipeline"].get("velocity_steps"),  # steps the decision got a velocity (None: older tree)
             "imu_steps": rep["pipeline"].get("imu_steps"),  # steps it got a specific force (None: older tree)
-            "rule": args.rule,
             "pace_reads": not args.no_pace_reads,
             "load_average": os.getloadavg(),
         },
@@ -245,7 +241,7 @@ def run_inprocess(args) -> dict:
     msgs = [m for f in frames for m in (parser.parse_buffer(f) or [])]
     best = None
     for _ in range(args.repeat):
-        cfg = monitor_config_from_mapping({"alerts": {"rule": args.rule}})
+        cfg = monitor_config_from_mapping({})
         # with the vehicle's geometry for the alerts' rotor effectiveness, as `propwatch monitor` runs
         daemon = Daemon(
             cfg, _NullLink(), Pipeline(clf, cfg, choose_esc(clf, "")), EventWriter(None), Notifier({}), vehicle=vehicle
@@ -265,7 +261,6 @@ def run_inprocess(args) -> dict:
         "cpu_us_per_message": round(1e6 * best / len(msgs), 2),
         "cpu_ms_per_classified_step": round(1e3 * best / max(classified, 1), 4),
         "cpu_percent_at_real_pace": round(100.0 * best / (args.minutes * 60.0), 3),
-        "rule": args.rule,
         "load_average": os.getloadavg(),
     }
 
@@ -283,12 +278,6 @@ def main(argv=None) -> int:
         "--profile", help="write the daemon's cProfile statistics here (the profiler's overhead inflates its CPU figure)"
     )
     p.add_argument("--repeat", type=int, default=3, help="--inprocess: best of this many runs")
-    p.add_argument(
-        "--rule",
-        choices=("sequential", "consecutive"),
-        default="sequential",
-        help="alerts.rule: sequential (the default: the shared decision layer) or consecutive (the older rule)",
-    )
     p.add_argument(
         "--no-pace-reads", action="store_true", help="link.pace_reads: false (wake for every datagram, as before pacing)"
     )

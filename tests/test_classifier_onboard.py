@@ -1,12 +1,12 @@
-"""Onboard figures: the time-switched propellers, the replayed alert rule, and onset flights."""
+"""Onboard figures: the time-switched propellers, onset flights, detection times of the replayed comparison rule."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from monitor.daemon.config import AlertConfig
-from offline.classifier.onboard import ShiftFlights, detection_times, replay_alerts, simulate_onset
+from offline.alerts.consecutive import ConsecutiveConfig
+from offline.classifier.onboard import ShiftFlights, detection_times, simulate_onset
 from offline.dataset.onset import SwitchedPropellers
 
 
@@ -28,16 +28,6 @@ def test_switched_propellers_change_at_each_flights_onset():
     seen = [sw(omega, 0.01)[0][:, 0] for _ in range(5)]  # t = 0, .01, .02, .03, .04
     assert [s[0] for s in seen] == [1.0, 1.0, 2.0, 2.0, 2.0]
     assert all(s[1] == 1.0 for s in seen)
-
-
-def test_replayed_rule_needs_consecutive_windows_and_respects_refractory():
-    cfg = AlertConfig(threshold=0.8, consecutive=3, refractory_s=1.0)
-    p = np.zeros((60, 4))
-    p[10:12, 0] = 0.9  # two in a row: no alert
-    p[20:50, 2] = 0.95  # alert at the 3rd window (22), again 1 s (20 windows) later at 42
-    alerts = replay_alerts(p, 20.0, 100, cfg)
-    assert [round(t, 2) for t, _ in alerts] == [round((22 + 100) / 20, 2), round((42 + 100) / 20, 2)]
-    assert all(props == (3,) for _, props in alerts)
 
 
 @pytest.mark.slow
@@ -76,7 +66,7 @@ def test_detection_time_counts_from_onset_and_checks_the_named_propellers():
     rpm[:, onset:] = faulty.signals["motor_rpm"][:, onset:]
     ds = dataclasses.replace(faulty, signals={**faulty.signals, "motor_rpm": rpm}, onset_step=np.full(16, onset))
     ds = ds.subset(np.arange(1, 15))  # labels 2..15: at least one rotor healthy, so "above the mean" is defined
-    rule = AlertConfig(threshold=0.8, consecutive=3, refractory_s=30.0)  # pinned: the daemon's default may change
+    rule = ConsecutiveConfig(threshold=0.8, consecutive=3, refractory_s=30.0)  # pinned: the default may change
     det = detection_times(_rpm_rule, ds, ("rpm_1", "rpm_2", "rpm_3", "rpm_4"), 100, rule)
     assert det["flights"] == 14 and det["alerts_before_onset"] == 0
     assert det["first_alert"]["detected"] == 1.0 and det["first_correct_alert"]["detected"] == 1.0

@@ -128,10 +128,12 @@ def synth_flight(
     imu_hz: float = 0.0,
     accel_of_t=None,
     imu_msg: str = "HIGHRES_IMU",
+    fault_from_s: float = 0.0,
 ) -> list[tuple[float, bytes]]:
     """(arrival wall time s, frame) in arrival order: PX4-like streams with jitter; armed, IN_AIR after takeoff_s.
 
-    ``nan_window_s=(a, b)`` writes NaN attitude between flight times a and b; ``hole_s=(a, b)``
+    The ``faulty`` rotors get their extra command from flight time ``fault_from_s`` on (an in-flight onset; the
+    decision rule learns each flight's baseline first). ``nan_window_s=(a, b)`` writes NaN attitude between flight times a and b; ``hole_s=(a, b)``
     drops every message in that span (a link outage). ``pos_hz`` > 0 adds LOCAL_POSITION_NED at that rate with
     the NED velocity ``vel_of_t(t)`` (m/s; default a slow 2 m/s circle); ``yaw_of_t(t)`` (rad) replaces the
     default slow yaw drift. ``imu_hz`` > 0 adds ``imu_msg`` (HIGHRES_IMU, or SCALED_IMU in milli-g) at that rate
@@ -148,8 +150,9 @@ def synth_flight(
 
     def pwm(t):
         base = HOVER_PWM_US + 8.0 * math.sin(0.7 * t) + rng.normal(0.0, 3.0, 4)
-        for p in faulty:
-            base[p - 1] += FAULT_PWM_US
+        if t >= fault_from_s:
+            for p in faulty:
+                base[p - 1] += FAULT_PWM_US
         return base
 
     for k in range(int(duration_s * 1) + 1):

@@ -156,13 +156,9 @@ def test_status_lists_velocity_and_imu_as_context_apart_from_evidence(toy):
     assert d.report()["pipeline"]["imu_steps"] > 140
 
 
-@pytest.mark.parametrize("rule", ["sequential", "consecutive"])
-def test_highres_imu_is_requested_at_50_hz_beside_local_position(toy, rule):
-    rates = requested_rates(toy, rule)
-    if rule == "sequential":
-        assert rates[HIGHRES_IMU_ID] == 50.0  # PX4's onboard-link rate: 2-3 samples in each 50 ms step
-    else:  # the older rule has no decision to give it to
-        assert HIGHRES_IMU_ID not in rates
+def test_highres_imu_is_requested_at_50_hz_beside_local_position(toy):
+    rates = requested_rates(toy)
+    assert rates[HIGHRES_IMU_ID] == 50.0  # PX4's onboard-link rate: 2-3 samples in each 50 ms step
 
 
 def test_diagnose_reads_each_steps_specific_force_as_the_daemon_does(toy, tmp_path):

@@ -1,4 +1,4 @@
-"""The daemon's streaming core: decoding, streaming hold == batch hold, pipeline parity, alert rule, config."""
+"""The daemon's streaming core: decoding, streaming hold == batch hold, pipeline parity, STATUSTEXT queue, config."""
 
 from __future__ import annotations
 
@@ -12,8 +12,8 @@ from pymavlink.dialects.v20 import common as mavlink
 from test_daemon_helpers import synth_flight, toy_model
 
 from monitor import mavlink_decode as md
-from monitor.daemon.alerts import AlertRule, RateLimiter
-from monitor.daemon.config import AlertConfig, MonitorConfig, load_monitor_config, monitor_config_from_mapping
+from monitor.daemon.alerts import RateLimiter, StatusTextQueue
+from monitor.daemon.config import MonitorConfig, load_monitor_config, monitor_config_from_mapping
 from monitor.daemon.pipeline import Pipeline
 from monitor.daemon.resampler import StreamingHold, StreamSpec
 from monitor.daemon.sdnotify import Notifier
@@ -282,39 +282,14 @@ class FakeClock:
         return self.t
 
 
-def test_alert_rule_consecutive_refractory_and_text():
-    clock = FakeClock()
-    rule = AlertRule(AlertConfig(threshold=0.8, consecutive=3, refractory_s=10.0, critical_threshold=0.95), clock)
-    lp = np.eye(16)[3]
-    hot = np.array([0.1, 0.2, 0.97, 0.1])
-    assert rule.update(1, hot, lp) is None and rule.update(2, hot, lp) is None
-    rule.update(3, np.array([0.1, 0.2, 0.5, 0.1]), lp)  # breaks the streak
-    assert rule.update(4, hot, lp) is None and rule.update(5, hot, lp) is None
-    a = rule.update(6, hot, lp)
-    assert a.faulty_propellers == (3,) and a.statustext() == "PROP 3 FAULT p=0.97" and a.critical and a.label == 4
-    ev = a.event()
-    assert set(ev) >= {"time_boot_ms", "label", "faulty_propellers", "probabilities"} and ev["faulty_propellers"] == [3]
-    clock.t += 9.9
-    assert all(rule.update(7 + i, hot, lp) is None for i in range(5))  # refractory
-    clock.t += 0.2
-    b = rule.update(20, np.array([0.9, 0.2, 0.97, 0.1]), lp)
-    assert b.faulty_propellers == (3,)  # propeller 1 has a streak of 1 only
-    assert rule.update(21, np.array([0.9, 0.2, 0.97, 0.1]), lp) is None
-    c = rule.update(22, np.array([0.9, 0.2, 0.97, 0.1]), lp)
-    assert c.faulty_propellers == (1,) and not c.critical and c.statustext() == "PROP 1 FAULT p=0.90"
-    worst = AlertRule(AlertConfig(consecutive=1), clock).update(1, np.array([0.999] * 4), np.eye(16)[15])
-    assert len(worst.statustext()) <= 50 and worst.faulty_propellers == (1, 2, 3, 4)
-    assert not AlertRule(AlertConfig(threshold=0.8, consecutive=1), clock).update(1, np.array([0.85, 0, 0, 0]), lp).critical
-
-
-def test_rate_limiter_and_nan_probabilities():
+def test_rate_limiter():
     clock = FakeClock()
     lim = RateLimiter(5.0, clock)
     assert lim.allow() and not lim.allow()
-    clock.t += 5.0
+    clock.t += 4.9
+    assert not lim.allow()
+    clock.t += 0.1
     assert lim.allow()
-    rule = AlertRule(AlertConfig(consecutive=1), clock)
-    assert rule.update(1, np.array([np.nan] * 4), np.full(16, np.nan)) is None
 
 
 # --- config ---------------------------------------------------------------------------------
@@ -332,8 +307,27 @@ def test_config_rejects_unknown_and_bad_keys_by_name(tmp_path):
     with pytest.raises(ConfigError, match="motor_outputs"):
         load_monitor_config(bad)
     good = tmp_path / "good.yaml"
-    good.write_text("alerts:\n  threshold: 0.9\n")
-    assert load_monitor_config(good).alerts.threshold == 0.9
+    good.write_text("alerts:\n  statustext_min_interval_s: 2.0\n")
+    assert load_monitor_config(good).alerts.statustext_min_interval_s == 2.0
+
+
+@pytest.mark.parametrize(
+    "text,expect",
+    [
+        ("alerts:\n  rule: consecutive\n", "alerts.rule: 'consecutive' is no longer an onboard rule; use 'sequential'"),
+        ("alerts:\n  rule: consecutive\n  threshold: 0.9\n", "offline comparison in offline/alerts"),
+        ("alerts:\n  threshold: 0.9\n  refractory_s: 30\n", "alerts.threshold, alerts.refractory_s: keys of the consecutive"),
+        ("alerts:\n  critical_threshold: 0.95\n", "alerts.critical_threshold: a key of the consecutive rule"),
+    ],
+)
+def test_the_consecutive_rule_and_its_keys_are_named_with_their_replacement(tmp_path, text, expect):
+    cfg = tmp_path / "monitor.yaml"
+    cfg.write_text(text)
+    with pytest.raises(ConfigError) as err:
+        load_monitor_config(cfg)
+    assert str(err.value).startswith(f"{cfg}: ") and expect in str(err.value), err.value
+    with pytest.raises(ConfigError, match="no longer an onboard rule"):
+        monitor_config_from_mapping({"alerts": {"rule": "consecutive"}})
 
 
 def test_shipped_example_config_loads():
@@ -391,30 +385,31 @@ def test_servo_port_1_carries_outputs_9_to_16(toy):
     assert not any(s.fault_probability is not None for s in steps) and p.stats["motor_msgs_unmapped"] > 100
 
 
-def test_statustext_rate_limit_merges_and_never_drops_an_alert():
-    from monitor.daemon.alerts import StatusTextQueue
-
+def test_statustext_rate_limit_holds_and_never_drops_an_announcement():
     clock = FakeClock()
-    rule = AlertRule(AlertConfig(threshold=0.8, consecutive=1, critical_threshold=0.95), clock)
-    q = StatusTextQueue(5.0, 0.95, clock)
-    lp = np.eye(16)[1]
-    q.add(rule.update(1, np.array([0.9, 0.0, 0.0, 0.0]), lp))
-    assert q.due() == ("PROP 1 FAULT p=0.90", 4)  # WARNING
+    q = StatusTextQueue(5.0, clock)
+    assert q.due() is None  # nothing pending
+    q.add_text("PROP 1 FAULT p=0.90", 4)
+    assert q.due() == ("PROP 1 FAULT p=0.90", 4)
     clock.t += 1.0
-    q.add(rule.update(2, np.array([0.0, 0.0, 0.97, 0.0]), lp))
+    q.add_text("PROP 3 FAULT p=0.97", 4)
+    q.add_text("PROP 3 FAULT p=0.97", 4)  # the same text twice is sent once
     clock.t += 1.0
-    q.add(rule.update(3, np.array([0.0, 0.85, 0.97, 0.0]), lp))
-    assert q.due() is None  # too soon: held
+    q.add_text("PROP 2 FAULT p=0.85", 4)
+    assert q.due() is None  # too soon, and no more severe than the last: held
     clock.t += 3.0
-    assert q.due() == ("PROP 2,3 FAULT p=0.85,0.97", 2)  # merged, CRITICAL
+    first = q.due()
+    assert first is not None and q.due() is None  # one per interval
+    clock.t += 5.0
+    second = q.due()
+    assert {first, second} == {("PROP 3 FAULT p=0.97", 4), ("PROP 2 FAULT p=0.85", 4)}
+    clock.t += 5.0
     assert q.due() is None
 
 
 def test_statustext_escalation_is_not_held_behind_its_own_notice():
-    from monitor.daemon.alerts import StatusTextQueue
-
     clock = FakeClock()
-    q = StatusTextQueue(5.0, 0.95, clock)
+    q = StatusTextQueue(5.0, clock)
     q.add_text("PROP 3 SUSPECT", 5)
     assert q.due() == ("PROP 3 SUSPECT", 5)
     clock.t += 1.0
@@ -435,7 +430,7 @@ def test_statustext_escalation_is_not_held_behind_its_own_notice():
 def test_an_exception_inside_the_pipeline_is_logged_and_survived(tmp_path, toy, caplog):
     from test_daemon_helpers import write_tlog
 
-    from monitor.daemon.alerts import EventWriter
+    from monitor.daemon.events import EventWriter
     from monitor.daemon.link import Link
     from monitor.daemon.service import Daemon
 

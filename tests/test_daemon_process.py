@@ -13,7 +13,6 @@ import signal
 import socket
 import subprocess
 import sys
-import tempfile
 import threading
 import time
 from pathlib import Path
@@ -25,6 +24,11 @@ from test_daemon_helpers import synth_flight, toy_model, write_tlog
 REPO = Path(__file__).resolve().parent.parent
 PY = sys.executable
 TAKEOFF_BOOT_MS = 102_000  # synth_flight: boot clock starts at 100 s, IN_AIR from 2 s
+# A fault that the decision rule (the shares' evidence) can see: each flight first learns its baseline, the 10 s of
+# windows after the first one (which ends 5 s after take-off), so the fault starts at 17 s; FAULT follows in ~4 s.
+ONSET_S = 17.0
+ONSET_BOOT_MS = 117_000
+ALERT_FLIGHT_S = 24.0
 
 
 def free_udp_port() -> int:
@@ -75,24 +79,7 @@ class Proc:
         return rc
 
 
-# These tests exercise the link, streams and sinks with a toy model whose faults are present from the
-# first sample: they run the daemon on the consecutive-window rule. The sequential decision rule (the
-# default, which alerts on a change, see monitor/decision/rule.py) has its own tests in test_decision*.py.
-CONSECUTIVE_RULE = "alerts:\n  rule: consecutive\n"
-_RULE_DIR = Path(tempfile.mkdtemp(prefix="propwatch-rule-"))
-
-
-def with_consecutive_rule(text: str) -> str:
-    if "rule:" in text:
-        return text
-    return text.replace("alerts:\n", CONSECUTIVE_RULE, 1) if "alerts:\n" in text else text + "\n" + CONSECUTIVE_RULE
-
-
 def monitor_cmd(*args: str) -> list[str]:
-    if "--config" not in args:
-        cfg = _RULE_DIR / "consecutive.yaml"
-        cfg.write_text(CONSECUTIVE_RULE)
-        args = (*args, "--config", str(cfg))
     return [PY, "-m", "monitor", *args]
 
 
@@ -110,7 +97,7 @@ def fly_over_udp(tmp_path, model, frames, speed, config_text="", extra=()):
     """Daemon on udpin, replay stub on udpout; returns (daemon, replay, events, requests, received, report)."""
     port = free_udp_port()
     tlog = write_tlog(tmp_path / "flight.tlog", frames)
-    text = with_consecutive_rule(config_text or "alerts:\n  refractory_s: 60\n")
+    text = config_text
     # The autopilot is pinned after 2 s of its heartbeats at real pace: the same boot time at the replay's speed.
     pin = f"  pin_wait_s: {2.0 / speed:g}\n"
     if "pin_wait_s" not in text:
@@ -166,19 +153,22 @@ def fly_over_udp(tmp_path, model, frames, speed, config_text="", extra=()):
 
 
 def test_faulty_propeller_alert_over_udp_against_the_replay_stub(tmp_path, model):
-    d, _, events, requests, received, report = fly_over_udp(tmp_path, model, synth_flight(14.0, faulty=(3,)), speed=5)
-    assert events, d.text
-    first = events[0]
-    assert first["faulty_propellers"] == [3] and first["label"] == 4
-    assert set(first) >= {"time_boot_ms", "label", "faulty_propellers", "probabilities"}
-    assert 0 < first["time_boot_ms"] - TAKEOFF_BOOT_MS <= 10_000  # within 10 s of flight time
-    assert all(e["faulty_propellers"] == [3] for e in events)
+    frames = synth_flight(ALERT_FLIGHT_S, faulty=(3,), fault_from_s=ONSET_S)
+    d, _, events, requests, received, report = fly_over_udp(tmp_path, model, frames, speed=5)
+    faults = [e for e in events if e["level"] == "fault"]
+    assert faults, d.text
+    first = faults[0]
+    assert first["faulty_propellers"] == [3] and first["text"].startswith("PROP 3 FAULT p=")
+    assert set(first) >= {"time_boot_ms", "level", "faulty_propellers", "probabilities", "text", "statistic"}
+    assert 0 < first["time_boot_ms"] - ONSET_BOOT_MS <= 6_000  # within 6 s of the onset
+    assert all(e["faulty_propellers"] == [3] and e["time_boot_ms"] > ONSET_BOOT_MS for e in events)  # suspect too
     assert 15.0 < first["battery_v"] < 16.5  # BATTERY_STATUS cells of the synthetic pack, summed
     # A good MAVLink component: heartbeats as an onboard controller on the autopilot's system, compid 191.
     hb = [m for m in received if m["mavpackettype"] == "HEARTBEAT"]
     assert hb and all(m["_from"] == [1, 191] and m["type"] == 18 for m in hb)
-    texts = [m for m in received if m["mavpackettype"] == "STATUSTEXT"]
-    assert texts and texts[0]["text"].startswith("PROP 3 FAULT p=") and texts[0]["severity"] in (2, 4)
+    texts = [m for m in received if m["mavpackettype"] == "STATUSTEXT" and m["text"].startswith("PROP ")]
+    assert texts and all(t["text"].startswith("PROP 3 ") for t in texts), texts
+    assert any(t["text"].startswith("PROP 3 FAULT p=") and t["severity"] in (2, 4) for t in texts), texts
     assert all(len(t["text"]) <= 50 for t in texts)
     # Only stream-rate requests, at >= 20 Hz for the fast streams, each acknowledged.
     cmds = [m for m in received if m["mavpackettype"] == "COMMAND_LONG"]
@@ -221,26 +211,26 @@ def test_link_drop_and_return_and_a_stream_that_stops(tmp_path, model):
 
 
 def test_runs_without_torch_on_a_tlog(tmp_path, model):
-    tlog = write_tlog(tmp_path / "f.tlog", synth_flight(10.0, faulty=(1,)))
+    tlog = write_tlog(tmp_path / "f.tlog", synth_flight(ALERT_FLIGHT_S, faulty=(1,), fault_from_s=ONSET_S))
     events = tmp_path / "ev.jsonl"
-    cfg = write_config(tmp_path / "rule.yaml", CONSECUTIVE_RULE)
     code = (
         "import sys; sys.modules['torch'] = None\n"
         "from monitor.cli import main\n"
         f"rc = main(['monitor', '--connect', {str(tlog)!r}, '--model', {str(model)!r}, '--tlog-speed', '0',"
-        f" '--events', {str(events)!r}, '--config', {str(cfg)!r}])\n"
+        f" '--events', {str(events)!r}])\n"
         "assert 'offline' not in sys.modules and sys.modules['torch'] is None\n"
         "sys.exit(rc)\n"
     )
     p = subprocess.run([PY, "-c", code], cwd=REPO, capture_output=True, text=True, timeout=120)
     assert p.returncode == 0, p.stderr
     ev = [json.loads(x) for x in events.read_text().splitlines()]
-    assert ev and ev[0]["faulty_propellers"] == [1]
+    faults = [e for e in ev if e.get("level") == "fault"]
+    assert faults and faults[0]["faulty_propellers"] == [1], ev
 
 
 def test_garbage_corrupt_and_truncated_packets_and_nan_in_a_tlog(tmp_path, model):
     rng = random.Random(3)
-    frames = synth_flight(14.0, faulty=(4,), nan_window_s=(3.0, 3.4))
+    frames = synth_flight(ALERT_FLIGHT_S, faulty=(4,), nan_window_s=(3.0, 3.4), fault_from_s=ONSET_S)
     bad = []
     for i in range(50, len(frames), 97):
         kind = i % 3
@@ -275,7 +265,8 @@ def test_garbage_corrupt_and_truncated_packets_and_nan_in_a_tlog(tmp_path, model
     assert p.returncode == 0 and "Traceback" not in p.stderr, p.stderr
     assert "attitude missing, stale or NaN" in p.stderr
     ev = [json.loads(x) for x in (tmp_path / "ev.jsonl").read_text().splitlines()]
-    assert ev and all(e["faulty_propellers"] == [4] for e in ev)
+    alerts = [e for e in ev if e.get("event") == "alert"]
+    assert any(e["level"] == "fault" for e in alerts) and all(e["faulty_propellers"] == [4] for e in alerts), ev
     r = json.loads(report.read_text())
     assert r["pipeline"]["resets"] >= 1
 
@@ -326,6 +317,7 @@ def test_wrong_or_missing_model_is_one_clear_line(tmp_path, case, expect):
         ("alerts:\n  treshold: 0.9\n", "treshold"),
         ("link: [1, 2\n", "invalid YAML"),
         ("input:\n  motor_source: pwm\n", "input.motor_source"),
+        ("alerts:\n  rule: consecutive\n", "alerts.rule: 'consecutive' is no longer an onboard rule; use 'sequential'"),
     ],
 )
 def test_bad_config_is_one_clear_line(tmp_path, model, text, expect):
@@ -338,6 +330,7 @@ def test_bad_config_is_one_clear_line(tmp_path, model, text, expect):
         timeout=60,
     )
     assert p.returncode == 2 and expect in p.stderr and str(cfg) in p.stderr and "Traceback" not in p.stderr, p.stderr
+    assert len(p.stderr.strip().splitlines()) == 1, p.stderr
 
 
 def test_systemd_notify_watchdog_and_clean_sigterm(tmp_path, model):
@@ -377,10 +370,10 @@ def test_tcp_link_that_is_not_there_yet_then_comes_and_goes(tmp_path, model):
         port = s.getsockname()[1]
     # 20 s of flight: what is sent before the daemon's next connection attempt (<= 1 s) is lost, as with PX4.
     tlog = write_tlog(tmp_path / "f.tlog", synth_flight(20.0, faulty=(2,)))
-    events = tmp_path / "ev.jsonl"
-    cfg = write_config(tmp_path / "monitor.yaml", CONSECUTIVE_RULE + "link:\n  pin_wait_s: 0.4\n")  # 2 s of boot at 5x
+    report = tmp_path / "report.json"
+    cfg = write_config(tmp_path / "monitor.yaml", "link:\n  pin_wait_s: 0.4\n")  # 2 s of boot at 5x
     d = Proc(
-        monitor_cmd("--connect", f"tcp:127.0.0.1:{port}", "--model", str(model), "--events", str(events), "--config", str(cfg))
+        monitor_cmd("--connect", f"tcp:127.0.0.1:{port}", "--model", str(model), "--report", str(report), "--config", str(cfg))
     )
     try:
         assert d.wait_for("cannot open"), d.text
@@ -409,8 +402,9 @@ def test_tcp_link_that_is_not_there_yet_then_comes_and_goes(tmp_path, model):
     finally:
         rc = d.stop()
     assert rc == 0 and "Traceback" not in d.text, d.text
-    ev = [json.loads(x) for x in events.read_text().splitlines()]
-    assert ev and ev[0]["faulty_propellers"] == [2], d.text
+    # The link is under test: what came over TCP was decoded and classified (faulty rotor 2 the most likely).
+    assert "autopilot: system 1 component 1" in d.text, d.text
+    assert json.loads(report.read_text())["pipeline"]["classified"] > 40, d.text
 
 
 def test_serial_device_with_baud_rate(tmp_path, model):
@@ -422,12 +416,12 @@ def test_serial_device_with_baud_rate(tmp_path, model):
     tty.setraw(slave)
     dev = os.ttyname(slave)
     events = tmp_path / "ev.jsonl"
-    cfg = write_config(tmp_path / "monitor.yaml", CONSECUTIVE_RULE + "link:\n  pin_wait_s: 0.4\n")  # 2 s of boot at 5x
+    cfg = write_config(tmp_path / "monitor.yaml", "link:\n  pin_wait_s: 0.4\n")  # 2 s of boot at 5x
     d = Proc(monitor_cmd("--connect", f"{dev},921600", "--model", str(model), "--events", str(events), "--config", str(cfg)))
     heard = b""
     try:
         assert d.wait_for("ready:"), d.text
-        frames = synth_flight(10.0, faulty=(1,))
+        frames = synth_flight(ALERT_FLIGHT_S, faulty=(1,), fault_from_s=ONSET_S)
         t0_log, t0 = frames[0][0], time.monotonic()
         for t, f in frames:
             while time.monotonic() < t0 + (t - t0_log) / 5.0:  # 5x the recorded pace
@@ -444,8 +438,8 @@ def test_serial_device_with_baud_rate(tmp_path, model):
         os.close(slave)
     assert rc == 0 and "Traceback" not in d.text, d.text
     ev = [json.loads(x) for x in events.read_text().splitlines()]
-    alerts = [e for e in ev if e.get("event") == "alert"]
-    assert alerts and alerts[0]["faulty_propellers"] == [1], d.text
+    faults = [e for e in ev if e.get("level") == "fault"]
+    assert faults and faults[0]["faulty_propellers"] == [1], d.text
     p = mavlink.MAVLink(None)
     p.robust_parsing = True
     back = [m for m in (p.parse_buffer(heard) or []) if m.get_type() != "BAD_DATA"]
@@ -458,7 +452,7 @@ def test_udpout_daemon_announces_itself_to_a_listening_autopilot(tmp_path, model
     port = free_udp_port()
     tlog = write_tlog(tmp_path / "f.tlog", synth_flight(20.0, faulty=(4,)))
     received = tmp_path / "received.jsonl"
-    events = tmp_path / "ev.jsonl"
+    report = tmp_path / "report.json"
     r = Proc(
         [
             PY,
@@ -476,7 +470,7 @@ def test_udpout_daemon_announces_itself_to_a_listening_autopilot(tmp_path, model
             str(received),
         ]
     )
-    d = Proc(monitor_cmd("--connect", f"udpout:127.0.0.1:{port}", "--model", str(model), "--events", str(events)))
+    d = Proc(monitor_cmd("--connect", f"udpout:127.0.0.1:{port}", "--model", str(model), "--report", str(report)))
     try:
         assert r.p.wait(60) == 0, r.text
     finally:
@@ -484,8 +478,9 @@ def test_udpout_daemon_announces_itself_to_a_listening_autopilot(tmp_path, model
     assert rc == 0 and "Traceback" not in d.text, d.text
     got = [json.loads(x) for x in received.read_text().splitlines()]
     assert any(m["mavpackettype"] == "HEARTBEAT" and m["_from"] == [1, 191] for m in got)
-    ev = [json.loads(x) for x in events.read_text().splitlines()]
-    assert ev and ev[0]["faulty_propellers"] == [4]
+    # ... and the autopilot's streams came back to it: the stream requests were answered, the flight classified.
+    rep = json.loads(report.read_text())
+    assert rep["acks"].get("0", 0) >= 2 and rep["pipeline"]["classified"] > 40, rep
 
 
 def test_slow_stream_is_reported_and_requested_again(tmp_path, model):

@@ -190,19 +190,15 @@ def test_status_says_while_the_shares_learn_their_baseline_and_stops_once_learnt
     assert d.decision.share.learning_s is None and d.decision.verdict()["tested_s"] > 0
 
 
-def requested_rates(toy, rule: str) -> dict[int, float]:
-    """Message id -> rate (Hz) the daemon asks of the autopilot once it hears its heartbeat, under alert rule ``rule``."""
-    d, link = make_daemon(toy, config={"alerts": {"rule": rule}})
+def requested_rates(toy) -> dict[int, float]:
+    """Message id -> rate (Hz) the daemon asks of the autopilot once it hears its heartbeat."""
+    d, link = make_daemon(toy)
     d.handle(decoded(mavlink.MAVLink_heartbeat_message(2, 12, 128 | 1, 0, 4, 3)), time.perf_counter())
     d.tick(time.monotonic())
     return {s[3]: s[4] for s in link.sent if s[0] == "COMMAND_LONG"}
 
 
-@pytest.mark.parametrize("rule", ["sequential", "consecutive"])
-def test_local_position_ned_is_requested_beside_attitude_for_the_decision(toy, rule):
-    rates = requested_rates(toy, rule)
+def test_local_position_ned_is_requested_beside_attitude_for_the_decision(toy):
+    rates = requested_rates(toy)
     assert rates[30] >= 20.0  # ATTITUDE, as before
-    if rule == "sequential":
-        assert rates[LOCAL_POSITION_NED_ID] == 30.0  # PX4's onboard-link rate, >= the 20 Hz grid
-    else:  # the older rule has no decision to give it to
-        assert LOCAL_POSITION_NED_ID not in rates
+    assert rates[LOCAL_POSITION_NED_ID] == 30.0  # PX4's onboard-link rate, >= the 20 Hz grid

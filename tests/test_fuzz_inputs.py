@@ -71,8 +71,10 @@ def test_config_of_random_bytes_is_one_line_naming_the_file(tmp_path, capsys, se
         ("resample:\n  max_gap_s: .inf\n", "resample.max_gap_s"),
         ("link:\n  heartbeat_rate_hz: .inf\n", "link.heartbeat_rate_hz"),
         ("link:\n  stream_rate_hz: .inf\n", "link.stream_rate_hz"),
-        ("alerts:\n  refractory_s: .inf\n", "alerts.refractory_s"),
-        ("alerts:\n  consecutive: 99999999999999999999999\n", "alerts.consecutive"),
+        ("alerts:\n  statustext_min_interval_s: .inf\n", "alerts.statustext_min_interval_s"),
+        ("alerts:\n  false_alarms_per_hour: 99999999999999999999999\n", "alerts.false_alarms_per_hour"),
+        ("alerts:\n  rule: consecutive\n", "use 'sequential' (the default)"),
+        ("alerts:\n  refractory_s: 30.0\n", "alerts.refractory_s: a key of the consecutive rule"),
     ],
 )
 def test_config_the_table_named(tmp_path, capsys, text, expect):

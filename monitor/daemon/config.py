@@ -10,14 +10,19 @@ import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from monitor.config import from_mapping, load_dataclass
+from monitor.config import from_mapping, read_yaml
 from monitor.decision.config import DecisionConfig
 from monitor.envelope import FROZEN_S
 from monitor.errors import ConfigError
 from monitor.resources import shipped
 
 MOTOR_SOURCES = ("servo", "actuator", "esc")
-ALERT_RULES = ("sequential", "consecutive")
+ALERT_RULES = ("sequential",)
+RETIRED_RULE = (
+    "alerts.rule: 'consecutive' is no longer an onboard rule; use 'sequential' (the default)"
+    " - the consecutive rule lives on as the offline comparison in offline/alerts"
+)
+RETIRED_ALERT_KEYS = ("threshold", "consecutive", "refractory_s", "critical_threshold")  # the consecutive rule's own
 LANDED_STATE_MODES = ("auto", "required", "ignore")
 
 
@@ -173,7 +178,6 @@ class InferenceConfig:
 @dataclass(frozen=True)
 class AlertConfig:
     # sequential: monitor.decision (CUSUM; thresholds from the false-alarm rates below), shared with diagnose.
-    # consecutive: the older rule below (threshold x consecutive windows), kept for comparison.
     rule: str = "sequential"
     false_alarms_per_hour: float = 0.1  # fault level (WARNING / CRITICAL)
     suspect_false_alarms_per_hour: float = 1.0  # suspect level (NOTICE; was 2.0, models/decision-evaluation.md)
@@ -185,25 +189,14 @@ class AlertConfig:
     fault_evidence: str = "physics"  # "physics": only the omega^2 shares raise FAULT (the network: suspect); "all"
     suspect_evidence: str = "all"  # "physics": the network raises nothing, not even SUSPECT (it only words); "all"
     calibration_path: str = ""  # '' = models/decision-calibration.json (threshold calibration of the model)
-    # Consecutive rule. Threshold and run length chosen on the shipped classifier (bc948c1) over simulated flights on random
-    # routes: 8 healthy x 80 s (0.165 flight-hours) and 8 single-propeller faults (bent/cracked, each rotor).
-    # 0.8 x 3 windows: 60.7 false alarms per flight-hour; 0.9 x 20 windows (1 s): none, every fault named
-    # right, first alert 5.9 s into the flight (5 s of window + 1 s). Tighten further per airframe.
-    threshold: float = 0.9  # P(propeller faulty) at or above this counts
-    consecutive: int = 20  # windows in a row (20 = 1 s at 20 Hz) before an alert
-    refractory_s: float = 30.0  # per propeller, on time.monotonic()
-    critical_threshold: float = 0.95  # STATUSTEXT severity CRITICAL at or above, WARNING below
     statustext_min_interval_s: float = 5.0  # rate limit of STATUSTEXT to the GCS
     named_value_float: bool = False  # send each probability as NAMED_VALUE_FLOAT PWF1..PWF4
 
     def __post_init__(self) -> None:
+        if self.rule == "consecutive":
+            raise ConfigError(RETIRED_RULE)
         _check(self.rule in ALERT_RULES, "alerts.rule", f"must be one of {ALERT_RULES}")
         self.decision()  # bounds of the sequential rule's keys, named alerts.*
-        _check(0 < self.threshold <= 1, "alerts.threshold", "must be in (0, 1]")
-        _check(self.threshold <= self.critical_threshold <= 1, "alerts.critical_threshold", "must be in [threshold, 1]")
-        _check(self.consecutive >= 1, "alerts.consecutive", "must be >= 1")
-        _within(self.consecutive, 1, 100_000, "alerts.consecutive")
-        _within(self.refractory_s, 0.0, 86_400.0, "alerts.refractory_s")
         _within(self.statustext_min_interval_s, 0.0, 3600.0, "alerts.statustext_min_interval_s")
 
     def decision(self) -> DecisionConfig:
@@ -287,9 +280,26 @@ class MonitorConfig:
 def load_monitor_config(path: str | Path | None) -> MonitorConfig:
     if path is None:
         return MonitorConfig()
-    cfg, _ = load_dataclass(MonitorConfig, path)
-    return cfg
+    return monitor_config_from_mapping(read_yaml(path), origin=str(path))
 
 
-def monitor_config_from_mapping(data: dict) -> MonitorConfig:
-    return from_mapping(MonitorConfig, data)[0]
+def monitor_config_from_mapping(data: dict, origin: str = "") -> MonitorConfig:
+    try:
+        _check_retired(data)
+    except ConfigError as exc:
+        raise ConfigError(f"{origin}: {exc}" if origin else str(exc)) from None
+    return from_mapping(MonitorConfig, data, origin=origin)[0]
+
+
+def _check_retired(data: dict) -> None:
+    """The consecutive rule and its keys are named as such, not as unknown keys (a config written for it)."""
+    alerts = data.get("alerts")
+    if not isinstance(alerts, dict):
+        return
+    if alerts.get("rule") == "consecutive":
+        raise ConfigError(RETIRED_RULE)
+    retired = [k for k in RETIRED_ALERT_KEYS if k in alerts]
+    if retired:
+        what = "a key" if len(retired) == 1 else "keys"
+        keys = ", ".join(f"alerts.{k}" for k in retired)
+        raise ConfigError(f"{keys}: {what} of the consecutive rule, which is no longer onboard (offline/alerts); remove")

@@ -51,13 +51,6 @@ class EventWriter:
     def pending(self) -> int:
         return len(self._pending)
 
-    def write(self, alert: Any) -> bool:
-        """Queue one alert (anything with ``event() -> dict``); True when it reached the file.
-
-        Alert lines carry ``"event": "alert"``; blind spells ``"blind"`` and ``"recovered"``.
-        """
-        return self.write_record({"event": "alert", **alert.event()})
-
     def write_record(self, record: dict) -> bool:
         if self.path is None:
             return True

@@ -2,9 +2,9 @@
 
 State that lives across loop turns is kept here (link health, stream rates,
 pending stream requests, blind spells, decision pauses); the per-step work is in
-``pipeline``, the decision in ``monitor.decision`` (``alerts.rule: sequential``,
-the default; the older rule in ``alerts``), the events file in ``events``, the
-socket in ``link``.
+``pipeline``, the decision in ``monitor.decision.rule`` (shared with ``propwatch
+diagnose``), the STATUSTEXT queue in ``alerts``, the events file in ``events``,
+the socket in ``link``.
 """
 
 from __future__ import annotations
@@ -18,10 +18,8 @@ from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import numpy as np
-
 from monitor import mavlink_decode as md
-from monitor.daemon.alerts import AlertRule, RateLimiter, StatusTextQueue
+from monitor.daemon.alerts import RateLimiter, StatusTextQueue
 from monitor.daemon.blind import BlindTracker, Transition
 from monitor.daemon.config import MonitorConfig
 from monitor.daemon.events import EventWriter
@@ -100,8 +98,6 @@ class Daemon:
         self.pipeline = pipeline
         self.events = events
         self.notifier = notifier or Notifier({})
-        self.rule = AlertRule(config.alerts)
-        self.sequential = config.alerts.rule == "sequential"
         self.decision = Decision(
             config.alerts.decision(),
             config.resample.rate_hz,
@@ -123,7 +119,7 @@ class Daemon:
         self._live: list[str] = []  # evidence live at the last step
         self._context: list[str] = []  # context live at the last step
         self._airborne = False
-        self.statustexts = StatusTextQueue(config.alerts.statustext_min_interval_s, config.alerts.critical_threshold)
+        self.statustexts = StatusTextQueue(config.alerts.statustext_min_interval_s)
         self.stop = threading.Event()
         self.counters = Counters()
         self._rates: Counter = Counter()
@@ -136,9 +132,6 @@ class Daemon:
         self._next_watchdog = 0.0
         self._next_bad_log = 0.0
         self._bad_since_log = 0
-        self._classifying_state: bool | None = None  # None: no step yet, the first one sets STATUS
-        self._last_reason = ""
-        self._state_log_limit = RateLimiter(2.0)
         self._error_log_limit = RateLimiter(10.0)
         self._fast = self.fast_streams()
         self._slow: set[str] = set(self._fast)
@@ -459,49 +452,7 @@ class Daemon:
         self._rotor_step(step)
         if self.memory is not None:
             self._memory_step(step)
-        if self.sequential:
-            self._decide(step)
-            return
-        stopped = self._classifying_state is True and not step.valid  # classification was running and stops
-        flipped = step.valid != self._classifying_state
-        if flipped or (not step.valid and step.reason != self._last_reason):
-            self._classifying_state = step.valid
-            if step.valid:
-                self._last_reason = ""
-                log.info("t=%d ms: buffering (classification after %d valid steps)", step.time_boot_ms, self.pipeline.window)
-                self._set_status("airborne: classifying")
-            else:
-                self._last_reason = step.reason
-                self._set_status(f"not classifying: {step.reason}")  # a datagram, only on change
-                # The journal hears of each stop (NaN flapping rate-limited); a new reason while stopped is STATUS only.
-                if stopped and self._state_log_limit.allow():
-                    log.info("t=%d ms: not classifying: %s", step.time_boot_ms, step.reason)
-        self._blind_step(step)
-        if not step.valid:
-            self.rule.reset()
-            return
-        if step.fault_probability is None:
-            return
-        self._add_latency(step)
-        self._send_named_values(step)
-        p = step.fault_probability
-        alert = self.rule.update(step.time_boot_ms, p, step.label_probability, step.battery_v)
-        if alert is None:
-            return
-        self.counters.alerts += 1
-        text = alert.statustext()
-        log.warning(
-            "ALERT t=%d ms: %s (label %d, p=%s)",
-            alert.time_boot_ms,
-            text,
-            alert.label,
-            np.array2string(np.asarray(alert.fault_probability), precision=3),
-        )
-        # The ground station first: a failing disk must never delay or lose the alert itself.
-        self.statustexts.add(alert)
-        self._send_statustext()
-        self._set_status(f"last alert: {text} at t={alert.time_boot_ms} ms")
-        self.events.write(alert)
+        self._decide(step)
 
     def _send_statustext(self) -> None:
         due = self.statustexts.due()
@@ -518,9 +469,8 @@ class Daemon:
         else:
             log.info("recovered: %s (blind %.1f s)", t.detail, t.duration_s)
         record = t.record(self._clock_seen // 1000 if self._clock_seen is not None else None)
-        if self.sequential:
-            self._apply_pause()  # blind: the decision adds nothing; recovered: it runs again unless a stream is stopped
-            record["decision"] = "paused" if self.decision.paused_reason else "running"
+        self._apply_pause()  # blind: the decision adds nothing; recovered: it runs again unless a stream is stopped
+        record["decision"] = "paused" if self.decision.paused_reason else "running"
         self._publish_status()
         self.events.write_record(record)
         self._send_notice()
@@ -537,7 +487,7 @@ class Daemon:
 
     def _publish_status(self) -> None:
         text = f"BLIND: {self.blind.detail}" if self.blind.blind else self._status_base
-        if self.blind.blind and self.sequential:
+        if self.blind.blind:
             text += f"; decision paused, evidence live: {', '.join(self._live) or 'none'}"
         if self.events.failing:
             text += f"; events file failing ({self.events.last_error}, {self.events.pending} waiting)"
@@ -616,7 +566,7 @@ class Daemon:
         if self.cfg.input.landed_state != "ignore" and "ATTITUDE" in names:
             self.link.request_message_interval(sysid, comp, md.STREAM_IDS["EXTENDED_SYS_STATE"], LANDED_RATE_HZ)
             self.counters.stream_requests += 1
-        if self.sequential and "ATTITUDE" in names:
+        if "ATTITUDE" in names:
             self.link.request_message_interval(sysid, comp, md.STREAM_IDS["VIBRATION"], VIBRATION_RATE_HZ)
             self.link.request_message_interval(sysid, comp, md.STREAM_IDS["LOCAL_POSITION_NED"], VELOCITY_RATE_HZ)
             self.link.request_message_interval(sysid, comp, md.HIGHRES_IMU_ID, IMU_RATE_HZ)
@@ -681,7 +631,7 @@ class Daemon:
                 "paces": c.paces,
                 "pace_misses": self.pipeline.pacer.misses,
             },
-            "decision": self.decision.verdict() if self.sequential else None,
+            "decision": self.decision.verdict(),
             "esc_rejected": dict(self.esc_telemetry.rejected),
         }
 

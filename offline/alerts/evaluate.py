@@ -31,12 +31,12 @@ import sys
 import time
 from pathlib import Path
 
-from monitor.daemon.config import AlertConfig
 from monitor.decision.config import DecisionConfig
 from monitor.decision.thresholds import DEFAULT_CALIBRATION, Calibration, file_sha256, load_calibration, thresholds
 from monitor.model import Classifier
 from monitor.vehicle import REPO_ROOT, load_vehicle
 from offline.alerts.calibrate import calibrate, write_calibration
+from offline.alerts.consecutive import ConsecutiveConfig
 from offline.alerts.flights import ALERT_FLIGHT_FIELDS, FlightSet, evalsim_set, simulate_set
 from offline.alerts.rules import consecutive_rule, decision_rule, px4_rule, summarise
 from offline.manifest import make_manifest
@@ -242,7 +242,7 @@ def main(argv=None) -> int:
         f"decision (CUSUM, {cfg.false_alarms_per_hour}/h fault, {cfg.suspect_false_alarms_per_hour}/h suspect target)": decision_rule(
             cfg, calibration, use_stored=False
         ),
-        "today: P >= 0.9 for 20 windows": consecutive_rule(AlertConfig(threshold=0.9, consecutive=20)),
+        "today: P >= 0.9 for 20 windows": consecutive_rule(ConsecutiveConfig(threshold=0.9, consecutive=20)),
         "PX4 imbalanced-prop metric (FD_IMB_PROP_THR 30)": px4_rule(),
     }
     if cfg.suspect_evidence == "all":  # the configurable alternative: the network raises nothing, it only words

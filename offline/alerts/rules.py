@@ -7,7 +7,7 @@ alert names, e.g. ``((1,), (1, 2))`` for ``PROP 1 or 1+2?``); an empty
 propeller tuple is an alert that names none (vibration metrics).
 
 * ``decision``: ``monitor.decision.rule.Decision``, the shipped rule, fed step by step as the daemon feeds it.
-* ``consecutive``: the rule before it (``monitor.daemon.alerts.AlertRule``: P >= 0.9 in 20 windows in a row).
+* ``consecutive``: the comparison rule (``offline.alerts.consecutive``: P >= 0.9 in 20 windows in a row).
 * ``px4_imbalance``: PX4's imbalanced-propeller check (commander FailureDetector::updateImbalancedPropStatus):
   metric = (std(acc_x) + std(acc_y)) / 2 - std(acc_z) from vehicle_imu_status.var_accel, low-passed with a
   5 s time constant, flagged above FD_IMB_PROP_THR (default 30). Here the variances come from the 20 Hz
@@ -21,11 +21,10 @@ import math
 
 import numpy as np
 
-from monitor.daemon.alerts import AlertRule
-from monitor.daemon.config import AlertConfig
 from monitor.decision.config import DecisionConfig
 from monitor.decision.replay import replay
 from monitor.decision.rule import Decision, WindowEvidence
+from offline.alerts.consecutive import ConsecutiveConfig, replay_consecutive
 from offline.alerts.flights import AlertFlight
 
 PX4_FD_IMB_PROP_THR = 30.0  # PX4 parameter FD_IMB_PROP_THR default
@@ -53,17 +52,9 @@ def decision_rule(cfg: DecisionConfig, calibration=None, use_stored: bool = True
     return run
 
 
-def consecutive_rule(cfg: AlertConfig):
+def consecutive_rule(cfg: ConsecutiveConfig):
     def run(f: AlertFlight):
-        now = [0.0]
-        rule = AlertRule(cfg, clock=lambda: now[0])
-        out = []
-        for k, p in enumerate(f.fault_probability):
-            now[0] = (k + f.window) / f.rate_hz
-            a = rule.update(int(1000 * now[0]), p, np.zeros(16))
-            if a is not None:
-                out.append((now[0], "fault", a.faulty_propellers))
-        return out
+        return [(t, "fault", props) for t, props in replay_consecutive(f.fault_probability, f.rate_hz, f.window, cfg)]
 
     return run
 

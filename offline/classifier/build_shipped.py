@@ -32,7 +32,7 @@ from offline.classifier.card_tables import TABLES_FILE, CardTable, load_tables, 
 from offline.classifier.evaluate import Result, evaluate_dataset, format_table
 from offline.classifier.experiments import EVAL_SETS, EXPERIMENTS
 from offline.classifier.export import export_onnx
-from offline.classifier.onboard import DAEMON_ALERTS, RULES, ShiftFlights, rule_sweep, simulate_onset
+from offline.classifier.onboard import DEFAULT_RULE, RULES, ShiftFlights, rule_sweep, simulate_onset
 from offline.classifier.train import TrainConfig, load_checkpoint, train
 from offline.dataset.generate import PRESETS, DatasetSpec, generate
 from offline.dataset.records import load_dataset, save_dataset
@@ -228,14 +228,14 @@ def main(argv: list[str] | None = None) -> int:
         cfg.window,
         RULES,
     )
-    alarms, detect = sweep["daemon default"]["false_alarms"], sweep["daemon default"]["detection"]
+    alarms, detect = sweep["default"]["false_alarms"], sweep["default"]["detection"]
     print(json.dumps(sweep, indent=1))
     figures = {
         "results": [{k: v for k, v in r.to_dict().items() if k != "confusion"} for r in results],
         "hop": a.hop,
         "false_alarms": alarms,
         "detection": detect,
-        "alert_rule": dataclasses.asdict(DAEMON_ALERTS),
+        "alert_rule": dataclasses.asdict(DEFAULT_RULE),
         "rule_sweep": sweep,
         "onboard_flights": dataclasses.asdict(onboard_cfg),
     }

@@ -2,9 +2,9 @@
 
 Flights are simulated with shifted conditions (random routes and payloads),
 the classifier runs on every window (hop 1, as the daemon does at 20 Hz) and
-the daemon's own alert rule (``monitor.daemon.alerts.AlertRule``, its default
-``AlertConfig``) is replayed on a simulated clock, so these numbers are what
-the shipped monitor would report.
+the consecutive-window rule (``offline.alerts.consecutive``, the comparison
+beside the daemon's sequential rule) is replayed on the flight's clock, with its
+defaults and the trade-offs in ``RULES``.
 """
 
 from __future__ import annotations
@@ -13,22 +13,21 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from monitor.daemon.alerts import AlertRule
-from monitor.daemon.config import AlertConfig
 from monitor.labels import LABEL_MASKS
 from monitor.vehicle import VehicleConfig
+from offline.alerts.consecutive import ConsecutiveConfig, replay_consecutive
 from offline.classifier.evaluate import Predictor
 from offline.classifier.windows import gather, window_index
 from offline.dataset.generate import DatasetSpec, from_log, routes, simulate_flights
 from offline.dataset.onset import SwitchedPropellers
 from offline.dataset.records import FaultDataset
 
-DAEMON_ALERTS = AlertConfig()  # the daemon's defaults: what the shipped monitor does
+DEFAULT_RULE = ConsecutiveConfig()  # the card's headline figures
 # Other rules to show the trade-off: a hair trigger (3 windows) and a longer run of hot windows (3 s at 20 Hz).
 RULES = {
-    "daemon default": DAEMON_ALERTS,
-    "hair trigger": AlertConfig(threshold=0.8, consecutive=3, critical_threshold=0.95),
-    "3 s": AlertConfig(threshold=0.9, consecutive=60, critical_threshold=0.95),
+    "default": DEFAULT_RULE,
+    "hair trigger": ConsecutiveConfig(threshold=0.8, consecutive=3),
+    "3 s": ConsecutiveConfig(threshold=0.9, consecutive=60),
 }
 
 
@@ -84,24 +83,6 @@ def simulate_onset(vehicle: VehicleConfig, cfg: ShiftFlights, healthy: bool) -> 
     )
 
 
-def replay_alerts(
-    fault_prob: np.ndarray, rate_hz: float, window: int, config: AlertConfig
-) -> list[tuple[float, tuple[int, ...]]]:
-    """The daemon's rule over one flight's consecutive windows -> [(time_s, faulty propellers)].
-
-    Window k (hop 1) ends at log sample k + window - 1, whose time is (k + window) / rate.
-    """
-    now = [0.0]
-    rule = AlertRule(config, clock=lambda: now[0])
-    out = []
-    for k, p in enumerate(fault_prob):
-        now[0] = (k + window) / rate_hz
-        a = rule.update(int(1000 * now[0]), p, np.zeros(16))
-        if a is not None:
-            out.append((now[0], a.faulty_propellers))
-    return out
-
-
 def flight_fault_probabilities(predict: Predictor, ds: FaultDataset, features, window: int) -> list[np.ndarray]:
     """Per flight, (N, 4) fault probabilities of every window (hop 1); window k ends at step k + window - 1."""
     feats = ds.features(features)
@@ -120,12 +101,12 @@ def false_alarms_per_hour(
     healthy: FaultDataset,
     features,
     window: int,
-    config: AlertConfig = DAEMON_ALERTS,
+    config: ConsecutiveConfig = DEFAULT_RULE,
     probs: list[np.ndarray] | None = None,
 ) -> dict:
     if probs is None:
         probs = flight_fault_probabilities(predict, healthy, features, window)
-    alarms = sum(len(replay_alerts(p, healthy.sample_rate_hz, window, config)) for p in probs)
+    alarms = sum(len(replay_consecutive(p, healthy.sample_rate_hz, window, config)) for p in probs)
     classified_s = sum(len(p) for p in probs) / healthy.sample_rate_hz
     hot_windows = float(np.mean(np.concatenate(probs) >= config.threshold))
     return {
@@ -142,7 +123,7 @@ def detection_times(
     onset: FaultDataset,
     features,
     window: int,
-    config: AlertConfig = DAEMON_ALERTS,
+    config: ConsecutiveConfig = DEFAULT_RULE,
     probs: list[np.ndarray] | None = None,
 ) -> dict:
     """Seconds from fault onset to the first alert, and to the first alert naming only truly faulty propellers."""
@@ -153,7 +134,7 @@ def detection_times(
     for b, p in enumerate(probs):
         t_on = (onset.onset_step[b] + 1) / rate  # time of the first faulty log sample
         truth = {i + 1 for i in np.flatnonzero(onset.fault_mask[b])}
-        alerts = replay_alerts(p, rate, window, config)
+        alerts = replay_consecutive(p, rate, window, config)
         early += sum(1 for t, _ in alerts if t < t_on)
         after = [(t - t_on, props) for t, props in alerts if t >= t_on]
         first.append(after[0][0] if after else np.inf)
@@ -178,7 +159,7 @@ def detection_times(
 
 
 def rule_sweep(
-    predict: Predictor, healthy: FaultDataset, onset: FaultDataset, features, window: int, rules: dict[str, AlertConfig]
+    predict: Predictor, healthy: FaultDataset, onset: FaultDataset, features, window: int, rules: dict[str, ConsecutiveConfig]
 ) -> dict[str, dict]:
     """False alarms and detection for several alert rules on the same classifier outputs (classified once)."""
     ph = flight_fault_probabilities(predict, healthy, features, window)
