@@ -32,14 +32,14 @@ import time
 from typing import Any
 
 from monitor import mavlink_decode as md
+from monitor.resample import US_PER_S
 
 log = logging.getLogger("propwatch.monitor")
 
-US_PER_S = 1_000_000
 # A step of the boot clock beyond these is a clock change, not a sample: PX4's streams come 10-250 times a
 # second, so 2 s ahead is no jitter; back is the decoder's own reboot threshold (pipeline.CLOCK_BACK_US).
-JUMP_US = 2_000_000
-BACK_US = 1_000_000
+JUMP_US = 2 * US_PER_S
+BACK_US = US_PER_S
 CONFIRM_SAMPLES = 10  # PX4 sends ~100 timed messages a second: a tenth of a second of agreement
 MAX_CANDIDATES = 4
 TELL_PERIOD_S = 60.0
