@@ -133,6 +133,8 @@ def run(args) -> dict:
         "classified_step_messages": summarise(step_paths),
         "first_fault_message": None,
     }
+    if step_paths:
+        out["classified_step_messages"]["last_path"] = step_paths[-1]
     if fault_path is not None:
         out["first_fault_message"] = {
             **summarise([fault_path]),

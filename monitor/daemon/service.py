@@ -136,6 +136,7 @@ class Daemon:
         self._fast = self.fast_streams()
         self._slow: set[str] = set(self._fast)
         self.blind = BlindTracker(config.blind)
+        self._bad_steps = False  # an airborne step without usable data was told to the tracker since it last recovered
         self._armed = False
         self._last_fast_rx: dict[str, float] = {}
         self._clock_seen: int | None = None
@@ -348,7 +349,7 @@ class Daemon:
 
     def _apply_pause(self) -> None:
         """The decision pauses while a stream is stopped (``_paused``) or the monitor is blind; else it runs."""
-        reason = f"blind: {self.blind.reason}" if self.blind.blind else self._paused
+        reason = self._paused if self.blind.reason is None else f"blind: {self.blind.reason}"
         if reason != self.decision.paused_reason:
             if reason:
                 self.decision.pause(reason)
@@ -419,9 +420,13 @@ class Daemon:
     def _blind_step(self, step) -> None:
         """Blindness seen from one grid step: bad data while airborne for ``blind.after_s``, or good data again."""
         if step.data_ok:
-            if self._tick_reason is None:  # a lost link or frozen clock ends at the next tick that clears it
+            # A lost link or frozen clock ends at the next tick that clears it. Nothing to recover from (not blind,
+            # no bad step counting towards blind.after_s) is the common step: the tracker is not called then.
+            if self._tick_reason is None and (self._bad_steps or self.blind.reason is not None):
+                self._bad_steps = False
                 self._transition(self.blind.recover())
         elif step.airborne:
+            self._bad_steps = True
             self._transition(self.blind.data(False, *_blind_reason(step.reason)))
 
     def _rotor_step(self, step) -> None:
@@ -482,12 +487,16 @@ class Daemon:
             self.link.send_statustext(*due)
 
     def _set_status(self, text: str) -> None:
-        self._status_base = text
-        self._publish_status()
+        """A new base text (the same one again, every step, changes nothing: blind spells and the events file
+        publish their own changes, and the tick publishes the rest)."""
+        if text != self._status_base:
+            self._status_base = text
+            self._publish_status()
 
     def _publish_status(self) -> None:
-        text = f"BLIND: {self.blind.detail}" if self.blind.blind else self._status_base
-        if self.blind.blind:
+        blind = self.blind.reason is not None
+        text = f"BLIND: {self.blind.detail}" if blind else self._status_base
+        if blind:
             text += f"; decision paused, evidence live: {', '.join(self._live) or 'none'}"
         if self.events.failing:
             text += f"; events file failing ({self.events.last_error}, {self.events.pending} waiting)"
