@@ -57,10 +57,19 @@ def outputs(tmp_path_factory):
     faulty = write_tlog(d / "f3.tlog", duration_s=12.0, faulty=3, seed=3)
     junk = d / "junk.bin"
     junk.write_bytes(b"\x00\x01garbage" * 100)
+    # the vehicle's own history: three healthy flights learnt into a baseline (vehicle memory's keys)
+    from monitor.logs import read_log
+    from monitor.memory.learn import learn_baseline
+    from monitor.vehicle import DEFAULT_VEHICLE, load_vehicle
+
+    esc = load_vehicle(DEFAULT_VEHICLE).esc
+    healthy = [write_tlog(d / f"h{i}.tlog", duration_s=12.0, seed=10 + i) for i in range(3)]
+    learn_baseline([read_log(h, esc=esc) for h in healthy], [h.name for h in healthy], vehicle_id="fixture").save(d / "B.json")
     runs = {
         "verdict": [faulty, "--model", model],
         "refusal": [faulty, "--model", far],
         "several": [faulty, junk, "--model", model],
+        "memory": [faulty, "--model", model, "--baseline", d / "B.json"],
     }
     out = {}
     for name, argv in runs.items():

@@ -5,9 +5,10 @@ is ``uid-<autopilot uid>`` where AUTOPILOT_VERSION gave one, else ``sysid-<n>``)
 that file records maintenance; the daemon re-reads it at each take-off and before each write, so a note made while
 it runs is kept.
 
-- With a ready baseline, each second airborne the flight so far is judged against it (``monitor.memory.judge``); a
-  FAULT (or SUSPECT) is announced once per flight and level, from the first seconds after take-off, so damage
-  present before take-off is heard in flight.
+- With a ready baseline, each second airborne the flight so far is judged against it (``monitor.memory.judge``): a
+  confident verdict naming one set is a FAULT; a suspect one, or a fault-level one whose set is not yet one, a
+  SUSPECT naming every set it keeps. Each is announced once per flight, from the first seconds after take-off, so
+  damage present before take-off is heard in flight.
 - A flight is learnt when it ended in landing and disarm, flew at least ``MIN_LEARN_S`` past take-off, raised no
   SUSPECT and no FAULT from any evidence, was judged healthy where a baseline exists, and, with signing on, every
   frame it used was verified. A flight whose stream merely stopped never disarms in our eyes and is never learnt.
@@ -26,7 +27,7 @@ import numpy as np
 from monitor.decision.rule import Announcement
 from monitor.errors import PropwatchError
 from monitor.memory.baseline import BASELINE_FILE, MIN_FLIGHTS, VehicleBaseline
-from monitor.memory.judge import judge
+from monitor.memory.judge import judge, statistic_of
 from monitor.memory.learn import set_aside_outliers
 from monitor.memory.summary import ShareAccumulator
 
@@ -144,16 +145,23 @@ class VehicleMemory:
             return None
         self._next_judge = s.n + int(round(JUDGE_PERIOD_S * self.rate_hz))
         v = self.last_verdict = judge(self.normal, s)
-        level = "fault" if v["faulty_propellers"] else "suspect" if v["confidence"] == "suspect" else ""
+        # FAULT names one set; a fault-level statistic whose set is not yet one is SUSPECT with every set it keeps
+        # (the flight's own wander shrinks as it goes on, and the set with it).
+        level = (
+            "fault"
+            if v["confidence"] == "confident" and v["faulty_propellers"]
+            else "suspect"
+            if v["confidence"] != "confident" and v["hypotheses"]
+            else ""
+        )
         if not level or level in self._announced or (level == "suspect" and "fault" in self._announced):
             return None
         self._announced.add(level)
         self.alerted = True
         sets = tuple(tuple(h["faulty_propellers"]) for h in v["hypotheses"] if h["faulty_propellers"])
         named = " or ".join("+".join(map(str, h)) for h in sets[:3]) or "?"
-        what = "DAMAGED" if v["confidence"] == "confident" else "damaged?"
-        text = f"PROP {named} {what} vs vehicle history" if level == "fault" else f"PROP {named} suspect vs history"
-        stat = tuple(float(v["statistics"].get(str(k), 0.0)) for k in range(1, 5))
+        text = f"PROP {named} DAMAGED vs vehicle history" if level == "fault" else f"PROP {named}? vs vehicle history"
+        stat = tuple(statistic_of(v, (k,)) for k in range(1, 5))
         return Announcement(
             t_s, level, tuple(v["faulty_propellers"]) or sets[0], text[:50], SEVERITY[level], stat, "vehicle memory", sets=sets
         )

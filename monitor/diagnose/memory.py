@@ -83,7 +83,7 @@ def _apply(d: Diagnosis, v: dict, motor_names, compared: str) -> None:
         "source": "vehicle memory",
         "compared_with": compared,
         "fault_probability": None if nominal is None else nominal.get("fault_probability"),
-        "nominal": nominal,
+        "nominal": None if nominal is None else {k: nominal[k] for k in ("label", "faulty_propellers", "confidence") if k in nominal},
     }
     d.reason = None
     suspect = set(v.get("suspect_propellers", [])) | {k for h in v["hypotheses"] for k in h["faulty_propellers"]}

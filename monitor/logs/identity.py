@@ -19,6 +19,8 @@ import re
 from dataclasses import dataclass
 from pathlib import Path
 
+from monitor.resample import US_PER_S
+
 # UTC from 2000 on: an autopilot clock before that is a board without time, never a flight date.
 MIN_PLAUSIBLE_UTC_US = 946_684_800 * 1_000_000
 MAX_PLAUSIBLE_UTC_US = 4_102_444_800 * 1_000_000  # 2100
@@ -46,7 +48,7 @@ def gps_to_unix_us(week: int, ms_of_week: float) -> int:
     """GPS week + milliseconds of week -> UTC µs since 1970 (leap seconds removed)."""
     gps_s = GPS_EPOCH_UNIX_S + week * 604_800 + ms_of_week / 1000.0
     leap = next((s for since, s in GPS_LEAP_S if gps_s - s >= since), 13)
-    return int(round((gps_s - leap) * 1e6))
+    return int(round((gps_s - leap) * US_PER_S))
 
 
 def identify(path: str | Path, fmt: str) -> LogIdentity:
@@ -154,4 +156,4 @@ def _dataflash(path: Path) -> LogIdentity:
 def iso_utc(us: int | None) -> str | None:
     if us is None:
         return None
-    return _dt.datetime.fromtimestamp(us / 1e6, tz=_dt.timezone.utc).isoformat(timespec="seconds")
+    return _dt.datetime.fromtimestamp(us / US_PER_S, tz=_dt.timezone.utc).isoformat(timespec="seconds")

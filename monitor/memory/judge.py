@@ -66,6 +66,12 @@ def detectable_loss(wi: np.ndarray) -> float:
     return float(worst)
 
 
+def statistic_of(verdict: dict, rotors) -> float:
+    """The statistic ``judge`` gave the hypothesis ``rotors`` (0 for one outside the hypotheses)."""
+    want = sorted(rotors)
+    return next((h["statistic"] for h in verdict["statistics"] if h["faulty_propellers"] == want), 0.0)
+
+
 def judge(normal: Normal, s: FlightSummary) -> dict:
     """The flight (or the part flown so far) summarised in ``s`` against ``normal``: the verdict's fields."""
     d = normal.deviation(s)
@@ -80,7 +86,7 @@ def judge(normal: Normal, s: FlightSummary) -> dict:
         "deviation": [float(x) for x in d],
         "deviation_sigma": [float(x) for x in d / sigma],
         "fault_statistic": float(top),
-        "statistics": {"+".join(map(str, h)): float(v) for h, v in stats.items()},
+        "statistics": [{"faulty_propellers": list(h), "statistic": float(v)} for h, v in stats.items()],
         "detectable_loss": loss,
         "tested_s": s.seconds,
         "thresholds": {

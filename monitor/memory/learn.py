@@ -19,6 +19,7 @@ from monitor.memory.baseline import MIN_FLIGHTS, BaselineError, VehicleBaseline
 from monitor.memory.judge import judge
 from monitor.memory.normal import normal_of
 from monitor.memory.summary import FlightSummary, summarize
+from monitor.resample import US_PER_S
 
 
 class HealthyOutlierError(BaselineError):
@@ -39,7 +40,7 @@ class LoggedFlight:
 def flight_date(utc_us: int | None) -> str | None:
     if utc_us is None:
         return None
-    return _dt.datetime.fromtimestamp(utc_us / 1e6, tz=_dt.timezone.utc).date().isoformat()
+    return _dt.datetime.fromtimestamp(utc_us / US_PER_S, tz=_dt.timezone.utc).date().isoformat()
 
 
 def read_flight(path: str | Path, fmt: str | None, esc, rate_hz: float = 20.0) -> LoggedFlight:

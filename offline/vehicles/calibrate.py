@@ -24,7 +24,7 @@ from unittest import mock
 import numpy as np
 
 from monitor.memory import thresholds as th
-from monitor.memory.judge import judge
+from monitor.memory.judge import judge, statistic_of
 from monitor.memory.normal import normal_of
 from offline.vehicles.evaluate import CLAIM, REFERENCES, later_flights, load_fleet
 
@@ -41,16 +41,16 @@ def calibrate(fleet: Path) -> dict:
     healthy = [v["fault_statistic"] for f, v in judged if not f["faulty"]]
     fault99 = float(np.quantile(healthy, 0.99))
     singles = [(f, v) for f, v in judged if len(f["faulty"]) == 1]
-    gaps = [v["fault_statistic"] - v["statistics"][str(f["faulty"][0])] for f, v in singles if v["fault_statistic"] >= fault99]
+    gaps = [v["fault_statistic"] - statistic_of(v, f["faulty"]) for f, v in singles if v["fault_statistic"] >= fault99]
     set_stat = float(max(2.0, np.quantile(gaps, 0.99))) if gaps else 2.0
 
     def exact(t: float) -> int:
         """Singles >= 6 % named exactly with fault level t: past it, and no other hypothesis within set_stat."""
         n = 0
         for f, v in singles:
-            top, st = v["fault_statistic"], v["statistics"]
-            if f["loss"] >= CLAIM and top >= t and st[str(f["faulty"][0])] == top:
-                n += sum(top - x <= set_stat for x in st.values()) == 1
+            top, st = v["fault_statistic"], [h["statistic"] for h in v["statistics"]]
+            if f["loss"] >= CLAIM and top >= t and statistic_of(v, f["faulty"]) == top:
+                n += sum(top - x <= set_stat for x in st) == 1
         return n
 
     sweep = [(float(t), exact(t)) for t in np.arange(np.ceil(fault99 * 2) / 2, 3 * fault99, 0.5)]
