@@ -82,13 +82,15 @@ def daemon_replays(fleet: Path, airframes: int) -> dict:
                 air = np.flatnonzero(t.airborne)
                 takeoff_s = t.timestamp_us[air[0]] / 1e6 if len(air) else 0.0
                 flown_s += len(air) / 20.0
-                faults = [json.loads(x) for x in ev.read_text().splitlines() if '"level": "fault"' in x]
+                alerts = [json.loads(x) for x in ev.read_text().splitlines() if '"event": "alert"' in x]
+                faults = [a for a in alerts if a["level"] == "fault"]
                 first = faults[0] if faults else None
                 rows.append(
                     {"name": f["name"], "reference": f["reference"], "faulty": f["faulty"], "loss": f["loss"],
                      "fault_s": None if first is None else first["time_boot_ms"] / 1000 - takeoff_s,
                      "named": None if first is None else first["faulty_propellers"], "evidence": None if first is None else first["evidence"],
-                     "one_set": first is not None and "hypothesis_sets" not in first}
+                     "one_set": first is not None and "hypothesis_sets" not in first,
+                     "suspect": any(a["level"] == "suspect" for a in alerts)}
                 )  # fmt: skip
     later = [r for r in rows if not r["reference"]]
     dmg = [r for r in later if r["faulty"] and r["loss"] >= 0.06]
@@ -104,6 +106,10 @@ def daemon_replays(fleet: Path, airframes: int) -> dict:
         "healthy_later": sum(not r["faulty"] for r in later),
         "healthy_with_fault": sum(not r["faulty"] and r["named"] is not None for r in later),
         "references_with_fault": sum(r["reference"] and r["named"] is not None for r in rows),
+        "healthy_with_suspect": sum(not r["faulty"] and r["suspect"] for r in later),
+        "wrong_single_named": sum(
+            r["named"] is not None and r["one_set"] and r["named"] != r["faulty"] for r in later if r["faulty"]
+        ),
         "cpu_share_of_core_with": cpu_with / flown_s,
         "cpu_share_of_core_without": cpu_without / flown_s,
         "rows": rows,
@@ -159,8 +165,8 @@ def main(argv: list[str] | None = None) -> int:
             print(
                 f"daemon ({d['airframes']} airframes): damaged >= 6 %: {d['named_within_15_s']} of {d['damaged_ge_6']} named alone within "
                 f"15 s of take-off ({d['alerted_within_15_s']} FAULT of any set) (median {np.median(fs) if fs else float('nan'):.1f} s, max {max(fs) if fs else float('nan'):.1f} s); "
-                f"wrong propeller {d['wrong_propeller']}; FAULT on {d['healthy_with_fault']} of {d['healthy_later']} healthy later "
-                f"flights and {d['references_with_fault']} references; CPU at real pace {100 * d['cpu_share_of_core_with']:.2f} % of a core "
+                f"a FAULT naming one wrong set {d['wrong_single_named']}; FAULT on {d['healthy_with_fault']} of {d['healthy_later']} healthy later "
+                f"flights ({d['healthy_with_suspect']} with a SUSPECT) and {d['references_with_fault']} references; CPU at real pace {100 * d['cpu_share_of_core_with']:.2f} % of a core "
                 f"with --state-dir, {100 * d['cpu_share_of_core_without']:.2f} % without (same replays, same run)"
             )
     c = learning_cost(fleets["evalsim"])
