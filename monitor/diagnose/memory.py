@@ -45,6 +45,11 @@ def judge_flight(d: Diagnosis, table, baseline: VehicleBaseline, vehicle_id: str
     if baseline.cg_damage_separable is False and v["faulty_propellers"]:
         v = as_imbalance(v)
     out.update(v)
+    if _in_flight_change(d) and not v["faulty_propellers"]:
+        # A propeller damaged mid-flight: the in-flight rule compared the flight with its own start and found the
+        # change; the whole flight's shares mix the healthy part before it in, so its answer stands.
+        out["note"] = "the in-flight rule's change stands: the whole flight against the vehicle's history did not name it"
+        return out
     _apply(d, v, table.motor_names, out["compared_with_text"])
     return out
 
@@ -72,6 +77,10 @@ def as_imbalance(v: dict) -> dict:
     }
 
 
+def _in_flight_change(d: Diagnosis) -> bool:
+    return d.verdict is not None and d.verdict.get("source") == "in-flight change"
+
+
 def _apply(d: Diagnosis, v: dict, motor_names, compared: str) -> None:
     nominal = d.verdict
     label = v["label"]
@@ -83,7 +92,9 @@ def _apply(d: Diagnosis, v: dict, motor_names, compared: str) -> None:
         "source": "vehicle memory",
         "compared_with": compared,
         "fault_probability": None if nominal is None else nominal.get("fault_probability"),
-        "nominal": None if nominal is None else {k: nominal[k] for k in ("label", "faulty_propellers", "confidence") if k in nominal},
+        "nominal": None
+        if nominal is None
+        else {k: nominal[k] for k in ("label", "faulty_propellers", "confidence") if k in nominal},
     }
     d.reason = None
     suspect = set(v.get("suspect_propellers", [])) | {k for h in v["hypotheses"] for k in h["faulty_propellers"]}
