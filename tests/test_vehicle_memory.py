@@ -326,3 +326,22 @@ def test_cli_learn_needs_one_identified_vehicle(fleet, tmp_path):
     append_autopilot_version(other, 0x1234)
     r = run("baseline", "learn", str(logs[0]), str(logs[1]), str(other), "--out", str(tmp_path / "B.json"))
     assert r.returncode == 2 and "the logs are of 2 vehicles" in r.stderr and not (tmp_path / "B.json").exists()
+
+
+def test_an_airframe_where_cg_and_damage_look_alike_gets_an_imbalance_never_a_propeller():
+    """CrazyPAD: a mass near a rotor and a cut propeller on it move the shares alike (offline/crazypad/README.md);
+    a baseline that says so turns a propeller verdict into an imbalance naming both causes and no propeller."""
+    from monitor.diagnose.engine import Diagnosis
+    from monitor.diagnose.memory import judge_flight
+
+    b = baseline_of()
+    t = damaged(2, 0.10)
+    d = Diagnosis(source="cut", verdict=None, windows=0, warnings=[])
+    out = judge_flight(d, t, b, None)
+    assert d.verdict["faulty_propellers"] == [2] and d.verdict["confidence"] == "confident"
+    b.cg_damage_separable = False
+    d = Diagnosis(source="cut", verdict=None, windows=0, warnings=[])
+    out = judge_flight(d, t, b, None)
+    assert d.verdict["faulty_propellers"] == [] and d.verdict["confidence"] == "ambiguous"
+    assert out["imbalance_rotors"] == [2] and any("CG offset toward rotor 2" in h.get("cause", "") for h in d.hypotheses)
+    assert VehicleBaseline.from_dict(json.loads(json.dumps(b.to_dict())), "x").cg_damage_separable is False
