@@ -52,6 +52,7 @@ from monitor.resample import US_PER_S  # noqa: E402
 log = logging.getLogger("propwatch.monitor.link")
 
 MAV_CMD_SET_MESSAGE_INTERVAL = 511
+MAV_CMD_REQUEST_MESSAGE = 512
 MAV_TYPE_ONBOARD_CONTROLLER = 18
 MAV_AUTOPILOT_INVALID = 8
 MAV_STATE_ACTIVE = 4
@@ -472,6 +473,15 @@ class Link:
                 0,
             ),
             to_ground=False,  # a command is for the autopilot only
+        )
+
+    def request_message(self, target_system: int, target_component: int, message_id: int) -> None:
+        """Ask the autopilot for one message now (MAV_CMD_REQUEST_MESSAGE), e.g. AUTOPILOT_VERSION."""
+        self._send(
+            lambda mav: mav.command_long_encode(
+                target_system, target_component, MAV_CMD_REQUEST_MESSAGE, 0, float(message_id), 0, 0, 0, 0, 0, 0
+            ),
+            to_ground=False,
         )
 
 

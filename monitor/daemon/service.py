@@ -61,6 +61,8 @@ CONTEXT = ("velocity", "imu")
 SINK_REPORT_PERIOD_S = 60.0  # a failing events file is told to the ground station once a minute
 MAV_SEVERITY_WARNING = 4
 REPORT_TOP_N = 20  # the report lists at most this many ignored sources / undecodable kinds
+AUTOPILOT_VERSION_ID = 148
+VERSION_REQUESTS = 3  # AUTOPILOT_VERSION asked for at most this often (an autopilot that never answers: sysid it is)
 PAUSE_LOG_PERIOD_S = 2.0  # decision pauses in the journal and events file: at most one per period (flapping data)
 
 
@@ -129,6 +131,8 @@ class Daemon:
         self._system_id: int | None = None
         self._next_hb = 0.0
         self._next_request = 0.0
+        self._next_version_request = 0.0
+        self._version_requests = 0
         self._next_watchdog = 0.0
         self._next_bad_log = 0.0
         self._bad_since_log = 0
@@ -548,6 +552,11 @@ class Daemon:
         if link.request_streams and talking and self._slow and now >= self._next_request:
             self._request_streams(sorted(self._slow))
             self._next_request = now + link.request_retry_s
+        if self.memory is not None and talking and self.memory.uid is None and now >= self._next_version_request:
+            # the vehicle's identity for its memory: the board's uid (AUTOPILOT_VERSION), asked for a few times
+            self.link.request_message(self._system_id, self.pipeline.decoder.component_id, AUTOPILOT_VERSION_ID)
+            self._version_requests += 1
+            self._next_version_request = now + (link.request_retry_s if self._version_requests < VERSION_REQUESTS else math.inf)
         if self._link_up and self._last_autopilot_hb is not None and now - self._last_autopilot_hb > link.link_timeout_s:
             self._link_up = False
             log.warning("link lost: no autopilot heartbeat for %.1f s", now - self._last_autopilot_hb)
