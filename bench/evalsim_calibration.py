@@ -187,7 +187,7 @@ def _effects() -> dict[str, Effect]:
             "esc_curve",
             ("esc_curve",),
             (0.02, 0.04, 0.08),
-            "RPM gain error (fitted rpm_gain - 1, sign removed)",
+            "RPM gain error at hover (|1 - rpm_gain - rpm_offset / hover RPM|)",
             lambda v, s, r: TERMS["esc_curve"].set(v, np.array([1.0 - s, 0.0])),
             lambda sp, s, r: _af(sp, esc=_esc_scaled(sp.airframe.esc, 1.0 - s)),
             lambda s, r: s,
