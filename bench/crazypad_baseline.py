@@ -2,7 +2,7 @@
 
     nice python -m bench.crazypad_baseline [--root ../shared/data/crazypad] [--json out.json]
 
-Per airframe (E8, E9), the baseline (``monitor.baseline``) is built from its healthy logs with an
+Per airframe (E8, E9), the baseline (``offline.adapt.share_rule``) is built from its healthy logs with an
 even number (the CrazyPAD split of ``offline/crazypad/data.py``); every other motor log is
 compared with it. A flight is *flagged at M3* when Bitcraze M3 (PX4 rotor 2) is the rotor with
 the largest positive deviation and it exceeds 3 spreads; *flagged* when any rotor exceeds 3
@@ -20,8 +20,8 @@ from pathlib import Path
 import numpy as np
 
 from bench import REPO
-from monitor.baseline import OUTLIER_SPREADS, baseline_from_tables  # noqa: E402
 from monitor.vehicle import load_vehicle  # noqa: E402
+from offline.adapt.share_rule import OUTLIER_SPREADS, baseline_from_tables  # noqa: E402
 from offline.crazypad.data import AIRFRAMES, DEFAULT_ROOT, load_manifest, select  # noqa: E402
 from offline.crazypad.experiment import GROUP_ORDER  # noqa: E402
 from offline.crazypad.real import read_flight  # noqa: E402

@@ -2,7 +2,7 @@
 
     nice python -m bench.crazypad_fusion [--root ../shared/data/crazypad] [--json out.json] [--write-card]
 
-Per airframe (E8, E9) the healthy baseline (``monitor.baseline``) is built from its healthy logs with an
+Per airframe (E8, E9) the healthy baseline (``offline.adapt.share_rule``) is built from its healthy logs with an
 even number (the CrazyPAD split, ``offline/crazypad/data.py``), exactly as ``propwatch adapt`` stores it;
 every other log is scored four ways, per condition. Motor logs (logged commands) and controller logs
 (commands rebuilt by the firmware mixer, ``monitor/logs/mixers.py``) each get their own baseline per
@@ -13,15 +13,15 @@ airframe, from their own even-numbered healthy logs:
 - adapted classifier: ``models/crazyflie-classifier.onnx`` (calibrated simulation) as ``propwatch diagnose``
   runs it (hop 20);
 - baseline only: the rotor with the largest deviation when it is beyond 3 spreads, else healthy;
-- fused: ``monitor.baseline.fuse``;
+- fused: ``offline.adapt.share_rule.fuse``;
 - verdict: what ``propwatch diagnose LOG --vehicle DIR`` now says of an airframe adapted on CrazyPAD logs, whose
   baseline carries ``cg_damage_separable: false`` (``offline/crazypad/evidence.py``): a fused fault becomes an
-  imbalance near its rotors (``monitor.baseline.cg_or_damage``), no propeller called faulty. "Imbalance located"
+  imbalance near its rotors (``offline.adapt.share_rule.cg_or_damage``), no propeller called faulty. "Imbalance located"
   = the imbalance's rotors are the damaged ones (cuts, tape) or the ones the mass hangs near (masses, strings).
 
 Exact = the paper's label (cuts and tape are faults of their rotors; masses and strings are healthy).
 "Called a fault" = any propeller named. No constant of the fusion is fitted on a fault flight (see
-``monitor.baseline.fuse``), so every condition is scored as if left out. The constant k = 3 spreads is
+``offline.adapt.share_rule.fuse``), so every condition is scored as if left out. The constant k = 3 spreads is
 checked here on the healthy calibration flights only: each against the baseline of the other calibration
 flights of its airframe. ``--write-card`` stores the table in the shipped manifest and rewrites the card
 from it (the motor-log table). About two minutes.
@@ -37,11 +37,11 @@ from pathlib import Path
 import numpy as np
 
 from bench import REPO
-from monitor.baseline import OUTLIER_SPREADS, baseline_from_tables, cg_or_damage, fuse  # noqa: E402
 from monitor.diagnose.engine import diagnose_table  # noqa: E402
 from monitor.labels import LABEL_TABLE, label_from_mask  # noqa: E402
 from monitor.model import Classifier  # noqa: E402
 from monitor.vehicle import load_vehicle  # noqa: E402
+from offline.adapt.share_rule import OUTLIER_SPREADS, baseline_from_tables, cg_or_damage, fuse  # noqa: E402
 from offline.crazypad.data import AIRFRAMES, DEFAULT_ROOT, load_manifest, select  # noqa: E402
 from offline.crazypad.evidence import CG_DAMAGE_SEPARABLE, CG_OFFSET_KINDS  # noqa: E402
 from offline.crazypad.experiment import GROUP_ORDER, truth_label  # noqa: E402

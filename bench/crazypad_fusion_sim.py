@@ -5,8 +5,8 @@
 Our simulator (``offline.crazypad.simdata``, the training recipe: healthy rotors +-3 % thrust from flight to flight,
 cuts of 8-40 % thrust on ANY one rotor, command noise as measured on healthy flights). Each trial draws an
 airframe's baseline from 4 healthy simulated flights (as CrazyPAD's E8 has 4 calibration logs; spread floored as in
-``monitor.baseline``), then scores fresh healthy flights and one-rotor cuts on each of the four rotors with the
-baseline-only rule of ``monitor.baseline.fuse`` (no classifier) at several k. This is where k = 3 is checked
+``offline.adapt.share_rule``), then scores fresh healthy flights and one-rotor cuts on each of the four rotors with the
+baseline-only rule of ``offline.adapt.share_rule.fuse`` (no classifier) at several k. This is where k = 3 is checked
 without any real fault flight: the simulated healthy false alarms and the named cuts per rotor at each k.
 About 30 s.
 """
@@ -19,8 +19,8 @@ from dataclasses import replace
 import numpy as np
 
 from bench import REPO
-from monitor.baseline import SPREAD_FLOOR  # noqa: E402
 from monitor.vehicle import load_vehicle  # noqa: E402
+from offline.adapt.share_rule import SPREAD_FLOOR  # noqa: E402
 from offline.crazypad.simdata import Recipe, simulate_dataset  # noqa: E402
 
 KS = (2.0, 2.5, 3.0, 3.5, 4.0)
@@ -28,7 +28,7 @@ N_CAL = 4
 
 
 def shares(rpm: np.ndarray) -> np.ndarray:
-    """(B, 4) each flight's mean omega^2 share, as ``monitor.baseline.flight_shares`` (finite rows only)."""
+    """(B, 4) each flight's mean omega^2 share, as ``offline.adapt.share_rule.flight_shares`` (finite rows only)."""
     w2 = (rpm / 1000.0) ** 2
     out = []
     for f in w2:

@@ -7,7 +7,7 @@ each with one hidden effect (CG offset, weak motor, motor lag, linear drag, ESC 
 2 healthy flights and 4 single-propeller faults. Per airframe, measured:
 
 1. the cause ``propwatch calibrate`` (``offline.calibrate.calibrate``) names from its 2 healthy flights;
-2. localisation of its 4 faulty flights by the healthy-baseline rule (``monitor.baseline``: the rotor
+2. localisation of its 4 faulty flights by the healthy-baseline rule (``offline.adapt.share_rule``: the rotor
    with the largest positive deviation beyond 3 spreads) with the airframe's own healthy baseline
    against the same rule with the nominal vehicle's (all shares equal);
 3. with ``--adapt EFFECT...``: ``propwatch adapt`` on the 2 healthy flights (1 fits, 1 held out),
@@ -23,9 +23,9 @@ from pathlib import Path
 
 import numpy as np
 
-from monitor.baseline import OUTLIER_SPREADS, HealthyBaseline, baseline_from_tables  # noqa: E402
 from monitor.logs import read_log  # noqa: E402
 from monitor.vehicle import DEFAULT_VEHICLE, load_vehicle  # noqa: E402
+from offline.adapt.share_rule import OUTLIER_SPREADS, HealthyBaseline, baseline_from_tables  # noqa: E402
 
 
 def localised(base: HealthyBaseline, table, rotor: int) -> bool:

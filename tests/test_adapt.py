@@ -10,10 +10,10 @@ import struct
 import numpy as np
 import pytest
 
-from monitor.baseline import HealthyBaseline
 from monitor.vehicle import REPO_ROOT
 from offline.adapt.checks import NotHealthyError, vehicle_type_problem
 from offline.adapt.pipeline import AdaptConfig, adapt, parse_labelled, read_healthy
+from offline.adapt.share_rule import HealthyBaseline
 
 CRAZYPAD = REPO_ROOT.parent / "shared" / "data" / "crazypad" / "motor"
 CRAZYFLIE = REPO_ROOT / "models" / "crazyflie.yaml"

@@ -1,19 +1,14 @@
-"""``diagnose LOG --vehicle DIR``: the verdict fuses the classifier with the airframe's healthy baseline (issue 14)."""
+"""The older share rule (``offline.adapt.share_rule``): the comparison behind the CrazyPAD card's fused figures and
+``propwatch adapt``'s own check of its healthy logs. No command's verdict uses it (vehicle memory does)."""
 
 from __future__ import annotations
 
-import json
-import shutil
-from dataclasses import replace
-
 import numpy as np
 import pytest
-from test_diagnose_fixtures import build_model, run_diagnose, write_tlog
-from test_diagnose_json_schema import documented, key_paths
+from test_diagnose_fixtures import write_tlog
 
-from monitor.baseline import BASELINE_FILE, HealthyBaseline, baseline_from_tables, fuse
 from monitor.labels import LABEL_TABLE, label_from_mask
-from monitor.vehicle import DEFAULT_VEHICLE, REPO_ROOT
+from offline.adapt.share_rule import HealthyBaseline, fuse
 
 
 def _probs(**by_label) -> np.ndarray:
@@ -53,89 +48,10 @@ def healthy_log(tmp_path_factory):
     return write_tlog(tmp_path_factory.mktemp("fuse") / "healthy.tlog", duration_s=12.0, faulty=None, seed=5)
 
 
-def test_baseline_names_a_rotor_the_classifier_calls_healthy(tmp_path, healthy_log):
-    """An airframe whose healthy flights load rotor 1 lightly: this flight's equal shares put rotor 1 far above
-    its healthy share, and the fused verdict names it where the classifier alone says healthy."""
-    d = tmp_path / "adapted"
-    d.mkdir()
-    shutil.copy(DEFAULT_VEHICLE, d / "vehicle.yaml")
-    build_model(d / "classifier.onnx")
-    code, out = run_diagnose([healthy_log, "--model", d / "classifier.onnx", "--json"])
-    alone = json.loads(out)["verdict"]
-    assert alone["label"] == 1  # the classifier alone: healthy
-    # This flight's own shares, measured through the same code the CLI uses.
-    light = HealthyBaseline("omega2", (1.0,) * 4, (0.0,) * 4, (0.05,) * 4, None, 20.0, 3, ("a",), ("1", "2", "3", "4"))
-    light.save(d / BASELINE_FILE)
-    seen = json.loads(run_diagnose([healthy_log, "--vehicle", d, "--json"])[1])["baseline"]["shares"]
-    # Healthy shares 0.1 lower on rotor 1 (the others raised to keep the mean at 1): rotor 1 now sits
-    # (s1 - (s1 - 0.1)) / 0.02 = 5 spreads above it, the others (0.1/3)/0.02 = 1.7 below.
-    mean = np.asarray(seen) + np.array([-0.1, 0.1 / 3, 0.1 / 3, 0.1 / 3])
-    for separable in (None, False):
-        HealthyBaseline(
-            "omega2", tuple(mean), (0.0,) * 4, (0.05,) * 4, None, 20.0, 3, ("a",), ("1", "2", "3", "4"), separable, "test"
-        ).save(d / BASELINE_FILE)
-        code, out = run_diagnose([healthy_log, "--vehicle", d, "--json"])
-        res = json.loads(out)
-        assert res["baseline"]["deviation_spreads"] == pytest.approx([5.0, -5 / 3, -5 / 3, -5 / 3], abs=0.01)
-        assert res["baseline"]["fusion"]["classifier_label"] == 1 and res["baseline"]["fusion"]["spreads_required"] == 3.0
-        undocumented = key_paths(res) - set(documented())
-        assert not undocumented, f"undocumented keys: {sorted(undocumented)}"
-        text = run_diagnose([healthy_log, "--vehicle", d])[1]
-        assert "verdict from the baseline and the classifier (label 1 alone): baseline: PX4 rotor(s) [1]" in text, text
-        if separable is None:  # nobody measured CG offset against damage: the rotor is named
-            assert res["verdict"]["faulty_propellers"] == [1] and res["verdict"]["confidence"] == "confident" and code == 0
-            assert [p["faulty"] for p in res["propellers"]] == [True, False, False, False]
-            assert "Propeller 1 (front-right) is damaged: replace it." in text, text
-        else:  # measured alike: an imbalance near rotor 1, no propeller called faulty
-            assert res["verdict"]["faulty_propellers"] == [] and res["verdict"]["imbalance_rotors"] == [1] and code == 3
-            assert not any(p["faulty"] for p in res["propellers"])
-            assert "Imbalance near propeller 1 (front-right): a shifted load or battery, or a damaged propeller." in text, text
-            assert "REPLACE" not in text, text
-
-
-CRAZYPAD = REPO_ROOT.parent / "shared" / "data" / "crazypad"
-E8 = CRAZYPAD / "motor" / "normal_flight"
-
-
-@pytest.mark.realdata
-@pytest.mark.skipif(not E8.is_dir(), reason=f"CrazyPAD data not found at {CRAZYPAD}")
-def test_real_crazypad_flights_baseline_corrects_the_classifier(tmp_path):
-    """E8's baseline from its even-numbered healthy logs, the shipped Crazyflie classifier: a 3 mm cut on M3 that the
-    classifier alone calls a pair, and a held-out healthy flight it calls faulty, both set right by the baseline."""
-    from monitor.logs import read_log
-    from monitor.vehicle import load_vehicle
-
-    crazyflie = REPO_ROOT / "models" / "crazyflie.yaml"
-    esc = load_vehicle(crazyflie).esc
-    cal = [E8 / f"E8_log0{i}.csv.gz" for i in (0, 2, 4, 6)]
-    base = baseline_from_tables([read_log(p, fmt="crazypad", esc=esc) for p in cal], [p.name for p in cal])
-    d = tmp_path / "E8"
-    d.mkdir()
-    shutil.copy(crazyflie, d / "vehicle.yaml")
-    shutil.copy(REPO_ROOT / "models" / "crazyflie-classifier.onnx", d / "classifier.onnx")
-    base.save(d / BASELINE_FILE)
-    cut = CRAZYPAD / "motor" / "cut_propeller_M3_3mm" / "E8_log02.csv.gz"
-    res = json.loads(run_diagnose([cut, "--format", "crazypad", "--vehicle", d, "--json"])[1])
-    assert res["baseline"]["fusion"]["classifier_label"] != label_of(2)  # the classifier alone: not M3 alone
-    assert res["verdict"]["faulty_propellers"] == [2] and res["verdict"]["faulty_names"] == ["M3"]
-    # The shipped CrazyPAD finding (cg_damage_separable false): the same flight is an imbalance near M3, not a fault.
-    from offline.crazypad.evidence import CG_DAMAGE_EVIDENCE, CG_DAMAGE_SEPARABLE
-
-    replace(base, cg_damage_separable=CG_DAMAGE_SEPARABLE, cg_damage_evidence=CG_DAMAGE_EVIDENCE).save(d / BASELINE_FILE)
-    res = json.loads(run_diagnose([cut, "--format", "crazypad", "--vehicle", d, "--json"])[1])
-    assert res["verdict"]["faulty_propellers"] == [] and res["verdict"]["imbalance_names"] == ["M3"]
-    assert [h["faulty_propellers"] for h in res["hypotheses"]] == [[2], []]
-    base.save(d / BASELINE_FILE)
-    healthy = E8 / "E8_log05.csv.gz"
-    res = json.loads(run_diagnose([healthy, "--format", "crazypad", "--vehicle", d, "--json"])[1])
-    assert res["baseline"]["fusion"]["classifier_label"] != 1  # the classifier alone: a false alarm
-    assert res["verdict"]["label"] == 1 and res["verdict"]["faulty_propellers"] == []
-
-
 def test_student_t_spreads_by_hand():
     """A new flight against the mean and std of n healthy flights: t_{n-1} at the Gaussian 3-sigma tail, times
     sqrt(1 + 1/n). By hand for n = 4: t_3.isf(0.0013499) = 9.2189 (tables), times sqrt(1.25) = 10.307."""
-    from monitor.baseline import T_ISF_3SIGMA, t_spreads_required
+    from offline.adapt.share_rule import T_ISF_3SIGMA, t_spreads_required
 
     assert t_spreads_required(1) is None
     assert t_spreads_required(4) == pytest.approx(9.2189 * np.sqrt(1.25), rel=1e-6)
@@ -150,8 +66,8 @@ def test_student_t_spreads_by_hand():
 
 def test_compare_reports_the_t_rule_beside_the_3_spread_rule(healthy_log):
     """Rotor 1 at 5 spreads above a 4-flight baseline: beyond 3 spreads, not beyond the t rule's 10.31."""
-    from monitor.baseline import flight_shares
     from monitor.logs import read_log
+    from offline.adapt.share_rule import flight_shares
 
     table = read_log(healthy_log)
     seen, basis = flight_shares(table)

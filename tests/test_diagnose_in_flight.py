@@ -177,27 +177,30 @@ def test_the_daemons_alert_reads_the_damaged_rotor_against_the_flights_own_start
         pytest.xfail(f"effectiveness read in a manoeuvre: {readings[1]}")
 
 
-def test_an_adapted_airframes_baseline_does_not_overrule_the_in_flight_answer():
-    from monitor.diagnose.cli import fuse_verdict
+def test_a_vehicle_baseline_does_not_overrule_the_in_flight_answer():
+    """A propeller damaged mid-flight: the in-flight rule found the change against the flight's own start; the whole
+    flight against the vehicle's history, which mixes the healthy part before it in, names nothing, so the change
+    stands (``monitor.diagnose.memory``); where the history does name a fault, that is the verdict."""
+    from test_vehicle_memory import QUIRKY, baseline_of, damaged, table
+
+    from monitor.diagnose.memory import judge_flight
 
     def change_verdict():
         d = Diagnosis("x.tlog", {"label": 1, "faulty_propellers": [], "faulty_names": [], "confidence": "ambiguous"}, 50, [])
         d.propellers = [{"propeller": i, "faulty": False, "suspect": False} for i in range(1, 5)]
         d.label_probability = [1.0 / 16] * 16
         d.decision = {"in_flight_fault": {"first_fault_boot_s": 40.0, "last_fault_boot_s": 70.0, "hypothesis_sets": [[3]]}}
-        apply_in_flight_fault(d, ["M1", "M2", "M3", "M4"])
+        apply_in_flight_fault(d, ["1", "2", "3", "4"])
         return d
 
-    # the whole flight's shares against the airframe's healthy ones name rotor 1: the change on rotor 3 stands
-    d, comparison = change_verdict(), {"deviation_spreads": [5.0, 0.0, 0.5, 0.0]}
-    fuse_verdict(d, comparison, ["M1", "M2", "M3", "M4"], cg_damage_separable=True)
-    assert d.verdict["faulty_propellers"] == [3] and d.verdict["confidence"] == "confident"
-    assert comparison["fusion"]["rule"].startswith("in-flight change")
-    # where this airframe's flights do not tell a CG offset from damage, the change is an imbalance naming no propeller
-    d, comparison = change_verdict(), {"deviation_spreads": [0.0, 0.0, 5.0, 0.0]}
-    fuse_verdict(d, comparison, ["M1", "M2", "M3", "M4"], cg_damage_separable=False)
-    assert d.verdict["faulty_propellers"] == [] and d.verdict["imbalance_rotors"] == [3] and d.hypothesis_rule is None
-    assert [p["suspect"] for p in d.propellers] == [False, False, True, False]
+    b = baseline_of()
+    d = change_verdict()
+    out = judge_flight(d, table(QUIRKY, seed=77), b, None)
+    assert d.verdict["faulty_propellers"] == [3] and d.verdict["source"] == "in-flight change"
+    assert "in-flight rule's change stands" in out["note"]
+    d = change_verdict()
+    judge_flight(d, damaged(1, 0.10), b, None)
+    assert d.verdict["faulty_propellers"] == [1] and d.verdict["source"] == "vehicle memory"
 
 
 def test_a_throttle_dip_in_flight_is_not_a_landing():

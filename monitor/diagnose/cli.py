@@ -14,14 +14,14 @@ import textwrap
 from pathlib import Path
 
 from monitor.decision.rotor_share import BASELINE_S
-from monitor.diagnose.engine import Diagnosis, diagnose_table, name_verdict, round_floats
+from monitor.diagnose.engine import Diagnosis, diagnose_table, round_floats
 from monitor.diagnose.memory import judge_flight, log_vehicle_id
 from monitor.diagnose.verdict import POSITION, flight_seconds, set_words, verdict_of
 from monitor.errors import PropwatchError
 from monitor.esc import EscCurve
 from monitor.logs import read_raw, to_flight_table
 from monitor.logs.guards import DEFAULT_MAX_SECONDS, check_size, check_time_advances
-from monitor.memory.baseline import VehicleBaseline, is_vehicle_baseline
+from monitor.memory.baseline import BASELINE_FILE, VehicleBaseline, is_vehicle_baseline
 from monitor.model import Classifier, choose_esc
 from monitor.progress import bar
 from monitor.resources import shipped
@@ -160,9 +160,9 @@ STATUS_WORD = {"replace": "REPLACE", "inspect": "INSPECT", "ok": "ok", "not judg
 TEXT_WIDTH = 110  # a long sentence continues on the next line, indented four spaces
 
 
-def format_text(d: Diagnosis, baseline=None, result: dict | None = None) -> str:
+def format_text(d: Diagnosis, result: dict | None = None) -> str:
     """The verdict in a pilot's words (``render_text``). ``result``: the ``--json`` object when the caller has it
-    (with ``baseline``), else ``d.to_json()``; ``baseline`` is no longer read (the fused verdict is in ``d``)."""
+    (with its ``baseline``), else ``d.to_json()``."""
     return render_text(result if result is not None else d.to_json())
 
 
@@ -191,51 +191,6 @@ def render_text(result: dict) -> str:
     return "\n".join(textwrap.fill(ln, TEXT_WIDTH, subsequent_indent="    ", break_on_hyphens=False) for ln in lines)
 
 
-def fuse_verdict(d: Diagnosis, comparison: dict, motor_names, cg_damage_separable: bool | None = None) -> None:
-    """Replace the classifier's verdict by the fusion with the airframe's healthy baseline (``monitor.baseline.fuse``).
-
-    Adds ``comparison["fusion"]`` (the rule that decided and what the classifier alone said). Nothing changes
-    where there is no verdict or the baseline was not compared (another basis). Where the airframe's flights
-    were measured not to tell a CG offset from damage (``cg_damage_separable`` False), a fault verdict becomes
-    an ambiguous imbalance with both explanations as hypotheses (``monitor.baseline.cg_or_damage``).
-    """
-    from monitor.baseline import OUTLIER_SPREADS, cg_or_damage, fuse
-    from monitor.labels import LABEL_TABLE
-
-    if d.verdict is None or d.label_probability is None or "deviation_spreads" not in comparison:
-        return
-    v = d.verdict
-    if v.get("source") == "in-flight change":
-        # The flight against its own start already answers; the whole-flight shares against the airframe's
-        # healthy flights mix the time before the change in. Where this airframe's flights do not tell a CG
-        # offset from damage, a change is worded as an imbalance all the same (a mass that shifted in flight).
-        comparison["fusion"] = {
-            "rule": "in-flight change: the in-flight rule's verdict stands (baseline not fused)",
-            "classifier_label": v["whole_flight"]["label"],
-            "classifier_confidence": v["whole_flight"]["confidence"],
-            "spreads_required": OUTLIER_SPREADS,
-        }
-        label = v["label"]
-    else:
-        f = fuse(comparison["deviation_spreads"], d.label_probability, v["label"], v.get("confidence") == "confident")
-        comparison["fusion"] = {
-            "rule": f["rule"],
-            "classifier_label": v["label"],
-            "classifier_confidence": v.get("confidence"),
-            "spreads_required": OUTLIER_SPREADS,
-        }
-        label = f["label"]
-        name_verdict(d, label, f["confidence"], motor_names)
-    if cg_damage_separable is False and LABEL_TABLE[label]:
-        imb = cg_or_damage(label, motor_names)
-        d.hypotheses, d.hypothesis_rule = imb.pop("hypotheses"), None
-        name_verdict(d, imb["label"], imb["confidence"], motor_names)
-        v.update(imb)
-        comparison["fusion"]["rule"] += "; CG offset and damage look alike on this airframe: an imbalance, no fault named"
-        for p in d.propellers:
-            p["suspect"] = p["propeller"] in imb["imbalance_rotors"]
-
-
 def memory_text(b: dict) -> str:
     """The vehicle-memory comparison in two lines: what the flight was compared with, and what it showed."""
     if "deviation_sigma" not in b:
@@ -261,21 +216,24 @@ def main(argv: list[str] | None = None) -> int:
     if not 0 < args.max_seconds <= 7 * 86400:
         print("propwatch diagnose: --max-seconds must be in (0, 604800]", file=sys.stderr)
         return 2
-    baseline = memory = None
+    memory = None
     if args.vehicle and Path(args.vehicle).is_dir():
         # A `propwatch adapt` folder: its calibrated vehicle, its model, its airframe's healthy baseline.
-        from monitor.baseline import BASELINE_FILE, HealthyBaseline
 
         folder = Path(args.vehicle)
         args.vehicle = str(folder / "vehicle.yaml")
         args.model = args.model or str(folder / "classifier.onnx")
-        if is_vehicle_baseline(folder / BASELINE_FILE):
-            memory = VehicleBaseline.load(folder / BASELINE_FILE)
-        else:  # an adapt folder written before vehicle memory: its fused classifier-and-shares baseline
-            baseline = HealthyBaseline.load(folder / BASELINE_FILE)
+        if not is_vehicle_baseline(folder / BASELINE_FILE):
+            print(
+                f"propwatch diagnose: error: {folder / BASELINE_FILE}: an adapt baseline from before vehicle memory "
+                "(no 'format'): run propwatch adapt again, or propwatch baseline learn on the vehicle's healthy logs",
+                file=sys.stderr,
+            )
+            return 2
+        memory = VehicleBaseline.load(folder / BASELINE_FILE)
     if args.baseline:
         try:
-            memory, baseline = VehicleBaseline.load(args.baseline), None
+            memory = VehicleBaseline.load(args.baseline)
         except PropwatchError as exc:
             print(f"propwatch diagnose: error: {exc}", file=sys.stderr)
             return 2
@@ -311,9 +269,6 @@ def main(argv: list[str] | None = None) -> int:
         finally:
             trap.report()
         res_baseline = None
-        if baseline is not None:
-            res_baseline = baseline.compare(table)
-            fuse_verdict(d, res_baseline, table.motor_names, baseline.cg_damage_separable)
         if memory is not None:
             try:
                 res_baseline = judge_flight(d, table, memory, log_vehicle_id(path, args.fmt))
@@ -339,19 +294,9 @@ def main(argv: list[str] | None = None) -> int:
         if progress is not None:
             progress.update(size)
         if not args.json:
-            print(format_text(d, baseline, res))
-            if baseline is not None and "deviation_spreads" in res["baseline"]:
-                b = res["baseline"]
-                print(
-                    "  vs this airframe's healthy baseline (spreads): "
-                    + ", ".join(f"{x:+.1f}" for x in b["deviation_spreads"])
-                    + f" -> {b['verdict']}"
-                )
+            print(format_text(d, res))
             if memory is not None:
                 print(memory_text(res["baseline"]))
-            if baseline is not None and "fusion" in res["baseline"]:
-                f = res["baseline"]["fusion"]
-                print(f"  verdict from the baseline and the classifier (label {f['classifier_label']} alone): {f['rule']}")
     if progress is not None:
         progress.close()
     if args.json:

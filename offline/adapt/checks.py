@@ -16,10 +16,10 @@ from pathlib import Path
 
 import numpy as np
 
-from monitor.baseline import OUTLIER_SPREADS, SPREAD_FLOOR, flight_shares
 from monitor.errors import LogFormatError
 from monitor.flight import FlightTable
 from monitor.logs import detect_format
+from offline.adapt.share_rule import OUTLIER_SPREADS, SPREAD_FLOOR, flight_shares
 
 MAV_TYPE_QUADROTOR = 2
 MIN_AIRBORNE_S = 5.0  # less than one classifier window (5 s) of flight teaches nothing

@@ -29,7 +29,6 @@ from pathlib import Path
 
 import numpy as np
 
-from monitor.baseline import SPREAD_FLOOR
 from monitor.config import to_mapping
 from monitor.errors import ConfigError
 from monitor.labels import LABEL_TABLE, label_from_mask
@@ -38,6 +37,7 @@ from monitor.logs.raw import to_flight_table
 from monitor.memory.cli import describe
 from monitor.vehicle import VehicleConfig, load_vehicle_with_sources
 from offline.adapt.checks import NotHealthyError, check_airborne, check_consistent, vehicle_type_problem
+from offline.adapt.share_rule import SPREAD_FLOOR
 from offline.calibrate.terms import TERMS
 from offline.manifest import make_manifest, write_manifest
 

@@ -1,15 +1,18 @@
-"""A healthy baseline of one airframe: what its own healthy flights look like.
+"""The older share rule of one airframe: 3 flight-to-flight spreads of its healthy flights' omega^2 shares.
 
-Every real vehicle holds a static per-motor spread (healthy Crazyflies: 4-8 % of the mean
-command, ``../shared/data/crazypad/README.md``), so "rotor 3 works harder than the others" is
-evidence of a fault only relative to *this* airframe's healthy flights. ``propwatch adapt``
-stores one (``baseline.json`` in its output folder); ``propwatch diagnose --vehicle DIR`` compares
-each flight with it.
+No longer a verdict of any command: ``propwatch diagnose``, the daemon and the fleet judge a flight against the
+vehicle's own history with ``monitor.memory`` (docs/VEHICLE_MEMORY.md). What stays here, offline:
 
-Shares: each rotor's flight-mean of omega^2 (RPM from the ESC fit, squared) over the mean of the
-four, over the airborne samples; the motor command's share where no ESC fit applies (``basis``).
-Spread: the flight-to-flight std of each share, floored at ``SPREAD_FLOOR`` so that two or
-three flights that happen to agree do not make every later flight an outlier.
+- ``propwatch adapt``'s own check that its healthy logs agree (``offline.adapt.checks``: ``flight_shares``,
+  ``OUTLIER_SPREADS``, ``SPREAD_FLOOR``), which admits real sessions that drift more than vehicle memory's prior
+  (CrazyPAD E9_log03);
+- the comparison rule behind the CrazyPAD card's "with the airframe's healthy baseline" figures
+  (``bench/crazypad_fusion.py``, ``bench/crazypad_baseline.py``, ``bench/evalsim_hidden.py``): ``HealthyBaseline``,
+  ``fuse``, ``cg_or_damage``, measured at the git revisions those figures name.
+
+Shares: each rotor's flight-mean of omega^2 (RPM from the ESC fit, squared) over the mean of the four, over the
+airborne samples; the motor command's share where no ESC fit applies (``basis``). Spread: the flight-to-flight std
+of each share, floored at ``SPREAD_FLOOR``.
 """
 
 from __future__ import annotations
@@ -57,7 +60,7 @@ def t_spreads_required(n_flights: int) -> float | None:
 def _rows_and_basis(table: FlightTable) -> tuple[np.ndarray, np.ndarray, str]:
     """Airborne rows with all four values known, their per-rotor values, and the basis.
 
-    omega^2 (kRPM^2) where RPM is known (the ESC fit or ESC telemetry), as ``monitor.share_baseline``;
+    omega^2 (kRPM^2) where RPM is known (the ESC fit or ESC telemetry), as ``offline.share_baseline``;
     the raw command where no RPM is known for any airborne row.
     """
     rpm = np.asarray(table.motor_rpm, dtype=np.float64)

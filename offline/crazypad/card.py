@@ -106,10 +106,12 @@ def fusion_lines(fusion: dict | None) -> list[str]:
     k = fusion["outlier_spreads"]
     lines = [
         "",
-        f"**With the airframe's healthy baseline** (`propwatch diagnose LOG --vehicle DIR`; `{fusion['bench']}`, git "
+        f"**With the airframe's healthy baseline, older share rule** (what `propwatch diagnose LOG --vehicle DIR` said before "
+        "vehicle memory, `offline/adapt/share_rule.py`; vehicle memory's figures: docs/VEHICLE_MEMORY.md; "
+        f"`{fusion['bench']}`, git "
         f"revision {fusion['git_revision']}): per airframe and log kind, the baseline of its even-numbered healthy logs; "
         f"baseline only = the rotor furthest above its healthy share when beyond {k:g} spreads, else healthy; fused = "
-        f"`monitor.baseline.fuse` (rotors beyond {k:g} spreads, the classifier choosing among several; none: healthy "
+        f"`offline.adapt.share_rule.fuse` (rotors beyond {k:g} spreads, the classifier choosing among several; none: healthy "
         "unless the classifier alone is confident). No constant is fitted on a fault flight; the healthy calibration "
         "flights, each against the others of its airframe, reach "
         f"{fusion['healthy_calibration_max_deviation_spreads']:.2f} spreads. Cells: exact / called a propeller fault.",
@@ -120,15 +122,15 @@ def fusion_lines(fusion: dict | None) -> list[str]:
         ks = ", ".join(f"{af} {kind} {k:.1f}" for af, kind, k in fusion.get("t_spreads_required_by_baseline", []))
         lines[-1] += (
             f" Baseline t rule = baseline only with Student's t in place of {k:g} spreads "
-            f"(`monitor.baseline.t_spreads_required`, spreads required per baseline: {ks}); reported, not used."
+            f"(`offline.adapt.share_rule.t_spreads_required`, spreads required per baseline: {ks}); reported, not used."
         )
         methods = methods[:2] + (("baseline_t", "baseline, t rule"),) + methods[2:]
     shipped = all("verdict" in row for t in tables for row in t)  # absent in manifests written before it
     if shipped:
         lines[-1] += (
-            " Verdict = what `diagnose --vehicle DIR` says on this airframe, whose baseline records that a CG offset "
+            " Verdict = what `diagnose --vehicle DIR` said on this airframe, whose baseline records that a CG offset "
             "and damage look alike (`cg_damage_separable: false`): a fused fault becomes an imbalance near its rotors, "
-            "no propeller called faulty (`monitor.baseline.cg_or_damage`); its cells: exact / called a propeller fault "
+            "no propeller called faulty (`offline.adapt.share_rule.cg_or_damage`); its cells: exact / called a propeller fault "
             "/ imbalance located (at the damaged rotors, or the rotors a mass hangs near) / any imbalance flagged (an "
             "ambiguous verdict, exit code 3: on a healthy flight, a false alarm)."
         )
