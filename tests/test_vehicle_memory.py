@@ -378,3 +378,12 @@ def test_real_crazypad_flights_against_their_airframes_own_history():
     d = Diagnosis(source="cut", verdict=None, windows=0, warnings=[])
     out = judge_flight(d, read(CRAZYPAD / "motor" / "cut_propeller_M3_3mm" / "E8_log02.csv.gz"), b, None)
     assert d.verdict["faulty_propellers"] == [] and 2 in out["imbalance_rotors"]
+
+
+def test_an_adapt_folder_with_an_older_baseline_is_refused_naming_the_way_out(fleet, tmp_path):
+    d = tmp_path / "adapted"
+    d.mkdir()
+    (d / "baseline.json").write_text(json.dumps({"basis": "omega2", "shares_mean": [1, 1, 1, 1], "n_flights": 3}))
+    r = run("diagnose", str(fleet / "ours_vehicles_0004.tlog"), "--vehicle", str(d))
+    assert r.returncode == 2 and "baseline.json: an adapt baseline from before vehicle memory" in r.stderr
+    assert "propwatch baseline learn" in r.stderr
