@@ -140,6 +140,7 @@ def zeros(args, work: Path, model: Path) -> dict:
     import struct
 
     from tests.test_daemon_helpers import synth_flight, write_tlog
+
     sys.path.insert(0, str(REPO / "tests"))  # the tests' own writers (they import each other by module name)
     from test_logs_ulog import write_ulog
     from test_security_readers import _csv

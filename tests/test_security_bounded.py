@@ -95,8 +95,11 @@ def test_a_real_reboot_is_still_seen_and_a_real_forward_jump_is_one_clock_event(
     stats = daemon.pipeline.stats
     assert stats["clock_resets"] == 1
     steps = stats["steps"]
+    entered, enter = [], daemon.blind.enter
+    daemon.blind.enter = lambda reason, detail: (entered.append(reason), enter(reason, detail))[1]
     feed(daemon, px4_stream(3609.0, 3616.0, seed=3))  # its boot clock jumps an hour forward and runs on
     assert stats["clock_jumps"] == 1 and stats["clock_resets"] == 1
+    assert entered == ["clock jumped"]  # a jump forward is told as one, not as a step back
     assert stats["steps"] - steps <= 7.0 * 20 + 2  # the new clock's steps only, no hour of empty ones
     # Each of the three clocks (the first, after the reboot, after the jump) waited for CONFIRM_SAMPLES agreeing.
     assert daemon.pipeline.decoder.clock_guard.refused == 3 * (CONFIRM_SAMPLES - 1)

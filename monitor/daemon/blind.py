@@ -2,7 +2,7 @@
 
 Reasons (short text for the ground station, <= 50 chars with the prefix):
 ``no motor data``, ``no attitude data``, ``implausible motor data``,
-``implausible attitude``, ``autopilot clock frozen``, ``clock stepped back``,
+``implausible attitude``, ``autopilot clock frozen``, ``clock stepped back``, ``clock jumped``,
 ``autopilot rebooted``, ``link lost``. The service calls ``enter`` for an
 event seen at once (reboot, clock step, frozen clock, lost link) and
 ``data(ok, ...)`` at each airborne grid step (bad data must last ``after_s``

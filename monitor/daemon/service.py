@@ -266,7 +266,8 @@ class Daemon:
             what = self.pipeline.clock_events.popleft()
             if self.memory is not None:
                 self.memory.discard(what)
-            self._transition(self.blind.enter("autopilot rebooted" if "reboot" in what else "clock stepped back", what))
+            reason = "autopilot rebooted" if "reboot" in what else "clock jumped" if "jumped" in what else "clock stepped back"
+            self._transition(self.blind.enter(reason, what))
         for step in steps:
             self._on_step(step)
         if self.pipeline.vibration or self.pipeline.esc_samples:
