@@ -70,6 +70,7 @@ def outputs(tmp_path_factory):
         "refusal": [faulty, "--model", far],
         "several": [faulty, junk, "--model", model],
         "memory": [faulty, "--model", model, "--baseline", d / "B.json"],
+        "memory_refused": [faulty, "--model", far, "--baseline", d / "B.json"],
     }
     out = {}
     for name, argv in runs.items():
@@ -113,3 +114,12 @@ def test_one_numbering_in_json_and_text(outputs, capsys):
     assert describe_label(3, names) == "label 3: M3 (PX4 rotor 2) faulty"
     assert describe_label(1, names) == "label 1: no faulty propeller"
     assert rotor_name("3", 3) == "propeller 3" and rotor_name("M2", 4) == "M2 (PX4 rotor 4)"
+
+
+def test_a_log_the_network_refuses_is_still_judged_against_the_vehicles_history(outputs):
+    """The comparison with the vehicle's own flights needs no classifier: outside the network's envelope (a model
+    trained at 2000 RPM) the nominal verdict is none, and vehicle memory's stands in its place."""
+    assert outputs["refusal"]["verdict"] is None
+    judged = outputs["memory_refused"]
+    assert judged["verdict"]["source"] == "vehicle memory" and judged["verdict"]["nominal"] is None
+    assert judged["verdict"]["faulty_propellers"] == judged["baseline"]["faulty_propellers"]
