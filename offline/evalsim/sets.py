@@ -425,7 +425,7 @@ def write_set(
             else:
                 write_tlog(out / tlog, log, 0)
             t = truth(spec, file=tlog)
-            _write_json(out / f"{spec.name}.json", t)
+            write_json(out / f"{spec.name}.json", t)
             entries.append(
                 {
                     "file": tlog,
@@ -451,7 +451,8 @@ def write_set(
     return out
 
 
-def _write_json(path: Path, obj: dict) -> None:
+def write_json(path: Path, obj: dict) -> None:
+    """A truth or manifest-side JSON file of a set, written to a temporary name and renamed (sorted keys)."""
     tmp = path.with_name(path.name + ".tmp")
     tmp.write_text(json.dumps(obj, indent=1, sort_keys=True) + "\n", encoding="utf-8")
     os.replace(tmp, path)

@@ -13,8 +13,6 @@ vehicle-memory thresholds; never the evaluation-only simulator.
 
 from __future__ import annotations
 
-import json
-import os
 from pathlib import Path
 
 import numpy as np
@@ -22,7 +20,7 @@ import numpy as np
 from monitor.esc import RPM_PER_RAD_S
 from monitor.labels import label_for
 from monitor.vehicle import DEFAULT_VEHICLE, load_vehicle
-from offline.evalsim.sets import DAY_US, VEHICLE_FLIGHTS, VEHICLE_HEALTHY_LATER, VEHICLE_REFERENCES
+from offline.evalsim.sets import DAY_US, VEHICLE_FLIGHTS, VEHICLE_HEALTHY_LATER, VEHICLE_REFERENCES, write_json
 from offline.fleet_sim import append_autopilot_version, vehicle_uid
 from offline.manifest import make_manifest, write_manifest
 
@@ -150,7 +148,7 @@ def write_fleet(out_dir: str | Path, n_flights: int, seed: int = 0, duration_s: 
                 "thrust_factor_at_hover": factor,
                 "airframe_id": f"ours-vehicle-{p['airframe']:03d}",
             }
-            _write_json(out / f"{p['name']}.json", truth)
+            write_json(out / f"{p['name']}.json", truth)
             entries.append(
                 {k: truth[k] for k in ("file", "label", "faulty_propellers", "airframe_id", "reference")}
                 | {"truth": f"{p['name']}.json"}
@@ -158,9 +156,3 @@ def write_fleet(out_dir: str | Path, n_flights: int, seed: int = 0, duration_s: 
     manifest = make_manifest("propwatch-ours-vehicles", {"flights": n_flights, "duration_s": duration_s}, seed, flights=entries)
     write_manifest(out / "manifest.json", manifest)
     return out
-
-
-def _write_json(path: Path, obj: dict) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(json.dumps(obj, indent=1, sort_keys=True) + "\n", encoding="utf-8")
-    os.replace(tmp, path)
