@@ -50,7 +50,6 @@ def judge_store(con, rediagnose: bool = False) -> int:
             log_hash, _, start, time_known, status, summ, memory, label, conf, names, path, diagnosis = r
             summary = FlightSummary.from_dict(json.loads(summ), path)
             if memory is None or rediagnose:
-                set_aside_outliers(history)
                 upd = _judge_row(history, summary, time_known)
                 updates.append((log_hash, upd))
                 label, conf, memory = upd.get("verdict_label", label), upd.get("confidence", conf), upd["memory"]
@@ -62,6 +61,7 @@ def judge_store(con, rediagnose: bool = False) -> int:
                 and summary.basis == history.basis
             ):
                 history.add(log_hash, start.date().isoformat() if start is not None else None, summary, "no fault")
+                set_aside_outliers(history)  # the history changed: check it once, not before every flight judged
     if updates:
         con.execute("BEGIN TRANSACTION")
         for h, upd in updates:

@@ -72,20 +72,31 @@ def read_flight(path: str | Path, fmt: str | None, esc, rate_hz: float = 20.0) -
     )
 
 
-def check_outliers(names: list[str], summaries: list[FlightSummary]) -> None:
-    """Raise naming the flight and rotor(s) where a declared-healthy flight is FAULTY against the others."""
+def outliers(summaries: list[FlightSummary]):
+    """Each flight the others call FAULTY (judged against the normal of the rest), in order: (index, verdict).
+    None below ``MIN_FLIGHTS`` flights."""
     if len(summaries) < MIN_FLIGHTS:
         return
     for i, s in enumerate(summaries):
-        rest = normal_of([x for j, x in enumerate(summaries) if j != i])
-        v = judge(rest, s)
+        v = judge(normal_of([x for j, x in enumerate(summaries) if j != i]), s)
         if v["faulty_propellers"]:
-            rotors = " or ".join("+".join(map(str, h["faulty_propellers"])) for h in v["hypotheses"])
-            raise HealthyOutlierError(
-                f"{names[i]}: given as healthy, but against the other {len(summaries) - 1} flights rotor {rotors} lies "
-                f"beyond their spread (statistic {v['fault_statistic']:.1f} >= {v['thresholds']['fault']:g}); "
-                "inspect that propeller, or leave the flight out"
-            )
+            yield i, v
+
+
+def _rotors(v: dict) -> str:
+    return " or ".join("+".join(map(str, h["faulty_propellers"])) for h in v["hypotheses"])
+
+
+def check_outliers(names: list[str], summaries: list[FlightSummary]) -> None:
+    """Raise naming the flight and rotor(s) where a declared-healthy flight is FAULTY against the others."""
+    found = next(outliers(summaries), None)
+    if found is not None:
+        i, v = found
+        raise HealthyOutlierError(
+            f"{names[i]}: given as healthy, but against the other {len(summaries) - 1} flights rotor {_rotors(v)} lies "
+            f"beyond their spread (statistic {v['fault_statistic']:.1f} >= {v['thresholds']['fault']:g}); "
+            "inspect that propeller, or leave the flight out"
+        )
 
 
 def set_aside_outliers(b: VehicleBaseline) -> list[str]:
@@ -93,18 +104,18 @@ def set_aside_outliers(b: VehicleBaseline) -> list[str]:
     there are ``MIN_FLIGHTS``, the one the others call FAULTY (the largest statistic against the rest) is set aside
     (``excluded``, with why), and again until none is. Returns the names set aside."""
     out = []
-    while len(act := b.active()) >= MIN_FLIGHTS:
-        sums = [FlightSummary.from_dict(f["summary"], f["name"]) for f in act]
-        worst, stat, rotors = None, 0.0, ""
-        for i, s in enumerate(sums):
-            v = judge(normal_of([x for j, x in enumerate(sums) if j != i]), s)
-            if v["faulty_propellers"] and v["fault_statistic"] > stat:
-                worst, stat = i, v["fault_statistic"]
-                rotors = " or ".join("+".join(map(str, h["faulty_propellers"])) for h in v["hypotheses"])
-        if worst is None:
+    while True:
+        act = b.active()
+        found = max(
+            outliers([FlightSummary.from_dict(f["summary"], f["name"]) for f in act]),
+            key=lambda iv: iv[1]["fault_statistic"],
+            default=None,
+        )
+        if found is None:
             break
-        act[worst]["excluded"] = f"unlike the other {len(act) - 1} flights: rotor {rotors} (statistic {stat:.1f})"
-        out.append(act[worst]["name"])
+        i, v = found
+        act[i]["excluded"] = f"unlike the other {len(act) - 1} flights: rotor {_rotors(v)} (statistic {v['fault_statistic']:.1f})"
+        out.append(act[i]["name"])
     return out
 
 
