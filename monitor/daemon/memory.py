@@ -60,7 +60,8 @@ class VehicleMemory:
         self.sysid: int | None = None
         self.baseline: VehicleBaseline | None = None
         self.normal = None
-        self.problem = ""  # why the state dir cannot be used ('' = fine)
+        self._problem = ""  # why the state dir cannot be used ('' = fine)
+        self._status: str | None = None  # STATUS suffix, made again only when the baseline or the problem changes
         self.learnt = 0
         self._reset_flight()
 
@@ -86,7 +87,7 @@ class VehicleMemory:
         p = self.path
         if p is None:
             return
-        self.normal = None
+        self.normal, self._status = None, None
         if not p.is_file():
             self.baseline = None
             return
@@ -100,14 +101,26 @@ class VehicleMemory:
         if self.baseline.ready and tuple(self.baseline.motor_names) == self.motor_names:
             self.normal = self.baseline.normal()
 
+    @property
+    def problem(self) -> str:
+        return self._problem
+
+    @problem.setter
+    def problem(self, text: str) -> None:
+        self._problem, self._status = text, None
+
     def status(self) -> str:
-        """The STATUS suffix: '' with a usable baseline, else why the flight is compared with no history."""
-        if self.problem:
-            return f"; {self.problem}"
-        if self.normal is not None:
-            return f"; vehicle memory: {self.baseline.compared_with_text()}"
-        k = 0 if self.baseline is None else len(self.baseline.active())
-        return f"; no vehicle baseline yet ({k} of {MIN_FLIGHTS} flights)"
+        """The STATUS suffix: what the flight is compared with, or why with no history. Read at every grid step: made
+        once per change of the baseline or the problem."""
+        if self._status is None:
+            if self.problem:
+                self._status = f"; {self.problem}"
+            elif self.normal is not None:
+                self._status = f"; vehicle memory: {self.baseline.compared_with_text()}"
+            else:
+                k = 0 if self.baseline is None else len(self.baseline.active())
+                self._status = f"; no vehicle baseline yet ({k} of {MIN_FLIGHTS} flights)"
+        return self._status
 
     # -- the flight
     def _reset_flight(self) -> None:
