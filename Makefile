@@ -144,7 +144,7 @@ clean:
 
 # Credible-set coverage of the moment-balance verdict on randomised flights of OUR simulator (about 1 min).
 calibrate-physics: $(STAMP)
-	$(BIN)/python -m offline.physics_calibration --json $(OUT)/physics-calibration.json
+	$(BIN)/propwatch tune noise --json $(OUT)/physics-calibration.json
 
 # The calibrator's hidden-effect matrix (bench/evalsim_calibration.py): resolution on our simulator, then 10 effects x
 # 3 sizes x 5 seeds, 60 nothing-hidden runs and outside-library effects on the evaluation-only simulator (hours on

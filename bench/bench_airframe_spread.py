@@ -5,7 +5,7 @@ Randomised flights of our simulator, every term drawn from the assumption regist
 over the register's ranges scaled by 0 (the airframe as its file says, as the shipped model was trained and its sets
 calibrated), 1/4, 1/2 and 1 (an airframe nobody measured). Each model (``--model NAME=PATH``, default the shipped one)
 is scored as ``propwatch diagnose`` answers: its conformal rule with the airframe check
-(``offline.classifier.conformal.measure_with_check``), beside the ω²-share baseline's singles.
+(``offline.tune.sets.measure_with_check``), beside the ω²-share baseline's singles.
 The evaluation-only simulator's counterpart is evalsim ``shift_quarter`` / ``shift_half`` (bench_generalisation.py).
 
 Run: ``python -m bench.bench_airframe_spread [--flights-per-label 10] [--seed 8]`` (about 4 min on 2 cores).
@@ -20,9 +20,9 @@ from bench.bench_localise import add_model_option, model_paths
 from monitor.decision.hypotheses import load_rule  # noqa: E402
 from monitor.model import Classifier  # noqa: E402
 from monitor.vehicle import DEFAULT_VEHICLE, load_vehicle  # noqa: E402
-from offline.classifier.conformal import measure_with_check, region_from_dataset, share_singles  # noqa: E402
 from offline.dataset.generate import DatasetSpec, generate  # noqa: E402
 from offline.sim.assumptions import scaled_airframe  # noqa: E402
+from offline.tune.sets import measure_with_check, region_from_dataset, share_singles  # noqa: E402
 
 SCALES = (0.0, 0.25, 0.5, 1.0)
 

@@ -26,9 +26,9 @@ from monitor.diagnose.engine import diagnose_table
 from monitor.flight import FlightTable
 from monitor.model import Classifier
 from monitor.vehicle import DEFAULT_VEHICLE, REPO_ROOT, load_vehicle
-from offline.classifier.conformal import share_rotors
 from offline.dataset.generate import PRESETS, DatasetSpec, generate
-from offline.physics_calibration import WARMUP_STEPS, flight_balances
+from offline.tune.noise import WARMUP_STEPS, flight_balances
+from offline.tune.sets import share_rotors
 
 
 def physics_verdicts(ds, bank: HypothesisBank, geometry: RotorGeometry, priors: Priors):

@@ -1,4 +1,4 @@
-"""The decision's calibration (offline/alerts/calibrate.py): a tail fit with a flight bootstrap behind it.
+"""The decision's calibration (offline/tune/alerts.py): a tail fit with a flight bootstrap behind it.
 
 Synthetic healthy flights with a known crossing-rate tail: each flight has Poisson-many excursions of the statistic,
 each one a jump of height h0 + Exp(1/b) on one propeller, so the renewal crossing rate of h > h0 is exactly
@@ -18,7 +18,7 @@ import pytest
 
 from monitor.decision.config import DecisionConfig
 from monitor.decision.thresholds import load_calibration, thresholds
-from offline.alerts.calibrate import H_GRID, fit_traces, flight_crossing_counts, flight_peaks, write_calibration
+from offline.tune.alerts import H_GRID, fit_traces, flight_crossing_counts, flight_peaks, write_calibration
 
 LAM_PER_H, B, H0 = 30.0, 1.0, 1.0
 FLIGHT_H = 72.0 / 3600.0

@@ -1,4 +1,4 @@
-"""offline.classifier.conformal.calibrate end to end, on small data sets of our simulator and the shipped model:
+"""offline.tune.sets.calibrate end to end, on small data sets of our simulator and the shipped model:
 regions beyond the register shape the set rule but not the airframe check, the torque-sign check is applied, and
 the rule written is the one ``choose`` picks from the candidates it records."""
 
@@ -40,7 +40,7 @@ def _write(tmp_path, name, seed, airframe="nominal", torque=None, flights_per_la
 
 @pytest.fixture(scope="module")
 def calibrated(tmp_path_factory):
-    from offline.classifier.conformal import calibrate
+    from offline.tune.sets import calibrate
 
     tmp = tmp_path_factory.mktemp("conformal")
     paths = {
@@ -66,7 +66,7 @@ def calibrated(tmp_path_factory):
 
 
 def test_the_rule_written_is_the_one_choose_picks_from_every_candidate_it_records(calibrated):
-    from offline.classifier.conformal import choose
+    from offline.tune.sets import choose
 
     res, _ = calibrated
     rule, cands = res["rule"], res["all_candidates"]
@@ -88,7 +88,7 @@ def test_the_rule_written_is_the_one_choose_picks_from_every_candidate_it_record
 
 def test_beyond_register_regions_count_for_the_rule_not_for_the_airframe_check(calibrated):
     from monitor.model import Classifier
-    from offline.classifier.conformal import AIRFRAME_CHECK_QUANTILE, region_of
+    from offline.tune.sets import AIRFRAME_CHECK_QUANTILE, region_of
 
     res, paths = calibrated
     assert res["beyond_register"] == [str(paths["beyond"])]

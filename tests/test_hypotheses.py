@@ -10,7 +10,7 @@ import pytest
 from monitor.decision.hypotheses import flight_score, hypothesis_set, load_rule, rule_path
 from monitor.errors import ModelError
 from monitor.labels import LABEL_TABLE
-from offline.classifier.conformal import conformal_threshold, measure
+from offline.tune.sets import conformal_threshold, measure
 
 
 def _flights(rng, n, sharp):
@@ -275,7 +275,7 @@ def test_rule_file_carries_its_sparsity_prior_and_refuses_an_impossible_one(tmp_
 
 
 def _region(name, rng, n, sharp, share_right):
-    from offline.classifier.conformal import Region
+    from offline.tune.sets import Region
 
     p, truth = _flights(rng, n, sharp)
     singles = np.array([len(LABEL_TABLE[t + 1]) == 1 for t in truth])
@@ -286,7 +286,7 @@ def _region(name, rng, n, sharp, share_right):
 
 
 def test_region_threshold_covers_every_region_not_only_their_mean():
-    from offline.classifier.conformal import candidate
+    from offline.tune.sets import candidate
 
     rng = np.random.default_rng(5)
     easy, hard = _region("easy", rng, 400, 6.0, 0.5), _region("hard", rng, 400, 1.0, 0.5)
@@ -301,7 +301,7 @@ def test_region_threshold_covers_every_region_not_only_their_mean():
 
 
 def test_choose_takes_the_smallest_sets_whose_singles_match_the_share_baseline_then_the_weakest_prior():
-    from offline.classifier.conformal import choose
+    from offline.tune.sets import choose
 
     def c(score, rho, size, ok, tau=1.0):
         return {
@@ -333,7 +333,7 @@ def test_choose_takes_the_smallest_sets_whose_singles_match_the_share_baseline_t
 
 
 def test_choose_keeps_only_rules_passing_the_torque_sign_check_when_any_does():
-    from offline.classifier.conformal import choose
+    from offline.tune.sets import choose
 
     def c(rho, size, move):
         return {
@@ -352,7 +352,7 @@ def test_choose_keeps_only_rules_passing_the_torque_sign_check_when_any_does():
 
 
 def test_torque_sign_move_is_the_change_of_single_propeller_accuracy_between_the_two_sets():
-    from offline.classifier.conformal import Region, torque_sign_move
+    from offline.tune.sets import Region, torque_sign_move
 
     truth = np.array([1, 2, 3, 4, 0, 5])  # four singles ({1}..{4}), healthy, a pair
     right = np.full((6, 16), 1e-3)
@@ -366,7 +366,7 @@ def test_torque_sign_move_is_the_change_of_single_propeller_accuracy_between_the
 
 
 def test_conformal_cli_refuses_a_sparsity_prior_outside_0_1_before_reading_anything(tmp_path, capsys):
-    from offline.classifier.conformal import main
+    from offline.tune.sets import main
 
     for bad in ("0", "1.5", "-0.1"):
         with pytest.raises(SystemExit) as exc:

@@ -1,4 +1,4 @@
-"""``python -m offline.alerts.evaluate`` (``make evaluate-alerts``; ``--calibrate`` for ``make calibrate-alerts``).
+"""``propwatch evaluate alerts`` (``make evaluate-alerts``); with ``--calibrate`` it is ``propwatch tune alerts``.
 
 Calibrate: healthy flights (seeds from ``--calibration-seed``) -> ``models/decision-calibration.json``.
 Evaluate: independent flights (other seeds): healthy, single-propeller and pair onsets, replayed through
@@ -35,12 +35,12 @@ from monitor.decision.config import DecisionConfig
 from monitor.decision.thresholds import DEFAULT_CALIBRATION, Calibration, file_sha256, load_calibration, thresholds
 from monitor.model import Classifier
 from monitor.vehicle import REPO_ROOT, load_vehicle
-from offline.alerts.calibrate import calibrate, write_calibration
 from offline.alerts.consecutive import ConsecutiveConfig
 from offline.alerts.flights import ALERT_FLIGHT_FIELDS, FlightSet, evalsim_set, simulate_set
 from offline.alerts.rules import consecutive_rule, decision_rule, px4_rule, summarise
 from offline.manifest import make_manifest
 from offline.sim.assumptions import REGISTER
+from offline.tune.alerts import calibrate, write_calibration
 
 FLIGHT_S = 80.0
 EVALSIM_BLOCK = 8  # evalsim simulates 8 flights per batch

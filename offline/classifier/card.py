@@ -212,7 +212,7 @@ def write_card(path: str | Path, manifest: dict, results: list[Result], tables: 
             "below the previous model's, which had learned that one guess."
         )
         lines.append(
-            "- Verdicts are sets (`classifier.sets.json`, `offline/classifier/conformal.py`): calibrated so the truth is "
+            "- Verdicts are sets (`classifier.sets.json`, `offline/tune/sets.py`): calibrated so the truth is "
             "in the set for >= 95 % of flights in EACH region of our own stress sets (torque per thrust falling "
             "-30..0 %, rising 0..+30 %, the whole range, and beyond the register hover losses of 12-25 %), with a "
             "sparsity prior (a set of k damaged propellers weighed rho^k) and the network's split inside each yaw class "

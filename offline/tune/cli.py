@@ -1,8 +1,10 @@
 """``propwatch tune``: fit what sits beside a shipped model to its outputs on our simulator's flights.
 
-    propwatch tune sets [ARGS]    the conformal set rule (<model>.sets.json): offline.classifier.conformal
-    propwatch tune alerts [ARGS]  the decision thresholds (models/decision-calibration.json):
-                                  offline.alerts.evaluate --calibrate
+    propwatch tune sets [ARGS]    the conformal set rule (<model>.sets.json): offline.tune.sets
+    propwatch tune noise [ARGS]   the moment balance's credible-set coverage (Priors.noise_inflation): offline.tune.noise
+    propwatch tune alerts [ARGS]  the decision thresholds (models/decision-calibration.json): the tail fit of
+                                  offline.tune.alerts, run by offline.alerts.evaluate --calibrate (which then
+                                  scores the thresholds on independent flights)
 
 ``propwatch tune WHAT --help`` lists that tool's options. Neither changes the simulator or the model: fitting the
 simulator to measured flights is ``propwatch calibrate``.
@@ -15,7 +17,8 @@ import importlib
 
 # what -> (module with main(argv), arguments put first, one line)
 TOOLS = {
-    "sets": ("offline.classifier.conformal", (), "set coverage: the conformal rule beside the model"),
+    "sets": ("offline.tune.sets", (), "set coverage: the conformal rule beside the model"),
+    "noise": ("offline.tune.noise", (), "set coverage of the moment balance alone: its noise inflation"),
     "alerts": ("offline.alerts.evaluate", ("--calibrate",), "alert thresholds: the decision's calibration file"),
 }
 

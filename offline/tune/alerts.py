@@ -1,5 +1,8 @@
 """Calibrate the decision's thresholds on healthy flights: the exceedance-rate tail of its CUSUM.
 
+``propwatch tune alerts`` (``make calibrate-alerts``) runs it through ``offline.alerts.evaluate --calibrate``,
+which then scores the thresholds it wrote on independent flights.
+
 Each healthy flight is replayed through ``monitor.decision.rule.Decision`` itself
 (regime holds and discounts included) with its trace on; the traced updates
 are then re-run against a grid of thresholds, restarting the statistic at
