@@ -5,12 +5,12 @@ that times the moment balance's likelihood of each set (``monitor.decision.effec
 alone, renormalised: the calibration picks one of the three on our own data.
 Split conformal prediction turns that score into a set: on flights of our own simulator with randomised
 physics that the classifier never saw, the threshold is the score the truth reached in all but
-``1 - coverage`` of them (``offline.classifier.conformal`` fits it and writes ``<model>.sets.json`` beside
+``1 - coverage`` of them (``propwatch tune sets``, ``offline.tune.sets``, fits it and writes ``<model>.sets.json`` beside
 the model). Every set scoring at least the threshold is a hypothesis; the most probable one is always in.
 A sparsity prior ``rho`` multiplies a set of k damaged propellers by ``rho**k`` (k = 0 for healthy): where
 physics cannot split two sets (a single rotor and that rotor with the opposite same-spin pair differ only
 through the unmeasured torque change), the sparser one is named, and both stay in the set. ``rho`` is chosen
-on our own stress sets by ``offline.classifier.conformal`` (the weakest prior whose singles never fall below
+on our own stress sets by ``offline.tune.sets`` (the weakest prior whose singles never fall below
 the ω²-share baseline on any torque region); 1 is no prior (older rule files).
 One member: the verdict is that set. More: physics could not tell them apart, and the output says so
 (the daemon words it as `monitor.decision.rule.statustext` does: ``PROP 1 or 1+2?``).

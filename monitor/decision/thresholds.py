@@ -1,7 +1,7 @@
 """The decision rule's thresholds: from the configured false-alarm rates, calibrated or Wald's bound.
 
 Part of the decision rule (``monitor.decision``; its docstring states how thresholds follow the rates). Also the
-calibration file (``models/decision-calibration.json``, written by ``offline.alerts.calibrate``) and the
+calibration file (``models/decision-calibration.json``, written by ``propwatch tune alerts``, ``offline.tune.alerts``) and the
 description of the statistic forms a calibration holds for.
 """
 
@@ -50,7 +50,7 @@ class Calibration:
     resample with no tail to fit is in ``bootstrap_failed`` and counts as an infinite threshold). When present,
     a rate's threshold is the ``confidence`` quantile of the resamples' thresholds, not the point fit's: a point
     fit of a thin tail moved the fault threshold by 0.7 nat-s between 5 and 10 calibration hours, and that was
-    the difference between 0 and 17 false FAULTs on another simulator (offline/alerts/calibrate.py).
+    the difference between 0 and 17 false FAULTs on another simulator (offline/tune/alerts.py).
     """
 
     fits: dict  # statistic -> (a, b) | None

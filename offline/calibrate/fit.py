@@ -463,7 +463,7 @@ def select_terms(data: Data, nominal: VehicleConfig, candidates: list[Term]) -> 
 
 
 # ---------------------------------------------------------------------------
-# Steady-state view (was offline/crazypad/calibration.py; one calibrator, issue 14).
+# Steady-state view.
 #
 # For logs without body rates or full attitude (CrazyPAD's motor logs: no pitch, no rates), the
 # equation-error view above cannot run; what such logs do carry is the per-motor command the
