@@ -25,7 +25,7 @@ from monitor.vehicle import REPO_ROOT, load_vehicle
 
 
 def load_flights(set_name: str, n: int, seed: int, cache: Path, model: str, physics: str = "randomised", pickup: float = 0.25):
-    """The set through the same cache as ``python -m offline.alerts.evaluate --cache``."""
+    """The set through the same cache as ``propwatch evaluate alerts --cache``."""
     from monitor.decision.thresholds import file_sha256
     from offline.alerts.evaluate import cached, evalsim_cached, set_key
     from offline.alerts.flights import FlightSet, simulate_set

@@ -3,7 +3,7 @@
 Reads the log with ``monitor.logs``, picks the classifier whose ESC command unit
 matches the log's (so a mixed fleet of PX4 quads and Crazyflies gets each its
 model), runs ``monitor.diagnose.engine.diagnose_table``, and adds who flew it
-and when (``fleet.identity``). Never raises for a bad log: the row says why.
+and when (``monitor.logs.identity``). Never raises for a bad log: the row says why.
 """
 
 from __future__ import annotations

@@ -7,8 +7,8 @@
     propwatch evaluate evalsim [ARGS]     write a named evaluation-only set from the second simulator, never
                                           for training (offline.evalsim.cli)
 
-``propwatch evaluate SUITE --help`` lists a suite's options. Without a suite (``propwatch evaluate --data ...``,
-the form before suites) the classifier suite runs, with a line on stderr naming the new form.
+``propwatch evaluate SUITE --help`` lists a suite's options. The form before suites is deprecated (``propwatch evaluate --data ...``):
+the classifier suite runs, with a line on stderr naming the new form.
 """
 
 from __future__ import annotations

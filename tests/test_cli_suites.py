@@ -54,8 +54,8 @@ def test_an_unknown_suite_is_refused_with_the_choices():
 @pytest.mark.parametrize(
     ("module", "usage", "new_form"),
     [
-        ("offline.classifier.conformal", "usage: propwatch tune sets", "use 'propwatch tune sets'"),
-        ("offline.physics_calibration", "usage: propwatch tune noise", "use 'propwatch tune noise'"),
+        ("offline.classifier.conformal", "usage: propwatch tune sets", "use 'propwatch tune sets'"),  # deprecated
+        ("offline.physics_calibration", "usage: propwatch tune noise", "use 'propwatch tune noise'"),  # deprecated
     ],
 )
 def test_former_module_entry_points_run_the_tune_tool_after_one_line_naming_it(module, usage, new_form):

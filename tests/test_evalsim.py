@@ -320,7 +320,7 @@ def test_cli_writes_a_set_that_scores_with_the_baseline_and_evaluate(tmp_path):
     s = score(tables, share_predictor(), "baseline").summary()
     assert s["flights"] == 4 and s["single_flights"] == 4
     assert s["single_accuracy"] is not None
-    # 'propwatch evaluate --evalsim': the shipped model and the baseline as rows of one table.
+    # 'propwatch evaluate classifier --evalsim': the shipped model and the baseline as rows of one table.
     from offline.classifier.evaluate_cli import main as evaluate_main
 
     assert evaluate_main([str(REPO / "models" / "classifier.onnx"), "--evalsim", str(out), "--out", str(tmp_path / "ev")]) == 0
@@ -345,7 +345,7 @@ def _imports(path: Path) -> set[str]:
     return names
 
 
-# The one reporting entry point allowed to read evalsim sets: 'propwatch evaluate --evalsim'. It is a
+# The one reporting entry point allowed to read evalsim sets: 'propwatch evaluate classifier --evalsim'. It is a
 # command-line leaf: no training or model-selection code imports it (checked below).
 REPORTING_ONLY = REPO / "offline" / "classifier" / "evaluate_cli.py"
 

@@ -105,7 +105,7 @@ def card_table(result: dict, source: str) -> CardTable:
         note=note,
         columns=COLUMNS,
         rows=tuple(rows(result)),
-        produced_by=f"python -m offline.alerts.evaluate ... --out DIR; python -m offline.alerts.card {source}",
+        produced_by=f"propwatch evaluate alerts ... --out DIR; python -m offline.alerts.card {source}",
     )
 
 

@@ -322,8 +322,8 @@ def _revision(checkout: str) -> str:
 
 
 # The decision rule's parts (monitor/decision/rule.py imports them), each after what it imports (thresholds reads
-# regime). A checkout from before the package keeps them beside monitor/decision.py as FLAT_DECISION_PARTS (or,
-# before the split, has none).
+# regime). A checkout from before the package keeps them at monitor/'s root beside its decision.py, as
+# FLAT_DECISION_PARTS (or, before the split, has none).
 DECISION_PARTS = ("config", "rotor_share", "regime", "thresholds", "stream_evidence")
 FLAT_DECISION_PARTS = ("decision_config", "rotor_share", "regime", "decision_thresholds", "stream_evidence")
 

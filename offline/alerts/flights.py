@@ -161,7 +161,7 @@ def simulate_set(vehicle: VehicleConfig, fs: FlightSet, clf: Classifier, log=pri
 class RandomisedChunk:
     """One simulated chunk of a randomised set: the simulator's log and what each flight of it holds."""
 
-    flog: object  # offline.sim.log.SimLog of len(names) flights
+    flog: object  # offline.sim.log.FlightLog of len(names) flights
     phys: list  # each flight's draw from the register
     cond: np.ndarray  # (n, 4) 0 healthy, 1 bent, 2 cracked (after the onset)
     onset_s: np.ndarray  # (n,) inf for healthy

@@ -52,7 +52,7 @@ def main(argv: list[str] | None = None) -> int:
         action="append",
         default=[],
         type=Path,
-        help="an evaluation-only set folder from 'propwatch evalsim' (repeatable; .onnx models; the ω²-share baseline is a row)",
+        help="an evaluation-only set folder from 'propwatch evaluate evalsim' (repeatable; .onnx models; the ω²-share baseline is a row)",
     )
     a = p.parse_args(argv)
     if not a.datasets and not a.evalsim:
