@@ -1,9 +1,9 @@
 """False alarms in fast forward flight with blade flapping, on the evaluation-only simulator (issue 13).
 
-Until session 12 neither simulator had the aerodynamic trim of forward flight (blade flapping), and the rule's
-share baseline was a constant: on the one real flight here flown fast (ArduPilot log171) the front rotors'
-omega^2 shares trim by up to 0.27 with forward speed (docs/ALERTS.md "On real flights"). Our register now draws
-flapping and the baseline is a plane in airspeed (docs/ALERTS.md "The shares' baseline follows the airspeed").
+On the one real flight here flown fast (ArduPilot log171) the front rotors' omega^2 shares trim by up to 0.27
+with forward speed (docs/ALERTS.md "On real flights"): the aerodynamic trim of forward flight (blade flapping).
+Our register draws flapping and the shares' baseline is a plane in airspeed (docs/ALERTS.md "The shares' baseline
+follows the airspeed").
 This bench measures the effect in evalsim's ``forward_flight`` set (healthy, routes at up to 10 m/s, flapping
 drawn from 0 to log171's trim, ``offline.evalsim.sets.FLAPPING_MAX``) against the same flights without flapping
 (a paired control: same seeds, routes, wind and noise), replayed through the shipped decision rule as

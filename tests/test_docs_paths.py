@@ -42,12 +42,13 @@ DEPRECATED_COMMAND = deprecated_commands()
 
 
 def cited_in() -> list[Path]:
-    """The files read: docs, model cards, README files, the Makefile and our Python sources."""
+    """The files read: docs, model cards, README files (deploy/ too), the Makefile and our Python sources."""
     files = [
         REPO / "README.md",
         REPO / "Makefile",
         *sorted((REPO / "docs").rglob("*.md")),
         *sorted((REPO / "models").glob("*.md")),
+        *sorted((REPO / "deploy").glob("*.md")),
     ]
     for package in PACKAGES:
         files += sorted(p for p in (REPO / package).rglob("*") if p.suffix in (".py", ".md") and "fixtures" not in p.parts)
