@@ -27,6 +27,8 @@ def propwatch(*args: str) -> subprocess.CompletedProcess:
         (("evaluate", "--hop", "20", "--help"), "usage: propwatch evaluate classifier", "'propwatch evaluate classifier"),
         (("tune", "sets", "--help"), "usage: propwatch tune sets", ""),
         (("tune", "noise", "--help"), "usage: propwatch tune noise", ""),
+        (("tune", "alerts", "--help"), "usage: propwatch tune alerts", ""),
+        (("evaluate", "alerts", "--help"), "usage: propwatch evaluate alerts", ""),
     ],
 )
 def test_each_form_reaches_its_tool(args, usage, deprecated):

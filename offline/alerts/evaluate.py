@@ -50,7 +50,8 @@ EVALSIM_SAMPLES_SHORT = 1
 
 
 def parse_args(argv):
-    p = argparse.ArgumentParser(prog="propwatch evaluate alerts", description=__doc__.split("\n")[0])
+    tune = "--calibrate" in (sys.argv[1:] if argv is None else argv)  # propwatch tune alerts puts it first
+    p = argparse.ArgumentParser(prog=f"propwatch {'tune' if tune else 'evaluate'} alerts", description=__doc__.split("\n")[0])
     p.add_argument("--model", default=str(REPO_ROOT / "models" / "classifier.onnx"))
     p.add_argument("--vehicle", default=str(REPO_ROOT / "models" / "vehicle.yaml"))
     p.add_argument("--out", default="out/alerts", help="where alerts.json and alerts.md go")

@@ -6,7 +6,7 @@
                                   offline.tune.alerts, run by offline.alerts.evaluate --calibrate (which then
                                   scores the thresholds on independent flights)
 
-``propwatch tune WHAT --help`` lists that tool's options. Neither changes the simulator or the model: fitting the
+``propwatch tune WHAT --help`` lists that tool's options. None changes the simulator or the model: fitting the
 simulator to measured flights is ``propwatch calibrate``.
 """
 
