@@ -110,6 +110,12 @@ def table(rows: list[dict], nominal: dict | None = None) -> dict:
 
 
 def nominal_verdicts(rows: list[dict]) -> dict:
+    """{flight name: (faulty propellers, confidence)} of today's nominal diagnose."""
+    return {n: (list(v["faulty_propellers"]), v["confidence"]) for n, v in nominal_verdict_dicts(rows).items()}
+
+
+def nominal_verdict_dicts(rows: list[dict]) -> dict:
+    """{flight name: today's nominal diagnose verdict} (``propwatch diagnose`` without a baseline; hypotheses kept)."""
     from monitor.diagnose.cli import DEFAULT_MODEL, diagnose_file
     from monitor.model import Classifier, choose_esc
     from monitor.vehicle import DEFAULT_VEHICLE, load_vehicle
@@ -119,8 +125,10 @@ def nominal_verdicts(rows: list[dict]) -> dict:
     out = {}
     for r in rows:
         _, d = diagnose_file(r["file"], clf, esc, None, 20, vehicle)
-        v = d.verdict or {"faulty_propellers": [], "confidence": "no verdict"}
-        out[r["name"]] = (list(v["faulty_propellers"]), v.get("confidence", "confident"))
+        v = dict(d.verdict or {"faulty_propellers": [], "confidence": "no verdict"})
+        v["faulty_propellers"] = list(v["faulty_propellers"])
+        v.setdefault("confidence", "confident")
+        out[r["name"]] = v
     return out
 
 
