@@ -1,8 +1,9 @@
 """What the docs, model cards, Makefile and comments cite exists: every ``python -m X`` of ours names a module
-in the repository, every repository path (``monitor/...``, ``offline/...``, ``docs/...``) a file or folder, and
-every dotted name of ours (``offline.tune.sets.measure``) a module, or a name that module mentions. A command
-cited in a deprecated form (``propwatch evalsim``, ``propwatch evaluate --flag`` without a suite, ``python -m``
-of a module that only says it is deprecated) counts as stale too, except on a line that says "deprecated".
+in the repository, every repository path (``monitor/...``, ``offline/...``, ``docs/...``) a file or folder, every
+backquoted ``make TARGET`` a Makefile target (outside tests/, whose synthetic cards cite made-up ones), and every
+dotted name of ours (``offline.tune.sets.measure``) a module, or a name that module mentions. A command cited in a
+deprecated form (``propwatch evalsim``, ``propwatch evaluate --flag`` without a suite, ``python -m`` of a module
+that only says it is deprecated) counts as stale too, except on a line that says "deprecated".
 
 Generated paths are not checked: ``out/...``, paths with a placeholder (``<model>``, ``{name}``, ``*``, ``$(...)``,
 ``NAME``) and recorded manifests (``models/*.json`` keep the command that made them). Reads text only; imports
@@ -24,10 +25,18 @@ EXTENSIONS = "py|md|yaml|yml|json|onnx|npz|txt|service|cfg|toml|svg|png|csv|tlog
 PATH = re.compile(rf"(?<![\w./-])((?:{'|'.join(TOP)})/[\w./-]*?(?:\.(?:{EXTENSIONS})\b|/))(?![\w*<{{$-])")
 DOTTED = re.compile(rf"(?<![\w./-])((?:{'|'.join(PACKAGES)})(?:\.[A-Za-z_]\w*)+)(?![\w(/-])")
 RUN_MODULE = re.compile(r"python3? -m ([A-Za-z_][\w.]*)")
+MAKE = re.compile(r"`make((?: [a-z][\w-]*)+)")  # `make a b`: targets up to the first VAR=... or the backtick
 FILE_SUFFIXES = {"py", "md", "yaml", "yml", "json", "parquet", "onnx", "npz", "txt", "csv", "duckdb"}
 INSTALLED_ONLY = {"monitor.shipped"}  # setup.py maps models/ onto it (monitor/resources.py)
 PLACEHOLDER = re.compile(r"\b(?:NAME|DIR|FILE)\b")
 SELF = Path(__file__).resolve()
+
+
+def make_targets() -> set[str]:
+    return set(re.findall(r"^([a-z][\w-]*):", (REPO / "Makefile").read_text(encoding="utf-8"), re.M))
+
+
+TARGETS = make_targets()
 
 
 def deprecated_commands() -> re.Pattern:
@@ -99,6 +108,8 @@ def stale(name: str, text: str) -> list[str]:
             found |= {m for m in DOTTED.findall(line) if only_says_deprecated(m) and f"python -m {m}" not in found}
             found |= set(DEPRECATED_COMMAND.findall(line))
         found |= {m for m in PATH.findall(line) if path_missing(m)}
+        if not name.startswith("tests/"):
+            found |= {f"make {t}" for ts in MAKE.findall(line) for t in ts.split() if t not in TARGETS}
         found |= {m.rstrip(".") for m in DOTTED.findall(line) if dotted_missing(m.rstrip("."))}
         out += [f"{name}:{i}: {m}" for m in sorted(found)]
     return out
@@ -116,6 +127,7 @@ def test_every_cited_module_and_path_exists():
         ("see monitor/baseline_gone.py and docs/NOWHERE.md", ["docs/NOWHERE.md", "monitor/baseline_gone.py"]),
         ("``offline.tune.sets.no_such_name`` fits it", ["offline.tune.sets.no_such_name"]),
         ("python -m offline.tune.sets; offline/tune/sets.py; ``offline.tune.sets.measure``; offline/tune/", []),
+        ("run `make calibrate-alerts evaluate-alerts HOURS=1` or `make nowhere-target`", ["make nowhere-target"]),
         ("out/alerts/alerts.json, models/<model>.sets.json, bench/*.py, models/NAME.yaml, python -m pytest", []),
         ("monitor.yaml, fleet.parquet, monitor.__file__, monitor.shipped", []),
         ("`propwatch evalsim --set paper`, `propwatch evaluate --evalsim`", ["propwatch evalsim", "propwatch evaluate -"]),
