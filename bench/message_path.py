@@ -10,6 +10,9 @@ counted: the module that called them is still the one running). Per message:
 
 - modules visited: the distinct repository modules the message entered;
 - returns: entries into a module the message had already left (entries - modules visited);
+- hub entries: entries into ``monitor/daemon/service.py`` (the daemon's loop), and the calls it makes per stage
+  (``from_hub``: modules entered straight from it; the stages are pipeline, decide and the announcement's queue and
+  events file);
 
 as means over all messages, over the messages that completed a classified grid step, and for the message whose
 step raised the first FAULT (with its entries per module). The figures count calls, not time: a profile hook
@@ -28,6 +31,7 @@ from pathlib import Path
 
 from bench import REPO
 
+HUB = "monitor/daemon/service.py"
 ROOTS = tuple(str(REPO / d) + "/" for d in ("monitor", "offline"))
 
 
@@ -104,12 +108,17 @@ def summarise(paths: list[list[str]]) -> dict:
         return {"messages": 0}
     visited = [len(set(p)) for p in paths]
     entries = [len(p) for p in paths]
+    from_hub: Counter = Counter()
+    for p in paths:
+        from_hub.update(b for a, b in zip(p, p[1:]) if a == HUB)
     return {
         "messages": len(paths),
         "modules_visited_mean": round(sum(visited) / len(paths), 2),
         "returns_mean": round(sum(e - v for e, v in zip(entries, visited)) / len(paths), 2),
         "modules_visited_max": max(visited),
         "returns_max": max(e - v for e, v in zip(entries, visited)),
+        "hub_entries_mean": round(sum(p.count(HUB) for p in paths) / len(paths), 2),
+        "from_hub_mean": {k: round(v / len(paths), 2) for k, v in from_hub.most_common()},
     }
 
 
@@ -164,8 +173,9 @@ def main(argv=None) -> int:
             continue
         print(
             f"{key}: {s['messages']} messages, modules visited {s['modules_visited_mean']} (max {s['modules_visited_max']}), "
-            f"returns {s['returns_mean']} (max {s['returns_max']})"
+            f"returns {s['returns_mean']} (max {s['returns_max']}), hub entries {s['hub_entries_mean']}"
         )
+        print("  from the hub:", ", ".join(f"{k} {v}" for k, v in s["from_hub_mean"].items()))
     if out["first_fault_message"]:
         print("  entries per module:", ", ".join(f"{k} {v}" for k, v in out["first_fault_message"]["entries_per_module"].items()))
     return 0

@@ -1,10 +1,11 @@
 """The daemon's loop: link in, pipeline, alerts out, heartbeats, rate checks, watchdog.
 
-State that lives across loop turns is kept here (link health, stream rates,
-pending stream requests, blind spells, decision pauses); the per-step work is in
-``pipeline``, the decision in ``monitor.decision.rule`` (shared with ``propwatch
-diagnose``), the STATUSTEXT queue in ``alerts``, the events file in ``events``,
-the socket in ``link``.
+One message's path: ``Daemon.handle`` -> ``pipeline`` (decode, the 20 Hz grid,
+features, the network) -> ``decide`` (every judge of the flight, one call per
+grid step) -> ``_announce`` (STATUSTEXT queue in ``alerts``, the events file in
+``events``). State that lives across loop turns is kept here (link health,
+stream rates, pending stream requests, blind spells, why the decision is
+paused); the socket is in ``link``.
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ from monitor import mavlink_decode as md
 from monitor.daemon.alerts import RateLimiter, StatusTextQueue
 from monitor.daemon.blind import BlindTracker, Transition
 from monitor.daemon.config import MonitorConfig
+from monitor.daemon.decide import Alert, DecisionStage
 from monitor.daemon.events import EventWriter
 from monitor.daemon.latency import LatencyHistogram
 from monitor.daemon.link import MAV_CMD_SET_MESSAGE_INTERVAL, Link
@@ -31,10 +33,7 @@ from monitor.daemon.pipeline import Pipeline
 from monitor.daemon.rotor_evidence import RecentEffectiveness
 from monitor.daemon.sdnotify import Notifier
 from monitor.decision.hypotheses import FlightSets, load_rule
-from monitor.decision.regime import StepInputs
-from monitor.decision.rotor_share import BASELINE_S
-from monitor.decision.rule import Announcement, Decision, WindowEvidence
-from monitor.decision.stream_evidence import EscTelemetry
+from monitor.decision.rule import Decision
 from monitor.decision.thresholds import file_sha256
 from monitor.resample import US_PER_S
 
@@ -100,7 +99,7 @@ class Daemon:
         self.pipeline = pipeline
         self.events = events
         self.notifier = notifier or Notifier({})
-        self.decision = Decision(
+        decision = Decision(
             config.alerts.decision(),
             config.resample.rate_hz,
             pipeline.window,
@@ -109,10 +108,11 @@ class Daemon:
         rule = load_rule(pipeline.classifier.path)  # the model's conformal rule words alerts as hypothesis sets
         # The set over the windows of the last second (each already spans 5 s; every_k_steps apart) words an alert.
         horizon = max(1, round(config.resample.rate_hz / config.inference.every_k_steps))
-        self.flight_sets = FlightSets(rule, horizon) if rule is not None else None
-        self.esc_telemetry = EscTelemetry()
         # Rotor effectiveness from the moment balance of the 5 s before an alert (in its event); needs the geometry.
-        self.rotors = RecentEffectiveness(vehicle, pipeline.window, config.resample.rate_hz) if vehicle is not None else None
+        rotors = RecentEffectiveness(vehicle, pipeline.window, config.resample.rate_hz) if vehicle is not None else None
+        self.stage = DecisionStage(decision, FlightSets(rule, horizon) if rule is not None else None, rotors, memory)
+        # The stage's judges, for reports and tests (the message path goes through ``stage`` only).
+        self.decision, self.rotors, self.esc_telemetry = decision, rotors, self.stage.esc_telemetry
         self._evidence_t: dict[str, float] = {}  # evidence -> boot time (s) it was last usable
         self._context_t: dict[str, float] = {}  # context (CONTEXT) -> boot time (s) a step last had it
         self._paused = ""  # why the classifier's evidence stopped while airborne ('' = flowing)
@@ -278,16 +278,10 @@ class Daemon:
         """VIBRATION and ESC_STATUS since the last message: validated (bad ones counted), then used."""
         vib, esc = self.pipeline.vibration, self.pipeline.esc_samples
         self.pipeline.vibration, self.pipeline.esc_samples = [], []
-        for v in vib:
-            t = v.timestamp_us / US_PER_S
-            before = sum(self.decision.vibration.rejected.values())
-            for a in self.decision.vibration_sample(t, v.vibration, self._airborne):
-                self._announce(a, int(v.timestamp_us // 1000))
-            if sum(self.decision.vibration.rejected.values()) == before:
-                self._evidence_t["vibration"] = t
-        for e in esc:
-            if self.esc_telemetry.observe(e.rpm) == "":
-                self._evidence_t["esc_rpm"] = e.timestamp_us / US_PER_S
+        alerts, fresh = self.stage.side_evidence(vib, esc, self._airborne)
+        self._evidence_t.update(fresh)
+        for a in alerts:
+            self._announce(a)
 
     def live_evidence(self, t_s: float) -> list[str]:
         """Which evidence is flowing now: classifier (motor stream + attitude), vibration, esc_rpm."""
@@ -301,20 +295,11 @@ class Daemon:
     def _context_status(self) -> str:
         return f"; context live: {', '.join(self._context)}" if self._context else ""
 
-    def _learning_status(self) -> str:
-        """While the flight's omega^2 shares learn their baseline, nothing they say is tested yet: no FAULT can come
-        from them (the first BASELINE_S of evidence windows after each take-off or collective step)."""
-        learnt = self.decision.share.learning_s
-        own = "" if learnt is None else f"; shares learning baseline ({int(learnt)} of {BASELINE_S:.0f} s)"
-        return own + (self.memory.status() if self.memory is not None else "")
-
-    def _decide(self, step) -> None:
-        """The shared decision rule on one grid step (pause when a stream stopped, never freeze it)."""
+    def _on_step(self, step) -> None:
+        """One grid step: what is live and why the decision pauses (from the step itself), the decision stage (one
+        call: every judge of the flight), STATUS, blindness seen from the step, then the step's alerts."""
         t = step.timestamp_us / US_PER_S
-        if self._airborne and not step.airborne and self.flight_sets:
-            self.flight_sets.reset()  # landed: the next flight gets a new set
         self._airborne = step.airborne
-        self.decision.step(t, step.inputs or StepInputs.of_state(step.airborne))
         if step.valid:
             self._evidence_t["classifier"] = t
         if step.inputs is not None:
@@ -327,39 +312,34 @@ class Daemon:
         if step.airborne and not step.valid:
             self._paused = step.reason
             self._record_pause(step.time_boot_ms, step.reason, live)  # at every such step: one held back is written later
-            self._set_status(
-                f"classifier paused: {step.reason}; evidence live: {', '.join(live) or 'none'}{self._context_status()}"
-            )
         elif step.valid and self._paused:
             self._paused = ""
             self._record_resume(step.time_boot_ms, live)
-        if step.valid:
+        out = self.stage.step(step, self._pause_reason())
+        if step.airborne and not step.valid:
             self._set_status(
-                f"airborne: deciding; evidence live: {', '.join(live)}{self._context_status()}{self._learning_status()}"
+                f"classifier paused: {step.reason}; evidence live: {', '.join(live) or 'none'}{self._context_status()}"
             )
-        elif not step.airborne and not self._paused:
-            self._set_status(f"not deciding: {step.reason}" + (self.memory.status() if self.memory is not None else ""))
+        elif step.valid:
+            self._set_status(
+                f"airborne: deciding; evidence live: {', '.join(live)}{self._context_status()}"
+                f"{out.shares_learning}{out.memory_status}"
+            )
+        elif not self._paused:
+            self._set_status(f"not deciding: {step.reason}{out.memory_status}")
         self._blind_step(step)  # after the step's own pause state, so a recovered line says whether it runs
-        self._apply_pause()
-        if not step.valid or step.fault_probability is None:
-            return
-        self._add_latency(step)
-        self._send_named_values(step)
-        hyps = None  # the set is worked out only if an alert words it (RecentSet)
-        if self.flight_sets and step.label_probability is not None:
-            hyps = self.flight_sets.add_deferred(step.label_probability)
-        ev = WindowEvidence(step.fault_probability, step.label_probability, hypotheses=hyps)
-        for a in self.decision.window_evidence(t, ev):
-            self._announce(a, step.time_boot_ms, step)
+        if step.valid and step.fault_probability is not None:
+            self._add_latency(step)
+            self._send_named_values(step)
+        for a in out.alerts:
+            self._announce(a)
+
+    def _pause_reason(self) -> str:
+        """The decision pauses while a stream is stopped (``_paused``) or the monitor is blind; else it runs ('')."""
+        return self._paused if self.blind.reason is None else f"blind: {self.blind.reason}"
 
     def _apply_pause(self) -> None:
-        """The decision pauses while a stream is stopped (``_paused``) or the monitor is blind; else it runs."""
-        reason = self._paused if self.blind.reason is None else f"blind: {self.blind.reason}"
-        if reason != self.decision.paused_reason:
-            if reason:
-                self.decision.pause(reason)
-            else:
-                self.decision.resume()
+        self.stage.pause(self._pause_reason())
 
     def _record_pause(self, time_boot_ms: int, reason: str, live: list[str]) -> None:
         """Journal and events line for a pause (or a new reason); flapping data is rate-limited.
@@ -393,17 +373,10 @@ class Daemon:
             {"event": "resumed", "time_boot_ms": time_boot_ms, "evidence_live": live, "context_live": self._context}
         )
 
-    def _announce(self, a: Announcement, time_boot_ms: int, step=None) -> None:
+    def _announce(self, alert: Alert) -> None:
         self.counters.alerts += 1
-        if self.memory is not None:
-            self.memory.alert_raised()  # a flight that raised anything never becomes the vehicle's history
-        event = {"event": "alert", **a.event(), "time_boot_ms": time_boot_ms}
-        if step is not None and step.fault_probability is not None:
-            event["probabilities"] = [round(float(p), 4) for p in step.fault_probability]
-            event["battery_v"] = None if math.isnan(step.battery_v) else round(step.battery_v, 2)
-        if self.rotors is not None:
-            self.rotors.freeze()  # the flight's own baseline ends before the change the alert is about
-            event.update(self.rotors.event_fields())
+        a, time_boot_ms = alert.announcement, alert.time_boot_ms
+        event = {"event": "alert", **a.event(), "time_boot_ms": time_boot_ms, **alert.fields}
         log.warning("%s t=%d ms: %s (%s evidence)", a.level.upper(), time_boot_ms, a.text, a.evidence)
         # The ground station first: a failing disk must never delay or lose the alert itself.
         self.statustexts.add_text(a.text, a.severity)
@@ -434,35 +407,12 @@ class Daemon:
             self._bad_steps = True
             self._transition(self.blind.data(False, *_blind_reason(step.reason)))
 
-    def _rotor_step(self, step) -> None:
-        if self.rotors is not None:
-            inputs = step.inputs
-            self.rotors.push(
-                inputs.motor_rpm if inputs is not None else None,
-                step.rates_rad_s,
-                step.valid,
-                airborne=bool(inputs.airborne) if inputs is not None else True,
-            )
-
-    def _memory_step(self, step) -> None:
-        """The flight so far against the vehicle's history (from take-off), one grid step."""
-        rpm = step.inputs.motor_rpm if step.inputs is not None else None
-        a = self.memory.step(step.timestamp_us / US_PER_S, step.airborne, rpm, step.roll_rad, step.pitch_rad)
-        if a is not None:
-            self._announce(a, step.time_boot_ms)
-
     def _disarmed(self) -> None:
         """Landing and disarm: the flight may become the vehicle's history (monitor.daemon.memory)."""
         auth = self.link.flight_authenticated if getattr(self.link, "gate", None) is not None else None
         what = self.memory.disarmed(auth)
         if what != "no flight":
             self.events.write_record({"event": "vehicle_memory", "flight": what, "status": self.memory.status().lstrip("; ")})
-
-    def _on_step(self, step) -> None:
-        self._rotor_step(step)
-        if self.memory is not None:
-            self._memory_step(step)
-        self._decide(step)
 
     def _send_statustext(self) -> None:
         due = self.statustexts.due()
