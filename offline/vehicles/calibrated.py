@@ -86,7 +86,7 @@ def prior_normal(predicted: np.ndarray, flight: FlightSummary, weight_flights: f
 
 def calibrated_vehicle(files: list[str], nominal: VehicleConfig, cache_dir: Path | None = None) -> tuple[VehicleConfig, dict]:
     """``propwatch calibrate``'s calibrated vehicle from ``files`` (and its findings), cached in ``cache_dir``."""
-    key = hashlib.sha256(json.dumps([str(f) for f in files] + [repr(nominal)]).encode()).hexdigest()[:16]
+    key = hashlib.sha256(json.dumps([str(Path(f).resolve()) for f in files] + [repr(nominal)]).encode()).hexdigest()[:16]
     path = cache_dir / f"{key}.json" if cache_dir else None
     if path and path.is_file():
         d = json.loads(path.read_text())

@@ -12,7 +12,8 @@ DIR is a same-airframe fleet (``offline.evalsim`` set ``vehicles`` or ``offline.
 - (c) ``nominal vehicle``: no history, the nominal vehicle's hover shares with the population covariance; with
   ``--nominal`` also today's nominal ``propwatch diagnose`` (no baseline), as ``offline.vehicles.evaluate`` runs it;
 - (d) ``calibrated alone``: no history, the calibrated vehicle's hover shares with the population covariance,
-  calibrated on the first 2 references (before a baseline of 3 exists) and on all 3.
+  calibrated on the first 2 references (before a baseline of 3 exists) and on all 3; beside it the vehicle's normal
+  from those 2 references alone (the judgement runs on 2, ``propwatch baseline learn`` asks for 3).
 
 Columns: "exact & confident" (confident and exactly the damaged propeller; on healthy flights confident healthy),
 "in set" (the damaged propeller among the verdict's propellers: named, in a hypothesis or suspect), "confident
@@ -32,7 +33,7 @@ import numpy as np
 from monitor.memory.judge import judge
 from monitor.memory.normal import normal_of
 from monitor.vehicle import DEFAULT_VEHICLE, load_vehicle
-from offline.vehicles.calibrated import calibrated_vehicle, hover_shares, prior_normal, pulled_normal
+from offline.vehicles.calibrated import PREDICTION_FLIGHTS, calibrated_vehicle, hover_shares, prior_normal, pulled_normal
 from offline.vehicles.evaluate import CLAIM, REFERENCES, load_fleet
 
 DEFAULT_CACHE = Path("out/localise/cal")
@@ -40,6 +41,7 @@ RULES = (
     "(a) baseline (3 references)",
     "(b) baseline + calibrated vehicle",
     "(c) nominal vehicle, no history",
+    "(a) baseline of 2 references (learn needs 3)",
     "(d) calibrated on 2 references, no history",
     "(d) calibrated on 3 references, no history",
 )
@@ -73,23 +75,25 @@ def airframe_predictions(refs: list[dict], nominal, cache: Path | None) -> dict:
     return out
 
 
-def score(by: dict[str, list[dict]], nominal, cache: Path | None) -> tuple[list[dict], dict]:
+def score(by: dict[str, list[dict]], nominal, cache: Path | None, k: float = PREDICTION_FLIGHTS) -> tuple[list[dict], dict]:
+    """Every later flight's verdict under each rule (a prediction weighs ``k`` flights); each airframe's shares."""
     rows, airframes = [], {}
     for af, flights in by.items():
         refs = [f for f in flights if f["reference"]][:REFERENCES]
         pred = airframe_predictions(refs, nominal, cache)
         own = normal_of([r["summary"] for r in refs])
+        own_2 = normal_of([r["summary"] for r in refs[:2]])
         airframes[af] = {
             "own_intercept": own.intercept.tolist(),
             **{k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in pred.items()},
         }
-        pulled = pulled_normal(own, pred[f"calibrated_{REFERENCES}"])
+        pulled = pulled_normal(own, pred[f"calibrated_{REFERENCES}"], k)
         for f in flights:
             if f["reference"]:
                 continue
             s = f["summary"]
-            normals = (own, pulled, prior_normal(pred["nominal"], s), prior_normal(pred["calibrated_2"], s),
-                       prior_normal(pred[f"calibrated_{REFERENCES}"], s))  # fmt: skip
+            normals = (own, pulled, prior_normal(pred["nominal"], s, k), own_2, prior_normal(pred["calibrated_2"], s, k),
+                       prior_normal(pred[f"calibrated_{REFERENCES}"], s, k))  # fmt: skip
             rows.append(
                 {"name": f["name"], "file": f["file"], "airframe": af, "faulty": f["faulty"], "loss": f["loss"],
                  "verdicts": {rule: brief(judge(n, s)) for rule, n in zip(RULES, normals)}}
@@ -148,12 +152,18 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--nominal", action="store_true", help="also today's nominal diagnose verdict (slower)")
     p.add_argument("--cache", type=Path, default=DEFAULT_CACHE, help=f"calibrated vehicles cached here (default {DEFAULT_CACHE})")
     p.add_argument("--json", type=Path, default=None, help="write the table, every row and each airframe's shares here")
+    p.add_argument(
+        "--prediction-flights",
+        type=float,
+        default=PREDICTION_FLIGHTS,
+        help=f"how many flights a predicted intercept weighs (default {PREDICTION_FLIGHTS:g}, the population prior's)",
+    )
     args = p.parse_args(argv)
     if not args.fleet.is_dir():
         print(f"python -m offline.vehicles.localise: --fleet {args.fleet}: not a folder", file=sys.stderr)
         return 2
     nominal = load_vehicle(DEFAULT_VEHICLE)
-    rows, airframes = score(load_fleet(args.fleet), nominal, args.cache)
+    rows, airframes = score(load_fleet(args.fleet), nominal, args.cache, args.prediction_flights)
     if args.nominal:
         from offline.vehicles.evaluate import nominal_verdict_dicts
 
