@@ -93,3 +93,23 @@ def test_prior_normal_names_the_weak_rotor_and_pulled_normal_moves_half_way():
     pulled = pulled_normal(own, np.ones(4), weight_flights=3.0)
     assert np.allclose(pulled.intercept, (own.intercept + 1.0) / 2.0)
     assert pulled.n_flights == 6
+
+
+def test_the_table_counts_what_its_columns_say():
+    from offline.vehicles.localise import RULES, table
+
+    def row(faulty, named, confidence, in_set):
+        v = {"faulty_propellers": named, "confidence": confidence, "set": in_set}
+        return {"faulty": faulty, "loss": 0.1 if faulty else 0.0, "verdicts": {RULES[0]: v}}
+
+    rows = [
+        row([2], [2], "confident", [2]),  # exact & confident, in set
+        row([2], [1, 2], "ambiguous", [1, 2]),  # in set only
+        row([2], [], "confident", []),  # confidently healthy on a damaged flight: confident wrong
+        row([], [3], "ambiguous", [3]),  # FAULTY on healthy, not confident
+        row([], [], "confident", []),  # exact & confident healthy
+    ]
+    res = table(rows)
+    singles, healthy = res["singles >= 6 %"][RULES[0]], res["healthy later"][RULES[0]]
+    assert (singles["exact_confident"], singles["in_set"], singles["confident_wrong"]) == (1, 2, 1)
+    assert (healthy["exact_confident"], healthy["confident_wrong"], healthy["faulty_on_healthy"]) == (1, 0, 1)
