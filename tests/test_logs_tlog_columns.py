@@ -162,3 +162,26 @@ def test_the_numpy_frame_walk_finds_what_the_byte_walk_finds_or_leaves_it(tmp_pa
             assert clean is None and (skipped, truncated) == (0, False)
         else:
             assert clean is None and (skipped or truncated)
+
+
+def test_the_proposed_chain_is_checked_link_by_link_and_the_walk_gives_the_same_frames(tmp_path, monkeypatch):
+    """The numpy chain is proposed from the records' receive times; a proposal holding a payload byte that looks like
+    a frame start (every candidate proposed) must fail its check and give the same frames by the record walk."""
+    buf = write_tlog(tmp_path / "f.tlog", duration_s=20.0).read_bytes()
+    data = np.frombuffer(buf, dtype=np.uint8)
+    false_starts = int(np.sum((data[8:] == 0xFD) | (data[8:] == 0xFE))) - len(tlog.clean_frame_starts(buf, range(1 << 24)))
+    assert false_starts > 0  # the file has magic bytes inside payloads: the proposal below holds them
+    proposed = tlog.clean_frame_starts(buf, tlog.WANTED_IDS)
+    calls = []
+    real = tlog._chain
+
+    def spy(cand, k, data):
+        out = real(cand, k, data)
+        calls.append(len(out) < len(cand))
+        return out
+
+    monkeypatch.setattr(tlog, "_chain", spy)
+    monkeypatch.setattr(tlog, "PROPOSAL_SPAN_US", float("inf"))  # every candidate proposed: the check must refuse it
+    walked = tlog.clean_frame_starts(buf, tlog.WANTED_IDS)
+    assert calls == [True] and proposed is not None and walked is not None
+    assert proposed.tolist() == walked.tolist()
