@@ -155,3 +155,43 @@ def test_daemon_process_learns_and_alerts_from_take_off(tmp_path):
     assert faults[0]["time_boot_ms"] / 1000 < 5.1 + 15  # take-off at the log's first airborne step (boot 5.05 s)
     b = VehicleBaseline.load(state / "vehicles" / "sysid-1" / "baseline.json")
     assert len(b.active()) == 4  # the references and the healthy later flight, never the damaged one
+
+
+def test_the_daemon_asks_the_autopilot_for_its_uid_at_most_three_times_and_keys_the_memory_by_it(tmp_path):
+    """AUTOPILOT_VERSION carries the board's uid: the daemon asks for it (a few times, not forever), and once it comes
+    the vehicle's memory is that board's, not the system id's."""
+    import time
+
+    from pymavlink.dialects.v20 import common as mavlink
+
+    from monitor.daemon.service import AUTOPILOT_VERSION_ID, VERSION_REQUESTS
+    from monitor.model import Classifier
+    from tests.fuzz_helpers import FakeLink, decoded, make_daemon, px4_stream
+    from tests.test_daemon_helpers import toy_model
+
+    class AskingLink(FakeLink):
+        def request_message(self, *args) -> None:
+            self.sent.append(("REQUEST_MESSAGE", *args))
+
+    def asked(link):
+        return [s for s in link.sent if s[0] == "REQUEST_MESSAGE"]
+
+    d, _ = make_daemon(Classifier(toy_model(tmp_path / "toy.onnx")))
+    d.link = link = AskingLink()
+    d.memory = d.stage.memory = mem = VehicleMemory(tmp_path / "state", RATE_HZ)
+    for m in px4_stream(0.0, 2.0, sys_id=7):
+        d.handle(m, time.perf_counter())
+    assert mem.sysid == 7 and mem.uid is None
+    sysid_path = mem.path
+    for k in range(10):  # ten housekeeping turns, each past the retry period
+        d.tick(1e6 * (k + 1))
+    assert len(asked(link)) == VERSION_REQUESTS
+    assert all(a[1:] == (7, 1, AUTOPILOT_VERSION_ID) for a in asked(link))
+    uid = 0x1234_5678_9ABC
+    version = mavlink.MAVLink_autopilot_version_message(0, 0, 0, 0, 0, [0] * 8, [0] * 8, [0] * 8, 0, 0, uid)
+    d.handle(decoded(version, 7), time.perf_counter())
+    assert mem.uid == uid and mem.path != sysid_path and f"{uid:016x}" in str(mem.path)
+    link.sent.clear()
+    d._version_requests, d._next_version_request = 0, 0.0  # even a fresh budget asks no more once the uid is known
+    d.tick(1e7)
+    assert asked(link) == []
