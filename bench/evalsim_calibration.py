@@ -10,15 +10,19 @@ whole term library and the gates in force.
 1. **Resolution, stated beforehand, on OUR simulator** (``offline.calibrate.nominal_flights``: the register
    drawn, the hidden effect on the vehicle): every effect at three sizes, ``--own-seeds`` seeds; an effect's
    resolution is the smallest size named in every own-simulator run ("not identifiable below X").
-2. **The matrix on the evaluation-only simulator** (``offline/evalsim``, never tuned on): every effect at the
+   ``--own-nominal`` runs with nothing hidden measure, on our simulator, what the outside-library checks must
+   stay clear of (the delay rival against the lag terms, the kinematic residual's correlation time).
+2. **Outside the library** (evaluation-only simulator): a damaged propeller in a "healthy" flight, a telemetry
+   delay between the motor outputs and the estimator, coloured (AR(1)) noise on the rates and attitude: the share
+   of runs reporting an "unexplained residual", what was named instead, and how often a named motor_efficiency
+   asks for one rotor's propeller to be inspected.
+3. **Wrong naming**: ``--nominal`` evaluation-simulator runs with nothing hidden (its small motor spread removed).
+4. **The matrix on the evaluation-only simulator** (``offline/evalsim``, never tuned on): every effect at the
    same three sizes, ``--seeds`` seeds; per cell the share of runs naming the hidden effect's term, the share
    naming another term, and the fitted value against the truth with its standard error.
-3. **Wrong naming**: ``--nominal`` runs with nothing hidden (evalsim's own small motor spread aside).
-4. **Outside the library**: a damaged propeller in a "healthy" flight, a telemetry delay between the motor
-   outputs and the estimator, coloured (AR(1)) noise on the rates and attitude: the share of runs reporting an
-   "unexplained residual", and what was named instead.
 
-Writes ``matrix.json`` (every run) and ``matrix.md`` (the tables); prints one JSON line per run.
+Writes ``runs.jsonl`` as runs end, ``matrix.json`` (every run) and ``matrix.md`` (the tables) at the end; prints
+one JSON line per run.
 """
 
 from __future__ import annotations
@@ -282,24 +286,52 @@ def _rng(*key) -> np.random.Generator:
     return np.random.default_rng([zlib.crc32(str(k).encode()) for k in key])
 
 
-def calibrate_tables(tabs) -> dict:
-    from offline.calibrate.calibrate import calibrate
+def calibrate_tables(tabs, rival_vs_lag: bool = False) -> dict:
+    """One run's verdicts. ``rival_vs_lag``: also the outside-library rival's held-out BIC lead over the better
+    lag term in round 1 (computed when selection did not run it): what fit.RIVAL_MARGIN_BIC must stay above on
+    real lags, and what a delay gives."""
+    from offline.calibrate.calibrate import LAG_TERMS, calibrate
+    from offline.calibrate.unexplained import delay_probe
 
     r = calibrate(tabs, NOM)
-    return {
+    extra = {}
+    if rival_vs_lag:
+        first = r.selection.steps[0]
+        rv = first.rival or delay_probe(r.data, NOM, 0)
+        lag = min(first.trials[n].bic for n in LAG_TERMS if n in first.trials)
+        extra = {"rival_minus_lag": round(lag - rv["bic"], 1), "rival_delay_ms": round(1000 * rv["delay_s"], 1)}
+    return extra | {
         "cause": r.cause,
         "named": [f["effect"] for f in r.findings],
         "findings": {f["effect"]: (f["params"], f["std"]) for f in r.findings},
         "unexplained": r.unexplained["found"],
         "unexplained_summary": r.unexplained["summary"],
         "vetoed": [n for n in r.notes if n.startswith("round ")],
+        # The outside-library rival against each round's best passing term (fit.RIVAL_MARGIN_BIC).
+        "rival": [
+            {
+                "round": k + 1,
+                "versus": s.rival["versus"],
+                "rival_minus_best": round(s.rival["lead"], 1),
+                "delay_ms": round(1000 * s.rival["delay_s"], 1),
+            }
+            for k, s in enumerate(r.selection.steps)
+            if s.rival
+        ],
+        "inspect_rotor": r.inspect_rotor,
+        "kin_corr_time": r.unexplained["probes"]["slow_kinematic_error"]["corr_time_samples"],
+        "delay_probe_ms": round(1000 * r.unexplained["probes"]["telemetry_delay"]["value"], 1),
     }
 
 
 def own_tables(vehicle: VehicleConfig, seed: int, duration_s: float):
-    from offline.calibrate.nominal_flights import nominal_flights
+    from offline.calibrate.nominal_flights import nominal_flights, nominal_register
 
-    return nominal_flights(vehicle, 2, 50_000 + seed, duration_s)
+    # offline.sim takes each flight's motor time constant from the register (PerFlightTerms), not from the
+    # vehicle: pinned to the vehicle's, or a lag hidden on the vehicle never reaches the flights.
+    tau = vehicle.motor_time_constant_s
+    register = nominal_register().with_range("motor_time_constant_s", tau, tau)
+    return nominal_flights(vehicle, 2, 50_000 + seed, duration_s, register)
 
 
 def eval_tables(specs, post=None):
@@ -377,7 +409,15 @@ def _cell(rows: list[dict], terms: tuple[str, ...]) -> dict:
         "fitted_mean": float(np.mean([v[0] for v in vals])) if vals else None,
         "fitted_se_mean": float(np.mean([v[1] for v in vals])) if vals else None,
         "truth": rows[0]["truth"] if rows else None,
+        "unexplained": sum(bool(r["unexplained"]) for r in rows),
+        "inspect_rotor": sum(r.get("inspect_rotor") is not None for r in rows),
+        "rival_minus_best_max": max((x["rival_minus_best"] for r in rows for x in r["rival"]), default=None),
+        "rival_minus_lag_max": _max_of(rows, "rival_minus_lag"),
     }
+
+
+def _max_of(rows, key):
+    return max((r[key] for r in rows if r.get(key) is not None), default=None)
 
 
 def markdown(res: dict) -> str:
@@ -389,41 +429,62 @@ def markdown(res: dict) -> str:
         "",
         "## Resolution on our own simulator (stated before the evaluation runs)",
         "",
-        "| effect | unit | " + " | ".join(f"size {i + 1}" for i in range(3)) + " | resolution |",
-        "|---|---|---|---|---|---|",
+        "| effect | unit | " + " | ".join(f"size {i + 1}" for i in range(3)) + " | resolution | rival - lag (max) |",
+        "|---|---|---|---|---|---|---|",
     ]
+    f = lambda x: "-" if x is None else f"{x:.4g}"  # noqa: E731
     for name, e in res["own"].items():
         cells = " | ".join(f"{c['size']:g}: {c['named']}/{c['runs']}" for c in e["cells"])
+        rival = max((c["rival_minus_lag_max"] for c in e["cells"] if c["rival_minus_lag_max"] is not None), default=None)
         lines.append(
-            f"| {name} | {e['unit']} | {cells} | {e['resolution'] if e['resolution'] is not None else 'none of the sizes'} |"
+            f"| {name} | {e['unit']} | {cells} | {e['resolution'] if e['resolution'] is not None else 'none of the sizes'} "
+            f"| {f(rival)} |"
         )
+    if "own_nominal" in res:
+        n = res["own_nominal"]
+        lines += [
+            "",
+            f"Nothing hidden on our simulator: {n['wrong_named']} of {n['runs']} runs named a term "
+            f"({json.dumps(n['named_terms'])}); {n['unexplained']} reported an unexplained residual; the rival's BIC "
+            f"minus the best passing term's, largest: {f(n['rival_minus_best_max'])} (the rival wins above "
+            f"fit.RIVAL_MARGIN_BIC), over the better lag term: {f(n['rival_minus_lag_max'])}; the kinematic residual's "
+            f"correlation time, largest: {f(n['kin_corr_time_max'])} "
+            "(unexplained.KIN_CORR_TIME_MAX).",
+        ]
     lines += [
         "",
         "## Evaluation-only simulator",
         "",
-        "| effect | size | above resolution | named | wrong-named | fitted (mean) | SE (mean) | truth |",
-        "|---|---|---|---|---|---|---|---|",
+        "| effect | size | above resolution | named | wrong-named | fitted (mean) | SE (mean) | truth | unexplained "
+        "| inspect rotor |",
+        "|---|---|---|---|---|---|---|---|---|---|",
     ]
-    f = lambda x: "-" if x is None else f"{x:.4g}"  # noqa: E731
     for name, e in res["evalsim"].items():
         for c in e["cells"]:
             lines.append(
                 f"| {name} | {c['size']:g} | {'yes' if c['above_resolution'] else 'no'} | {c['named']}/{c['runs']} | "
-                f"{c['wrong_named']}/{c['runs']} | {f(c['fitted_mean'])} | {f(c['fitted_se_mean'])} | {f(c['truth'])} |"
+                f"{c['wrong_named']}/{c['runs']} | {f(c['fitted_mean'])} | {f(c['fitted_se_mean'])} | {f(c['truth'])} | "
+                f"{c['unexplained']}/{c['runs']} | {c['inspect_rotor']}/{c['runs']} |"
             )
     n = res["nominal"]
     lines += [
         "",
         f"**Nothing hidden**: {n['wrong_named']} of {n['runs']} runs ({2 * n['runs']} flights) named a term "
-        f"({json.dumps(n['named_terms'])}); {n['unexplained']} reported an unexplained residual.",
+        f"({json.dumps(n['named_terms'])}); {n['unexplained']} reported an unexplained residual; rival minus best "
+        f"passing term, largest: {f(n['rival_minus_best_max'])}; over the better lag term: {f(n['rival_minus_lag_max'])}; "
+        f"kinematic correlation time, largest: {f(n['kin_corr_time_max'])}.",
         "",
         "## Outside the library",
         "",
-        "| effect | runs | unexplained residual | named instead |",
-        "|---|---|---|---|",
+        "| effect | runs | unexplained residual | named instead | inspect rotor (caveat) | rival - best (max) "
+        "| rival - lag (min) | kin. corr. time (min) |",
+        "|---|---|---|---|---|---|---|---|",
     ]
     for name, o in res["outside"].items():
-        lines.append(f"| {name} | {o['runs']} | {o['unexplained']} | {json.dumps(o['named_terms'])} |")
+        lines.append(
+            f"| {name} | {o['runs']} | {o['unexplained']} | {json.dumps(o['named_terms'])} | {o['inspect_rotor']} | "
+            f"{f(o['rival_minus_best_max'])} | {f(o['rival_minus_lag_min'])} | {f(o['kin_corr_time_min'])} |"
+        )
     return "\n".join(lines) + "\n"
 
 
@@ -435,6 +496,18 @@ def _count(rows) -> dict:
     return out
 
 
+def _nominal_summary(rows) -> dict:
+    return {
+        "runs": len(rows),
+        "wrong_named": sum(bool(r["named"]) for r in rows),
+        "named_terms": _count(rows),
+        "unexplained": sum(r["unexplained"] for r in rows),
+        "rival_minus_best_max": max((x["rival_minus_best"] for r in rows for x in r["rival"]), default=None),
+        "kin_corr_time_max": _max_of(rows, "kin_corr_time"),
+        "rival_minus_lag_max": _max_of(rows, "rival_minus_lag"),
+    }
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m bench.evalsim_calibration", description=__doc__.split("\n\n")[0])
     ap.add_argument("--out", type=Path, required=True)
@@ -443,6 +516,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seeds", type=int, default=5)
     ap.add_argument("--nominal", type=int, default=60, help="evalsim runs with nothing hidden (2 flights each)")
     ap.add_argument("--outside-seeds", type=int, default=10)
+    ap.add_argument("--own-nominal", type=int, default=10, help="our-simulator runs with nothing hidden (2 flights each)")
     ap.add_argument("--effects", nargs="+", default=None)
     a = ap.parse_args(argv)
     a.out.mkdir(parents=True, exist_ok=True)
@@ -452,8 +526,14 @@ def main(argv: list[str] | None = None) -> int:
     res: dict = {"config": {k: (str(v) if isinstance(v, Path) else v) for k, v in vars(a).items()}}
     t0 = time.time()
 
-    def log(row):
-        print(json.dumps(row | {"wall_s": round(time.time() - t0)}, default=float), flush=True)
+    runs: list[dict] = []
+    partial = (a.out / "runs.jsonl").open("w", encoding="utf-8")  # every run as it ends (a cut-short run keeps them)
+
+    def log(row, keys):
+        runs.append(row)
+        partial.write(json.dumps(row, default=float) + "\n")
+        partial.flush()
+        print(json.dumps({k: row.get(k) for k in keys} | {"wall_s": round(time.time() - t0)}, default=float), flush=True)
 
     # 1. Resolution on our own simulator.
     res["own"] = {}
@@ -465,15 +545,67 @@ def main(argv: list[str] | None = None) -> int:
                 r = _rng("own", name, size, seed)
                 v = e.own(NOM, size, r)
                 row = {"sim": "own", "effect": name, "size": size, "seed": seed} | calibrate_tables(
-                    own_tables(v, seed, a.duration_s)
+                    own_tables(v, seed, a.duration_s), name.startswith("lag_")
                 )
-                log({k: row[k] for k in ("sim", "effect", "size", "seed", "named", "unexplained")})
+                log(row, ("sim", "effect", "size", "seed", "named", "unexplained", "rival", "rival_minus_lag"))
                 rows.append(row)
             cells.append({"size": size, **_cell([r | {"truth": size} for r in rows], e.terms)})
         ok = [c["size"] for c in cells if c["named"] == c["runs"]]
         res["own"][name] = {"unit": e.unit, "cells": cells, "resolution": min(ok) if ok else None}
-    # 2. The matrix on the evaluation-only simulator.
-    res["evalsim"], runs = {}, []
+    rows = []
+    for seed in range(a.own_nominal):
+        row = {"sim": "own", "effect": "none", "seed": seed} | calibrate_tables(own_tables(NOM, 5000 + seed, a.duration_s), True)
+        log(row, ("sim", "effect", "seed", "named", "unexplained", "rival", "rival_minus_lag", "kin_corr_time"))
+        rows.append(row)
+    res["own_nominal"] = _nominal_summary(rows)
+    # 2. Outside the library (before the matrix: a run cut short keeps the targets the matrix cannot miss).
+    res["outside"] = {}
+    for name, (mod, post) in _outside().items():
+        rows = []
+        for seed in range(a.outside_seeds):
+            specs = [mod(sp, _rng("outside", name, seed)) for sp in eval_specs(2000 + seed, a.duration_s)]
+            row = {"sim": "evalsim", "effect": name, "seed": seed, **calibrate_tables(eval_tables(specs, post), "delay" in name)}
+            log(
+                row,
+                (
+                    "sim",
+                    "effect",
+                    "seed",
+                    "named",
+                    "unexplained",
+                    "unexplained_summary",
+                    "rival",
+                    "rival_minus_lag",
+                    "inspect_rotor",
+                    "kin_corr_time",
+                ),
+            )
+            rows.append(row)
+        res["outside"][name] = {
+            "runs": len(rows),
+            "unexplained": sum(r["unexplained"] for r in rows),
+            "named_terms": _count(rows),
+            "inspect_rotor": sum(r["inspect_rotor"] is not None for r in rows),
+            "rival_minus_best_max": max((x["rival_minus_best"] for r in rows for x in r["rival"]), default=None),
+            "rival_minus_lag_min": min(
+                (r["rival_minus_lag"] for r in rows if r.get("rival_minus_lag") is not None), default=None
+            ),
+            "kin_corr_time_min": min((r["kin_corr_time"] for r in rows), default=None),
+        }
+    # 3. Nothing hidden.
+    rows = []
+    for seed in range(a.nominal):
+        row = {
+            "sim": "evalsim",
+            "effect": "none",
+            "seed": seed,
+            **calibrate_tables(eval_tables(eval_specs(1000 + seed, a.duration_s)), True),
+        }
+        log(row, ("sim", "effect", "seed", "named", "unexplained", "rival", "rival_minus_lag"))
+        rows.append(row)
+    res["nominal"] = _nominal_summary(rows)
+    # 4. The matrix on the evaluation-only simulator.
+    res["evalsim"] = {}
     for name, e in effects.items():
         cells = []
         resolution = res["own"][name]["resolution"]
@@ -483,7 +615,7 @@ def main(argv: list[str] | None = None) -> int:
                 r_spec = _rng("evalsim", name, size, seed)
                 specs = [e.evalsim(sp, size, _rng("evalsim", name, size, seed)) for sp in eval_specs(seed, a.duration_s)]
                 del r_spec
-                out = calibrate_tables(eval_tables(specs))
+                out = calibrate_tables(eval_tables(specs), name.startswith("lag_"))
                 fitted = e.fitted(out["findings"], _rng("evalsim", name, size, seed))
                 row = {"sim": "evalsim", "effect": name, "size": size, "seed": seed, **out}
                 row |= {
@@ -491,45 +623,25 @@ def main(argv: list[str] | None = None) -> int:
                     "fitted": fitted[0] if fitted else None,
                     "fitted_se": fitted[1] if fitted else None,
                 }
-                log({k: row[k] for k in ("sim", "effect", "size", "seed", "named", "fitted", "unexplained")})
+                log(
+                    row,
+                    (
+                        "sim",
+                        "effect",
+                        "size",
+                        "seed",
+                        "named",
+                        "fitted",
+                        "unexplained",
+                        "rival",
+                        "rival_minus_lag",
+                        "inspect_rotor",
+                    ),
+                )
                 rows.append(row)
-                runs.append(row)
             above = resolution is not None and size >= resolution
             cells.append({"size": size, "above_resolution": above, **_cell(rows, e.terms)})
         res["evalsim"][name] = {"unit": e.unit, "terms": list(e.terms), "cells": cells}
-    # 3. Nothing hidden.
-    rows = []
-    for seed in range(a.nominal):
-        row = {
-            "sim": "evalsim",
-            "effect": "none",
-            "seed": seed,
-            **calibrate_tables(eval_tables(eval_specs(1000 + seed, a.duration_s))),
-        }
-        log({k: row[k] for k in ("sim", "effect", "seed", "named", "unexplained")})
-        rows.append(row)
-        runs.append(row)
-    res["nominal"] = {
-        "runs": len(rows),
-        "wrong_named": sum(bool(r["named"]) for r in rows),
-        "named_terms": _count(rows),
-        "unexplained": sum(r["unexplained"] for r in rows),
-    }
-    # 4. Outside the library.
-    res["outside"] = {}
-    for name, (mod, post) in _outside().items():
-        rows = []
-        for seed in range(a.outside_seeds):
-            specs = [mod(sp, _rng("outside", name, seed)) for sp in eval_specs(2000 + seed, a.duration_s)]
-            row = {"sim": "evalsim", "effect": name, "seed": seed, **calibrate_tables(eval_tables(specs, post))}
-            log({k: row[k] for k in ("sim", "effect", "seed", "named", "unexplained", "unexplained_summary")})
-            rows.append(row)
-            runs.append(row)
-        res["outside"][name] = {
-            "runs": len(rows),
-            "unexplained": sum(r["unexplained"] for r in rows),
-            "named_terms": _count(rows),
-        }
     res["runs"] = runs
     (a.out / "matrix.json").write_text(json.dumps(res, indent=1, default=float) + "\n", encoding="utf-8")
     (a.out / "matrix.md").write_text(markdown(res), encoding="utf-8")

@@ -11,6 +11,7 @@ from __future__ import annotations
 import dataclasses
 import math
 
+import evalsim_flights
 import numpy as np
 import pytest
 
@@ -28,21 +29,35 @@ DURATION_S = 30.0
 FLIGHTS = 2
 
 
+def _lag_groups() -> dict[str, list]:
+    from offline.evalsim.sets import motor_lag_specs
+
+    tau = NOM.motor_time_constant_s
+    slow = [tau] * 4
+    slow[SLOW_ROTOR - 1] = SLOW_TAU_S
+    return {"slow": motor_lag_specs(slow, FLIGHTS, 0, DURATION_S), "null": motor_lag_specs([tau] * 4, FLIGHTS, 0, DURATION_S)}
+
+
+def _common_lag_specs() -> list:
+    from offline.evalsim.sets import motor_lag_specs
+
+    return motor_lag_specs([0.060] * 4, 2, 0, 80.0)
+
+
+evalsim_flights.declare(__name__, "tables", lambda: [s for g in _lag_groups().values() for s in g])
+evalsim_flights.declare(__name__, "common_lag_tables", _common_lag_specs)
+
+
 @pytest.fixture(scope="module")
 def tables(tmp_path_factory):
     """Two 30 s flights each, simulated in one batch: rotor 2 slow (75 ms, the others at the nominal vehicle's
     20 ms), and nothing hidden. The same flights as `bench/evalsim_lag.py --duration-s 30 --seeds 0` (there:
     rotor 2 fitted 73.7 ms, held-out BIC gain 251, RMS cut 11.7 %; nothing hidden: the lag terms' gains -4, -10)."""
-    from offline.evalsim.flight import simulate_flights
-    from offline.evalsim.sets import motor_lag_specs
     from offline.sim.io_tlog import write_tlog
 
-    tau = NOM.motor_time_constant_s
-    slow = [tau] * 4
-    slow[SLOW_ROTOR - 1] = SLOW_TAU_S
-    groups = {"slow": motor_lag_specs(slow, FLIGHTS, 0, DURATION_S), "null": motor_lag_specs([tau] * 4, FLIGHTS, 0, DURATION_S)}
+    groups = _lag_groups()
     specs = [s for g in groups.values() for s in g]
-    logs = simulate_flights(specs)
+    logs = evalsim_flights.simulate_flights(specs)
     d = tmp_path_factory.mktemp("evalsim-lag")
     out = {}
     for k, (name, g) in enumerate(groups.items()):
@@ -74,16 +89,35 @@ def test_no_hidden_lag_names_no_lag(tables):
     assert "from about 60 ms" in note and "rotor_time_constant alone fits" in note, note
 
 
+@pytest.mark.slow
+def test_a_telemetry_delay_is_an_unexplained_residual_not_a_motor_lag(tables):
+    """The same healthy flights with the estimator's attitude, rates and velocity stamped 80 ms after the motor
+    outputs (the link as ``offline.calibrate.nominal_flights`` degrades it): a motor lag fits it (about 100 ms) but
+    the exact delay explains the held-out data better, so no lag is named and the delay is reported outside the
+    library, with its size."""
+    from offline.calibrate.nominal_flights import degrade_table
+
+    late = [degrade_table(t, 0.08, 0.0, 0.0, np.random.default_rng(i)) for i, t in enumerate(tables["null"])]
+    r = calibrate(late, NOM)
+    named = [f["effect"] for f in r.findings]
+    assert not {"rotor_time_constant", "motor_time_constant"} & set(named), (named, r.notes)
+    u = r.unexplained
+    assert u["found"] and u["probes"]["telemetry_delay"]["heldout_bic_gain"] > u["threshold"], u["summary"]
+    assert 0.065 <= u["probes"]["telemetry_delay"]["value"] <= 0.095, u["probes"]["telemetry_delay"]
+    (line,) = [n for n in r.notes if n.startswith("round 1:")]
+    assert "outside_library gate rejects it" in line and "telemetry_delay" in line, line
+    verdicts = r.to_json()["selection_rounds"][0]["verdicts"]
+    assert any(v["decided_by"] == "outside_library" for v in verdicts.values()), verdicts
+
+
 @pytest.fixture(scope="module")
 def common_lag_tables(tmp_path_factory):
     """Issue 40's case: two 80-s flights, a 60 ms lag on all four rotors (the vehicle file says 20 ms)."""
-    from offline.evalsim.flight import simulate_flights
-    from offline.evalsim.sets import motor_lag_specs
     from offline.sim.io_tlog import write_tlog
 
-    specs = motor_lag_specs([0.060] * 4, 2, 0, 80.0)
+    logs = evalsim_flights.simulate_flights(_common_lag_specs())
     d = tmp_path_factory.mktemp("evalsim-lag60")
-    return [read_log(write_tlog(d / f"lag60-{i}.tlog", log, 0), esc=NOM.esc) for i, log in enumerate(simulate_flights(specs))]
+    return [read_log(write_tlog(d / f"lag60-{i}.tlog", log, 0), esc=NOM.esc) for i, log in enumerate(logs)]
 
 
 @pytest.mark.slow

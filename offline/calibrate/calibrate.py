@@ -23,7 +23,7 @@ from offline.calibrate.prepare import Segment, prepare
 from offline.calibrate.steady import steady_state
 from offline.calibrate.terms import TERMS, Term
 from offline.calibrate.unbalance import unbalance_ratio
-from offline.calibrate.unexplained import unexplained_residual
+from offline.calibrate.unexplained import delay_probe, unexplained_residual
 
 PHASES = ("hover", "cruise", "climb", "manoeuvre")
 LAG_TERMS = ("motor_time_constant", "rotor_time_constant")
@@ -37,6 +37,16 @@ LAG_RESOLUTION_NOTE = (
     "rotors slower from about {common} ms; a smaller lag can be present unnamed"
 )
 LAG_RESOLUTION_MS = {"one": 60, "common": 60}
+# A named motor_efficiency that singles out one rotor: its thrust efficiency off the other three's mean by at least
+# INSPECT_MIN_DEVIATION and by INSPECT_OUTLIER_RATIO times the others' own half-range. Four efficiencies span every
+# static thrust and moment pattern, so a damaged propeller (thrust lost, torque per thrust changed) on that rotor
+# fits as a weak motor plus a small spread in the yaw pattern: the logs cannot tell them apart. 5 % is below the
+# smallest propeller damage the hidden-effect matrix draws (8 % thrust loss at hover, bench/evalsim_calibration.py)
+# and above the +-1 % spread of the evaluation simulator's healthy airframes; the ratio keeps a four-way spread
+# (each rotor off by a similar amount) from singling one out. How often it appears on damaged, weak and spread
+# runs: ``python -m bench.evalsim_calibration`` (column inspect_rotor; docs/CALIBRATION.md).
+INSPECT_MIN_DEVIATION = 0.05
+INSPECT_OUTLIER_RATIO = 2.0
 
 
 @dataclass
@@ -57,6 +67,7 @@ class CalibrationResult:
     gain: dict
     notes: list[str] = field(default_factory=list)
     unexplained: dict = field(default_factory=dict)
+    inspect_rotor: dict | None = None
 
     def to_json(self) -> dict:
         return {
@@ -71,6 +82,7 @@ class CalibrationResult:
             "logs": self.sources,
             "notes": self.notes,
             "unexplained_residual": self.unexplained,
+            "inspect_rotor": self.inspect_rotor,
             "selection_rounds": [
                 {"chosen": step.chosen, "verdicts": {n: v.to_dict() for n, v in step.verdicts.items()}}
                 for step in self.selection.steps
@@ -124,11 +136,34 @@ def vetoed_leader_notes(sel: Selection) -> list[str]:
     return out
 
 
+def inspect_rotor(efficiency: list[float]) -> dict | None:
+    """The rotor a named ``motor_efficiency`` singles out, and why it should be inspected; None when none stands out."""
+    e2 = np.asarray(efficiency, dtype=np.float64) ** 2  # thrust efficiencies
+    dev = np.array([e2[k] / np.delete(e2, k).mean() - 1.0 for k in range(4)])
+    k = int(np.argmax(np.abs(dev)))
+    others = np.delete(e2, k)
+    half_range = float((others.max() - others.min()) / 2.0 / others.mean())
+    if abs(dev[k]) < INSPECT_MIN_DEVIATION or abs(dev[k]) < INSPECT_OUTLIER_RATIO * half_range:
+        return None
+    return {
+        "rotor": k + 1,
+        "thrust_vs_others_pct": round(100 * dev[k], 1),
+        "others_half_range_pct": round(100 * half_range, 1),
+        "why": (
+            f"motor_efficiency singles out rotor {k + 1} ({100 * dev[k]:+.1f} % thrust against the other three, which "
+            f"agree within {100 * half_range:.1f} %): a damaged propeller on rotor {k + 1} (thrust lost, its torque per "
+            "thrust changed) would look the same in these logs, as a weak motor plus a small yaw-pattern spread. "
+            f"Inspect rotor {k + 1}'s propeller before trusting this calibration: a damaged propeller calibrated into "
+            "the vehicle's normal hides it from the monitor"
+        ),
+    }
+
+
 def calibrate(tables: list[FlightTable], nominal: VehicleConfig, candidates: list[str] | None = None) -> CalibrationResult:
     segments = prepare(tables, nominal)
     data = Data.split(segments)
     terms = [TERMS[n] for n in (candidates or list(TERMS))]
-    sel = select_terms(data, nominal, terms)
+    sel = select_terms(data, nominal, terms, rival=delay_probe)
     final = sel.final
     calibrated = final.vehicle if final else nominal
     sigma = sel.sigma
@@ -227,6 +262,11 @@ def calibrate(tables: list[FlightTable], nominal: VehicleConfig, candidates: lis
                 v = first.verdicts[name]
                 note += f"; {name} alone fits {fitted} ms, held-out BIC gain {c['score']:.1f}, not named: {v.why}"
         notes.append(note)
+    inspect = None
+    if "motor_efficiency" in {f["effect"] for f in findings}:
+        inspect = inspect_rotor(list(calibrated.motor_efficiency))
+        if inspect:
+            notes.append(inspect["why"])
     unexplained = unexplained_residual(data, calibrated, final.residuals if final else sel.nominal_residuals)
     if unexplained["found"]:
         notes.append(f"unexplained residual (no term of the library can express it): {unexplained['summary']}")
@@ -247,4 +287,5 @@ def calibrate(tables: list[FlightTable], nominal: VehicleConfig, candidates: lis
         gain=gain,
         notes=notes,
         unexplained=unexplained,
+        inspect_rotor=inspect,
     )
