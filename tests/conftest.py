@@ -8,3 +8,10 @@ one (``--state-dir`` in a temporary folder).
 import os
 
 os.environ["PROPWATCH_STATE_DIR"] = ""
+
+
+def pytest_collection_finish(session):
+    """The evalsim flights the selected tests declared are flown together, once (tests/evalsim_flights.py)."""
+    from evalsim_flights import note_selected
+
+    note_selected(session.items)

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 
+import evalsim_flights
 import numpy as np
 import pytest
 
@@ -36,24 +37,32 @@ def test_bayes_factor_is_the_log_ratio_of_the_two_evidences_by_hand():
     assert airframe_log_bayes_factor(a, b) == pytest.approx(np.log(SET_PRIOR[1] / SET_PRIOR[0]), abs=1e-3)
 
 
-@pytest.fixture(scope="module")
-def diagnosed(tmp_path_factory):
+def _specs() -> list:
     from offline.evalsim.airframe import Airframe, Damage
     from offline.evalsim.environment import Wind
-    from offline.evalsim.flight import FlightSpec, simulate_flights
-    from offline.sim.io_tlog import write_tlog
+    from offline.evalsim.flight import FlightSpec
 
     def spec(name, seed, **af_kw):
         return FlightSpec(name, Airframe.from_vehicle(V, **af_kw), ROUTE, 30.0, seed, wind=Wind())
 
-    specs = [
+    return [
         spec("nominal", 1),
         spec("cg_2cm", 2, cg_offset_frd_m=(0.02, 0.0, 0.0)),
         spec("rotor3_20pct", 3, damage=Damage(thrust_loss_at_hover=(0.0, 0.0, 0.20, 0.0))),
     ]
+
+
+evalsim_flights.declare(__name__, "diagnosed", _specs)
+
+
+@pytest.fixture(scope="module")
+def diagnosed(tmp_path_factory):
+    from offline.sim.io_tlog import write_tlog
+
+    specs = _specs()
     d = tmp_path_factory.mktemp("airframe-check")
     out = {}
-    for s, log in zip(specs, simulate_flights(specs), strict=True):
+    for s, log in zip(specs, evalsim_flights.simulate_flights(specs), strict=True):
         path = write_tlog(d / f"{s.name}.tlog", log, 0)
         out[s.name] = path
     return out

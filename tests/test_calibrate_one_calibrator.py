@@ -13,6 +13,7 @@ import io
 import json
 from pathlib import Path
 
+import evalsim_flights
 import numpy as np
 import pytest
 
@@ -80,20 +81,27 @@ def _cg_flights_own_sim():
     return [log.to_flight_table(i, source=f"cg-{i}") for i in range(2)]
 
 
+def _cg_specs() -> list:
+    from offline.evalsim.sets import motor_lag_specs
+
+    return [
+        dataclasses.replace(s, airframe=s.airframe.with_(cg_offset_frd_m=(0.012, -0.009, 0.0)))
+        for s in motor_lag_specs([NOM.motor_time_constant_s] * 4, 2, 5, 30.0)
+    ]
+
+
+evalsim_flights.declare(__name__, "evalsim_cg_logs", _cg_specs)
+
+
 @pytest.fixture(scope="module")
 def evalsim_cg_logs(tmp_path_factory):
     """Two 30-s healthy evalsim flights of the paper quad with a hidden 15 mm CG offset, as .tlog files."""
     pytest.importorskip("rotorpy")
-    from offline.evalsim.flight import simulate_flights
-    from offline.evalsim.sets import motor_lag_specs
     from offline.sim.io_tlog import write_tlog
 
-    specs = [
-        dataclasses.replace(s, airframe=s.airframe.with_(cg_offset_frd_m=(0.012, -0.009, 0.0)))
-        for s in motor_lag_specs([NOM.motor_time_constant_s] * 4, 2, 5, 30.0)
-    ]
+    logs = evalsim_flights.simulate_flights(_cg_specs())
     d = tmp_path_factory.mktemp("evalsim-cg")
-    return [str(write_tlog(d / f"cg-{i}.tlog", log, 0)) for i, log in enumerate(simulate_flights(specs))]
+    return [str(write_tlog(d / f"cg-{i}.tlog", log, 0)) for i, log in enumerate(logs)]
 
 
 @pytest.mark.slow

@@ -12,6 +12,7 @@ while every statistic is below QUIET_NATS, which re-learns the slope as well: ei
 
 from __future__ import annotations
 
+import evalsim_flights
 import pytest
 
 import monitor.decision.rotor_share as rs
@@ -23,10 +24,20 @@ from offline.alerts.flights import evalsim_set
 from offline.alerts.rules import decision_rule
 
 
+def _braking_spec() -> list:
+    from offline.evalsim.sets import build_set
+
+    return build_set("healthy", flights=20, seed=300, duration_s=80.0)[19:]  # as evalsim_set(..., start=19) flies it
+
+
+evalsim_flights.declare(__name__, "braking_flight", _braking_spec)
+
+
 @pytest.fixture(scope="module")
 def braking_flight():
     clf = Classifier(str(shipped("classifier.onnx")))
-    (f,) = evalsim_set("healthy", 1, 300, clf, log=lambda m: None, start=19)
+    with evalsim_flights.shared():
+        (f,) = evalsim_set("healthy", 1, 300, clf, log=lambda m: None, start=19)
     return f
 
 

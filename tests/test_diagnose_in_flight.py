@@ -15,6 +15,7 @@ import json
 import re
 from types import SimpleNamespace
 
+import evalsim_flights
 import numpy as np
 import pytest
 from test_diagnose_fixtures import build_model, write_tlog
@@ -37,13 +38,23 @@ def run(argv) -> tuple[int, dict, str]:
     return code, out.getvalue(), err.getvalue()
 
 
+def _onset_specs() -> list:
+    from offline.evalsim.sets import build_set
+
+    return build_set("onset", flights=4, seed=0)  # as write_set flies it below
+
+
+evalsim_flights.declare(__name__, "evalsim_onsets", _onset_specs)
+
+
 @pytest.fixture(scope="module")
 def evalsim_onsets(tmp_path_factory):
     pytest.importorskip("rotorpy")
     from offline.evalsim.score import load_set
     from offline.evalsim.sets import write_set
 
-    folder = write_set("onset", tmp_path_factory.mktemp("onset"), flights=4, seed=0)
+    with evalsim_flights.shared():
+        folder = write_set("onset", tmp_path_factory.mktemp("onset"), flights=4, seed=0)
     _, truths = load_set(folder)
     return [(folder / t["file"], t) for t in truths]
 

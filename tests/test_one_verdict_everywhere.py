@@ -12,6 +12,7 @@ import json
 import subprocess
 import sys
 
+import evalsim_flights
 import pytest
 
 
@@ -21,12 +22,22 @@ def _run(*args, **kw):
     )
 
 
+def _onset_spec() -> list:
+    from offline.evalsim.sets import build_set
+
+    return build_set("onset", flights=1, seed=0, duration_s=60.0)  # as write_set flies it below
+
+
+evalsim_flights.declare(__name__, "onset_log", _onset_spec)
+
+
 @pytest.fixture(scope="module")
 def onset_log(tmp_path_factory):
     from offline.evalsim.sets import write_set
 
     d = tmp_path_factory.mktemp("onset")
-    write_set("onset", d, flights=1, seed=0, duration_s=60.0)
+    with evalsim_flights.shared():
+        write_set("onset", d, flights=1, seed=0, duration_s=60.0)
     return d / "onset_0000.tlog"
 
 
