@@ -135,14 +135,29 @@ class CsvFormat:
         return list(dict.fromkeys(out))
 
 
+_LOADED_FORMATS: dict[tuple[str, bytes], dict[str, CsvFormat]] = {}  # (path, its bytes) -> its formats (frozen)
+
+
 def load_formats(path: str | Path = FORMATS_FILE) -> dict[str, CsvFormat]:
+    """The formats in ``path``: parsed once per content of the file (one CSV read asks for them up to four times,
+    and parsing the YAML costs more than reading a short log)."""
+    try:
+        key = (str(Path(path).resolve()), Path(path).read_bytes())
+    except OSError:  # read_yaml says why, naming the file
+        key = None
+    if key in _LOADED_FORMATS:
+        return dict(_LOADED_FORMATS[key])
     data = read_yaml(path)
     out = {}
     for name, spec in data.items():
         if not isinstance(spec, dict):
             raise ConfigError(f"{path}: format {name!r} must be a mapping")
         out[name] = _build_format(spec, f"{path}: {name}")
-    return out
+    if key is not None:
+        if len(_LOADED_FORMATS) >= 8:
+            _LOADED_FORMATS.clear()
+        _LOADED_FORMATS[key] = out
+    return dict(out)
 
 
 def _build_format(spec: dict, origin: str) -> CsvFormat:
