@@ -39,6 +39,12 @@ def test_the_same_effect_inside_the_library_is_named_and_leaves_nothing_unexplai
     r = calibrate(weak_rotor_3, NOM)
     assert r.cause == "motor_efficiency"
     assert not r.unexplained["found"], r.unexplained["summary"]
+    # One rotor singled out: the caveat that a damaged propeller there would look the same, with the one-rotor
+    # reading: a motor scales thrust and torque alike, so its torque per thrust stays near 0.
+    ins = r.inspect_rotor
+    assert ins["rotor"] == 3 and any("damaged propeller on rotor 3" in n for n in r.notes), r.notes
+    one = ins["if_only_this_rotor"]
+    assert -16.0 < one["thrust_pct"] < -11.0 and abs(one["torque_per_thrust_pct"]) < 2.0, one
 
 
 @pytest.fixture(scope="module")

@@ -12,6 +12,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -23,7 +24,7 @@ from offline.calibrate.prepare import Segment, prepare
 from offline.calibrate.steady import steady_state
 from offline.calibrate.terms import TERMS, Term
 from offline.calibrate.unbalance import unbalance_ratio
-from offline.calibrate.unexplained import delay_probe, unexplained_residual
+from offline.calibrate.unexplained import delay_probe, one_rotor_reading, unexplained_residual
 
 PHASES = ("hover", "cruise", "climb", "manoeuvre")
 LAG_TERMS = ("motor_time_constant", "rotor_time_constant")
@@ -147,7 +148,7 @@ def inspect_rotor(efficiency: list[float]) -> dict | None:
         return None
     return {
         "rotor": k + 1,
-        "thrust_vs_others_pct": round(100 * dev[k], 1),
+        "thrust_vs_others_pct": round(float(100 * dev[k]), 1),
         "others_half_range_pct": round(100 * half_range, 1),
         "why": (
             f"motor_efficiency singles out rotor {k + 1} ({100 * dev[k]:+.1f} % thrust against the other three, which "
@@ -266,6 +267,15 @@ def calibrate(tables: list[FlightTable], nominal: VehicleConfig, candidates: lis
     if "motor_efficiency" in {f["effect"] for f in findings}:
         inspect = inspect_rotor(list(calibrated.motor_efficiency))
         if inspect:
+            base = dataclasses.replace(calibrated, motor_efficiency=nominal.motor_efficiency)
+            one = one_rotor_reading(data, base, inspect["rotor"] - 1, sigma)
+            inspect["if_only_this_rotor"] = one
+            inspect["why"] += (
+                f". Read as rotor {inspect['rotor']} alone (the other three as the file says): thrust "
+                f"{one['thrust_pct']:+.1f} %, torque per thrust {one['torque_per_thrust_pct']:+.1f} % (held-out BIC "
+                f"{one['torque_heldout_bic_gain']:.1f} for that torque change); a motor or ESC moves thrust and torque "
+                "alike, a damaged propeller changes its torque per thrust"
+            )
             notes.append(inspect["why"])
     unexplained = unexplained_residual(data, calibrated, final.residuals if final else sel.nominal_residuals)
     if unexplained["found"]:

@@ -27,9 +27,10 @@ import numpy as np
 from scipy.optimize import minimize_scalar
 
 from monitor.vehicle import VehicleConfig
-from offline.calibrate.fit import MIN_DELTA_BIC, Data, bic, correlation_time, rms_by_signal
+from offline.calibrate.fit import MIN_DELTA_BIC, Data, bic, correlation_time, fit_terms, rms_by_signal
 from offline.calibrate.physics import KIN_SIGNALS, integrated, residuals, rotor_forces
 from offline.calibrate.prepare import Segment, sg_smooth
+from offline.calibrate.terms import TERMS
 
 YAW = "yaw_accel_rad_s2"
 # The attitude kinematics' residual (the logged attitude's derivative against the logged rates) is the estimator's
@@ -110,6 +111,45 @@ def _fit_probe(res, reg, data: Data, weights: dict[str, float]) -> float:
             num += float(np.sum(x[ok] * r[s][ok])) / weights[s] ** 2
             den += float(np.sum(x[ok] ** 2)) / weights[s] ** 2
     return num / den if den > 0 else 0.0
+
+
+def one_rotor_reading(data: Data, base: VehicleConfig, rotor: int, sigma: dict[str, float]) -> dict:
+    """``rotor`` (0-based) alone off ``base``: its speed scale fitted (thrust and torque alike, one parameter), then
+    its torque per thrust on top (the ``rotor_torque`` probe). A motor or ESC moves a rotor's thrust and torque
+    alike; a damaged propeller changes its torque per thrust. Only a reading under the assumption that the other
+    three rotors are as ``base`` says: a weak motor with the others spread in the yaw pattern fits the same data."""
+    k = rotor
+
+    def set_k(v: VehicleConfig, x: np.ndarray) -> VehicleConfig:
+        e = list(v.motor_efficiency)
+        e[k] = float(x[0])
+        return dataclasses.replace(v, motor_efficiency=tuple(e))
+
+    eff = TERMS["motor_efficiency"]
+    one = dataclasses.replace(
+        eff,
+        name=f"eff_{k + 1}",
+        params=(f"eff_{k + 1}",),
+        get=lambda v: np.array([v.motor_efficiency[k]]),
+        set=set_k,
+        scale=lambda v: eff.scale(v)[[k]],
+        lower=lambda v: eff.lower(v)[[k]],
+        upper=lambda v: eff.upper(v)[[k]],
+    )
+    fit = fit_terms(data, base, [one], one.get(base), sigma)
+    reg = _regressors(data, fit.vehicle)[f"rotor_torque_{k + 1}"]
+    weights = {s: max(v, 1e-9) for s, v in rms_by_signal(fit.residuals, data.fit_masks).items()}
+    beta = _fit_probe(fit.residuals, reg, data, weights)
+    after = [{s: r[s] - beta * g[s] if s in g else r[s] for s in r} for r, g in zip(fit.residuals, reg)]
+    two = bic(after, data.held_masks, 2, data.n_fit, data.corr_time)
+    gain = fit.bic - two
+    base_bic = bic(data.residuals(base), data.held_masks, 0, data.n_fit, data.corr_time)
+    return {
+        "heldout_bic_gain": round(base_bic - two, 1),  # both parameters over ``base``
+        "thrust_pct": round(float(100 * (fit.x[0] ** 2 / base.motor_efficiency[k] ** 2 - 1)), 2),
+        "torque_per_thrust_pct": round(100 * beta, 2),
+        "torque_heldout_bic_gain": round(gain, 1),
+    }
 
 
 def _kinematic_whiteness(data: Data, res: list[dict[str, np.ndarray]]) -> dict:
