@@ -9,13 +9,18 @@ Skipped until the shipped classifier exists (issue 4, ``make classifier``). The
 flights are simulated here (tmp dir), never committed, each on a random route
 of its own (seeded). Replayed at 4x: faster overruns the daemon on 2 shared
 cores and UDP drops packets, which shows as gaps (the daemon then, rightly,
-classifies less).
+classifies less). The three flights fly at once, each to its own daemon on its
+own port: a paced replay mostly waits (this file: 13 s of CPU in 40 s, the
+flights' simulation included), so it takes the longest flight's time, not the
+sum; the daemons see the same steps and raise the same alerts at the same boot
+times as one at a time.
 """
 
 from __future__ import annotations
 
 import json
 import subprocess
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import pytest
@@ -84,12 +89,24 @@ def first_boot_ms(frames) -> int:
     return min(int(m.time_boot_ms) for _, _, m in frames if m.get_type() == "ATTITUDE")
 
 
+@pytest.fixture(scope="module")
+def flown(flights, tmp_path_factory):
+    """{name: a future of (fly_over_udp's result, the log's frames)}: every flight replayed at 4x to its own daemon,
+    all at once; a test reads its flight's result (a failed run fails that test, with its error)."""
+
+    def fly(name):
+        raw, frames = frames_of(flights[name][0])
+        return fly_over_udp(tmp_path_factory.mktemp(f"udp-{name}"), CLASSIFIER, raw, speed=4), frames
+
+    with ThreadPoolExecutor(len(flights)) as pool:
+        yield {name: pool.submit(fly, name) for name in flights}
+
+
 @pytest.mark.parametrize("name", sorted(ONSETS))
-def test_single_faulty_propeller_named_within_15_s_of_its_onset(tmp_path, flights, name):
-    tlog, faulty = flights[name]
+def test_single_faulty_propeller_named_within_15_s_of_its_onset(flights, flown, name):
+    _, faulty = flights[name]
     assert len(faulty) == 1
-    raw, frames = frames_of(tlog)
-    d, _, events, _, received, report = fly_over_udp(tmp_path, CLASSIFIER, raw, speed=4)
+    (d, _, events, _, received, report), frames = flown[name].result()
     faults = [e for e in events if e["level"] == "fault"]
     assert faults, f"no FAULT for {name}: {events}\n{d.text[-2000:]}"
     onset_ms = first_boot_ms(frames) + 1000 * ONSET_S
@@ -101,11 +118,10 @@ def test_single_faulty_propeller_named_within_15_s_of_its_onset(tmp_path, flight
     assert any(t.startswith(f"PROP {faulty[0]} FAULT") for t in texts), texts
 
 
-def test_full_healthy_flight_raises_no_alert(tmp_path, flights):
-    tlog, faulty = flights["healthy"]
+def test_full_healthy_flight_raises_no_alert(flights, flown):
+    _, faulty = flights["healthy"]
     assert faulty == ()
-    raw, _ = frames_of(tlog)
-    d, _, events, _, received, report = fly_over_udp(tmp_path, CLASSIFIER, raw, speed=4)
+    (d, _, events, _, received, report), _ = flown["healthy"].result()
     assert report["pipeline"]["classified"] > 1000, d.text[-2000:]  # it did watch the flight
     assert [e for e in events if e.get("event") == "alert"] == [], events
     # No alert text at any level (suspect is a NOTICE too); the monitor's own notices
