@@ -106,10 +106,12 @@ def test_the_table_counts_what_its_columns_say():
         row([2], [2], "confident", [2]),  # exact & confident, in set
         row([2], [1, 2], "ambiguous", [1, 2]),  # in set only
         row([2], [], "confident", []),  # confidently healthy on a damaged flight: confident wrong
-        row([], [3], "ambiguous", [3]),  # FAULTY on healthy, not confident
+        row([], [3], "ambiguous", [3]),  # a propeller named on a healthy flight, not confidently: not FAULTY
+        row([], [4], "confident", [4]),  # FAULTY on healthy: confident wrong
         row([], [], "confident", []),  # exact & confident healthy
     ]
     res = table(rows)
     singles, healthy = res["singles >= 6 %"][RULES[0]], res["healthy later"][RULES[0]]
     assert (singles["exact_confident"], singles["in_set"], singles["confident_wrong"]) == (1, 2, 1)
-    assert (healthy["exact_confident"], healthy["confident_wrong"], healthy["faulty_on_healthy"]) == (1, 0, 1)
+    assert (healthy["exact_confident"], healthy["confident_wrong"], healthy["faulty_on_healthy"]) == (1, 1, 1)
+    assert healthy["named_on_healthy"] == 2

@@ -18,7 +18,9 @@ DIR is a same-airframe fleet (``offline.evalsim`` set ``vehicles`` or ``offline.
 Columns: "exact & confident" (confident and exactly the damaged propeller; on healthy flights confident healthy),
 "in set" (the damaged propeller among the verdict's propellers: named, in a hypothesis or suspect), "confident
 wrong" (confident and anything else, a healthy call on a damaged flight included), "FAULTY on healthy" (a healthy
-flight given a propeller, at any confidence). Calibrations are cached (``--cache``; about 20-30 s each).
+flight marked FAULTY: confident with a propeller, as ``offline.vehicles.evaluate`` counts it), "named on healthy" (a
+healthy flight given a propeller at any confidence: ambiguous past the fault level, or today's diagnose's uncertain
+verdicts). Calibrations are cached (``--cache``; about 20-30 s each).
 """
 
 from __future__ import annotations
@@ -110,7 +112,14 @@ def groups(rows: list[dict]) -> dict[str, list[dict]]:
 
 
 def cell(sel: list[dict], rule: str) -> dict:
-    out = {"flights": len(sel), "exact_confident": 0, "in_set": 0, "confident_wrong": 0, "faulty_on_healthy": 0}
+    out = {
+        "flights": len(sel),
+        "exact_confident": 0,
+        "in_set": 0,
+        "confident_wrong": 0,
+        "faulty_on_healthy": 0,
+        "named_on_healthy": 0,
+    }
     for r in sel:
         v = r["verdicts"][rule]
         exact = sorted(v["faulty_propellers"]) == sorted(r["faulty"])
@@ -118,7 +127,8 @@ def cell(sel: list[dict], rule: str) -> dict:
         out["exact_confident"] += confident and exact
         out["confident_wrong"] += confident and not exact
         out["in_set"] += bool(r["faulty"]) and set(r["faulty"]) <= set(v["set"])
-        out["faulty_on_healthy"] += not r["faulty"] and bool(v["faulty_propellers"])
+        out["faulty_on_healthy"] += not r["faulty"] and bool(v["faulty_propellers"]) and confident
+        out["named_on_healthy"] += not r["faulty"] and bool(v["faulty_propellers"])
     return out
 
 
@@ -130,8 +140,8 @@ def table(rows: list[dict]) -> dict:
 
 def format_table(res: dict, title: str) -> str:
     lines = [
-        f"| {title}: flights | rule | n | exact & confident | in set | confident wrong | FAULTY on healthy |",
-        "|---|---|---|---|---|---|---|",
+        f"| {title}: flights | rule | n | exact & confident | in set | confident wrong | FAULTY on healthy | named on healthy |",
+        "|---|---|---|---|---|---|---|---|",
     ]
     for g, rules in res.items():
         healthy = g.startswith("healthy")
@@ -139,7 +149,8 @@ def format_table(res: dict, title: str) -> str:
             n = max(c["flights"], 1)
             lines.append(
                 f"| {g} | {rule} | {c['flights']} | {c['exact_confident']} ({100 * c['exact_confident'] / n:.0f} %) | "
-                f"{'-' if healthy else c['in_set']} | {c['confident_wrong']} | {c['faulty_on_healthy'] if healthy else '-'} |"
+                f"{'-' if healthy else c['in_set']} | {c['confident_wrong']} | "
+                f"{c['faulty_on_healthy'] if healthy else '-'} | {c['named_on_healthy'] if healthy else '-'} |"
             )
     return "\n".join(lines)
 
