@@ -8,7 +8,8 @@ DIR is a same-airframe fleet (``offline.evalsim`` set ``vehicles`` or ``offline.
 - (a) ``baseline``: the vehicle's normal from its 3 healthy references (today's vehicle memory);
 - (b) ``baseline + calibrated``: that normal with its intercept pulled towards the hover shares of the vehicle
   ``propwatch calibrate`` fits on the same 3 references (``offline.vehicles.calibrated``: the prediction weighs as
-  many flights as the population prior, 3);
+  many flights as the population prior, 3); beside it a control: the same weight given to the baseline's own mean
+  (a prediction carrying no new information), which shows what (b) owes to the weight alone;
 - (c) ``nominal vehicle``: no history, the nominal vehicle's hover shares with the population covariance; with
   ``--nominal`` also today's nominal ``propwatch diagnose`` (no baseline), as ``offline.vehicles.evaluate`` runs it;
 - (d) ``calibrated alone``: no history, the calibrated vehicle's hover shares with the population covariance,
@@ -42,6 +43,7 @@ DEFAULT_CACHE = Path("out/localise/cal")
 RULES = (
     "(a) baseline (3 references)",
     "(b) baseline + calibrated vehicle",
+    "(b) control: baseline + its own mean as the prediction",
     "(c) nominal vehicle, no history",
     "(a) baseline of 2 references (learn needs 3)",
     "(d) calibrated on 2 references, no history",
@@ -90,11 +92,12 @@ def score(by: dict[str, list[dict]], nominal, cache: Path | None, k: float = PRE
             **{k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in pred.items()},
         }
         pulled = pulled_normal(own, pred[f"calibrated_{REFERENCES}"], k)
+        control = pulled_normal(own, own.intercept, k)  # the same weight, no new information: what (b) owes to it
         for f in flights:
             if f["reference"]:
                 continue
             s = f["summary"]
-            normals = (own, pulled, prior_normal(pred["nominal"], s, k), own_2, prior_normal(pred["calibrated_2"], s, k),
+            normals = (own, pulled, control, prior_normal(pred["nominal"], s, k), own_2, prior_normal(pred["calibrated_2"], s, k),
                        prior_normal(pred[f"calibrated_{REFERENCES}"], s, k))  # fmt: skip
             rows.append(
                 {"name": f["name"], "file": f["file"], "airframe": af, "faulty": f["faulty"], "loss": f["loss"],
@@ -134,7 +137,7 @@ def cell(sel: list[dict], rule: str) -> dict:
 
 def table(rows: list[dict]) -> dict:
     have = rows[0]["verdicts"] if rows else {}
-    rules = [r for r in (*RULES[:3], NOMINAL_DIAGNOSE, *RULES[3:]) if r in have]
+    rules = [r for r in (*RULES[:4], NOMINAL_DIAGNOSE, *RULES[4:]) if r in have]
     return {g: {rule: cell(sel, rule) for rule in rules} for g, sel in groups(rows).items()}
 
 
