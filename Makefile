@@ -34,7 +34,7 @@ lint: $(STAMP)
 # the bench_* timings and the import-graph counts; `make bench-measure` the scripts that measured shipped constants
 # and cards, each with its defaults and outputs under $(OUT)/bench (minutes to an hour; CrazyPAD ones need its data).
 BENCH ?= $(sort $(basename $(notdir $(wildcard bench/bench_*.py)))) house_counts
-BENCH_MEASURE ?= alerts_flights crazypad_baseline crazypad_fusion crazypad_fusion_sim crazypad_separation response_gain_sim
+BENCH_MEASURE ?= alerts_flights decision_constants crazypad_baseline crazypad_fusion crazypad_fusion_sim crazypad_separation response_gain_sim
 bench: $(STAMP)
 	for b in $(BENCH); do echo "== bench.$$b"; $(BIN)/python -m bench.$$b || exit 1; done
 

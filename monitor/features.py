@@ -266,7 +266,9 @@ class Normalizer:
 # so the daemon can call them when its streams are fast enough (``NATIVE_MIN_RATE_HZ``).
 
 NATIVE_MIN_RATE_HZ = 50.0  # below this the high band (VIBRATION_BAND_HZ) is not observable
-VIBRATION_BAND_HZ = 15.0  # lower edge of the "vibration" band; the flight script's manoeuvres sit below 2 Hz
+# Lower edge of the "vibration" band. Chosen, not measured: well above the flight script's manoeuvres (below 2 Hz)
+# and below the Nyquist frequency of the slowest native stream (25 Hz at NATIVE_MIN_RATE_HZ).
+VIBRATION_BAND_HZ = 15.0
 
 
 def _check_native_rate(rate_hz: float, what: str) -> None:

@@ -35,7 +35,9 @@ log = logging.getLogger("propwatch.monitor")
 
 MIN_LEARN_S = 30.0  # accepted airborne seconds before a flight can become history ("too short to count")
 JUDGE_PERIOD_S = 1.0
-MIN_JUDGE_S = 4.0  # accepted seconds before the first judgement (two 2-s blocks of the flight's own wander)
+# Accepted seconds before the first judgement (two 2-s blocks of the flight's own wander): chosen, not measured,
+# the fewest blocks that give a wander at all.
+MIN_JUDGE_S = 4.0
 SEVERITY = {"fault": 2, "suspect": 4}  # MAV_SEVERITY_CRITICAL / WARNING, as the decision's own alerts
 
 

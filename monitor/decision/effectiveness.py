@@ -57,7 +57,8 @@ SUB_BLOCKS = 4  # a window's noise is read from the spread of its sub-blocks' ba
 HYPOTHESES: tuple[tuple[int, ...], ...] = tuple(tuple(LABEL_TABLE[k]) for k in range(1, 17))
 # Prior over the 16 sets: a healthy vehicle is as likely as all damage patterns together (a monitor
 # watches mostly healthy flights; what the balance cannot see, e.g. all four rotors alike, stays
-# "healthy" unless evidence says otherwise), the 15 damage patterns alike.
+# "healthy" unless evidence says otherwise), the 15 damage patterns alike. Chosen, not measured: no fleet's
+# damage rate is known.
 HEALTHY_PRIOR = 0.5
 SET_PRIOR = np.array([HEALTHY_PRIOR] + [(1.0 - HEALTHY_PRIOR) / 15.0] * 15)
 _LOG_SET_PRIOR = np.log(SET_PRIOR)
@@ -107,15 +108,20 @@ class Priors:
     their motors by 4-8 % (CrazyPAD) and carry CG offsets of millimetres, each worth a 10-20 %
     loss of one rotor. ``propwatch adapt`` measures them from the airframe's healthy flights and
     passes a ``Baseline``; with ``Priors.unmeasured_airframe()`` the verdict hedges instead.
-    Yaw trim from motor tilt: std 0.02 of one rotor's drag torque. The noise floor (0.01) is the
-    balance scatter of healthy 5 s windows on our simulator at 20 Hz.
+    Yaw trim from motor tilt: std 0.02 of one rotor's drag torque; chosen, not measured: our simulator tilts no
+    motor (its nominal airframe's flight-mean yaw balance spreads by 0.002 between flights).
+    The noise floor (0.01): on our simulator's healthy 5 s windows at 20 Hz (nominal airframe) the median
+    window's noise is 0.026 / 0.034 / 0.010 (roll / pitch / yaw), so 0.01 is yaw's; the floor raises 24 / 14 / 49 %
+    of windows. Both figures: ``python -m bench.decision_constants`` (seed 100, 48 flights).
     """
 
     loss_mean: float = 0.07
     loss_std: float = 0.035
     torque_per_thrust_std: float = 0.15
     healthy_spread_std: float = 0.01
-    healthy_torque_spread_std: float = 0.02  # torque coefficient spread beyond the speed spread
+    # Torque coefficient spread beyond the speed spread: the register's healthy_torque_per_thrust_spread_frac,
+    # uniform +-3 % (std 0.017, itself not measured), rounded up; `python -m bench.decision_constants` prints it.
+    healthy_torque_spread_std: float = 0.02
     cg_offset_std_m: float = 0.0005
     yaw_trim_std: float = 0.02
     noise_floor: float = 0.01  # per-window balance noise never below this (snapshot sampling, lag)
@@ -434,12 +440,15 @@ def credible_set(verdict: Verdict, mass: float = 0.95) -> list[int]:
 
 
 # A rotor outside this range of nominal thrust is not a damaged propeller but a balance that does not
-# close for this vehicle (another airframe, wrong ESC curve or inertia): the evidence is withheld.
+# close for this vehicle (another airframe, wrong ESC curve or inertia): the evidence is withheld. Chosen, not
+# measured. On our simulator's healthy flights diagnose's whole-flight reading spans -0.04..1.01 and falls outside
+# this range on 56 of 96 randomised flights and 27 of 48 of the nominal airframe (`python -m bench.decision_constants`).
 PLAUSIBLE_EFFECTIVENESS = (0.5, 1.15)
 
 
-# A baseline read from a flight's own windows: the spread of its windows' balances, floored at this (the per-window
-# noise floor of the balance, Priors.noise_floor).
+# A baseline read from a flight's own windows: the spread of its windows' balances, floored at this. Chosen equal to
+# Priors.noise_floor, not measured; a healthy flight's windows spread by at least 0.015 / 0.013 / 0.003 (roll / pitch /
+# yaw; 10th percentile of 48 nominal-airframe flights, `python -m bench.decision_constants`): it binds in yaw.
 OWN_BASELINE_STD_FLOOR = 0.01
 # The onset precedes the in-flight rule's first announcement by its detection delay (median 4-5 s, p95 under 10 s
 # on both simulators): a flight's own baseline ends this long before that announcement.

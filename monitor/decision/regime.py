@@ -16,7 +16,9 @@ import numpy as np
 
 from monitor.decision.config import DecisionConfig
 
-COLLECTIVE_MEDIAN_S = 10.0  # a collective step compares the median mean RPM of two such spans (manoeuvres average out)
+# A collective step compares the median mean RPM of two such spans (manoeuvres average out). Chosen, not measured;
+# alerts.collective_step_fraction was measured at this span.
+COLLECTIVE_MEDIAN_S = 10.0
 # The step rule above sees a payload step only once the last 10 s are mostly after it: 5-7 s late. A payload picked
 # up off-centre moves the trims at once: on flight healthy-r601-227 of our simulator's randomised healthy set
 # (`python -m bench.alerts_flights --set ours-healthy --seed 601 --flights 228`) a 38 % payload made the omega^2

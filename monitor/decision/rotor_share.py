@@ -14,7 +14,7 @@ import numpy as np
 from monitor.labels import N_PROPS
 
 LLR_CLIP = math.log(0.999 / 0.001)  # |logit P| beyond P = 0.999 is the network's over-confidence, not evidence
-BASELINE_S = 10.0  # classified seconds that define the airframe's own baseline evidence
+BASELINE_S = 10.0  # classified seconds that define the airframe's own baseline evidence (chosen, not measured)
 # The pair statistic's vector is (CCW up, CCW up, CW up, CW up): index i holds the evidence for i's same-spin pair.
 SAME_SPIN_PAIRS = ((1, 2), (3, 4))  # PX4 quad-X: 1, 2 CCW (diagonal), 3, 4 CW (diagonal)
 
@@ -44,17 +44,21 @@ _U = _AXES.T.copy()  # (4, 2): rotor i's direction in (pitch, roll); a loss f on
 
 
 # -- physics: each rotor's share of omega^2 ---------------------------------------------------------
-# The healthy spread of the yaw-free share (mean over SHARE_AVERAGE_S) around the flight's own first 10 s, on
-# 4.7 h of randomised healthy flights of our simulator (register physics, drawn airframes, payload steps;
-# `bench/alerts_flights.py --share-spread`): rms 0.006, 99 % within 0.020, 99.9 % within 0.032 (manoeuvres,
-# gusts, motor lag). The Gaussian noise model takes the tail's scale, so a manoeuvre's excursion is not read as
-# decisive evidence; the calibrated thresholds absorb what the model gets wrong.
+# The healthy spread of each rotor's yaw-free share (mean over SHARE_AVERAGE_S) less the decision's baseline plane,
+# at every tested window of 96 randomised healthy flights of our simulator (seed 100: register physics, drawn
+# airframes, payload steps; `python -m bench.decision_constants`): rms 0.008, 99 % within 0.029, 99.9 % within 0.074.
+# The Gaussian noise model takes the tail's scale (99 % / 2), so a manoeuvre's excursion is not read as decisive
+# evidence: that measures 0.014 against the 0.01 shipped. 0.01 is the same scale against the flight's first 10 s
+# (no plane), for which `python -m bench.alerts_flights --set ours-healthy --seed 100 --flights 96 --share-spread`
+# now gives 99 % within 0.19. The calibrated thresholds absorb what the model gets wrong.
 SHARE_SIGMA = 0.01
-SHARE_BASELINE_TAU_S = 60.0  # slow drifts (battery sag, motor warm-up) enter the baseline over a minute
+# Slow drifts (battery sag, motor warm-up) enter the baseline over a minute: chosen, not measured.
+SHARE_BASELINE_TAU_S = 60.0
 # Seconds of shares averaged per sample. Shorter reacts sooner to an onset (the mean ramps over this time) but is
 # noisier; chosen on our simulator (calibration flights seed 100, onset flights seed 400: 5 s gave a median
 # latency of 7.7 s at >= 8 % loss, 2 s 4.2 s with the fault threshold 1.5x the highest healthy value, 1 s 3.8 s
-# at only 1.1x), never on the evaluation-only simulator.
+# at only 1.1x), never on the evaluation-only simulator. No command runs the comparison; each row is this value set,
+# `make calibrate-alerts`, then `propwatch evaluate alerts --seed 400 --no-evalsim`.
 SHARE_AVERAGE_S = 2.0
 # What the baseline's plane learns from: each span's trims as a 10 %-trimmed mean (``trimmed_mean``), not the mean.
 # 20-Hz snapshots of a 200-Hz motor command can catch one controller tick of a transient: evalsim's healthy flight
@@ -76,11 +80,13 @@ PLANE_CUT = 0.1
 # and -g for 3+4. With c = 0 (torque scales with thrust) g = f, so the CUSUM reference is half of
 # alerts.min_thrust_loss; the sign of c is unknown (issue 12), so a shift names both pairs ("1+2 or 3+4?"), the
 # one it fits with c = 0 first. YAW_SIGMA: the healthy spread of y (mean over SHARE_AVERAGE_S) around the flight's
-# own first 10 s on the 4.7 calibration hours of our simulator (bench/alerts_flights.py --share-spread, seed 100):
-# over 2 s, rms 0.052 (99 % within 0.11: yaw manoeuvres re-trim it within seconds), over 10 s rms 0.017 (99 % within
-# 0.044). So the yaw balance is averaged over YAW_AVERAGE_S = 10 s (pairs have no latency target; singles keep
-# their 2 s), and YAW_SIGMA takes the tail's scale (99 % / 2) as SHARE_SIGMA does; the calibrated thresholds absorb
-# what the Gaussian model gets wrong.
+# own first 10 s on 96 randomised healthy flights of our simulator (`python -m bench.alerts_flights --set
+# ours-healthy --seed 100 --flights 96 --share-spread`, or unclassified `python -m bench.decision_constants`): over
+# 10 s rms 0.017 (99 % within 0.043); against the decision's own yaw baseline rms 0.015 (99 % within 0.043); over
+# 2 s it scatters by ~0.05 (yaw manoeuvres re-trim it within seconds; no command here measures that). So the yaw
+# balance is averaged over YAW_AVERAGE_S = 10 s (pairs have no latency target; singles keep their 2 s), and YAW_SIGMA
+# takes the tail's scale (99 % / 2) as SHARE_SIGMA does; the calibrated thresholds absorb what the Gaussian model
+# gets wrong.
 YAW_AVERAGE_S = 10.0
 YAW_SIGMA = 0.022
 # What a yaw-balance alert names. A single rotor i losing thrust f with a torque-per-thrust change c moves the yaw
@@ -88,18 +94,18 @@ YAW_SIGMA = 0.022
 # y by f - c and the yaw-free shares not at all (docs/ALERTS.md "The pair statistic"). So a yaw shift alone is
 # a same-spin pair, or a small single with a large torque change, and the single is the rotor whose yaw-free share
 # rose most over the same YAW_AVERAGE_S: it is always one of the alert's hypotheses, first when its rise exceeds
-# what healthy flights reach. YAW_FREE_RISE: the 99 % quantile of the largest rotor's rise (10-s mean against the
-# flight's first 10 s) on 96 randomised healthy flights of our simulator, the calibration seed
-# (`python -m bench.alerts_flights --seed 100 --flights 96 --share-spread`: 0.0116; 99.9 %: 0.0159). Measured as
-# the decision forms it (against the plane, every 0.5 s of the 10 calibration hours) 0.012 is the 96.5 % quantile
-# (99 %: 0.021); that measurement is not reproducible from the repository (its script was never committed):
-# "beyond healthy" orders the hypotheses, YAW_FREE_GAP below decides who is named.
+# what healthy flights reach. YAW_FREE_RISE: measured as the decision forms it (``yaw_free_rise`` at every tested
+# window of 96 randomised healthy flights of our simulator, the calibration seed 100:
+# `python -m bench.decision_constants`), 0.012 is the 96.6 % quantile (99 %: 0.035; 99.9 %: 0.062). Against the
+# flight's first 10 s instead (`python -m bench.alerts_flights --set ours-healthy --seed 100 --flights 96
+# --share-spread`) the same flights give 0.17 at 99 %. "Beyond healthy" orders the hypotheses, YAW_FREE_GAP below decides who is named.
 YAW_FREE_RISE = 0.012
 # Which single a yaw-balance alert names is only as sure as the rises differ. A loss f moves its rotor's rise by
-# f/2 against its neighbours' (0.0165 at 3.3 %), and two neighbours' healthy 10-s rises differ by up to 0.033
-# (99 % quantile of the largest adjacent difference, the decision's own rise every 0.5 s over the 10 calibration
-# hours of seed 100) and 0.069 (99.9 %). Not reproducible from the repository: the script that measured these
-# quantiles was never committed, and no command here re-measures them. So every rotor whose rise is within
+# f/2 against its neighbours' (0.0165 at 3.3 %), and two neighbours' healthy 10-s rises differ by up to 0.046
+# (99 % quantile of the largest difference between rotors sharing a side, the decision's own rise at every tested
+# window of 96 healthy flights of seed 100; `python -m bench.decision_constants`) and 0.076 (99.9 %; 0.069 shipped,
+# measured on 10 hours of the same seed every 0.5 s by a script not in the repository). So every rotor whose rise
+# is within
 # YAW_FREE_GAP of the largest is a hypothesis too, after the pairs: two rotor-4 losses of 3.2-3.3 % on our
 # simulator (`python -m bench.alerts_flights --set ours-single --seed 601`) were alerted "PROP 1 or 3+4 or 1+2?",
 # rotor 1's rise 0.003-0.008 above rotor 4's. The
@@ -122,8 +128,10 @@ YAW_FREE_GAP = 0.069
 # forward flights either leaves ~0.015, both 0.013; on log171 (real) 0.087 / 0.096 / 0.085 (a hard-flown flight).
 # The slopes' priors: mean 0 (flapping's sign is blowback's, but other speed-linear trims, e.g. body drag above
 # the CG, take either); sd FLAP_SLOPE_PRIOR_SD per m/s puts the register's largest (0.05 per m/s in a_pitch) at
-# 1.7 sd; DRAG_SLOPE_PRIOR_SD per m/s^2 covers our simulator's fitted -0.1..-0.26 at 1 sd. SHARE_BASELINE_TAU_S
-# sets the intercept's drift.
+# 1.7 sd (chosen from the register's range); DRAG_SLOPE_PRIOR_SD per m/s^2 covers our simulator's fitted slopes at
+# 1 sd: each healthy flight's plane of its 2-s trims, 96 randomised flights of seed 100
+# (`python -m bench.decision_constants`), gives specific-force slopes -0.24..-0.009 per m/s^2 (5-95 %, median
+# -0.07) and velocity slopes -0.005..0.002 per m/s. SHARE_BASELINE_TAU_S sets the intercept's drift.
 # FLAP_SLOPE_Q: how fast the slopes may drift, as a random walk: ~0.005 per m/s in ten minutes (the specific-force
 # slope ten times that per m/s^2, in proportion to the priors). The plane stops learning while evidence gathers, so
 # after an onset what it does not know at a speed it has flown grows by this drift for as long as the loss is being

@@ -10,6 +10,7 @@ import math
 
 import numpy as np
 
+# The next three are chosen, not measured: sanity guards, and no simulator here produces VIBRATION.
 VIBE_MAX_M_S2 = 100.0  # a vibration metric beyond this is a sensor fault, not a propeller
 FROZEN_REPEATS = 20  # identical float readings in a row: a stuck stream
 VIBE_BASELINE_S = 10.0  # airborne seconds that define the flight's own vibration level

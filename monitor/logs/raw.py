@@ -38,12 +38,12 @@ LIFT_CMD = {"us": 1150.0, "cf16": 0.15 * 65535.0}
 # Height above the first sample that counts as off the ground, where a
 # height stream exists (CrazyPAD's README uses z > 0.25 m).
 DEFAULT_MIN_HEIGHT_M = 0.25
-# Airborne stretches shorter than this are take-off bounces, not flight.
+# Airborne stretches shorter than this are take-off bounces, not flight. Chosen, not measured.
 MIN_SEGMENT_S = 1.0
 # A mean motor command below lift throttle for at most this long between two airborne stretches, while armed and
 # (where logged) the land detector says in the air, is a throttle dip in flight (a fast descent, a controller
 # transient, a dropped output sample), not a landing: evalsim's controller dips to 1104 us for 0.2 s on descents,
-# which reset the in-flight rule's evidence as if the vehicle had landed.
+# which reset the in-flight rule's evidence as if the vehicle had landed. Chosen, not measured: five times that dip.
 MAX_THROTTLE_DIP_S = 1.0
 
 

@@ -17,7 +17,7 @@ from monitor.memory import thresholds as th
 from monitor.memory.summary import FlightSummary
 
 # Ridge of the tilt slopes: (0.01 rad)^2 per step, i.e. tilt that varies by less than about half a degree within the
-# flights carries no slope. Not tuned: a floor against a singular regression on hover-only flights.
+# flights carries no slope. Chosen, not measured: a floor against a singular regression on hover-only flights.
 TILT_RIDGE_RAD2 = 1.0e-4
 
 

@@ -18,8 +18,11 @@ from monitor.errors import ConfigError
 from monitor.flight import FlightTable
 
 # Seconds after each take-off whose steps are not accepted: the climb-out from the ground (spool-up, ground effect).
+# Chosen, not measured: our simulator's flights start in hover and model no ground effect.
 SETTLE_S = 2.0
-BLOCK_S = 2.0  # block length of the within-flight wander (10 blocks in 20 s: a covariance from one flight)
+# Block length of the within-flight wander (10 blocks in 20 s: a covariance from one flight). Chosen, not measured;
+# the thresholds of monitor/memory/thresholds.py were measured with it (`make calibrate-memory`).
+BLOCK_S = 2.0
 N_REGIME = 3  # (1, roll, pitch)
 
 
