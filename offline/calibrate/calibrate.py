@@ -267,11 +267,14 @@ def calibrate(tables: list[FlightTable], nominal: VehicleConfig, candidates: lis
     if "motor_efficiency" in {f["effect"] for f in findings}:
         inspect = inspect_rotor(list(calibrated.motor_efficiency))
         if inspect:
-            base = dataclasses.replace(calibrated, motor_efficiency=nominal.motor_efficiency)
+            # The other three at their common level (with mass or the ESC named beside, that level carries part of
+            # the collective), rotor k free.
+            level = float(np.mean(np.delete(np.asarray(calibrated.motor_efficiency), inspect["rotor"] - 1)))
+            base = dataclasses.replace(calibrated, motor_efficiency=(level,) * 4)
             one = one_rotor_reading(data, base, inspect["rotor"] - 1, sigma)
             inspect["if_only_this_rotor"] = one
             inspect["why"] += (
-                f". Read as rotor {inspect['rotor']} alone (the other three as the file says): thrust "
+                f". Read as rotor {inspect['rotor']} alone (the other three equal): thrust "
                 f"{one['thrust_pct']:+.1f} %, torque per thrust {one['torque_per_thrust_pct']:+.1f} % (held-out BIC "
                 f"{one['torque_heldout_bic_gain']:.1f} for that torque change); a motor or ESC moves thrust and torque "
                 "alike, a damaged propeller changes its torque per thrust"

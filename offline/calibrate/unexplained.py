@@ -117,7 +117,8 @@ def one_rotor_reading(data: Data, base: VehicleConfig, rotor: int, sigma: dict[s
     """``rotor`` (0-based) alone off ``base``: its speed scale fitted (thrust and torque alike, one parameter), then
     its torque per thrust on top (the ``rotor_torque`` probe). A motor or ESC moves a rotor's thrust and torque
     alike; a damaged propeller changes its torque per thrust. Only a reading under the assumption that the other
-    three rotors are as ``base`` says: a weak motor with the others spread in the yaw pattern fits the same data."""
+    three rotors are as ``base`` says: a weak motor with the others spread in the yaw pattern fits the same data.
+    Thrust is given against ``base``'s own value for that rotor."""
     k = rotor
 
     def set_k(v: VehicleConfig, x: np.ndarray) -> VehicleConfig:
