@@ -8,6 +8,7 @@ import math
 from dataclasses import replace
 from pathlib import Path
 
+import evalsim_flights
 import numpy as np
 import pytest
 
@@ -33,17 +34,25 @@ def _spec(name, loss=(0.0, 0.0, 0.0, 0.0), seed=1, duration_s=8.0, route=HOVER, 
     return FlightSpec(name, af, route, duration_s, seed, wind=Wind(), sensors=QUIET)
 
 
-@pytest.fixture(scope="module")
-def flights():
-    """One batch: healthy hover, rotor 1 weak (15 %), rotor 3 weak, and a flown route."""
+def _fixture_specs() -> list[FlightSpec]:
     route = ((8.0, 4.0, -9.0), (-6.0, 8.0, -11.0), (0.0, 0.0, -10.0), (5.0, -5.0, -10.0), (0.0, 0.0, -10.0))
-    specs = [
+    return [
         _spec("hover"),
         _spec("weak1", (0.15, 0.0, 0.0, 0.0)),
         _spec("weak3", (0.0, 0.0, 0.15, 0.0)),
         _spec("route", route=route, seed=5),
     ]
-    return specs, simulate_flights(specs)
+
+
+evalsim_flights.declare(__name__, "flights", _fixture_specs)
+
+
+@pytest.fixture(scope="module")
+def flights():
+    """Healthy hover, rotor 1 weak (15 %), rotor 3 weak, and a flown route: flown in the session's evalsim batch
+    (tests/evalsim_flights.py), beside whatever other flights the session's tests declared."""
+    specs = _fixture_specs()
+    return specs, evalsim_flights.simulate_flights(specs)
 
 
 # --- frames and numbering -------------------------------------------------------------
