@@ -44,8 +44,9 @@ LAG_RESOLUTION_MS = {"one": 60, "common": 60}
 # fits as a weak motor plus a small spread in the yaw pattern: the logs cannot tell them apart. 5 % is below the
 # smallest propeller damage the hidden-effect matrix draws (8 % thrust loss at hover, bench/evalsim_calibration.py)
 # and above the +-1 % spread of the evaluation simulator's healthy airframes; the ratio keeps a four-way spread
-# (each rotor off by a similar amount) from singling one out. How often it appears on damaged, weak and spread
-# runs: ``python -m bench.evalsim_calibration`` (column inspect_rotor; docs/CALIBRATION.md).
+# (each rotor off by a similar amount; the matrix's pattern +-s, +-s/2 gives 1.8) from singling one out. How often
+# it appears on damaged, weak and spread runs: ``python -m bench.evalsim_calibration`` (column inspect_rotor) and
+# ``python -m bench.evalsim_inspect`` (with the one-rotor reading); docs/CALIBRATION.md.
 INSPECT_MIN_DEVIATION = 0.05
 INSPECT_OUTLIER_RATIO = 2.0
 
@@ -277,7 +278,9 @@ def calibrate(tables: list[FlightTable], nominal: VehicleConfig, candidates: lis
                 f". Read as rotor {inspect['rotor']} alone (the other three equal): thrust "
                 f"{one['thrust_pct']:+.1f} %, torque per thrust {one['torque_per_thrust_pct']:+.1f} % (held-out BIC "
                 f"{one['torque_heldout_bic_gain']:.1f} for that torque change); a motor or ESC moves thrust and torque "
-                "alike, a damaged propeller changes its torque per thrust"
+                "alike, a damaged propeller changes its torque per thrust, but a +-2 % spread of the other three moves "
+                "this reading by as much as a damaged propeller does (python -m bench.evalsim_inspect): a hint for the "
+                "inspection, not a verdict"
             )
             notes.append(inspect["why"])
     unexplained = unexplained_residual(data, calibrated, final.residuals if final else sel.nominal_residuals)
