@@ -124,6 +124,13 @@ def markdown(r: CalibrationResult) -> str:
         f"**Cause: {r.cause or 'none stands out above the noise'}**" + (f" (confidence {r.confidence:.3f})" if r.cause else ""),
         "",
     ]
+    if r.unexplained.get("found"):
+        lines += [
+            f"**Unexplained residual** (no term can express it; nothing written onto the vehicle): {r.unexplained['summary']}",
+            "",
+        ]
+    if r.inspect_rotor:
+        lines += [f"**Inspect rotor {r.inspect_rotor['rotor']}'s propeller** before trusting this calibration (notes below).", ""]
     for f in r.findings:
         lines += (
             [
