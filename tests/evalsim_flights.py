@@ -1,9 +1,9 @@
 """Flights of the evaluation-only simulator (``offline/evalsim``) for tests: each ``FlightSpec`` flown once per test
 session, and every flight the session's selected tests declared flown together in one batch.
 
-evalsim integrates a batch vectorised over flights, so a step costs about the same for one flight as for twelve
-(10-s onset flights: 3.5 s alone, 4.5 s for twelve), and a flight is the same, array for array, whichever flights
-and durations it is batched with (``tests/test_evalsim.py::test_flight_is_deterministic_and_independent_of_its_batch``).
+evalsim integrates a batch vectorised over flights, so a step costs little more for a dozen flights than for one,
+and a flight is the same, array for array, whichever flights and durations it is batched with
+(``tests/test_evalsim.py::test_flight_is_deterministic_and_independent_of_its_batch``).
 A test module declares, when it is imported, the specs a fixture of it will fly (``declare``); the first fixture of
 the session that asks for flights (``simulate_flights``, or ``write_set`` and ``evalsim_set`` under ``shared()``)
 flies every declared flight that a selected test needs, and later fixtures read theirs from the cache. A spec that

@@ -224,8 +224,9 @@ def test_route_is_flown(flights):
 
 def test_flight_is_deterministic_and_independent_of_its_batch(flights):
     specs, logs = flights
-    # The same flight in another batch (other partner, other position, batch of 2 not 4).
-    again, other = simulate_flights([specs[2], _spec("weak3", (0.0, 0.0, 0.15, 0.0), seed=2)])
+    # The same flight in another batch (other partner, other position, batch of 2 not 4, a partner that flies
+    # longer: tests/evalsim_flights.py batches flights of every duration together).
+    again, other = simulate_flights([specs[2], _spec("weak3", (0.0, 0.0, 0.15, 0.0), seed=2, duration_s=10.0)])
     assert np.array_equal(again.pwm_us, logs[2].pwm_us)
     assert np.array_equal(again.timestamp_us, logs[2].timestamp_us)
     n = min(other.n_samples, again.n_samples)
