@@ -85,8 +85,11 @@ def prior_normal(predicted: np.ndarray, flight: FlightSummary, weight_flights: f
 
 
 def calibrated_vehicle(files: list[str], nominal: VehicleConfig, cache_dir: Path | None = None) -> tuple[VehicleConfig, dict]:
-    """``propwatch calibrate``'s calibrated vehicle from ``files`` (and its findings), cached in ``cache_dir``."""
-    key = hashlib.sha256(json.dumps([str(Path(f).resolve()) for f in files] + [repr(nominal)]).encode()).hexdigest()[:16]
+    """``propwatch calibrate``'s calibrated vehicle from ``files`` (and its findings), cached in ``cache_dir`` (keyed by
+    the logs, the nominal vehicle and the calibrator's source, so a changed calibrator fits again)."""
+    calibrator = Path(__file__).resolve().parents[1] / "calibrate"
+    code = sorted((p.name, hashlib.sha256(p.read_bytes()).hexdigest()) for p in calibrator.glob("*.py"))
+    key = hashlib.sha256(json.dumps([str(Path(f).resolve()) for f in files] + [repr(nominal), code]).encode()).hexdigest()[:16]
     path = cache_dir / f"{key}.json" if cache_dir else None
     if path and path.is_file():
         d = json.loads(path.read_text())
