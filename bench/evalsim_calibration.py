@@ -320,6 +320,8 @@ def calibrate_tables(tabs, rival_vs_lag: bool = False) -> dict:
         ],
         "inspect_rotor": r.inspect_rotor,
         "kin_corr_time": r.unexplained["probes"]["slow_kinematic_error"]["corr_time_samples"],
+        # The variance check a whiteness check is compared with: the kinematic residual's held-out RMS, largest axis.
+        "kin_rms": max(v for k, v in r.gain["heldout_residual_rms_by_signal_after"].items() if k.endswith("_kin_rad_s")),
         "delay_probe_ms": round(1000 * r.unexplained["probes"]["telemetry_delay"]["value"], 1),
     }
 
@@ -504,6 +506,7 @@ def _nominal_summary(rows) -> dict:
         "unexplained": sum(r["unexplained"] for r in rows),
         "rival_minus_best_max": max((x["rival_minus_best"] for r in rows for x in r["rival"]), default=None),
         "kin_corr_time_max": _max_of(rows, "kin_corr_time"),
+        "kin_rms_max": _max_of(rows, "kin_rms"),
         "rival_minus_lag_max": _max_of(rows, "rival_minus_lag"),
     }
 
@@ -518,6 +521,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--outside-seeds", type=int, default=10)
     ap.add_argument("--own-nominal", type=int, default=10, help="our-simulator runs with nothing hidden (2 flights each)")
     ap.add_argument("--effects", nargs="+", default=None)
+    ap.add_argument("--outside", nargs="+", default=None, help="outside-library effects to run (default: all)")
     a = ap.parse_args(argv)
     a.out.mkdir(parents=True, exist_ok=True)
     effects = _effects()
@@ -561,6 +565,8 @@ def main(argv: list[str] | None = None) -> int:
     # 2. Outside the library (before the matrix: a run cut short keeps the targets the matrix cannot miss).
     res["outside"] = {}
     for name, (mod, post) in _outside().items():
+        if a.outside and name not in a.outside:
+            continue
         rows = []
         for seed in range(a.outside_seeds):
             specs = [mod(sp, _rng("outside", name, seed)) for sp in eval_specs(2000 + seed, a.duration_s)]
@@ -591,6 +597,7 @@ def main(argv: list[str] | None = None) -> int:
                 (r["rival_minus_lag"] for r in rows if r.get("rival_minus_lag") is not None), default=None
             ),
             "kin_corr_time_min": min((r["kin_corr_time"] for r in rows), default=None),
+            "kin_rms_min": min((r["kin_rms"] for r in rows), default=None),
         }
     # 3. Nothing hidden.
     rows = []

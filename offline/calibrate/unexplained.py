@@ -1,22 +1,29 @@
 """What the calibrated model still gets wrong that no term of the library can express: "unexplained residual".
 
-After selection, small probes outside the term library are fitted to the calibrated model's residual, each a
-linear regression through the same filters as the model (``physics.integrated``), fitted on the fit blocks
-and scored on the held-out blocks with the selection's BIC (``fit.bic``: correlation-time corrected):
+After selection, small probes outside the term library are fitted to the calibrated model's residual, fitted on
+the fit blocks and scored on the held-out blocks with the selection's BIC (``fit.bic``: correlation-time corrected):
 
-- ``rotor_torque`` (one per rotor, 1 parameter): rotor i's drag torque off its thrust by a factor, seen in the
-  yaw equation alone. The library scales a rotor's thrust and torque together (``motor_efficiency``); a damaged
-  or mismatched propeller changes its torque per unit thrust, which no term can;
+- ``rotor_torque`` (one per rotor, 1 parameter, a linear regression through the model's own filters,
+  ``physics.integrated``): rotor i's drag torque off its thrust by a factor, seen in the yaw equation alone. The
+  library scales a rotor's thrust and torque together (``motor_efficiency``); a damaged or mismatched propeller
+  changes its torque per unit thrust, which no term can (it shows here only when ``motor_efficiency`` is not a
+  candidate);
 - ``telemetry_delay`` (1 parameter, ``delay_probe``): the estimator's attitude, rates and velocity stamped ``d``
   later than the motor outputs they answer, fitted exactly (the commands shifted by ``d``, a grid and a 1-D
   search), not linearised. The same probe competes with the library's terms in every selection round
   (``fit.select_terms``, ``rival``): where it explains the held-out data better than the round's best term by
   ``fit.RIVAL_MARGIN_BIC``, that term is not named. A motor lag and a delay agree to first order in w*tau;
-  on 2 x 40 s flights at 20 Hz the second-order difference is a few tens of BIC (docs/CALIBRATION.md).
+  on 2 x 40 s flights at 20 Hz the second-order difference is a few tens of BIC (docs/CALIBRATION.md);
+- ``slow_kinematic_error`` (no parameter): the attitude kinematics' residual correlated for longer than
+  ``KIN_CORR_TIME_MAX`` samples, the logged rates and attitude drifting apart slowly (coloured noise).
 
-A probe whose held-out BIC gain exceeds the selection's gate (``fit.MIN_DELTA_BIC``) is reported with its size
-(the held-out RMS it removes, per signal) and where it sits (signal, rotor); the cause stays whatever the library
-named: a probe never becomes a term of the calibrated vehicle.
+A probe whose held-out BIC gain exceeds the selection's gate (``fit.MIN_DELTA_BIC``), or a kinematic residual
+beyond its correlation-time ceiling, is reported with its size and where it sits (signal, rotor, delay); the cause
+stays whatever the library named: a probe never becomes a term of the calibrated vehicle.
+
+What no probe here can see: a damaged propeller in a healthy flight. Four motor efficiencies span every static
+thrust and moment pattern, so its thrust loss and torque change fit as ``motor_efficiency`` (a weak motor plus a
+yaw-pattern spread); ``calibrate.inspect_rotor`` says so when the named efficiencies single out one rotor.
 """
 
 from __future__ import annotations
