@@ -19,6 +19,7 @@ from collections.abc import Callable
 _DECLARED: dict[str, Callable[[], list]] = {}  # "module::fixture" -> the specs that fixture flies
 _SELECTED: set[str] | None = None  # "module::fixture" of the session's selected tests (None: unknown, fly all)
 _FLOWN: dict = {}  # FlightSpec -> its one-flight FlightLog
+_EVALSIM: dict[str, Callable] = {}  # "fly": offline.evalsim.flight.simulate_flights, kept while shared() replaces it
 BATCH = 32  # flights integrated together, as offline.evalsim.sets flies a set (memory ~ BATCH * duration)
 
 
@@ -39,8 +40,9 @@ def _batch_key(spec) -> tuple:
 
 
 def _fly(specs: list) -> None:
-    from offline.evalsim.flight import simulate_flights as fly
+    import offline.evalsim.flight
 
+    fly = _EVALSIM.get("fly", offline.evalsim.flight.simulate_flights)
     groups: dict[tuple, list] = {}
     for s in dict.fromkeys(specs):
         if s not in _FLOWN:
@@ -72,6 +74,7 @@ def shared():
     import offline.evalsim.flight
     import offline.evalsim.sets
 
+    _EVALSIM.setdefault("fly", offline.evalsim.flight.simulate_flights)  # before it is replaced: _fly flies with it
     with pytest.MonkeyPatch.context() as mp:
         mp.setattr(offline.evalsim.flight, "simulate_flights", simulate_flights)
         mp.setattr(offline.evalsim.sets, "simulate_flights", simulate_flights)
