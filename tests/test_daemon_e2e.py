@@ -46,10 +46,7 @@ FLIGHTS = {"healthy": (1, None, 80.0, 13)}  # name: (label, fault, duration_s, s
 
 @pytest.fixture(scope="module")
 def flights(tmp_path_factory):
-    out = {}
-    for name, (faulty, seed) in ONSETS.items():
-        tlog = simulated_tlog(tmp_path_factory.mktemp(name), faulty, ONSET_S, ONSET_FLIGHT_S, wind_m_s=0.0, seed=seed)
-        out[name] = (tlog, tuple(faulty))
+    started = {}  # the whole flights simulate in their own processes while the onset flights simulate here
     for name, (label, fault, duration, seed) in FLIGHTS.items():
         d = tmp_path_factory.mktemp(name)
         cmd = [
@@ -72,11 +69,21 @@ def flights(tmp_path_factory):
         ]
         if fault:
             cmd += ["--fault", fault]
-        p = subprocess.run(cmd, cwd=REPO, capture_output=True, text=True, timeout=300)
-        if p.returncode != 0:
-            pytest.skip(f"propwatch simulate is not available: {p.stderr.strip()[-300:]}")
-        truth = json.loads((d / "sidecar.json").read_text())["flights"][0]
-        out[name] = (d / truth["file"], tuple(truth["faulty_propellers"]))
+        started[name] = (d, subprocess.Popen(cmd, cwd=REPO, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True))
+    out = {}
+    try:
+        for name, (faulty, seed) in ONSETS.items():
+            tlog = simulated_tlog(tmp_path_factory.mktemp(name), faulty, ONSET_S, ONSET_FLIGHT_S, wind_m_s=0.0, seed=seed)
+            out[name] = (tlog, tuple(faulty))
+        for name, (d, p) in started.items():
+            _, err = p.communicate(timeout=300)
+            if p.returncode != 0:
+                pytest.skip(f"propwatch simulate is not available: {err.strip()[-300:]}")
+            truth = json.loads((d / "sidecar.json").read_text())["flights"][0]
+            out[name] = (d / truth["file"], tuple(truth["faulty_propellers"]))
+    finally:
+        for _, p in started.values():
+            p.kill()
     return out
 
 
