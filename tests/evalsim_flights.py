@@ -61,7 +61,10 @@ def simulate_flights(specs: list) -> list:
         wanted = list(specs)
         for key, make in _DECLARED.items():
             if _SELECTED is None or key in _SELECTED:
-                wanted += make()
+                try:
+                    wanted += make()
+                except Exception:  # noqa: BLE001 - that fixture fails on its own when it asks, with its own error
+                    continue
         _fly(wanted)
     return [copy.deepcopy(_FLOWN[s]) for s in specs]
 
