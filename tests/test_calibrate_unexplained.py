@@ -120,3 +120,20 @@ def test_nominal_flights_fix_the_library_terms_and_draw_the_rest():
         assert reg[name].low == reg[name].high == reg[name].nominal, name
     for name in ("battery_internal_resistance_ohm", "attitude_log_delay_s", "turbulence_sigma_w_m_s", "mc_rollrate_p"):
         assert flights[0][name] != flights[1][name], name
+
+
+def test_the_delay_rival_keeps_a_term_unnamed_only_beyond_its_margin():
+    """The rule by hand: the round's best passing term loses its name only when the outside-library rival's held-out
+    BIC is lower than its own by more than the margin; the verdict names the gate, the rival and the numbers."""
+    from types import SimpleNamespace
+
+    from offline.calibrate.fit import RIVAL_MARGIN_BIC, rival_verdict
+
+    trial = SimpleNamespace(bic=100.0)
+    rival = {"name": "telemetry_delay", "describe": "estimator signals 80 ms later", "bic": 100.0 - RIVAL_MARGIN_BIC - 1.0}
+    v = rival_verdict("motor_time_constant", trial, rival, 500.0)
+    assert not v.named and v.gate == "outside_library" and v.gain == 400.0
+    assert "telemetry_delay" in v.why and "not motor_time_constant" in v.why, v.why
+    (check,) = v.checks
+    assert check.numbers["lead"] == RIVAL_MARGIN_BIC + 1.0 and not check.passed
+    assert rival_verdict("motor_time_constant", trial, rival | {"bic": 100.0 - RIVAL_MARGIN_BIC + 1.0}, 500.0) is None
