@@ -156,3 +156,20 @@ def test_adapt_json_on_two_healthy_logs_is_strict_json(tmp_path, capsys):
     assert all(np.isfinite(floats(manifest)))
     assert "nan" not in (tmp_path / "card.md").read_text().lower()
     assert ".nan" not in (tmp_path / "vehicle.yaml").read_text()
+
+
+def test_adapt_says_which_rotor_to_inspect_when_the_calibration_singles_one_out(tmp_path, monkeypatch, capsys):
+    """The calibration's damaged-propeller caveat reaches the person running adapt (its baseline learnt these flights
+    as healthy): the pipeline's result is stubbed here; the caveat's rule is tested in test_calibrate_unexplained."""
+    import offline.adapt.cli as cli
+    import offline.adapt.pipeline as pipeline
+    from offline.calibrate.calibrate import inspect_rotor
+
+    caveat = inspect_rotor([0.940, 0.992, 1.007, 1.008])
+    res = {"out": str(tmp_path), "scores": {}, "calibration": {"view": "dynamic", "cause": "motor_efficiency"}}
+    for given, said in ((caveat, True), (None, False)):
+        res["calibration"]["inspect_rotor"] = given
+        monkeypatch.setattr(pipeline, "adapt", lambda *a, **k: res)
+        assert cli.main(["--healthy", "a.tlog", "b.tlog", "--vehicle", str(CRAZYFLIE), "--out", str(tmp_path)]) == 0
+        out = capsys.readouterr().out
+        assert ("INSPECT ROTOR 1:" in out and "damaged propeller" in out) == said

@@ -53,6 +53,9 @@ def main(argv: list[str] | None = None) -> int:
         print()
     else:
         print(f"adapted model, vehicle, baseline and card in {res['out']}")
+        inspect = res["calibration"].get("inspect_rotor")
+        if inspect:
+            print(f"  INSPECT ROTOR {inspect['rotor']}: {inspect['why']}")
         for kind, s in res["scores"].items():
             print(f"  {kind}: exact {s['exact']}/{s['scored']}, healthy false alarms {s['healthy_false_alarms']}/{s['healthy']}")
     return 0

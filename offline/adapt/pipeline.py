@@ -386,6 +386,9 @@ def adapt(
             "view": cal.view,
             "cause": cal.cause,
             "unexplained_residual": cal.record.get("unexplained_residual"),
+            # the damaged-propeller caveat (offline.calibrate.calibrate.inspect_rotor): the baseline written here
+            # learnt these flights as healthy, so a damaged propeller in them is the vehicle's normal until inspected
+            "inspect_rotor": cal.record.get("inspect_rotor"),
         },
         "features": list(features),
         "scores": {k: v["summary"] for k, v in scores.items()},
