@@ -397,7 +397,11 @@ def test_tcp_link_that_is_not_there_yet_then_comes_and_goes(tmp_path, model):
             timeout=60,
         )
         assert r.returncode == 0, r.stderr
-        assert d.wait_for("connection closed by the peer"), d.text
+        # The peer's close reaches the daemon as an end of stream (FIN), or as a reset (RST) where the replay closed
+        # with the daemon's heartbeats unread in its buffer: the kernel's choice, not the daemon's. Either way the
+        # daemon says so, reopens and goes on.
+        assert d.wait_for("reopening"), d.text
+        assert "connection closed by the peer" in d.text or "Connection reset by peer" in d.text, d.text
         assert d.p.poll() is None
     finally:
         rc = d.stop()
