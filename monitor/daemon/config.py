@@ -175,20 +175,24 @@ class InferenceConfig:
         _within(self.threads, 1, 64, "inference.threads")
 
 
+_RULE = DecisionConfig()  # the rule's defaults, once
+
+
 @dataclass(frozen=True)
 class AlertConfig:
     # sequential: monitor.decision (CUSUM; thresholds from the false-alarm rates below), shared with diagnose.
     rule: str = "sequential"
-    false_alarms_per_hour: float = 0.1  # fault level (WARNING / CRITICAL)
-    suspect_false_alarms_per_hour: float = 1.0  # suspect level (NOTICE; was 2.0, models/decision-evaluation.md)
-    aggressive_tilt_deg: float = 45.0  # windows holding a manoeuvre beyond this add no evidence
-    aggressive_rate_deg_s: float = 200.0
-    collective_step_fraction: float = 0.07  # payload drop / pick-up: 10-s median RPM change that re-learns baselines
-    battery_sag_fraction: float = 0.04  # voltage lost within one window that discounts evidence
-    min_thrust_loss: float = 0.08  # the smallest per-rotor thrust loss the omega^2-share evidence calls (CUSUM reference)
-    fault_evidence: str = "physics"  # "physics": only the omega^2 shares raise FAULT (the network: suspect); "all"
-    suspect_evidence: str = "all"  # "physics": the network raises nothing, not even SUSPECT (it only words); "all"
-    calibration_path: str = ""  # '' = models/decision-calibration.json (threshold calibration of the model)
+    # The sequential rule's keys: their defaults, meanings and measured sources are DecisionConfig's.
+    false_alarms_per_hour: float = _RULE.false_alarms_per_hour  # fault level (WARNING / CRITICAL)
+    suspect_false_alarms_per_hour: float = _RULE.suspect_false_alarms_per_hour  # suspect level (NOTICE)
+    aggressive_tilt_deg: float = _RULE.aggressive_tilt_deg
+    aggressive_rate_deg_s: float = _RULE.aggressive_rate_deg_s
+    collective_step_fraction: float = _RULE.collective_step_fraction
+    battery_sag_fraction: float = _RULE.battery_sag_fraction
+    min_thrust_loss: float = _RULE.min_thrust_loss
+    fault_evidence: str = _RULE.fault_evidence
+    suspect_evidence: str = _RULE.suspect_evidence
+    calibration_path: str = _RULE.calibration_path  # '' = models/decision-calibration.json
     statustext_min_interval_s: float = 5.0  # rate limit of STATUSTEXT to the GCS
     named_value_float: bool = False  # send each probability as NAMED_VALUE_FLOAT PWF1..PWF4
 
