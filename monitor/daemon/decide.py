@@ -69,11 +69,10 @@ class DecisionStage:
         out = StepOutcome()
         t = step.timestamp_us / US_PER_S
         inputs = step.inputs
+        rpm = inputs.motor_rpm if inputs is not None else None
         if self.rotors is not None:
-            rpm = inputs.motor_rpm if inputs is not None else None
             self.rotors.push(rpm, step.rates_rad_s, step.valid, airborne=bool(inputs.airborne) if inputs is not None else True)
         if self.memory is not None:
-            rpm = inputs.motor_rpm if inputs is not None else None
             a = self.memory.step(t, step.airborne, rpm, step.roll_rad, step.pitch_rad)
             if a is not None:
                 out.alerts.append(self._raised(a, step.time_boot_ms))
@@ -81,7 +80,10 @@ class DecisionStage:
             self.flight_sets.reset()  # landed: the next flight gets a new set
         self._airborne = step.airborne
         self.decision.step(t, inputs or StepInputs.of_state(step.airborne))
-        out.shares_learning, out.memory_status = self._shares_learning(), self.memory.status() if self.memory else ""
+        if step.valid:  # STATUS reads the shares' learning on a deciding step, the memory's on it or on the ground
+            out.shares_learning = self._shares_learning()
+        if self.memory is not None and (step.valid or not step.airborne):
+            out.memory_status = self.memory.status()
         self.pause(paused)
         if not step.valid or step.fault_probability is None:
             return out

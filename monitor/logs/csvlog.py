@@ -270,6 +270,7 @@ def _parse(path: Path, delimiter: str) -> tuple[list[str], np.ndarray, list[str]
 def read_csv(path: str | Path, fmt: str | CsvFormat, formats_path: str | Path = FORMATS_FILE) -> RawFlight:
     path = Path(path)
     spec = get_format(fmt, formats_path) if isinstance(fmt, str) else fmt
+    name = fmt if isinstance(fmt, str) else _name(spec, formats_path)  # for messages: found once
     if not path.is_file():
         raise LogFormatError(f"{path}: no such file")
     header, data, warnings = _parse(path, spec.delimiter)
@@ -277,7 +278,7 @@ def read_csv(path: str | Path, fmt: str | CsvFormat, formats_path: str | Path = 
     if missing:
         hint = _matching_formats(header, formats_path)
         raise LogFormatError(
-            f"{path}: columns {missing} needed by format {_name(spec, formats_path)!r} are missing"
+            f"{path}: columns {missing} needed by format {name!r} are missing"
             + (f"; the header fits format(s) {hint}" if hint else "")
         )
     if len(data) == 0:
@@ -294,7 +295,7 @@ def read_csv(path: str | Path, fmt: str | CsvFormat, formats_path: str | Path = 
     t_us = np.round(data[:, col[spec.time.column]] * TO_PROJECT[spec.time.unit]).astype(np.int64)
     for what in ("roll", "pitch", "yaw", "roll_rate", "pitch_rate", "yaw_rate"):
         if getattr(spec, what).column is None:
-            warnings.append(f"{what} is not logged in format {_name(spec, formats_path)!r}")
+            warnings.append(f"{what} is not logged in format {name!r}")
     motors = np.stack([data[:, col[m]] if m else np.full(len(data), np.nan) for m in spec.motors], axis=1)
     if not any(spec.motors) and spec.mixer.kind:
         mx = spec.mixer
@@ -302,7 +303,7 @@ def read_csv(path: str | Path, fmt: str | CsvFormat, formats_path: str | Path = 
         motors = own[:, [k - 1 for k in mx.outputs_to_px4]]
         warnings.append(f"motor commands rebuilt from {', '.join(mx.columns())} with the {mx.kind} mixer (not logged)")
     elif not any(spec.motors):
-        warnings.append(f"motor commands are not logged in format {_name(spec, formats_path)!r}")
+        warnings.append(f"motor commands are not logged in format {name!r}")
 
     def opt(*specs: ColumnSpec) -> Stream | None:
         if all(s.column is None or s.column not in col for s in specs):
