@@ -234,7 +234,7 @@ def run_inprocess(args) -> dict:
     with tempfile.TemporaryDirectory() as tmp:
         model, tlog = build_inputs(args, Path(tmp))
         clf = Classifier(str(model))
-        from monitor.replay import read_tlog
+        from monitor.mavlink.player import read_tlog
 
         frames = [f for _, f, _ in read_tlog(tlog)]
     parser = mavlink.MAVLink(None)

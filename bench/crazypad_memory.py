@@ -20,7 +20,7 @@ from collections import defaultdict
 from pathlib import Path
 
 from bench import REPO
-from monitor.diagnose.memory import as_imbalance
+from monitor.diagnose.memory_adapter import as_imbalance
 from monitor.memory.judge import judge
 from monitor.memory.learn import HealthyOutlierError, learn_baseline
 from monitor.memory.summary import summarize

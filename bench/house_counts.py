@@ -28,8 +28,8 @@ LAYER = {"monitor": 0, "offline": 1, "fleet": 1, "bench": 2}
 APPS = {
     "daemon": ("monitor.daemon",),
     "diagnose": ("monitor.diagnose",),
-    "inspect": ("monitor.inspect_cli", "monitor.inspect_log"),
-    "replay": ("monitor.replay",),
+    "inspect": ("monitor.inspect.cli", "monitor.inspect.log"),
+    "replay": ("monitor.mavlink.player",),
 }
 DISPATCH = ("monitor.cli", "monitor.__main__")
 

@@ -75,8 +75,8 @@ def build(args, work: Path):
     from monitor.daemon.pipeline import Pipeline
     from monitor.daemon.sdnotify import Notifier
     from monitor.daemon.service import Daemon
+    from monitor.mavlink.player import read_tlog
     from monitor.model import Classifier, choose_esc
-    from monitor.replay import read_tlog
     from monitor.vehicle import DEFAULT_VEHICLE, load_vehicle
     from tests.test_daemon_helpers import synth_flight, toy_model, write_tlog
 

@@ -19,7 +19,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 from fleet.discover import content_hash, find_logs
-from fleet.memory import judge_store
+from fleet.memory_adapter import judge_store
 from fleet.raycluster import cluster_cpus, ray_session
 from fleet.schema import (
     export_parquet,
@@ -58,7 +58,7 @@ class IngestSummary:
     total_s: float = 0.0
     worker_pids: list[int] = field(default_factory=list)
     export: str | None = None
-    memory_judged: int = 0  # rows judged against their vehicle's healthy flights before them (fleet.memory)
+    memory_judged: int = 0  # rows judged against their vehicle's healthy flights before them (fleet.memory_adapter)
 
     def to_json(self) -> dict:
         out = asdict(self)

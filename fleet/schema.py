@@ -51,7 +51,7 @@ COLUMNS: tuple[tuple[str, str], ...] = (
     ("process_s", "DOUBLE"),  # worker wall-clock seconds spent on this log
     ("process_cpu_s", "DOUBLE"),  # worker CPU seconds (user + system) spent on this log
 ) + (
-    # Vehicle memory (fleet.memory): each flight judged against its vehicle's healthy flights before it.
+    # Vehicle memory (fleet.memory_adapter): each flight judged against its vehicle's healthy flights before it.
     ("confidence", "VARCHAR"),  # the verdict's: confident | ambiguous | suspect | uncertain (NULL: no verdict)
     ("baseline_flights", "INTEGER"),  # healthy flights of this vehicle it was compared with (0: none yet)
     ("compared_with_first", "VARCHAR"),  # their first and last dates (YYYY-MM-DD), NULL where unknown

@@ -28,10 +28,10 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "crazypad": ("offline.crazypad.cli", "sim-to-real experiment on CrazyPAD"),
     "adapt": ("offline.adapt.cli", "calibrate, simulate, train and baseline a new airframe from its healthy logs"),
     "diagnose": ("monitor.diagnose.cli", "diagnose recorded flight logs"),
-    "inspect": ("monitor.inspect_cli", "what propwatch read from a log: messages, rates, gaps, motors, CSV"),
+    "inspect": ("monitor.inspect.cli", "what propwatch read from a log: messages, rates, gaps, motors, CSV"),
     "monitor": ("monitor.daemon.cli", "run the onboard monitor daemon"),
     "keygen": ("monitor.daemon.keygen", "write a new MAVLink 2 signing key for the monitor (mode 0600)"),
-    "replay": ("monitor.replay", "replay a .tlog as if it were PX4"),
+    "replay": ("monitor.mavlink.player", "replay a .tlog as if it were PX4"),
     "fleet": ("fleet.cli", "fleet: ingest many logs into a health database (Ray), web report"),
     "baseline": ("monitor.memory.cli", "a vehicle's healthy normal from its own flights: learn, show, note"),
 }

@@ -27,7 +27,7 @@ import pytest
 from test_daemon_process import PY, REPO, fly_over_udp
 from test_decision_daemon import simulated_tlog
 
-from monitor.replay import read_tlog
+from monitor.mavlink.player import read_tlog
 
 CLASSIFIER = REPO / "models" / "classifier.onnx"
 pytestmark = [

@@ -26,10 +26,10 @@ import onnx  # noqa: E402
 from onnx import TensorProto, helper  # noqa: E402
 from pymavlink.dialects.v20 import common as mavlink  # noqa: E402
 
-from monitor import mavlink_esc  # noqa: E402
 from monitor.esc import PAPER_ESC  # noqa: E402
 from monitor.features import PAPER_FEATURES  # noqa: E402
 from monitor.labels import LABEL_MASKS, LABEL_TABLE, class_names  # noqa: E402
+from monitor.mavlink import esc as mavlink_esc  # noqa: E402
 from monitor.model import Classifier  # noqa: E402
 from monitor.vehicle import GRAVITY_M_S2  # noqa: E402
 

@@ -24,8 +24,8 @@ from test_daemon_velocity import (
     run_daemon,
 )
 
-from monitor import mavlink_decode as md
 from monitor.daemon.resampler import StreamingHold, StreamSpec
+from monitor.mavlink import decode as md
 from monitor.model import Classifier
 
 PERIOD_US = 50_000  # the 20 Hz grid
@@ -208,7 +208,7 @@ def test_diagnose_reads_scaled_imu_in_milli_g_where_the_log_has_no_highres_imu(t
 
 def test_diagnose_ignores_the_context_samples_the_daemon_ignores(toy, tmp_path):
     """NaN, absurd and frozen velocity and IMU samples in a recorded flight: diagnose's reader drops the samples the
-    daemon drops (``monitor.envelope``), says so in a warning, and the steps that carry context are the daemon's."""
+    daemon drops (``monitor.decision.envelope``), says so in a warning, and the steps that carry context are the daemon's."""
     from test_daemon_helpers import write_tlog
 
     from monitor.logs import read_log

@@ -11,7 +11,6 @@ import pytest
 from pymavlink.dialects.v20 import common as mavlink
 from test_daemon_helpers import synth_flight, toy_model
 
-from monitor import mavlink_decode as md
 from monitor.daemon.alerts import RateLimiter, StatusTextQueue
 from monitor.daemon.config import MonitorConfig, load_monitor_config, monitor_config_from_mapping
 from monitor.daemon.pipeline import Pipeline
@@ -20,6 +19,7 @@ from monitor.daemon.sdnotify import Notifier
 from monitor.errors import ConfigError, ModelError
 from monitor.esc import PAPER_ESC
 from monitor.features import compute_features, sliding_windows
+from monitor.mavlink import decode as md
 from monitor.model import Classifier
 from monitor.resample import hold
 
@@ -354,7 +354,7 @@ def test_sd_notify_speaks_the_systemd_protocol(tmp_path):
 
 
 def test_esc_status_decodes_even_from_a_parser_that_calls_it_unknown_291():
-    from monitor import mavlink_esc
+    from monitor.mavlink import esc as mavlink_esc
 
     ap = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
     frame = mavlink_esc.encode_esc_status(ap, 123_456_789, [5000, 5100, 5200, 5300], index=0)

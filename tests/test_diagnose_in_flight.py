@@ -191,10 +191,10 @@ def test_the_daemons_alert_reads_the_damaged_rotor_against_the_flights_own_start
 def test_a_vehicle_baseline_does_not_overrule_the_in_flight_answer():
     """A propeller damaged mid-flight: the in-flight rule found the change against the flight's own start; the whole
     flight against the vehicle's history, which mixes the healthy part before it in, names nothing, so the change
-    stands (``monitor.diagnose.memory``); where the history does name a fault, that is the verdict."""
+    stands (``monitor.diagnose.memory_adapter``); where the history does name a fault, that is the verdict."""
     from test_vehicle_memory import QUIRKY, baseline_of, damaged, table
 
-    from monitor.diagnose.memory import judge_flight
+    from monitor.diagnose.memory_adapter import judge_flight
 
     def change_verdict():
         d = Diagnosis("x.tlog", {"label": 1, "faulty_propellers": [], "faulty_names": [], "confidence": "ambiguous"}, 50, [])

@@ -1,4 +1,4 @@
-"""monitor.envelope: the context streams' envelope, judged on a whole log as the daemon judges sample by sample."""
+"""monitor.decision.envelope: the context streams' envelope, judged on a whole log as the daemon judges sample by sample."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import pytest
 
 from monitor.daemon.config import PlausibleConfig
 from monitor.daemon.plausible import Plausibility
-from monitor.envelope import implausible_context
+from monitor.decision.envelope import implausible_context
 from monitor.esc import PAPER_ESC
 
 

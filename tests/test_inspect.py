@@ -10,7 +10,7 @@ import pytest
 from test_diagnose_fixtures import build_model, write_tlog
 
 from monitor.cli import main as propwatch
-from monitor.inspect_log import stream_stats
+from monitor.inspect.log import stream_stats
 from monitor.model import Classifier
 
 ULOG = Path(__file__).resolve().parents[2] / "shared" / "data" / "px4_ulog" / "sample_px4_events.ulg"

@@ -4,7 +4,7 @@ from pymavlink import mavutil
 from pymavlink.dialects.v20 import common
 from pymavlink.generator import mavparse
 
-from monitor import mavlink_esc
+from monitor.mavlink import esc as mavlink_esc
 
 ESC_XML = """<?xml version="1.0"?>
 <mavlink><version>3</version><messages>

@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 from pymavlink import mavutil
 
-from monitor import mavlink_esc
 from monitor.errors import LogFormatError
 from monitor.esc import RPM_PER_RAD_S
+from monitor.mavlink import esc as mavlink_esc
 from monitor.vehicle import DEFAULT_VEHICLE, load_vehicle
 from offline.sim.cli import main as simulate_main
 from offline.sim.io_npz import read_npz, write_npz

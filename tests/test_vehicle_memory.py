@@ -332,7 +332,7 @@ def test_an_airframe_where_cg_and_damage_look_alike_gets_an_imbalance_never_a_pr
     """CrazyPAD: a mass near a rotor and a cut propeller on it move the shares alike (offline/crazypad/README.md);
     a baseline that says so turns a propeller verdict into an imbalance naming both causes and no propeller."""
     from monitor.diagnose.engine import Diagnosis
-    from monitor.diagnose.memory import judge_flight
+    from monitor.diagnose.memory_adapter import judge_flight
 
     b = baseline_of()
     t = damaged(2, 0.10)
@@ -358,7 +358,7 @@ def test_real_crazypad_flights_against_their_airframes_own_history():
     finding that a CG offset and damage look alike, the cut is an imbalance and no propeller is named. The real
     sessions drift: E8_log00 is itself beyond the other three by this rule, and learning it as declared is refused."""
     from monitor.diagnose.engine import Diagnosis
-    from monitor.diagnose.memory import judge_flight
+    from monitor.diagnose.memory_adapter import judge_flight
     from monitor.logs import read_log
     from monitor.vehicle import REPO_ROOT, load_vehicle
 

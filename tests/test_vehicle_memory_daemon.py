@@ -1,4 +1,5 @@
-"""The daemon's vehicle memory (monitor.daemon.memory): learns landed, disarmed, quiet flights; judges from take-off."""
+"""The daemon's vehicle memory (monitor.daemon.memory_adapter): learns landed, disarmed, quiet flights; judges from
+take-off."""
 
 from __future__ import annotations
 
@@ -9,7 +10,7 @@ import sys
 
 import numpy as np
 
-from monitor.daemon.memory import MIN_LEARN_S, VehicleMemory
+from monitor.daemon.memory_adapter import MIN_LEARN_S, VehicleMemory
 from monitor.memory.baseline import VehicleBaseline
 
 RATE_HZ = 20.0

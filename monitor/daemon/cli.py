@@ -20,7 +20,7 @@ from pathlib import Path
 from monitor.daemon.config import MonitorConfig, load_monitor_config, parse_address, parse_endpoint, parse_source
 from monitor.daemon.events import EventWriter
 from monitor.daemon.link import Link, LinkGuard, read_signing_key
-from monitor.daemon.memory import VehicleMemory
+from monitor.daemon.memory_adapter import VehicleMemory
 from monitor.daemon.pipeline import Pipeline
 from monitor.daemon.sdnotify import Notifier
 from monitor.daemon.service import Daemon

@@ -31,7 +31,7 @@ import logging
 import time
 from typing import Any
 
-from monitor import mavlink_decode as md
+from monitor.mavlink import decode as md
 from monitor.resample import US_PER_S
 
 log = logging.getLogger("propwatch.monitor")

@@ -12,7 +12,7 @@ from pathlib import Path
 
 from monitor.config import from_mapping, read_yaml
 from monitor.decision.config import DecisionConfig
-from monitor.envelope import FROZEN_S
+from monitor.decision.envelope import FROZEN_S
 from monitor.errors import ConfigError
 from monitor.resources import shipped
 
@@ -269,7 +269,7 @@ class MonitorConfig:
     model_path: str = str(shipped("classifier.onnx"))
     vehicle_path: str = ""  # optional vehicle YAML whose ESC curve overrides the model's
     events_path: str = ""  # JSON lines, one per alert ('' = none; --events overrides)
-    # Vehicle memory (monitor.daemon.memory): one healthy baseline per vehicle. Default /var/lib/propwatch, or
+    # Vehicle memory (monitor.daemon.memory_adapter): one healthy baseline per vehicle. Default /var/lib/propwatch, or
     # $PROPWATCH_STATE_DIR where set; '' = no vehicle memory. --state-dir overrides.
     state_dir: str = field(default_factory=lambda: os.environ.get("PROPWATCH_STATE_DIR", DEFAULT_STATE_DIR))
     link: LinkConfig = field(default_factory=LinkConfig)

@@ -16,7 +16,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-from monitor.daemon.memory import VehicleMemory
+from monitor.daemon.memory_adapter import VehicleMemory
 from monitor.daemon.pipeline import StepResult
 from monitor.daemon.rotor_evidence import RecentEffectiveness
 from monitor.decision.hypotheses import FlightSets

@@ -24,7 +24,7 @@ from collections import Counter
 from collections.abc import Callable
 from typing import Any
 
-from monitor.mavlink_decode import _NOT_AUTOPILOT_TYPES, MAV_AUTOPILOT_INVALID, MAV_TYPE_GCS  # the decoder's own test
+from monitor.mavlink.decode import _NOT_AUTOPILOT_TYPES, MAV_AUTOPILOT_INVALID, MAV_TYPE_GCS  # the decoder's own test
 
 log = logging.getLogger("propwatch.monitor.link")
 

@@ -41,7 +41,6 @@ from typing import Any
 
 import numpy as np
 
-from monitor import mavlink_decode as md
 from monitor.daemon.clockguard import GuardedDecoder
 from monitor.daemon.config import MonitorConfig
 from monitor.daemon.pacing import ReadPacer
@@ -50,6 +49,7 @@ from monitor.daemon.resampler import GridStep, StreamingHold, StreamSpec
 from monitor.decision.regime import StepInputs, heading_velocity
 from monitor.esc import EscCurve
 from monitor.features import step_feature_function
+from monitor.mavlink import decode as md
 from monitor.model import Classifier
 from monitor.resample import US_PER_S, period_us
 

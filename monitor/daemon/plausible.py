@@ -31,7 +31,7 @@ import math
 from collections import Counter
 
 from monitor.daemon.config import PlausibleConfig
-from monitor.envelope import ACCEL_XY_MAX_M_S2, VELOCITY_MAX_M_S
+from monitor.decision.envelope import ACCEL_XY_MAX_M_S2, VELOCITY_MAX_M_S
 from monitor.esc import EscCurve
 from monitor.resample import US_PER_S
 

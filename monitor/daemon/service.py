@@ -19,7 +19,6 @@ from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from monitor import mavlink_decode as md
 from monitor.daemon.alerts import RateLimiter, StatusTextQueue
 from monitor.daemon.blind import BlindTracker, Transition
 from monitor.daemon.config import MonitorConfig
@@ -27,7 +26,7 @@ from monitor.daemon.decide import Alert, DecisionStage
 from monitor.daemon.events import EventWriter
 from monitor.daemon.latency import LatencyHistogram
 from monitor.daemon.link import MAV_CMD_SET_MESSAGE_INTERVAL, Link
-from monitor.daemon.memory import VehicleMemory
+from monitor.daemon.memory_adapter import VehicleMemory
 from monitor.daemon.pacing import MAX_PAUSE_S
 from monitor.daemon.pipeline import Pipeline
 from monitor.daemon.rotor_evidence import RecentEffectiveness
@@ -35,6 +34,7 @@ from monitor.daemon.sdnotify import Notifier
 from monitor.decision.hypotheses import FlightSets, load_rule
 from monitor.decision.rule import Decision
 from monitor.decision.thresholds import file_sha256
+from monitor.mavlink import decode as md
 from monitor.resample import US_PER_S
 
 log = logging.getLogger("propwatch.monitor")
@@ -95,7 +95,7 @@ class Daemon:
     ):
         self.cfg = config
         self.link = link
-        self.memory = memory  # the vehicle's healthy history (monitor.daemon.memory), None without a state dir
+        self.memory = memory  # the vehicle's healthy history (monitor.daemon.memory_adapter), None without a state dir
         self.pipeline = pipeline
         self.events = events
         self.notifier = notifier or Notifier({})
@@ -408,7 +408,7 @@ class Daemon:
             self._transition(self.blind.data(False, *_blind_reason(step.reason)))
 
     def _disarmed(self) -> None:
-        """Landing and disarm: the flight may become the vehicle's history (monitor.daemon.memory)."""
+        """Landing and disarm: the flight may become the vehicle's history (monitor.daemon.memory_adapter)."""
         auth = self.link.flight_authenticated if getattr(self.link, "gate", None) is not None else None
         what = self.memory.disarmed(auth)
         if what != "no flight":

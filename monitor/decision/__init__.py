@@ -11,4 +11,6 @@ Each name lives in one module and is imported from there (this package re-export
 * ``stream_evidence``: VIBRATION and ESC_STATUS checked before they count as evidence.
 * ``effectiveness``: rotor effectiveness from the moment balance, and the 16 propeller-set hypotheses it weighs.
 * ``hypotheses``: the conformal set of propeller-set hypotheses a verdict names.
+* ``envelope``: the physical envelope of the context streams (velocity, specific force), for the daemon and the log
+  reader alike.
 """

@@ -14,8 +14,8 @@ import textwrap
 from pathlib import Path
 
 from monitor.decision.rotor_share import BASELINE_S
-from monitor.diagnose.engine import Diagnosis, diagnose_table, round_floats
-from monitor.diagnose.memory import judge_flight, log_vehicle_id
+from monitor.diagnose.engine import DEFAULT_MODEL, Diagnosis, default_model, diagnose_table, round_floats  # noqa: F401 (DEFAULT_MODEL: offline.vehicles.evaluate)
+from monitor.diagnose.memory_adapter import judge_flight, log_vehicle_id
 from monitor.diagnose.verdict import POSITION, flight_seconds, set_words, verdict_of
 from monitor.errors import PropwatchError
 from monitor.esc import EscCurve
@@ -24,25 +24,9 @@ from monitor.logs.guards import DEFAULT_MAX_SECONDS, check_size, check_time_adva
 from monitor.memory.baseline import BASELINE_FILE, VehicleBaseline, is_vehicle_baseline
 from monitor.model import Classifier, choose_esc
 from monitor.progress import bar
-from monitor.resources import shipped
 from monitor.vehicle import DEFAULT_VEHICLE, load_vehicle
 
-DEFAULT_MODEL = shipped("classifier.onnx")
 BIG_LOG_BYTES = 1_000_000  # a single log this large takes seconds to read: show a bar
-
-
-def default_model(vehicle_yaml: str | None) -> Path:
-    """The classifier shipped for a vehicle: ``models/NAME-classifier.onnx`` beside ``NAME.yaml``.
-
-    A vehicle with its own shipped model (the Crazyflie) gets it without
-    ``--model``; any other vehicle gets the paper quad's classifier, whose
-    envelope checks then say whether the log fits it.
-    """
-    if vehicle_yaml:
-        own = shipped(f"{Path(vehicle_yaml).stem}-classifier.onnx")
-        if own.is_file():
-            return own
-    return DEFAULT_MODEL
 
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:

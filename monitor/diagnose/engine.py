@@ -33,6 +33,7 @@ moment balance reads the windows after the change against the flight's own start
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
@@ -50,6 +51,24 @@ from monitor.flight import FlightTable
 from monitor.labels import LABEL_TABLE, fault_probability_from_label_probs, label_for
 from monitor.model import Classifier
 from monitor.resample import US_PER_S
+from monitor.resources import shipped
+
+DEFAULT_MODEL = shipped("classifier.onnx")
+
+
+def default_model(vehicle_yaml: str | None) -> Path:
+    """The classifier shipped for a vehicle: ``models/NAME-classifier.onnx`` beside ``NAME.yaml``.
+
+    A vehicle with its own shipped model (the Crazyflie) gets it without
+    ``--model``; any other vehicle gets the paper quad's classifier, whose
+    envelope checks then say whether the log fits it.
+    """
+    if vehicle_yaml:
+        own = shipped(f"{Path(vehicle_yaml).stem}-classifier.onnx")
+        if own.is_file():
+            return own
+    return DEFAULT_MODEL
+
 
 # Airborne RPM against what the model saw in training (its normaliser's mean and
 # std per RPM feature): the typical |z| of each rotor's RPM over the flight. A

@@ -8,7 +8,7 @@ definitions (wire field order, types, array lengths, CRC extra), and handed
 on, in file order, as small tuples with the same attributes and the
 ``get_type`` / ``get_srcSystem`` / ``get_srcComponent`` methods the shared
 decoder reads. Meaning (which system, boot clock, unknown values) stays with
-``monitor.mavlink_decode``; only the byte unpacking is done in bulk.
+``monitor.mavlink.decode``; only the byte unpacking is done in bulk.
 
 Anything unusual (bytes skipped while walking, a CRC that fails, an id
 pymavlink does not know) makes ``unpack_frames`` return None, and the reader

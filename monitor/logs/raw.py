@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from monitor.envelope import implausible_context
+from monitor.decision.envelope import implausible_context
 from monitor.errors import LogFormatError
 from monitor.esc import EscCurve
 from monitor.flight import FlightTable, true_runs
@@ -161,7 +161,7 @@ def _drop_short(mask: np.ndarray, min_len: int) -> np.ndarray:
 
 
 def _plausible_context(s: Stream | None, kind: str, warnings: list, source: str) -> Stream | None:
-    """The context stream with its implausible samples (``monitor.envelope``, the daemon's checks) set to NaN:
+    """The context stream with its implausible samples (``monitor.decision.envelope``, the daemon's checks) set to NaN:
     never evidence, a step without context. A warning counts them."""
     if s is None or len(s) == 0:
         return None

@@ -6,7 +6,7 @@ propwatch uses are unpacked; the rest are skipped unparsed. A clean file is
 CRC-checked and unpacked in bulk (``monitor.logs.mavbulk``, from pymavlink's
 message definitions); a damaged one goes frame by frame through pymavlink's
 ``decode``. Either way every message then goes, in file order, through
-``monitor.mavlink_decode``'s ``MavlinkDecoder``, the same decoder the onboard
+``monitor.mavlink.decode``'s ``MavlinkDecoder``, the same decoder the onboard
 daemon uses, so both see the same samples on the same boot clock.
 
 Bytes that are not a valid frame (corruption) are skipped with a warning; a
@@ -19,13 +19,13 @@ from pathlib import Path
 
 import numpy as np
 
-from monitor import mavlink_decode as md
 from monitor.errors import LogFormatError
 from monitor.logs.guards import check_marker_gaps
 from monitor.logs.mavbulk import messages, unpack_groups
 from monitor.logs.raw import RawFlight, Stream
 from monitor.logs.tlog_columns import decode_columns
 from monitor.logs.units import US_PER_MS
+from monitor.mavlink import decode as md
 
 TS_BYTES = 8
 V1_MAGIC, V2_MAGIC = 0xFE, 0xFD

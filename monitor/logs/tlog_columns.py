@@ -1,6 +1,6 @@
 """A clean tlog's 50 Hz streams decoded as whole columns, with the shared decoder's meaning.
 
-``monitor.mavlink_decode.MavlinkDecoder`` takes one message at a time (the daemon's way): on a 30-minute tlog
+``monitor.mavlink.decode.MavlinkDecoder`` takes one message at a time (the daemon's way): on a 30-minute tlog
 that is ~280 000 Python calls, most of what ``propwatch diagnose`` spends. Here ATTITUDE, SERVO_OUTPUT_RAW and
 LOCAL_POSITION_NED, nearly every message of such a log, are decoded column by column with that decoder's rules:
 only the autopilot's messages (from the first HEARTBEAT ``MavlinkDecoder._is_autopilot`` takes), stamped on its
@@ -16,8 +16,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from monitor import mavlink_decode as md
 from monitor.logs.mavbulk import Group, messages
+from monitor.mavlink import decode as md
 
 # Messages decoded here as columns (their handler's arithmetic below), and the ones left to the decoder.
 COLUMN_TYPES = ("ATTITUDE", "SERVO_OUTPUT_RAW", "LOCAL_POSITION_NED")

@@ -110,7 +110,7 @@ def healthy_baseline(logs: list[HealthyLog], fmt: str | None, cg_damage_separabl
     """The vehicle's normal in vehicle memory's format (``monitor.memory``), from its healthy flights: what
     ``propwatch diagnose LOG --vehicle DIR`` judges a flight against. Fewer than ``MIN_FLIGHTS`` logs give a baseline
     that is not ready yet (diagnose says so and does not compare)."""
-    from monitor.diagnose.memory import log_vehicle_id
+    from monitor.diagnose.memory_adapter import log_vehicle_id
     from monitor.memory.baseline import MIN_FLIGHTS, VehicleBaseline
     from monitor.memory.learn import learn_baseline
     from monitor.memory.summary import summarize

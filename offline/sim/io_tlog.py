@@ -13,7 +13,7 @@ during a mission (system 1, component 1 = MAV_COMP_ID_AUTOPILOT1):
 Times: ``time_boot_ms`` / ``time_usec`` are the boot clock of the log
 (``FlightLog.timestamp_us``); the wall clock is ``wall_boot_us`` + boot time.
 ESC_STATUS (id 291, absent from pymavlink 2.4.50) is encoded by
-``monitor.mavlink_esc``, the same code the monitor decodes it with; its RPM
+``monitor.mavlink.esc``, the same code the monitor decodes it with; its RPM
 is the rotor's actual speed, as ESC telemetry measures it.
 """
 
@@ -28,7 +28,7 @@ from pymavlink.dialects.v20 import common as mavlink2
 
 from monitor.esc import RPM_PER_RAD_S
 from monitor.logs.units import US_PER_MS, US_PER_S, V_PER_MV
-from monitor.mavlink_esc import encode_esc_status
+from monitor.mavlink.esc import encode_esc_status
 from offline.sim.log import FlightLog
 from offline.sim.quat import rotate_world_to_body
 

@@ -65,8 +65,8 @@ def format_text(info: dict) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
-    from monitor.diagnose.cli import default_model
-    from monitor.inspect_log import inspect_log, write_csv
+    from monitor.diagnose.engine import default_model
+    from monitor.inspect.log import inspect_log, write_csv
     from monitor.logs import read_log
     from monitor.model import Classifier, choose_esc
 

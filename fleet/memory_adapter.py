@@ -1,4 +1,5 @@
-"""Each flight of the store judged against its vehicle's healthy flights before it (``monitor.memory``).
+"""The fleet's adapter of vehicle memory (``monitor.memory``): each flight of the store judged against its vehicle's
+healthy flights before it.
 
 After the workers have written their rows (each with its flight's share summary), ``judge_store`` walks every
 vehicle's flights in order of the logs' own clocks. A flight is compared with the vehicle's flights before it that

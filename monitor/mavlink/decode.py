@@ -33,7 +33,7 @@ from collections import Counter
 from dataclasses import dataclass
 from typing import Any
 
-from monitor import mavlink_esc
+from monitor.mavlink import esc as mavlink_esc
 from monitor.vehicle import GRAVITY_M_S2
 
 # MAVLink constants (common.xml), named here so the module needs no dialect import.

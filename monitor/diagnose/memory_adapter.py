@@ -1,4 +1,5 @@
-"""A diagnosed flight judged against its vehicle's own healthy history (``monitor.memory``).
+"""Diagnose's adapter of vehicle memory (``monitor.memory``): a diagnosed flight judged against its vehicle's own
+healthy history.
 
 ``judge_flight`` is the one place a log's ``Diagnosis`` meets a ``VehicleBaseline``: ``propwatch diagnose
 --baseline`` and ``fleet ingest`` both call it, so both give the same verdict on the same log against the same

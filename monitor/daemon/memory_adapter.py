@@ -1,4 +1,5 @@
-"""The daemon's vehicle memory: one baseline per vehicle in the state dir, judged from take-off, learnt on landing.
+"""The daemon's adapter of vehicle memory (``monitor.memory``): one baseline per vehicle in the state dir, judged
+from take-off, learnt on landing.
 
 State dir layout: ``STATE_DIR/vehicles/<vehicle key>/baseline.json`` (``monitor.memory.baseline`` format; the key
 is ``uid-<autopilot uid>`` where AUTOPILOT_VERSION gave one, else ``sysid-<n>``). ``propwatch baseline note`` on

@@ -27,10 +27,10 @@ os.environ.setdefault("MAVLINK_DIALECT", "common")  # mavutil's default 'all' co
 
 from pymavlink import mavutil  # noqa: E402
 
-from monitor import mavlink_decode as md  # noqa: E402
-from monitor import mavlink_esc  # noqa: E402
 from monitor.daemon.link import MAV_CMD_SET_MESSAGE_INTERVAL, split_serial  # noqa: E402
 from monitor.errors import ConfigError, LogFormatError  # noqa: E402
+from monitor.mavlink import decode as md  # noqa: E402
+from monitor.mavlink import esc as mavlink_esc  # noqa: E402
 
 log = logging.getLogger("propwatch.replay")
 
