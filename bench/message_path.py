@@ -11,8 +11,8 @@ counted: the module that called them is still the one running). Per message:
 - modules visited: the distinct repository modules the message entered;
 - returns: entries into a module the message had already left (entries - modules visited);
 - hub entries: entries into ``monitor/daemon/service.py`` (the daemon's loop), and the calls it makes per stage
-  (``from_hub``: modules entered straight from it; the stages are pipeline, decide and the announcement's queue and
-  events file);
+  (``from_hub``: modules entered straight from it; the stages are the pipeline, which shows the message to
+  ``monitor/daemon/autopilot.py`` once decoded, and decide, which hands each step to ``monitor/daemon/announce.py``);
 
 as means over all messages, over the messages that completed a classified grid step, and for the message whose
 step raised the first FAULT (with its entries per module). The figures count calls, not time: a profile hook

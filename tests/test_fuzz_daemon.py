@@ -293,13 +293,13 @@ def test_a_lost_motor_stream_pauses_the_sequential_decision_until_it_returns(toy
 
 def test_flapping_data_pauses_the_decision_at_every_step_but_is_written_at_most_once_per_period(toy, tmp_path):
     from monitor.daemon.alerts import RateLimiter
+    from monitor.daemon.announce import PAUSE_LOG_PERIOD_S
     from monitor.daemon.pipeline import StepResult
-    from monitor.daemon.service import PAUSE_LOG_PERIOD_S
 
     cfg = {"alerts": {"rule": "sequential"}, "blind": {"after_s": 60.0}}
     daemon, _ = make_daemon(toy, tmp_path / "ev.jsonl", cfg)
     now = [0.0]
-    daemon._pause_log_limit = RateLimiter(PAUSE_LOG_PERIOD_S, lambda: now[0])
+    daemon.announce.pause_log_limit = RateLimiter(PAUSE_LOG_PERIOD_S, lambda: now[0])
     why = "motor missing, stale or NaN"
 
     def step(k, valid):

@@ -165,7 +165,7 @@ def test_the_daemon_asks_the_autopilot_for_its_uid_at_most_three_times_and_keys_
 
     from pymavlink.dialects.v20 import common as mavlink
 
-    from monitor.daemon.service import AUTOPILOT_VERSION_ID, VERSION_REQUESTS
+    from monitor.daemon.autopilot import AUTOPILOT_VERSION_ID, VERSION_REQUESTS
     from monitor.model import Classifier
     from tests.fuzz_helpers import FakeLink, decoded, make_daemon, px4_stream
     from tests.test_daemon_helpers import toy_model
@@ -178,8 +178,8 @@ def test_the_daemon_asks_the_autopilot_for_its_uid_at_most_three_times_and_keys_
         return [s for s in link.sent if s[0] == "REQUEST_MESSAGE"]
 
     d, _ = make_daemon(Classifier(toy_model(tmp_path / "toy.onnx")))
-    d.link = link = AskingLink()
-    d.memory = d.stage.memory = mem = VehicleMemory(tmp_path / "state", RATE_HZ)
+    d.link = d.autopilot.link = link = AskingLink()
+    d.memory = d.stage.memory = d.autopilot.memory = mem = VehicleMemory(tmp_path / "state", RATE_HZ)
     for m in px4_stream(0.0, 2.0, sys_id=7):
         d.handle(m, time.perf_counter())
     assert mem.sysid == 7 and mem.uid is None
@@ -193,6 +193,7 @@ def test_the_daemon_asks_the_autopilot_for_its_uid_at_most_three_times_and_keys_
     d.handle(decoded(version, 7), time.perf_counter())
     assert mem.uid == uid and mem.path != sysid_path and f"{uid:016x}" in str(mem.path)
     link.sent.clear()
-    d._version_requests, d._next_version_request = 0, 0.0  # even a fresh budget asks no more once the uid is known
+    # even a fresh budget asks no more once the uid is known
+    d.autopilot.version_requests, d.autopilot.next_version_request = 0, 0.0
     d.tick(1e7)
     assert asked(link) == []

@@ -1,23 +1,32 @@
-"""The daemon's decision stage: one grid step in, its alerts out, in one call.
+"""The daemon's decision: one grid step in, decided and handed to the announcer, in one call.
+
+``Decider.step`` is a step's whole way after the pipeline: which evidence and context are live, why the decision
+pauses (a stream stopped while airborne, or blind; the pause journal), the judges, STATUS, blindness seen from the
+step, then ``monitor.daemon.announce`` (latency, named values, the step's alerts). Blind spells the loop or the
+autopilot's clock find come in through ``Decider.transition``; VIBRATION and ESC_STATUS through ``side_evidence``.
 
 Everything that judges the flight sits behind ``DecisionStage.step``, in this order: the rotors' moment balance
-(``rotor_evidence``: the effectiveness an alert's event carries), the vehicle's memory (``memory``: the flight against
-the vehicle's own history), the shared rule (``monitor.decision.rule``: regime, omega^2 shares and the network's
-windows, worded by ``monitor.decision.hypotheses``' set). The service says beforehand whether the rule is paused (a
-stream stopped, or blind) and announces what comes out; it never reaches into the judges itself. VIBRATION and
-ESC_STATUS samples come in through ``side_evidence`` the same way.
+(``rotor_evidence``: the effectiveness an alert's event carries), the vehicle's memory (``memory_adapter``: the
+flight against the vehicle's own history), the shared rule (``monitor.decision.rule``: regime, omega^2 shares and
+the network's windows, worded by ``monitor.decision.hypotheses``' set). The ``Decider`` says beforehand whether the
+rule is paused and announces what comes out; nothing else reaches into the judges.
 
-An alert is returned as an ``Alert``: the announcement and the fields its event carries beside it, made when the
-alert is made (the rotors' baseline freezes then, and the vehicle's memory learns that the flight raised something).
+An alert is returned as an ``Alert`` (``monitor.daemon.announce``): the announcement and the fields its event carries
+beside it, made when the alert is made (the rotors' baseline freezes then, and the vehicle's memory learns that the
+flight raised something).
 """
 
 from __future__ import annotations
 
+import logging
 import math
 from dataclasses import dataclass, field
 
+from monitor.daemon.announce import Alert, Announcer
+from monitor.daemon.autopilot import MOTOR_STREAM, Autopilot
+from monitor.daemon.blind import BlindTracker, Transition
 from monitor.daemon.memory_adapter import VehicleMemory
-from monitor.daemon.pipeline import StepResult
+from monitor.daemon.pipeline import Pipeline, StepResult
 from monitor.daemon.rotor_evidence import RecentEffectiveness
 from monitor.decision.hypotheses import FlightSets
 from monitor.decision.regime import StepInputs
@@ -26,12 +35,11 @@ from monitor.decision.rule import Announcement, Decision, WindowEvidence
 from monitor.decision.stream_evidence import EscTelemetry
 from monitor.resample import US_PER_S
 
+log = logging.getLogger("propwatch.monitor")
 
-@dataclass(frozen=True)
-class Alert:
-    announcement: Announcement
-    time_boot_ms: int
-    fields: dict  # the event's fields beside the announcement's own (probabilities, battery, rotor effectiveness)
+EVIDENCE_FRESH_S = 2.0  # a VIBRATION / ESC_STATUS stream (or the grid's velocity, IMU) silent for longer is not live
+# Context for the decision (the shares' baseline follows it), not evidence of a fault: listed apart in STATUS and events.
+CONTEXT = ("velocity", "imu")
 
 
 @dataclass
@@ -128,3 +136,122 @@ class DecisionStage:
             self.rotors.freeze()  # the flight's own baseline ends before the change the alert is about
             fields.update(self.rotors.event_fields())
         return Alert(a, time_boot_ms, fields)
+
+
+class Decider:
+    """One grid step's whole way after the pipeline, in one call (``step``): what is live and why the decision
+    pauses (from the step itself; the pause journal), the judges (``DecisionStage``), STATUS, blindness seen from
+    the step, then the announcer (latency, named values, the step's alerts). Blind spells from the loop and the
+    autopilot's clock come in through ``transition`` and ``loop_blind``; VIBRATION and ESC_STATUS through
+    ``side_evidence``."""
+
+    def __init__(self, config, stage: DecisionStage, announce: Announcer, blind: BlindTracker, autopilot: Autopilot):
+        self.cfg = config
+        self.stage = stage
+        self.announce = announce
+        self.blind = blind
+        self.autopilot = autopilot  # its boot clock dates a blind spell's events line
+        self._evidence_t: dict[str, float] = {}  # evidence -> boot time (s) it was last usable
+        self._context_t: dict[str, float] = {}  # context (CONTEXT) -> boot time (s) a step last had it
+        self._paused = ""  # why the classifier's evidence stopped while airborne ('' = flowing)
+        self._airborne = False
+        self._bad_steps = False  # an airborne step without usable data was told to the tracker since it last recovered
+        self.tick_reason: str | None = None  # the loop's own blindness (link, clock, streams), else None
+
+    def live_evidence(self, t_s: float) -> list[str]:
+        """Which evidence is flowing now: classifier (motor stream + attitude), vibration, esc_rpm."""
+        return [k for k, last in sorted(self._evidence_t.items()) if t_s - last <= EVIDENCE_FRESH_S]
+
+    def live_context(self, t_s: float) -> list[str]:
+        """Which context the grid steps carry now: velocity (LOCAL_POSITION_NED), imu (the specific force). Not
+        evidence itself: what the omega^2 shares' baseline follows."""
+        return [k for k in CONTEXT if t_s - self._context_t.get(k, -math.inf) <= EVIDENCE_FRESH_S]
+
+    def step(self, step: StepResult) -> None:
+        t = step.timestamp_us / US_PER_S
+        self._airborne = step.airborne
+        if step.valid:
+            self._evidence_t["classifier"] = t
+        if step.inputs is not None:
+            if step.inputs.vel_heading_m_s is not None:
+                self._context_t["velocity"] = t
+            if step.inputs.accel_xy_frd_m_s2 is not None:
+                self._context_t["imu"] = t
+        announce = self.announce
+        live = announce.live = self.live_evidence(t)
+        context = announce.context = self.live_context(t)
+        if step.airborne and not step.valid:
+            self._paused = step.reason
+            # at every such step: one held back by the journal's rate limit is written later
+            announce.paused(step.time_boot_ms, step.reason, MOTOR_STREAM[self.cfg.input.motor_source])
+        elif step.valid and self._paused:
+            self._paused = ""
+            announce.resumed(step.time_boot_ms)
+        out = self.stage.step(step, self.pause_reason())
+        context_status = f"; context live: {', '.join(context)}" if context else ""
+        if step.airborne and not step.valid:
+            announce.set_status(f"classifier paused: {step.reason}; evidence live: {', '.join(live) or 'none'}{context_status}")
+        elif step.valid:
+            announce.set_status(
+                f"airborne: deciding; evidence live: {', '.join(live)}{context_status}{out.shares_learning}{out.memory_status}"
+            )
+        elif not self._paused:
+            announce.set_status(f"not deciding: {step.reason}{out.memory_status}")
+        self._blind_step(step)  # after the step's own pause state, so a recovered line says whether it runs
+        if step.valid and step.fault_probability is not None:
+            announce.classified(step)
+        for a in out.alerts:
+            announce.alert(a)
+
+    def side_evidence(self, pipeline: Pipeline) -> None:
+        """VIBRATION and ESC_STATUS since the last message: validated (bad ones counted), then used."""
+        vib, esc = pipeline.vibration, pipeline.esc_samples
+        pipeline.vibration, pipeline.esc_samples = [], []
+        alerts, fresh = self.stage.side_evidence(vib, esc, self._airborne)
+        self._evidence_t.update(fresh)
+        for a in alerts:
+            self.announce.alert(a)
+
+    def pause_reason(self) -> str:
+        """The decision pauses while a stream is stopped (``_paused``) or the monitor is blind; else it runs ('')."""
+        return self._paused if self.blind.reason is None else f"blind: {self.blind.reason}"
+
+    def _blind_step(self, step: StepResult) -> None:
+        """Blindness seen from one grid step: bad data while airborne for ``blind.after_s``, or good data again."""
+        if step.data_ok:
+            # A lost link or frozen clock ends at the next tick that clears it. Nothing to recover from (not blind,
+            # no bad step counting towards blind.after_s) is the common step: the tracker is not called then.
+            if self.tick_reason is None and (self._bad_steps or self.blind.reason is not None):
+                self._bad_steps = False
+                self.transition(self.blind.recover())
+        elif step.airborne:
+            self._bad_steps = True
+            self.transition(self.blind.data(False, *_blind_reason(step.reason)))
+
+    def loop_blind(self, found: tuple[str, str] | None) -> None:
+        """Blindness seen from the loop (``Autopilot.loop_blindness``): a lost link, a frozen clock, a stream gone."""
+        self.tick_reason = None if found is None else found[0]
+        if found is not None:
+            self.transition(self.blind.enter(*found))
+
+    def transition(self, t: Transition | None) -> None:
+        if t is None:
+            return
+        if t.blind:
+            log.warning("BLIND: %s", t.detail)
+        else:
+            log.info("recovered: %s (blind %.1f s)", t.detail, t.duration_s)
+        clock_us = self.autopilot.clock_us
+        record = t.record(clock_us // 1000 if clock_us is not None else None)
+        self.stage.pause(self.pause_reason())  # blind: the decision adds nothing; recovered: it runs unless a stream is stopped
+        record["decision"] = "paused" if self.stage.decision.paused_reason else "running"
+        self.announce.transition(record)
+
+
+def _blind_reason(step_reason: str) -> tuple[str, str]:
+    """(short reason, detail) of an airborne step without usable data."""
+    if "implausible" in step_reason:
+        return ("implausible attitude" if step_reason.startswith("attitude") else "implausible motor data"), step_reason
+    if step_reason.startswith("attitude") and "motor" not in step_reason:
+        return "no attitude data", step_reason
+    return "no motor data", step_reason

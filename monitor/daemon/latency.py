@@ -47,3 +47,7 @@ class LatencyHistogram:
         if i >= len(self.counts) - 1:
             return self.max_s
         return min(float(self.edges_s[i]), self.max_s)
+
+    def percentiles_ms(self) -> dict:
+        """The report's figures: count, p50, p99 and max in milliseconds."""
+        return {"n": self.n, "p50": self.percentile_s(50) * 1e3, "p99": self.percentile_s(99) * 1e3, "max": self.max_s * 1e3}

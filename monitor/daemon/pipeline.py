@@ -36,6 +36,7 @@ from __future__ import annotations
 import math
 import time
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -160,6 +161,9 @@ class Pipeline:
         # VIBRATION and ESC_STATUS samples since the caller last took them (the decision validates them).
         self.vibration: list[md.Vibration] = []
         self.esc_samples: list[md.EscRpm] = []
+        # Shown each message once decoded, when the decoder knows the autopilot's ids and clock: the daemon's
+        # autopilot bookkeeping (monitor.daemon.autopilot.Autopilot.watch), set by the daemon; None outside it.
+        self.watch: Callable[[Any], None] | None = None
 
     # -- input -----------------------------------------------------------------------
     def feed(self, msg: Any, received_s: float | None = None) -> list[StepResult]:
@@ -168,6 +172,8 @@ class Pipeline:
         out: list[StepResult] = []
         for sample in self.decoder.decode(msg):
             out += self.feed_sample(sample, received_s)
+        if self.watch is not None:
+            self.watch(msg)
         return out
 
     def feed_sample(self, s: md.Sample, received_s: float) -> list[StepResult]:
