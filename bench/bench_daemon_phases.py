@@ -42,7 +42,7 @@ PHASES = ("read", "handle", "step", "decide", "inference", "tick")
 
 def instrument() -> dict[str, list[float]]:
     """Wrap each phase's method with a thread-time counter; ``handle`` and ``step`` exclude the inference."""
-    from monitor.daemon import link, pipeline, service
+    from monitor.daemon import decide, link, pipeline, service
     from monitor.model import Classifier
 
     acc = {k: [0.0, 0] for k in PHASES}
@@ -68,7 +68,7 @@ def instrument() -> dict[str, list[float]]:
     wrap(link.Link, "read", "read")
     wrap(service.Daemon, "handle", "handle")
     wrap(pipeline.Pipeline, "_step", "step")
-    wrap(service.Daemon, "_decide", "decide")
+    wrap(decide.DecisionStage, "step", "decide")
     wrap(service.Daemon, "tick", "tick")
     return acc
 
