@@ -96,7 +96,7 @@ def stages(tlog: Path, model: Path | None) -> list[tuple[str, float]]:
     out = [("process start and imports", child_cpu_s() - c0)]
     from monitor.decision.config import DecisionConfig
     from monitor.diagnose import engine
-    from monitor.diagnose.cli import default_model
+    from monitor.diagnose.engine import default_model
     from monitor.features import compute_features
     from monitor.logs import read_raw, to_flight_table
     from monitor.model import Classifier, choose_esc

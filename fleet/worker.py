@@ -20,6 +20,7 @@ import numpy as np
 
 from monitor import __version__ as PROPWATCH_VERSION
 from monitor.errors import PropwatchError
+from monitor.logs.guards import DEFAULT_MAX_SECONDS
 from monitor.logs.identity import identify
 from monitor.memory.summary import summarize
 from monitor.vehicle import REPO_ROOT
@@ -36,12 +37,13 @@ class IngestSettings:
     csv_format: str | None = None  # mapping for .csv/.csv.gz logs (monitor/formats.yaml)
     hop: int = 20
     vehicle_from_dir: int | None = None  # folder level naming the vehicle when the log carries no id
+    max_seconds: float = DEFAULT_MAX_SECONDS  # longest log accepted (as ``diagnose --max-seconds``)
 
     def model_paths(self) -> tuple[Path, ...]:
         if self.models:
             return tuple(Path(m) for m in self.models)
         if self.vehicle_yaml:
-            from monitor.diagnose.cli import default_model
+            from monitor.diagnose.engine import default_model
 
             return (default_model(self.vehicle_yaml),)
         return tuple(p for p in SHIPPED_MODELS if p.is_file())
@@ -182,17 +184,16 @@ def process_log(path: str, log_hash: str, size_bytes: int, settings: IngestSetti
 
 
 def _diagnose_into(row: dict, path: Path, settings: IngestSettings) -> None:
-    from monitor.diagnose.engine import diagnose_table
-    from monitor.logs import read_raw, to_flight_table
+    from monitor.diagnose.engine import diagnose_raw, read_guarded
 
     if row["size_bytes"] == 0:
         raise PropwatchError(f"{path}: empty file (0 bytes)")
     fmt = log_format(path, settings.csv_format)
     row["format"] = fmt
-    raw = read_raw(path, fmt, extras=False)
+    raw = read_guarded(path, fmt, settings.max_seconds)  # the guards `propwatch diagnose` applies
     clf, esc, model_id, model_version, vehicle = choose_model(settings, raw.cmd_unit)
     row.update(model_id=model_id, model_version=model_version)
-    table = to_flight_table(raw, esc=esc, rate_hz=clf.info.sample_rate_hz)
+    table, d = diagnose_raw(raw, clf, esc, settings.hop, vehicle)
     try:
         ident = identify(path, fmt)
     except Exception as exc:  # noqa: BLE001 - the id is extra: a log readable for diagnosis is still diagnosed
@@ -203,7 +204,6 @@ def _diagnose_into(row: dict, path: Path, settings: IngestSettings) -> None:
             start_us = int(table.timestamp_us[0]) + ident.utc_minus_boot_us
             row["start_time_utc"] = utc_naive(start_us)
             row["start_time_source"] = ident.time_source
-    d = diagnose_table(table, clf, hop=settings.hop, esc=esc, vehicle=vehicle)
     out = d.to_json()
     row.update(
         duration_s=len(table) / table.rate_hz,

@@ -14,13 +14,11 @@ import textwrap
 from pathlib import Path
 
 from monitor.decision.rotor_share import BASELINE_S
-from monitor.diagnose.engine import DEFAULT_MODEL, Diagnosis, default_model, diagnose_table, round_floats  # noqa: F401 (DEFAULT_MODEL: offline.vehicles.evaluate)
+from monitor.diagnose.engine import Diagnosis, default_model, diagnose_file, round_floats
 from monitor.diagnose.memory_adapter import judge_flight, log_vehicle_id
 from monitor.diagnose.verdict import POSITION, flight_seconds, set_words, verdict_of
 from monitor.errors import PropwatchError
-from monitor.esc import EscCurve
-from monitor.logs import read_raw, to_flight_table
-from monitor.logs.guards import DEFAULT_MAX_SECONDS, check_size, check_time_advances
+from monitor.logs.guards import DEFAULT_MAX_SECONDS
 from monitor.memory.baseline import BASELINE_FILE, VehicleBaseline, is_vehicle_baseline
 from monitor.model import Classifier, choose_esc
 from monitor.progress import bar
@@ -76,17 +74,6 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         help="write a picture (PNG) and page (HTML) per log into DIR",
     )
     return p.parse_args(argv)
-
-
-def diagnose_file(
-    path: str, clf: Classifier, esc: EscCurve, fmt: str | None, hop: int, vehicle=None, max_seconds: float = DEFAULT_MAX_SECONDS
-):
-    check_size(path, max_seconds)
-    raw = read_raw(path, fmt, extras=False)
-    streams = {k: getattr(raw, k) for k in ("motor_cmd", "attitude_rad", "rates_rad_s")}
-    check_time_advances(streams, path, max_seconds)
-    table = to_flight_table(raw, esc=esc, rate_hz=clf.info.sample_rate_hz)
-    return table, diagnose_table(table, clf, hop=hop, esc=esc, vehicle=vehicle)
 
 
 class _PrintTrap(io.TextIOBase):

@@ -49,6 +49,8 @@ from monitor.esc import EscCurve
 from monitor.features import compute_features, signals_needed, sliding_windows, valid_windows
 from monitor.flight import FlightTable
 from monitor.labels import LABEL_TABLE, fault_probability_from_label_probs, label_for
+from monitor.logs import RawFlight, read_raw, to_flight_table
+from monitor.logs.guards import DEFAULT_MAX_SECONDS, check_size, check_time_advances
 from monitor.model import Classifier
 from monitor.resample import US_PER_S
 from monitor.resources import shipped
@@ -586,3 +588,33 @@ def predict_at(clf: Classifier, feats: np.ndarray, ends: np.ndarray, window: int
         out_l.append(lab)
         out_f.append(fau)
     return np.concatenate(out_l).astype(np.float64), np.concatenate(out_f).astype(np.float64)
+
+
+def read_guarded(path: str | Path, fmt: str | None, max_seconds: float = DEFAULT_MAX_SECONDS) -> RawFlight:
+    """``read_raw`` between the guards of ``monitor.logs.guards``: the file's size before reading, then that
+    the streams the diagnosis reads advance in time within ``max_seconds``. Raises ``LogFormatError``."""
+    check_size(path, max_seconds)
+    raw = read_raw(path, fmt, extras=False)
+    streams = {k: getattr(raw, k) for k in ("motor_cmd", "attitude_rad", "rates_rad_s")}
+    check_time_advances(streams, path, max_seconds)
+    return raw
+
+
+def diagnose_raw(raw: RawFlight, clf: Classifier, esc: EscCurve | None, hop: int, vehicle=None) -> tuple[FlightTable, Diagnosis]:
+    """A log read by ``read_guarded`` -> (its flight table on the model's grid, its ``Diagnosis``)."""
+    table = to_flight_table(raw, esc=esc, rate_hz=clf.info.sample_rate_hz)
+    return table, diagnose_table(table, clf, hop=hop, esc=esc, vehicle=vehicle)
+
+
+def diagnose_file(
+    path: str | Path,
+    clf: Classifier,
+    esc: EscCurve | None,
+    fmt: str | None,
+    hop: int,
+    vehicle=None,
+    max_seconds: float = DEFAULT_MAX_SECONDS,
+) -> tuple[FlightTable, Diagnosis]:
+    """One log file -> (flight table, ``Diagnosis``): the one path from a log to its verdict, shared by
+    ``propwatch diagnose``, ``fleet ingest`` (``fleet.worker``) and offline evaluation."""
+    return diagnose_raw(read_guarded(path, fmt, max_seconds), clf, esc, hop, vehicle)

@@ -116,7 +116,7 @@ def nominal_verdicts(rows: list[dict]) -> dict:
 
 def nominal_verdict_dicts(rows: list[dict]) -> dict:
     """{flight name: today's nominal diagnose verdict} (``propwatch diagnose`` without a baseline; hypotheses kept)."""
-    from monitor.diagnose.cli import DEFAULT_MODEL, diagnose_file
+    from monitor.diagnose.engine import DEFAULT_MODEL, diagnose_file
     from monitor.model import Classifier, choose_esc
     from monitor.vehicle import DEFAULT_VEHICLE, load_vehicle
 
