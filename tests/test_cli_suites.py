@@ -51,17 +51,3 @@ def test_tune_alerts_is_the_alert_evaluation_that_rewrites_the_calibration(monke
 def test_an_unknown_suite_is_refused_with_the_choices():
     r = propwatch("evaluate", "nonsense")
     assert r.returncode == 2 and "alerts" in r.stderr and "classifier" in r.stderr and "evalsim" in r.stderr
-
-
-@pytest.mark.parametrize(
-    ("module", "usage", "new_form"),
-    [
-        ("offline.classifier.conformal", "usage: propwatch tune sets", "use 'propwatch tune sets'"),  # deprecated
-        ("offline.physics_calibration", "usage: propwatch tune noise", "use 'propwatch tune noise'"),  # deprecated
-    ],
-)
-def test_former_module_entry_points_run_the_tune_tool_after_one_line_naming_it(module, usage, new_form):
-    r = subprocess.run([sys.executable, "-m", module, "--help"], capture_output=True, text=True, cwd=REPO, timeout=60)
-    assert r.returncode == 0, r.stderr
-    assert r.stdout.startswith(usage), r.stdout[:200]
-    assert r.stderr.strip().splitlines() == [f"python -m {module} is deprecated: {new_form}"]

@@ -127,7 +127,7 @@ def test_every_cited_module_and_path_exists():
         ("see monitor/baseline_gone.py and docs/NOWHERE.md", ["docs/NOWHERE.md", "monitor/baseline_gone.py"]),
         ("``offline.tune.sets.no_such_name`` fits it", ["offline.tune.sets.no_such_name"]),
         ("python -m offline.tune.sets; offline/tune/sets.py; ``offline.tune.sets.measure``; offline/tune/", []),
-        ("run `make calibrate-alerts evaluate-alerts HOURS=1` or `make nowhere-target`", ["make nowhere-target"]),
+        ("run `make tune-alerts evaluate-alerts HOURS=1` or `make nowhere-target`", ["make nowhere-target"]),
         ("out/alerts/alerts.json, models/<model>.sets.json, bench/*.py, models/NAME.yaml, python -m pytest", []),
         ("monitor.yaml, fleet.parquet, monitor.__file__, monitor.shipped", []),
         ("`propwatch evalsim --set paper`, `propwatch evaluate --evalsim`", ["propwatch evalsim", "propwatch evaluate -"]),
@@ -135,8 +135,7 @@ def test_every_cited_module_and_path_exists():
             "propwatch evaluate m.onnx d.npz; propwatch evaluate classifier m.onnx; propwatch evaluate SUITE",
             ["propwatch evaluate m.onnx"],
         ),
-        ("python -m offline.classifier.conformal --model m.onnx", ["python -m offline.classifier.conformal"]),
-        ("python -m offline.classifier.conformal is deprecated: use 'propwatch tune sets'", []),
+        ("python -m offline.classifier.conformal --model m.onnx", ["offline.classifier.conformal"]),  # removed
         ("the rule ``offline.classifier.conformal`` fits", ["offline.classifier.conformal"]),
     ],
 )
