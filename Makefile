@@ -6,7 +6,9 @@ STAMP := $(VENV)/.installed
 DATA ?= ../shared/data
 OUT ?= out
 
-.PHONY: setup demo test lint bench bench-measure models propellers classifier crazypad clean calibrate-physics evaluate-physics dataset-randomised card card-text calibrate-alerts evaluate-alerts evaluate-torque-sign evaluate-calibration calibrate-memory evaluate-memory
+.PHONY: setup demo test lint bench bench-measure models propellers classifier crazypad clean tune-noise evaluate-physics dataset-randomised card card-text tune-alerts evaluate-alerts evaluate-torque-sign evaluate-calibration tune-memory evaluate-memory
+# Former target names, kept as aliases of the targets that follow the commands.
+.PHONY: calibrate-physics calibrate-alerts calibrate-memory
 
 $(STAMP): pyproject.toml
 	$(PY) -m venv $(VENV)
@@ -121,20 +123,21 @@ card-text: $(STAMP)
 crazypad: $(STAMP)
 	$(BIN)/propwatch crazypad run --data $(DATA)/crazypad --out $(OUT)/crazypad --ship
 
-# Alert decisions (issue 13; docs/ALERTS.md). calibrate-alerts rewrites models/decision-calibration.json from
-# healthy randomised flights (HOURS); evaluate-alerts scores the rules on independent flights and writes
-# $(OUT)/alerts/alerts.{json,md}; `python -m offline.alerts.card $(OUT)/alerts/alerts.json` puts the table in the card. The issue's size is the default (10 classified healthy hours
-# per simulator, 200 onsets): hours of CPU on 2 cores; e.g. `make evaluate-alerts ALERT_ARGS="--healthy-hours 1 --onset-flights 64"`.
+# Alert decisions (docs/ALERTS.md). tune-alerts (`propwatch tune alerts`) rewrites models/decision-calibration.json
+# from healthy randomised flights (HOURS); evaluate-alerts scores the rules on independent flights and writes
+# $(OUT)/alerts/alerts.{json,md}; `python -m offline.alerts.card $(OUT)/alerts/alerts.json` puts the table in the card.
+# The default size is 10 classified healthy hours per simulator and 200 onsets: hours of CPU on 2 cores;
+# e.g. `make evaluate-alerts ALERT_ARGS="--healthy-hours 1 --onset-flights 64"`.
 # The shipped calibration: 10 flown hours (450 flights), thresholds at the 95 % quantile of a flight bootstrap.
 HOURS ?= 10
 ALERT_ARGS ?=
-calibrate-alerts: $(STAMP)
+tune-alerts: $(STAMP)
 	$(BIN)/propwatch tune alerts --calibration-hours $(HOURS) --healthy-hours 0.05 --onset-flights 4 --out $(OUT)/alerts-calibration
 
 evaluate-alerts: $(STAMP)
 	$(BIN)/propwatch evaluate alerts --out $(OUT)/alerts $(ALERT_ARGS)
 
-# Issue 12's torque-sign check: the damaged blade's torque-per-thrust change up (+2..+10 %) vs down (-10..-2 %),
+# The torque-sign check: the damaged blade's torque-per-thrust change up (+2..+10 %) vs down (-10..-2 %),
 # 192 singles each; fails when the shipped system's single-propeller accuracy moves by more than 2 points (~6 min).
 evaluate-torque-sign: $(STAMP)
 	$(BIN)/python -m bench.bench_torque_sign --flights-per-label 48 --check
@@ -142,8 +145,9 @@ evaluate-torque-sign: $(STAMP)
 clean:
 	rm -rf $(VENV) $(OUT) .pytest_cache
 
-# Credible-set coverage of the moment-balance verdict on randomised flights of OUR simulator (about 1 min).
-calibrate-physics: $(STAMP)
+# Credible-set coverage of the moment-balance verdict on randomised flights of OUR simulator (about 1 min):
+# `propwatch tune noise`.
+tune-noise: $(STAMP)
 	$(BIN)/propwatch tune noise --json $(OUT)/physics-calibration.json
 
 # The calibrator's hidden-effect matrix (bench/evalsim_calibration.py): resolution on our simulator, then 10 effects x
@@ -152,10 +156,10 @@ calibrate-physics: $(STAMP)
 evaluate-calibration: $(STAMP)
 	nice -n 10 $(BIN)/python -m bench.evalsim_calibration --out $(OUT)/evaluate-calibration
 
-# Vehicle memory (docs/VEHICLE_MEMORY.md). calibrate-memory: our simulator's same-airframe fleet (seed 1, 24 airframes,
+# Vehicle memory (docs/VEHICLE_MEMORY.md). tune-memory: our simulator's same-airframe fleet (seed 1, 24 airframes,
 # about 3 min) and the constants of monitor/memory/thresholds.py from it. evaluate-memory: diagnose, daemon and cost on
 # the evaluation-only simulator's set `vehicles` and our fleet of seed 0, beside the references (about 30 min).
-calibrate-memory: $(STAMP)
+tune-memory: $(STAMP)
 	$(BIN)/python -c "from offline.vehicles.ours import write_fleet; write_fleet('$(OUT)/ours_cal', 288, seed=1)"
 	$(BIN)/python -m offline.vehicles.calibrate --fleet $(OUT)/ours_cal
 
@@ -166,3 +170,7 @@ evaluate-memory: $(STAMP)
 # Localisation on our paper sets (physics, CNN, omega^2-share side by side; a few minutes).
 evaluate-physics: $(STAMP)
 	$(BIN)/python -m bench.bench_localise --json $(OUT)/localise-ours.json
+
+calibrate-alerts: tune-alerts
+calibrate-physics: tune-noise
+calibrate-memory: tune-memory

@@ -17,7 +17,7 @@ from collections import defaultdict
 from pathlib import Path
 
 from bench import REPO
-from offline.adapt.pipeline import AdaptConfig, adapt  # noqa: E402
+from offline.adapt.pipeline import AdaptConfig, adapt_vehicle  # noqa: E402
 from offline.crazypad.data import AIRFRAMES, DEFAULT_ROOT, load_manifest, select  # noqa: E402
 from offline.crazypad.experiment import GROUP_ORDER  # noqa: E402
 from offline.crazypad.vehicle import PROJECT_INDEX_OF_BITCRAZE  # noqa: E402
@@ -46,7 +46,7 @@ def main(argv=None) -> int:
         healthy = [str(args.root / f.file) for f in flights if f.airframe == af and f.fault_kind == "healthy"]
         healthy.sort()
         labelled = [f"{args.root / f.file}={truth_spec(f)}" for f in flights if f.airframe == af and f.fault_kind != "healthy"]
-        res = adapt(healthy, REPO / "models" / "crazyflie.yaml", args.out / af, "crazypad", labelled, cfg, progress=True)
+        res = adapt_vehicle(healthy, REPO / "models" / "crazyflie.yaml", args.out / af, "crazypad", labelled, cfg, progress=True)
         manifest = json.loads(Path(res["manifest"]).read_text())
         for kind in ("nominal", "adapted"):
             for r in manifest["scores"][kind]["logs"]:

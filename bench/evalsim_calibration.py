@@ -290,10 +290,10 @@ def calibrate_tables(tabs, rival_vs_lag: bool = False) -> dict:
     """One run's verdicts. ``rival_vs_lag``: also the outside-library rival's held-out BIC lead over the better
     lag term in round 1 (computed when selection did not run it): what fit.RIVAL_MARGIN_BIC must stay above on
     real lags, and what a delay gives."""
-    from offline.calibrate.calibrate import LAG_TERMS, calibrate
+    from offline.calibrate.calibrate import LAG_TERMS, calibrate_vehicle
     from offline.calibrate.unexplained import delay_probe
 
-    r = calibrate(tabs, NOM)
+    r = calibrate_vehicle(tabs, NOM)
     extra = {}
     if rival_vs_lag:
         first = r.selection.steps[0]

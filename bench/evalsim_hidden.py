@@ -66,15 +66,15 @@ def main(argv=None) -> int:
             "faulty": len(faulty),
         }
         if not args.no_calibrate:
-            from offline.calibrate.calibrate import calibrate
+            from offline.calibrate.calibrate import calibrate_vehicle
 
-            row["calibrate_cause"] = calibrate(h_tabs, veh).cause
+            row["calibrate_cause"] = calibrate_vehicle(h_tabs, veh).cause
         if effect in args.adapt:
-            from offline.adapt.pipeline import AdaptConfig, adapt
+            from offline.adapt.pipeline import AdaptConfig, adapt_vehicle
 
             cfg = AdaptConfig(mission="random", flights_per_label=2, epochs=3, duration_s=args.duration_s, vehicle_variants=2)
             labelled = [f"{setdir / e['file']}={e['faulty_propellers'][0]}" for e in faulty]
-            res = adapt([str(setdir / e["file"]) for e in healthy], DEFAULT_VEHICLE, args.out / af, None, labelled, cfg)
+            res = adapt_vehicle([str(setdir / e["file"]) for e in healthy], DEFAULT_VEHICLE, args.out / af, None, labelled, cfg)
             row["adapt"] = res["scores"]
         results[af] = row
         print(json.dumps({af: row}), flush=True)

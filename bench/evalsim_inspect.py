@@ -30,7 +30,7 @@ def _weak_and_spread(sp, r):
 
 def main(argv: list[str] | None = None) -> int:
     from monitor.vehicle import DEFAULT_VEHICLE, load_vehicle
-    from offline.calibrate.calibrate import calibrate
+    from offline.calibrate.calibrate import calibrate_vehicle
 
     ap = argparse.ArgumentParser(prog="python -m bench.evalsim_inspect", description=__doc__.split("\n\n")[0])
     ap.add_argument("--seeds", type=int, default=3)
@@ -52,7 +52,7 @@ def main(argv: list[str] | None = None) -> int:
         rows = []
         for seed in range(a.seeds):
             specs = [mod(sp, _rng("inspect", name, seed)) for sp in eval_specs(3000 + seed, a.duration_s)]
-            r = calibrate(eval_tables(specs), nom)
+            r = calibrate_vehicle(eval_tables(specs), nom)
             ins = r.inspect_rotor
             row = {
                 "case": name,

@@ -104,7 +104,7 @@ def main(argv=None) -> int:
         help="instead of the sweep: the 2 healthy flights of the 'hidden' set's motor-lag airframe (bench/evalsim_hidden.py)",
     )
     args = ap.parse_args(argv)
-    from offline.calibrate.calibrate import calibrate
+    from offline.calibrate.calibrate import calibrate_vehicle
     from offline.evalsim.flight import simulate_flights
     from offline.evalsim.sets import motor_lag_specs
 
@@ -122,7 +122,7 @@ def main(argv=None) -> int:
             "hidden_set": specs[0].airframe_id,
             "hidden_ms": [round(1000 * t, 1) for t in specs[0].airframe.motor_time_constant_s],
         }
-        row.update(summarise(calibrate(tabs, nom)))
+        row.update(summarise(calibrate_vehicle(tabs, nom)))
         print(json.dumps(row), flush=True)
         (args.out / "evalsim-lag-hidden.json").write_text(json.dumps(row, indent=1))
         return 0
@@ -141,7 +141,7 @@ def main(argv=None) -> int:
                     with tempfile.TemporaryDirectory() as tmp:
                         tabs = read_back(specs, logs, Path(tmp))
                     t1 = time.process_time()
-                    found = {} if args.truth_only else summarise(calibrate(tabs, nom))
+                    found = {} if args.truth_only else summarise(calibrate_vehicle(tabs, nom))
                     t2 = time.process_time()
                     row = {
                         "seed": seed,

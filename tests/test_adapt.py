@@ -12,7 +12,7 @@ import pytest
 
 from monitor.vehicle import REPO_ROOT
 from offline.adapt.checks import NotHealthyError, vehicle_type_problem
-from offline.adapt.pipeline import AdaptConfig, adapt, parse_labelled, read_healthy
+from offline.adapt.pipeline import AdaptConfig, adapt_vehicle, parse_labelled, read_healthy
 from offline.adapt.share_rule import HealthyBaseline
 
 CRAZYPAD = REPO_ROOT.parent / "shared" / "data" / "crazypad" / "motor"
@@ -39,7 +39,7 @@ def test_a_hexa_or_vtol_tlog_is_refused_by_name(tmp_path):
     assert "MAV_TYPE_HEXAROTOR" in vehicle_type_problem(_tlog(tmp_path / "hexa.tlog", mavlink2.MAV_TYPE_HEXAROTOR), None)
     vtol = _tlog(tmp_path / "vtol.tlog", mavlink2.MAV_TYPE_VTOL_QUADROTOR)
     with pytest.raises(NotHealthyError, match=r"vtol\.tlog: refused: .*MAV_TYPE_VTOL_QUADROTOR"):
-        adapt([vtol], REPO_ROOT / "models" / "vehicle.yaml", tmp_path / "out")
+        adapt_vehicle([vtol], REPO_ROOT / "models" / "vehicle.yaml", tmp_path / "out")
     assert not (tmp_path / "out").exists()  # nothing half-written
 
 
@@ -53,7 +53,7 @@ def test_a_log_that_never_flies_is_refused(tmp_path):
     path = tmp_path / "ground.csv"
     path.write_text("\n".join(lines))
     with pytest.raises(NotHealthyError, match=r"ground\.csv: refused as healthy: 0\.0 s airborne"):
-        adapt([str(path)], REPO_ROOT / "models" / "vehicle.yaml", tmp_path / "out", fmt="propwatch")
+        adapt_vehicle([str(path)], REPO_ROOT / "models" / "vehicle.yaml", tmp_path / "out", fmt="propwatch")
 
 
 def test_labelled_spec():
@@ -78,7 +78,7 @@ def test_a_loaded_vehicle_given_as_healthy_is_refused_by_name():
 def test_adapt_end_to_end_tiny(tmp_path):
     cfg = AdaptConfig(mission="crazypad", flights_per_label=1, epochs=1, window=40, channels=4, blocks=1, dense=8)
     cut = str(CRAZYPAD / "cut_propeller_M3_3mm" / "E9_log00.csv.gz") + "=2"
-    res = adapt(HEALTHY_E9, CRAZYFLIE, tmp_path, fmt="crazypad", labelled=[cut], cfg=cfg)
+    res = adapt_vehicle(HEALTHY_E9, CRAZYFLIE, tmp_path, fmt="crazypad", labelled=[cut], cfg=cfg)
     for key in ("model", "vehicle", "baseline", "card", "manifest"):
         assert (tmp_path / res[key].rsplit("/", 1)[-1]).is_file(), key
     manifest = json.loads((tmp_path / "adapt.manifest.json").read_text())
@@ -169,7 +169,7 @@ def test_adapt_says_which_rotor_to_inspect_when_the_calibration_singles_one_out(
     res = {"out": str(tmp_path), "scores": {}, "calibration": {"view": "dynamic", "cause": "motor_efficiency"}}
     for given, said in ((caveat, True), (None, False)):
         res["calibration"]["inspect_rotor"] = given
-        monkeypatch.setattr(pipeline, "adapt", lambda *a, **k: res)
+        monkeypatch.setattr(pipeline, "adapt_vehicle", lambda *a, **k: res)
         assert cli.main(["--healthy", "a.tlog", "b.tlog", "--vehicle", str(CRAZYFLIE), "--out", str(tmp_path)]) == 0
         out = capsys.readouterr().out
         assert ("INSPECT ROTOR 1:" in out and "damaged propeller" in out) == said

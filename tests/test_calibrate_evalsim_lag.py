@@ -19,7 +19,7 @@ pytest.importorskip("rotorpy")
 
 from monitor.logs import read_log  # noqa: E402
 from monitor.vehicle import DEFAULT_VEHICLE, load_vehicle  # noqa: E402
-from offline.calibrate.calibrate import calibrate  # noqa: E402
+from offline.calibrate.calibrate import calibrate_vehicle  # noqa: E402
 from offline.calibrate.physics import first_order_lag  # noqa: E402
 
 NOM = load_vehicle(DEFAULT_VEHICLE)
@@ -68,7 +68,7 @@ def tables(tmp_path_factory):
 
 @pytest.mark.slow
 def test_a_slow_rotor_is_named_with_its_lag(tables):
-    r = calibrate(tables["slow"], NOM)
+    r = calibrate_vehicle(tables["slow"], NOM)
     found = {f["effect"]: f["params"] for f in r.findings}
     assert "rotor_time_constant" in found, (r.cause, list(found), r.candidates["rotor_time_constant"])
     taus = np.array([found["rotor_time_constant"][f"tau_{i}_s"] for i in range(1, 5)])
@@ -80,7 +80,7 @@ def test_a_slow_rotor_is_named_with_its_lag(tables):
 
 @pytest.mark.slow
 def test_no_hidden_lag_names_no_lag(tables):
-    r = calibrate(tables["null"], NOM)
+    r = calibrate_vehicle(tables["null"], NOM)
     named = [f["effect"] for f in r.findings]
     assert not {"rotor_time_constant", "motor_time_constant"} & set(named), named
     assert r.calibrated.motor_time_constant_ratio == (1.0, 1.0, 1.0, 1.0)
@@ -98,7 +98,7 @@ def test_a_telemetry_delay_is_an_unexplained_residual_not_a_motor_lag(tables):
     from offline.calibrate.nominal_flights import degrade_table
 
     late = [degrade_table(t, 0.08, 0.0, 0.0, np.random.default_rng(i)) for i, t in enumerate(tables["null"])]
-    r = calibrate(late, NOM)
+    r = calibrate_vehicle(late, NOM)
     named = [f["effect"] for f in r.findings]
     assert not {"rotor_time_constant", "motor_time_constant"} & set(named), (named, r.notes)
     u = r.unexplained
@@ -122,7 +122,7 @@ def common_lag_tables(tmp_path_factory):
 
 @pytest.mark.slow
 def test_a_60_ms_lag_on_all_rotors_is_named_and_every_verdict_says_its_gate(common_lag_tables):
-    r = calibrate(common_lag_tables, NOM)
+    r = calibrate_vehicle(common_lag_tables, NOM)
     found = {f["effect"]: f["params"] for f in r.findings}
     lag = set(found) & {"motor_time_constant", "rotor_time_constant"}
     assert lag, (r.cause, r.notes, {n: c["verdict"] for n, c in r.candidates.items()})

@@ -17,7 +17,7 @@ import pytest
 
 from monitor.errors import LogFormatError
 from monitor.vehicle import DEFAULT_VEHICLE, load_vehicle
-from offline.calibrate.calibrate import calibrate
+from offline.calibrate.calibrate import calibrate_vehicle
 from offline.sim.mission import random_waypoints
 from offline.sim.propeller import QuadraticPropeller
 from offline.sim.simulator import SimConfig, simulate
@@ -88,7 +88,7 @@ def test_the_seeds_draw_every_kind_with_realistic_magnitudes():
 @pytest.mark.parametrize("seed", SEEDS)
 def test_hidden_term_is_named_fitted_and_gains(seed):
     kind, changes = draw_hidden(seed)
-    r = calibrate(measured(_key(changes), seed), NOM)
+    r = calibrate_vehicle(measured(_key(changes), seed), NOM)
     assert r.cause == kind, (r.cause, changes, [f["effect"] for f in r.findings])
     check_value(kind, changes, r.findings[0]["params"])
     assert r.findings[0]["residual_rms_after"] < r.findings[0]["residual_rms_before"]
@@ -109,7 +109,7 @@ def test_hidden_term_is_named_fitted_and_gains(seed):
 
 @pytest.mark.slow
 def test_no_hidden_term_gives_no_cause():
-    r = calibrate(measured((), 5), NOM)
+    r = calibrate_vehicle(measured((), 5), NOM)
     assert r.cause is None, [(f["effect"], f["params"], f["score"]) for f in r.findings]
     assert r.findings == []
     assert r.calibrated == NOM
@@ -118,7 +118,7 @@ def test_no_hidden_term_gives_no_cause():
 @pytest.mark.slow
 def test_two_hidden_terms_are_both_found():
     changes = {"cg_offset_frd_m": (0.02, -0.015, 0.0), "motor_efficiency": (1.0, 0.92, 1.0, 1.0)}
-    r = calibrate(measured(_key(changes), 1), NOM)
+    r = calibrate_vehicle(measured(_key(changes), 1), NOM)
     found = {f["effect"]: f["params"] for f in r.findings}
     assert {"cg_offset", "motor_efficiency"} <= set(found), list(found)
     check_value("cg_offset", changes, found["cg_offset"])
@@ -128,7 +128,7 @@ def test_two_hidden_terms_are_both_found():
 
 def test_hover_only_flight_reports_drag_not_identifiable_without_a_value():
     # Hovering in place excites neither drag (no airspeed) nor the CG/efficiency split beyond the mean.
-    r = calibrate(measured((), 3, n_flights=1, duration_s=20.0, hover=True), NOM)
+    r = calibrate_vehicle(measured((), 3, n_flights=1, duration_s=20.0, hover=True), NOM)
     drag = r.candidates["drag"]
     assert drag["identifiable"] is False and drag["params"] is None and drag["score"] is None
     assert "not identifiable" in drag["reason"]
@@ -138,7 +138,7 @@ def test_hover_only_flight_reports_drag_not_identifiable_without_a_value():
 def test_too_short_a_log_is_refused_by_name():
     tables = measured((), 3, n_flights=1, duration_s=4.0)
     with pytest.raises(LogFormatError, match="hidden-3-0"):
-        calibrate(tables, NOM)
+        calibrate_vehicle(tables, NOM)
 
 
 @pytest.mark.slow
@@ -177,7 +177,7 @@ def test_too_short_a_log_is_refused_by_name():
 )
 def test_other_library_terms_are_found_too(kind, changes, check):
     # One flight is enough for these: each acts on a channel the others leave alone.
-    r = calibrate(measured(_key(changes), 9, n_flights=1), NOM)
+    r = calibrate_vehicle(measured(_key(changes), 9, n_flights=1), NOM)
     assert r.cause == kind, (r.cause, [f["effect"] for f in r.findings])
     assert check(r.findings[0]["params"]), r.findings[0]["params"]
     assert r.gain["heldout_residual_rms_after"] < r.gain["heldout_residual_rms_before"]

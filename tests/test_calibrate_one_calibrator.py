@@ -59,15 +59,15 @@ def test_the_scan_finds_fitting_code():
 
 def test_steady_view_says_what_it_cannot_separate():
     """A log without body rates gets the steady-state view, which lists the terms it cannot tell apart."""
-    from offline.adapt.pipeline import HealthyLog, calibrate
+    from offline.adapt.pipeline import HealthyLog, calibrate_airframe
 
     tabs = _cg_flights_own_sim()
     no_rates = [dataclasses.replace(t, roll_rate_rad_s=np.full_like(t.roll_rate_rad_s, np.nan)) for t in tabs]
-    cal, _ = calibrate(NOM, [HealthyLog(f"f{i}", t) for i, t in enumerate(no_rates)])
+    cal, _ = calibrate_airframe(NOM, [HealthyLog(f"f{i}", t) for i, t in enumerate(no_rates)])
     assert cal.view == "steady-state"
     assert ["cg_offset", "motor_efficiency"] in cal.record["cannot_separate"]
     assert "motor_time_constant" in cal.record["not_observable"]
-    dyn, _ = calibrate(NOM, [HealthyLog(f"f{i}", t) for i, t in enumerate(tabs)])
+    dyn, _ = calibrate_airframe(NOM, [HealthyLog(f"f{i}", t) for i, t in enumerate(tabs)])
     assert dyn.view == "dynamic" and "cannot_separate" not in dyn.record
 
 
@@ -106,15 +106,14 @@ def evalsim_cg_logs(tmp_path_factory):
 
 @pytest.mark.slow
 def test_adapt_and_calibrate_name_the_same_cause_on_a_hidden_cg_offset(evalsim_cg_logs):
-    from offline.adapt.pipeline import calibrate as adapt_calibrate
-    from offline.adapt.pipeline import read_healthy
+    from offline.adapt.pipeline import calibrate_airframe, read_healthy
     from offline.calibrate.cli import main
 
     out = io.StringIO()
     with contextlib.redirect_stdout(out):
         assert main([*evalsim_cg_logs, "--json"]) == 0
     by_calibrate = json.loads(out.getvalue())
-    cal, _ = adapt_calibrate(NOM, read_healthy(evalsim_cg_logs, None, NOM))
+    cal, _ = calibrate_airframe(NOM, read_healthy(evalsim_cg_logs, None, NOM))
     assert cal.view == "dynamic"
     assert by_calibrate["cause"] == "cg_offset", by_calibrate["notes"]
     assert cal.cause == by_calibrate["cause"]

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from monitor.vehicle import DEFAULT_VEHICLE, load_vehicle
-from offline.calibrate.calibrate import calibrate
+from offline.calibrate.calibrate import calibrate_vehicle
 from offline.calibrate.nominal_flights import nominal_flights
 
 NOM = load_vehicle(DEFAULT_VEHICLE)
@@ -24,7 +24,7 @@ def weak_rotor_3():
 
 def test_an_effect_outside_the_library_is_an_unexplained_residual_at_its_rotor(weak_rotor_3):
     # Without motor_efficiency in the library nothing can express one rotor's torque deficit.
-    r = calibrate(weak_rotor_3, NOM, ["cg_offset", "mass", "drag"])
+    r = calibrate_vehicle(weak_rotor_3, NOM, ["cg_offset", "mass", "drag"])
     assert r.cause is None, r.findings  # no term forced onto it
     u = r.to_json()["unexplained_residual"]
     assert u["found"] and "rotor_torque_3" in u["probes"], u
@@ -36,7 +36,7 @@ def test_an_effect_outside_the_library_is_an_unexplained_residual_at_its_rotor(w
 
 
 def test_the_same_effect_inside_the_library_is_named_and_leaves_nothing_unexplained(weak_rotor_3):
-    r = calibrate(weak_rotor_3, NOM)
+    r = calibrate_vehicle(weak_rotor_3, NOM)
     assert r.cause == "motor_efficiency"
     assert not r.unexplained["found"], r.unexplained["summary"]
     # One rotor singled out: the caveat that a damaged propeller there would look the same, with the one-rotor
@@ -53,7 +53,7 @@ def nominal_pair():
 
 
 def test_nominal_flights_leave_nothing_unexplained(nominal_pair):
-    r = calibrate(nominal_pair, NOM)
+    r = calibrate_vehicle(nominal_pair, NOM)
     assert not r.unexplained["found"], r.unexplained["summary"]
     slow = r.unexplained["probes"]["slow_kinematic_error"]
     assert not slow["found"] and slow["corr_time_samples"] < slow["threshold"], slow
@@ -77,7 +77,7 @@ def test_rates_and_attitude_drifting_apart_slowly_are_an_unexplained_residual(no
                 yaw_rate_rad_s=t.yaw_rate_rad_s + 0.02 * z[:, 2],
             )
         )
-    r = calibrate(tabs, NOM)
+    r = calibrate_vehicle(tabs, NOM)
     slow = r.unexplained["probes"]["slow_kinematic_error"]
     assert r.unexplained["found"] and slow["found"], slow
     assert slow["corr_time_samples"] > slow["threshold"] and slow["signal"].endswith("_kin_rad_s")

@@ -1,4 +1,4 @@
-"""offline.tune.sets.calibrate end to end, on small data sets of our simulator and the shipped model:
+"""offline.tune.sets.tune_sets end to end, on small data sets of our simulator and the shipped model:
 regions beyond the register shape the set rule but not the airframe check, the torque-sign check is applied, and
 the rule written is the one ``choose`` picks from the candidates it records."""
 
@@ -40,7 +40,7 @@ def _write(tmp_path, name, seed, airframe="nominal", torque=None, flights_per_la
 
 @pytest.fixture(scope="module")
 def calibrated(tmp_path_factory):
-    from offline.tune.sets import calibrate
+    from offline.tune.sets import tune_sets
 
     tmp = tmp_path_factory.mktemp("conformal")
     paths = {
@@ -50,7 +50,7 @@ def calibrated(tmp_path_factory):
         "down": _write(tmp, "down", 3, torque=(-0.10, -0.02)),
         "drawn": _write(tmp, "drawn", 4, airframe="drawn", flights_per_label=3),
     }
-    res = calibrate(
+    res = tune_sets(
         MODEL,
         [paths["register"]],
         [],

@@ -58,7 +58,7 @@ SHARE_BASELINE_TAU_S = 60.0
 # noisier; chosen on our simulator (calibration flights seed 100, onset flights seed 400: 5 s gave a median
 # latency of 7.7 s at >= 8 % loss, 2 s 4.2 s with the fault threshold 1.5x the highest healthy value, 1 s 3.8 s
 # at only 1.1x), never on the evaluation-only simulator. No command runs the comparison; each row is this value set,
-# `make calibrate-alerts`, then `propwatch evaluate alerts --seed 400 --no-evalsim`.
+# `make tune-alerts`, then `propwatch evaluate alerts --seed 400 --no-evalsim`.
 SHARE_AVERAGE_S = 2.0
 # What the baseline's plane learns from: each span's trims as a 10 %-trimmed mean (``trimmed_mean``), not the mean.
 # 20-Hz snapshots of a 200-Hz motor command can catch one controller tick of a transient: evalsim's healthy flight
@@ -71,7 +71,7 @@ SHARE_AVERAGE_S = 2.0
 # simulator's healthy flights within 1 % of its mean (rms of 2-s steps, seed 100; not re-measured by a command in
 # the repository). The evidence keeps the mean: its noise is what the thresholds were calibrated on (a trimmed mean
 # there lowered the calibrated fault threshold from 8.05 to 6.37 nat-s and let one of 10 held-out healthy hours of
-# ours cross it: a plane misfit, not noise; `make calibrate-alerts evaluate-alerts` with the evidence trimmed).
+# ours cross it: a plane misfit, not noise; `make tune-alerts evaluate-alerts` with the evidence trimmed).
 PLANE_CUT = 0.1
 # The pair statistic: a same-spin diagonal pair (1+2 CCW or 3+4 CW) that loses thrust f on both rotors keeps roll
 # and pitch balanced (T1 = T2, T3 = T4 still hold), so the yaw-free shares do not move. What moves is the yaw
@@ -137,7 +137,7 @@ YAW_FREE_GAP = 0.069
 # after an onset what it does not know at a speed it has flown grows by this drift for as long as the loss is being
 # heard: at 0.005 per m/s a minute that is 0.002-0.006 at 3-4 m/s^2 within 10-20 s, 10-30 times one sample's noise,
 # and 8-12 % losses flown at speed are heard that much less (p95 latency 10.8-12.9 s on our held-out seeds 300, 600,
-# 700). Measured by setting FLAP_SLOPE_Q and running `make calibrate-alerts evaluate-alerts` (calibration on seed
+# 700). Measured by setting FLAP_SLOPE_Q and running `make tune-alerts evaluate-alerts` (calibration on seed
 # 100, onsets on seed 300), one drift per minute of 0.005 / 0.0027 / 0.0016 / 0.0009 / 0 per m/s: fault threshold
 # 7.37 / 8.53 / 9.45 / 10.44 / 20.46 nat-s, median / p95 latency 6.05 / 10.77, 5.2 / 9.22, 4.65 / 9.44, 4.8 / 9.7,
 # 8.55 / 14.96 s (with none the healthy flights' slow changes are misfits the threshold must absorb). 0.0016 per m/s

@@ -21,7 +21,7 @@ from monitor.flight import FlightTable
 # Chosen, not measured: our simulator's flights start in hover and model no ground effect.
 SETTLE_S = 2.0
 # Block length of the within-flight wander (10 blocks in 20 s: a covariance from one flight). Chosen, not measured;
-# the thresholds of monitor/memory/thresholds.py were measured with it (`make calibrate-memory`).
+# the thresholds of monitor/memory/thresholds.py were measured with it (`make tune-memory`).
 BLOCK_S = 2.0
 N_REGIME = 3  # (1, roll, pitch)
 

@@ -5,7 +5,7 @@ All were measured on our own simulator's same-airframe fleet (``offline/vehicles
 
     python -m offline.vehicles.calibrate --fleet OUT/ours_cal
 
-(``make calibrate-memory`` simulates that fleet and runs it; ``make evaluate-memory`` measures the rule; figures in
+(``make tune-memory`` simulates that fleet and runs it; ``make evaluate-memory`` measures the rule; figures in
 docs/VEHICLE_MEMORY.md.)
 
 - ``PRIOR_COV``: the flight-to-flight covariance of a healthy vehicle's share intercepts (PX4 rotor order), the

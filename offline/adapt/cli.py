@@ -36,7 +36,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    from offline.adapt.pipeline import AdaptConfig, adapt
+    from offline.adapt.pipeline import AdaptConfig, adapt_vehicle
 
     mission = args.mission or ("crazypad" if (args.fmt or "").startswith("crazypad") else "random")
     window = 60 if mission == "crazypad" else 100
@@ -44,7 +44,7 @@ def main(argv: list[str] | None = None) -> int:
         cfg = AdaptConfig(
             mission=mission, flights_per_label=args.flights_per_label, epochs=args.epochs, window=window, seed=args.seed
         )
-        res = adapt(args.healthy, args.vehicle, args.out, args.fmt, args.labelled, cfg, progress=sys.stderr.isatty())
+        res = adapt_vehicle(args.healthy, args.vehicle, args.out, args.fmt, args.labelled, cfg, progress=sys.stderr.isatty())
     except PropwatchError as exc:
         print(f"propwatch adapt: error: {exc}", file=sys.stderr)
         return 2

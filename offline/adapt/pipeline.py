@@ -178,15 +178,15 @@ def has_body_rates(logs: list[HealthyLog]) -> bool:
     return all(np.isfinite(getattr(h.table, n)[h.table.airborne]).mean() > 0.9 for h in logs for n in names)
 
 
-def calibrate(nominal: VehicleConfig, logs: list[HealthyLog]) -> tuple[AirframeCalibration, list[int]]:
+def calibrate_airframe(nominal: VehicleConfig, logs: list[HealthyLog]) -> tuple[AirframeCalibration, list[int]]:
     """Calibrate with ``offline.calibrate``: its dynamic view where the logs carry body rates (it separates a CG
     offset from a motor spread), else its steady-state view, which says which terms it cannot separate. Returns
     the calibration and the indices of the healthy logs scored as held out (odd ones; one log: itself)."""
     held_i = list(range(1, len(logs), 2)) or [0]
     if has_body_rates(logs):
-        from offline.calibrate.calibrate import calibrate as calibrate_dynamic
+        from offline.calibrate.calibrate import calibrate_vehicle
 
-        r = calibrate_dynamic([h.table for h in logs], nominal)
+        r = calibrate_vehicle([h.table for h in logs], nominal)
         rec = {
             "view": "dynamic",
             "why": TERMS[r.cause].why if r.cause else "no term beats the nominal model on the held-out blocks",
@@ -292,7 +292,7 @@ def write_vehicle(cal: AirframeCalibration, sources: dict, path: Path, nominal_p
     return path
 
 
-def adapt(
+def adapt_vehicle(
     healthy: list[str],
     vehicle_path: str | Path,
     out: str | Path,
@@ -323,7 +323,7 @@ def adapt(
     baseline = healthy_baseline(logs, fmt, separable)
     spread = share_spread(logs)
     with _progress(1, "calibrate", progress) as bar:
-        cal, held_i = calibrate(nominal, logs)
+        cal, held_i = calibrate_airframe(nominal, logs)
         bar.update()
     features = features_for(logs)
     tcfg = TrainConfig(

@@ -40,7 +40,7 @@ from offline.alerts.flights import ALERT_FLIGHT_FIELDS, FlightSet, evalsim_set, 
 from offline.alerts.rules import consecutive_rule, decision_rule, px4_rule, summarise
 from offline.manifest import make_manifest
 from offline.sim.assumptions import REGISTER
-from offline.tune.alerts import calibrate, write_calibration
+from offline.tune.alerts import tune_alerts, write_calibration
 
 FLIGHT_S = 80.0
 EVALSIM_BLOCK = 8  # evalsim simulates 8 flights per batch
@@ -184,7 +184,7 @@ def main(argv=None) -> int:
         )
         healthy = ours(fs)
         prov = {"flight_set": fs.__dict__, "simulator": "offline.sim (ours)"}
-        cal = calibrate(healthy, args.model, cfg, prov, seed=args.calibration_seed)
+        cal = tune_alerts(healthy, args.model, cfg, prov, seed=args.calibration_seed)
         config = {"flight_set": fs.__dict__}
         if args.physics == "randomised":
             config["assumptions"] = REGISTER.to_mapping()

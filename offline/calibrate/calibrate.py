@@ -161,7 +161,9 @@ def inspect_rotor(efficiency: list[float]) -> dict | None:
     }
 
 
-def calibrate(tables: list[FlightTable], nominal: VehicleConfig, candidates: list[str] | None = None) -> CalibrationResult:
+def calibrate_vehicle(
+    tables: list[FlightTable], nominal: VehicleConfig, candidates: list[str] | None = None
+) -> CalibrationResult:
     segments = prepare(tables, nominal)
     data = Data.split(segments)
     terms = [TERMS[n] for n in (candidates or list(TERMS))]

@@ -74,9 +74,9 @@ def main(argv: list[str] | None = None) -> int:
         print(f"propwatch calibrate: unknown term(s) {', '.join(unknown)} (known: {', '.join(TERMS)})", file=sys.stderr)
         return 2
     tables = [t for p in args.measured for t in read_measured(p, args.format, loaded.config)]
-    from offline.calibrate.calibrate import calibrate  # scipy: only once there is work to do
+    from offline.calibrate.calibrate import calibrate_vehicle  # scipy: only once there is work to do
 
-    result = calibrate(tables, loaded.config, terms)
+    result = calibrate_vehicle(tables, loaded.config, terms)
     if args.out:
         from offline.calibrate.writer import write_calibrated
 

@@ -26,9 +26,9 @@ BIC_GRID = (10.0, 15.0, 20.0, 25.0, 30.0, 40.0, 50.0, 60.0, 80.0, 100.0, 150.0, 
 
 def first_round(tables, vehicle) -> dict:
     """The first round's verdict per candidate, as ``calibrate`` reports it."""
-    from offline.calibrate.calibrate import calibrate
+    from offline.calibrate.calibrate import calibrate_vehicle
 
-    r = calibrate(tables, vehicle)
+    r = calibrate_vehicle(tables, vehicle)
     return {"cause": r.cause, "candidates": {n: c["verdict"] for n, c in r.candidates.items()}}
 
 

@@ -21,7 +21,7 @@ import json
 import sys
 
 from monitor.vehicle import DEFAULT_VEHICLE, VehicleConfig, load_vehicle
-from offline.calibrate.calibrate import calibrate
+from offline.calibrate.calibrate import calibrate_vehicle
 from offline.classifier.evaluate import evaluate_dataset
 from offline.classifier.train import TrainConfig, predict_probabilities, train
 from offline.dataset.generate import DatasetSpec, generate
@@ -78,7 +78,7 @@ def experiment(flights_per_label: int = 2, duration_s: float = 40.0, epochs: int
         SimConfig(duration_s=60.0),
         seed=seed + 100,
     )
-    result = calibrate([sim.to_flight_table(i, source=f"healthy-{i}") for i in range(2)], nominal)
+    result = calibrate_vehicle([sim.to_flight_table(i, source=f"healthy-{i}") for i in range(2)], nominal)
     log(f"calibration: cause {result.cause}, findings {[(f['effect'], f['params']) for f in result.findings]}")
     measured = generate(dataclasses.replace(base, name="measured", seed=seed + 200), truth, log=log)
     cfg = TrainConfig(epochs=epochs, seed=seed)

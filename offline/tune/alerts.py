@@ -1,6 +1,6 @@
 """Calibrate the decision's thresholds on healthy flights: the exceedance-rate tail of its CUSUM.
 
-``propwatch tune alerts`` (``make calibrate-alerts``) runs it through ``offline.alerts.evaluate --calibrate``,
+``propwatch tune alerts`` (``make tune-alerts``) runs it through ``offline.alerts.evaluate --calibrate``,
 which then scores the thresholds it wrote on independent flights.
 
 Each healthy flight is replayed through ``monitor.decision.rule.Decision`` itself
@@ -132,7 +132,7 @@ def bootstrap_tails(
     return fits, failed
 
 
-def calibrate(healthy: list[AlertFlight], model_path: str | Path, cfg: DecisionConfig, provenance: dict, seed: int = 0) -> dict:
+def tune_alerts(healthy: list[AlertFlight], model_path: str | Path, cfg: DecisionConfig, provenance: dict, seed: int = 0) -> dict:
     traces = []
     never = {k: np.inf for k in STATISTICS}
     for f in healthy:

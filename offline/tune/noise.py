@@ -14,7 +14,7 @@ Two airframe regimes, each with its own register:
 - ``unmeasured``: the whole register, with ``Priors.unmeasured_airframe()``.
 
 ``propwatch tune noise [--flights-per-label 3] [--duration-s 60] [--seed 7]`` prints
-the coverage and mean set size per inflation; ``make calibrate-physics`` runs it.
+the coverage and mean set size per inflation; ``make tune-noise`` runs it.
 """
 
 from __future__ import annotations
@@ -68,7 +68,7 @@ def coverage(balances, truths, priors: Priors, geometry: RotorGeometry) -> tuple
     return float(np.mean(hit)), float(np.mean(sizes)), float(np.mean(exact))
 
 
-def calibrate(flights_per_label: int, duration_s: float, seed: int, log=print) -> dict:
+def tune_noise(flights_per_label: int, duration_s: float, seed: int, log=print) -> dict:
     vehicle = load_vehicle(DEFAULT_VEHICLE)
     geometry = RotorGeometry.from_vehicle(vehicle)
     out = {"seed": seed, "flights_per_label": flights_per_label, "duration_s": duration_s, "regimes": {}}
@@ -112,7 +112,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seed", type=int, default=7, help="data set seed (default 7)")
     ap.add_argument("--json", help="write the table here")
     args = ap.parse_args(argv)
-    res = calibrate(args.flights_per_label, args.duration_s, args.seed)
+    res = tune_noise(args.flights_per_label, args.duration_s, args.seed)
     for regime, r in res["regimes"].items():
         print(f"{regime}: smallest inflation with >= 95 % coverage: {r['chosen']['noise_inflation']} ({r['flights']} flights)")
     if args.json:

@@ -295,7 +295,7 @@ def measure_with_check(r: Region, score: str, rho: float, threshold: float, chec
     return {"flights": m.pop("flights"), "flagged": float(np.mean(flag)), **m}
 
 
-def calibrate(
+def tune_sets(
     model: Path,
     data: list[Path],
     checks: list[Path],
@@ -473,7 +473,7 @@ def main(argv: list[str] | None = None) -> int:
         p.error(f"--classifier-weight must be in (0, 1], got {a.classifier_weight}")
     grid = SPARSITY_GRID if a.sparsity_prior is None else (a.sparsity_prior,)
     weights = CLASSIFIER_WEIGHT_GRID if a.classifier_weight is None else (a.classifier_weight,)
-    res = calibrate(
+    res = tune_sets(
         a.model,
         a.data,
         a.check,

@@ -29,7 +29,7 @@ from monitor.memory.normal import normal_of
 from offline.vehicles.evaluate import CLAIM, REFERENCES, later_flights, load_fleet
 
 
-def calibrate(fleet: Path) -> dict:
+def calibrate_memory_thresholds(fleet: Path) -> dict:
     by = load_fleet(fleet)
     dev = []
     for refs, f in later_flights(by):
@@ -75,7 +75,7 @@ def main(argv: list[str] | None = None) -> int:
     )
     p.add_argument("--fleet", required=True, type=Path)
     args = p.parse_args(argv)
-    c = calibrate(args.fleet)
+    c = calibrate_memory_thresholds(args.fleet)
     print(f"{c['healthy_flights']} healthy later flights, {c['damaged_past_fault']} damaged singles past the fault level")
     print("PRIOR_COV = (\n" + "".join(f"    ({', '.join(f'{x:.3e}' for x in row)}),\n" for row in c["prior_cov"]) + ")")
     print("fault level -> singles >= 6 % named exactly: " + ", ".join(f"{t:g}: {n}" for t, n in c["sweep"]))

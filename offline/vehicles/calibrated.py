@@ -94,11 +94,11 @@ def calibrated_vehicle(files: list[str], nominal: VehicleConfig, cache_dir: Path
     if path and path.is_file():
         d = json.loads(path.read_text())
         return from_mapping(VehicleConfig, d["vehicle"], origin=str(path))[0], d["result"]
-    from offline.calibrate.calibrate import calibrate
+    from offline.calibrate.calibrate import calibrate_vehicle
     from offline.calibrate.cli import read_measured
 
     tables = [t for f in files for t in read_measured(Path(f), None, nominal)]
-    r = calibrate(tables, nominal)
+    r = calibrate_vehicle(tables, nominal)
     result = {
         "logs": [str(f) for f in files],
         "cause": r.cause,
