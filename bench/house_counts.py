@@ -12,6 +12,13 @@ included; a ``from a.b import c`` goes to module ``a.b.c`` where that is a modul
 * ``arrows across commands``: one command's modules importing another's (``monitor.cli`` and
   ``monitor.__main__`` dispatch to all of them and are not counted).
 * ``cycles``: strongly connected groups of more than one module (each listed).
+
+And for ``offline`` by package (a subpackage, or a loose module of ``offline/``'s root, is one package):
+
+* ``offline modules per package``, ``offline package arrows`` (distinct importer -> imported package pairs, each
+  with its number of module arrows) and ``offline package cycles``;
+* ``offline arrows back up``: a package importing one of a higher layer of ``OFFLINE_LAYERS`` (lowest first),
+  each with the module arrows behind it; ``offline packages without a layer`` names any package not placed there.
 """
 
 from __future__ import annotations
@@ -32,6 +39,21 @@ APPS = {
     "replay": ("monitor.mavlink.player",),
 }
 DISPATCH = ("monitor.cli", "monitor.__main__")
+# offline's packages, lowest layer first: shared records; the simulator; its propeller models and fleets; data
+# sets and the evaluation-only simulator; the classifier; what is scored or fitted on its outputs; what tunes
+# those; the pipelines built on all of it; the commands at offline/'s root.
+OFFLINE_LAYERS = (
+    ("offline", "offline.manifest", "offline.response_gain", "offline.share_baseline"),
+    ("offline.sim",),
+    ("offline.propellers",),
+    ("offline.fleet_sim",),
+    ("offline.dataset", "offline.evalsim"),
+    ("offline.classifier",),
+    ("offline.alerts", "offline.calibrate"),
+    ("offline.tune", "offline.crazypad", "offline.vehicles"),
+    ("offline.adapt",),
+    ("offline.demo", "offline.evaluate", "offline.simulate"),
+)
 
 
 def module_names(repo: Path) -> dict[str, Path]:
@@ -126,6 +148,45 @@ def cycles(graph: dict[str, set[str]]) -> list[list[str]]:
     return found
 
 
+def offline_package(name: str) -> str | None:
+    """``offline.sim`` for ``offline.sim.io_tlog``; a loose module of offline/'s root is its own package."""
+    parts = name.split(".")
+    if parts[0] != "offline":
+        return None
+    return ".".join(parts[:2])
+
+
+def offline_counts(graph: dict[str, set[str]]) -> dict:
+    pkg = {n: offline_package(n) for n in graph}
+    per_package: dict[str, int] = {}
+    for p in filter(None, pkg.values()):
+        per_package[p] = per_package.get(p, 0) + 1
+    arrows: dict[tuple[str, str], list[str]] = {}
+    for s in graph:
+        for t in graph[s]:
+            a, b = pkg[s], pkg.get(t)
+            if a is not None and b is not None and a != b:
+                arrows.setdefault((a, b), []).append(f"{s} -> {t}")
+    layer = {p: i for i, group in enumerate(OFFLINE_LAYERS) for p in group}
+    up = [
+        f"{a} -> {b}: " + ", ".join(sorted(mods))
+        for (a, b), mods in sorted(arrows.items())
+        if a in layer and b in layer and layer[b] > layer[a]
+    ]
+    package_graph: dict[str, set[str]] = {p: set() for p in per_package}
+    for a, b in arrows:
+        package_graph[a].add(b)
+    return {
+        "offline packages": len(per_package),
+        "offline modules": sum(per_package.values()),
+        "offline modules per package": dict(sorted(per_package.items(), key=lambda kv: (-kv[1], kv[0]))),
+        "offline package arrows": [f"{a} -> {b} ({len(m)})" for (a, b), m in sorted(arrows.items())],
+        "offline package cycles": cycles(package_graph),
+        "offline arrows back up": up,
+        "offline packages without a layer": sorted(p for p in per_package if p not in layer),
+    }
+
+
 def counts(repo: Path = REPO) -> dict:
     names = module_names(repo)
     graph = {name: {t for t in imports_of(name, path, names) if t in names} for name, path in names.items()}
@@ -144,14 +205,16 @@ def counts(repo: Path = REPO) -> dict:
         "arrows back up": up,
         "arrows across commands": sideways,
         "cycles": cycles(graph),
+        **offline_counts(graph),
     }
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--json", action="store_true", help="print the counts as JSON")
+    parser.add_argument("--repo", type=Path, default=REPO, help="the tree to count (default: this one)")
     args = parser.parse_args(argv)
-    result = counts()
+    result = counts(args.repo)
     if args.json:
         print(json.dumps(result, indent=2))
         return 0
@@ -160,6 +223,8 @@ def main(argv: list[str] | None = None) -> int:
             print(f"{key}: {len(value)}")
             for item in value:
                 print(f"  {item if isinstance(item, str) else ' <-> '.join(item)}")
+        elif isinstance(value, dict):
+            print(f"{key}: " + ", ".join(f"{k} {v}" for k, v in value.items()))
         else:
             print(f"{key}: {value}")
     return 0
