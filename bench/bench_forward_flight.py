@@ -29,8 +29,9 @@ from monitor.decision.rotor_share import _YAW_FREE, BASELINE_S, SHARE_AVERAGE_S
 from monitor.decision.thresholds import file_sha256, load_calibration
 from monitor.model import Classifier
 from monitor.vehicle import REPO_ROOT
-from offline.alerts.evaluate import _revision, cached, previous_rule
+from offline.alerts.evaluate import _revision, cached
 from offline.alerts.flights import ALERT_FLIGHT_FIELDS, evalsim_specs
+from offline.alerts.previous import previous_rule
 from offline.alerts.rules import decision_rule
 from offline.evalsim.sets import FLAPPING_MAX, build_set
 

@@ -17,7 +17,7 @@ from monitor.errors import PropwatchError
 
 # name -> (module, one-line help). Offline commands need the ``offline`` extra.
 COMMANDS: dict[str, tuple[str, str]] = {
-    "simulate": ("offline.sim.cli", "simulate flights (npz or PX4-like tlog) with ground truth"),
+    "simulate": ("offline.simulate", "simulate flights (npz or PX4-like tlog) with ground truth"),
     "train-propellers": ("offline.propellers.cli", "virtual load cell + LSTM propeller models"),
     "dataset": ("offline.dataset.cli", "generate labelled fault data sets (A, B, C, ...)"),
     "train": ("offline.classifier.train_cli", "train the CNN fault classifier"),

@@ -57,7 +57,7 @@ def append_autopilot_version(path: Path, uid: int) -> None:
 
 def write_fleet(out: str | Path, spec: FleetSpec | None = None) -> list[Path]:
     """Simulate ``spec`` and write ``out/vehicle_V/flight_K.tlog``; returns the paths, vehicle-major."""
-    from offline.sim.cli import build_propellers
+    from offline.propellers import build_propellers
 
     spec = spec or FleetSpec()
     out = Path(out)
@@ -69,7 +69,7 @@ def write_fleet(out: str | Path, spec: FleetSpec | None = None) -> list[Path]:
         for k in range(spec.fault_from_flight, spec.flights):
             conditions[spec.faulty_vehicle * spec.flights + k, spec.faulty_propeller - 1] = code
     sim = dataclasses.replace(SimConfig(), duration_s=spec.duration_s, log_rate_hz=TLOG_RATE_HZ)
-    props = build_propellers(vehicle, conditions, spec.propellers, spec.seed)
+    props = build_propellers(vehicle, conditions, kind=spec.propellers, rng_seed=spec.seed)
     log = simulate(vehicle, random_waypoints(n, 5, seed=spec.seed), props, sim, seed=spec.seed)
     paths = []
     for v in range(spec.vehicles):

@@ -1,7 +1,8 @@
-"""``offline.alerts.evaluate --compare-with``: another checkout's decision rule, replayed as that checkout has it.
+"""``propwatch evaluate alerts --compare-with``: another checkout's decision rule, replayed as that checkout has it.
 
 The rule lives in several modules (monitor/decision/rule.py and its parts); a comparison that loaded the other
-checkout's rule but this tree's parts would replay a mix of both.
+checkout's rule but this tree's parts would replay a mix of both. The other checkout runs in its own interpreter
+(``offline.alerts.previous``), so this one's modules are never touched.
 """
 
 from __future__ import annotations
@@ -13,8 +14,8 @@ import numpy as np
 
 from monitor.decision.config import DecisionConfig
 from monitor.vehicle import REPO_ROOT
-from offline.alerts.evaluate import DECISION_PARTS, previous_rule
 from offline.alerts.flights import AlertFlight
+from offline.alerts.previous import previous_rule
 from offline.alerts.rules import decision_rule
 
 RATE_HZ, WINDOW, HOVER_RPM = 20.0, 100, 6500.0
@@ -34,22 +35,20 @@ def onset_flight() -> AlertFlight:
 
 def checkout_copy(tmp_path):
     root = tmp_path / "other"
-    (root / "monitor" / "decision").mkdir(parents=True)
+    shutil.copytree(REPO_ROOT / "monitor", root / "monitor", ignore=shutil.ignore_patterns("__pycache__"))
     (root / "models").mkdir()
-    for part in (*DECISION_PARTS, "rule"):
-        shutil.copy(REPO_ROOT / "monitor" / "decision" / f"{part}.py", root / "monitor" / "decision" / f"{part}.py")
     shutil.copy(REPO_ROOT / "models" / "decision-calibration.json", root / "models")
     return root
 
 
 def test_this_checkout_compared_with_itself_gives_the_same_alerts_and_leaves_the_modules_alone(tmp_path):
     f = onset_flight()
-    before = {p: sys.modules.get(f"monitor.decision.{p}") for p in DECISION_PARTS}
+    before = dict(sys.modules)
     ours = decision_rule(DecisionConfig())(f)
     theirs = previous_rule(str(checkout_copy(tmp_path)))(f)
     assert ours and [a[1:3] for a in ours][:2] == [("suspect", (3,)), ("fault", (3,))]
     assert theirs == ours
-    assert {p: sys.modules.get(f"monitor.decision.{p}") for p in DECISION_PARTS} == before
+    assert all(sys.modules.get(name) is mod for name, mod in before.items())
 
 
 def test_the_other_checkouts_parts_are_the_ones_replayed(tmp_path):

@@ -1,11 +1,11 @@
-"""The consecutive-window rule, the offline comparison beside the daemon's sequential rule (offline.alerts.consecutive)."""
+"""The consecutive-window rule, the offline comparison beside the daemon's sequential rule (offline.classifier.consecutive)."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from offline.alerts.consecutive import ConsecutiveConfig, ConsecutiveRule, replay_consecutive
+from offline.classifier.consecutive import ConsecutiveConfig, ConsecutiveRule, replay_consecutive
 
 
 def test_a_streak_of_consecutive_windows_alerts_then_the_propeller_is_quiet_for_the_refractory_time():

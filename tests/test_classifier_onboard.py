@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from offline.alerts.consecutive import ConsecutiveConfig
+from offline.classifier.consecutive import ConsecutiveConfig
 from offline.classifier.onboard import ShiftFlights, detection_times, simulate_onset
 from offline.dataset.onset import SwitchedPropellers
 

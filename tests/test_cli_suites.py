@@ -39,13 +39,15 @@ def test_each_form_reaches_its_tool(args, usage, deprecated):
 
 
 def test_tune_alerts_is_the_alert_evaluation_that_rewrites_the_calibration(monkeypatch):
-    import offline.alerts.evaluate as alerts
+    import offline.tune.alerts as tune_alerts
+    from offline.alerts.evaluate import main as evaluate_alerts
     from offline.tune.cli import main
 
     seen = []
-    monkeypatch.setattr(alerts, "main", lambda argv: seen.append(argv) or 0)
+    monkeypatch.setattr(tune_alerts, "main", lambda argv: seen.append(argv) or 0)
     assert main(["alerts", "--calibration-hours", "1"]) == 0
-    assert seen == [["--calibrate", "--calibration-hours", "1"]]
+    assert evaluate_alerts(["--calibrate", "--calibration-hours", "2"]) == 0  # the evaluation's own --calibrate
+    assert seen == [["--calibration-hours", "1"], ["--calibration-hours", "2"]]
 
 
 def test_an_unknown_suite_is_refused_with_the_choices():

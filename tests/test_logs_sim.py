@@ -17,9 +17,9 @@ from monitor.vehicle import DEFAULT_VEHICLE, load_vehicle  # noqa: E402
 
 @pytest.fixture(scope="module")
 def flown(tmp_path_factory):
-    from offline.sim.cli import TLOG_RATE_HZ, build_propellers
     from offline.sim.io_tlog import write_tlog
     from offline.sim.mission import random_waypoints
+    from offline.simulate import TLOG_RATE_HZ, build_propellers
 
     vehicle = load_vehicle(DEFAULT_VEHICLE)
     cfg = dataclasses.replace(sim.SimConfig(), duration_s=12.0, log_rate_hz=TLOG_RATE_HZ)

@@ -5,8 +5,8 @@ import pytest
 
 from monitor.errors import ConfigError
 from monitor.vehicle import DEFAULT_VEHICLE, load_vehicle
-from offline.propellers.faults import SIGNATURES
 from offline.propellers.loadcell import LoadCellConfig, run_load_cell
+from offline.sim.faults import SIGNATURES
 
 VEHICLE = load_vehicle(DEFAULT_VEHICLE)
 CFG = LoadCellConfig(duration_s=120.0, seed=7)

@@ -9,9 +9,9 @@ import pytest
 from monitor.errors import ModelError
 from monitor.vehicle import DEFAULT_VEHICLE, load_vehicle
 from offline.propellers import CONDITIONS, MODELS_DIR, build_propellers
-from offline.propellers.faults import SIGNATURES
 from offline.propellers.loadcell import LoadCellConfig, run_load_cell
 from offline.propellers.lstm_runtime import load_condition_models
+from offline.sim.faults import SIGNATURES
 
 VEHICLE = load_vehicle(DEFAULT_VEHICLE)
 MODELS = load_condition_models(MODELS_DIR)

@@ -14,12 +14,12 @@ from monitor.errors import LogFormatError
 from monitor.esc import RPM_PER_RAD_S
 from monitor.mavlink import esc as mavlink_esc
 from monitor.vehicle import DEFAULT_VEHICLE, load_vehicle
-from offline.sim.cli import main as simulate_main
 from offline.sim.io_npz import read_npz, write_npz
 from offline.sim.io_tlog import DEFAULT_WALL_BOOT_US, write_tlog
 from offline.sim.mission import random_waypoints
 from offline.sim.propeller import QuadraticPropeller
 from offline.sim.simulator import SimConfig, simulate
+from offline.simulate import main as simulate_main
 
 
 @pytest.fixture(scope="module")

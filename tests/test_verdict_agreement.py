@@ -34,7 +34,7 @@ JARGON = re.compile(r"\blabel\b|conformal|\bwindows?\b|boot time", re.I)
 def demo_logs(tmp_path_factory) -> list[Path]:
     pytest.importorskip("torch")  # simulate's LSTM propellers
     from offline.demo import DEMO_CASES, simulate_args
-    from offline.sim.cli import main as simulate
+    from offline.simulate import main as simulate
 
     out = tmp_path_factory.mktemp("demo")
     for case in DEMO_CASES:

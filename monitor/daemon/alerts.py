@@ -4,7 +4,7 @@ The daemon decides with ``monitor.decision.rule.Decision`` (shared with
 ``propwatch diagnose``); what it announces is worded there and queued here,
 rate-limited on ``time.monotonic()`` (a wall-clock step never re-arms or
 silences it). The consecutive-window rule it is compared against lives offline
-(``offline.alerts.consecutive``).
+(``offline.classifier.consecutive``).
 """
 
 from __future__ import annotations

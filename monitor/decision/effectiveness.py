@@ -99,7 +99,7 @@ class Priors:
     speed (the register's low- and high-speed ranges of bent and cracked blades, read at the paper
     quad's hover, s² = 0.26: mean 0.07, std 0.025, 90 % within 3-11 %; the std is widened to 0.035
     for heavier vehicles hovering faster) and a torque-per-thrust change of either sign (std 0.15: the
-    register's -30..+30 %, which holds the +5..+25 % that offline/propellers/faults.py's fixed
+    register's -30..+30 %, which holds the +5..+25 % that offline/sim/faults.py's fixed
     signatures imply, lies within 2 std; a uniform draw over it has std 0.17).
 
     The airframe is taken as nominal as its vehicle file says: rotors matched to 1 % and the CG

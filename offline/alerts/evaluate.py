@@ -1,6 +1,7 @@
 """``propwatch evaluate alerts`` (``make evaluate-alerts``); with ``--calibrate`` it is ``propwatch tune alerts``.
 
-Calibrate: healthy flights (seeds from ``--calibration-seed``) -> ``models/decision-calibration.json``.
+Calibrate (``offline.tune.alerts``, first when ``--calibrate``): healthy flights (seeds from
+``--calibration-seed``) -> ``models/decision-calibration.json``.
 Evaluate: independent flights (other seeds): healthy, single-propeller and pair onsets, replayed through
 each rule; writes ``OUT/alerts.json`` (rows + sizes + manifest) and ``OUT/alerts.md`` (the card table).
 
@@ -35,12 +36,12 @@ from monitor.decision.config import DecisionConfig
 from monitor.decision.thresholds import DEFAULT_CALIBRATION, Calibration, file_sha256, load_calibration, thresholds
 from monitor.model import Classifier
 from monitor.vehicle import REPO_ROOT, load_vehicle
-from offline.alerts.consecutive import ConsecutiveConfig
 from offline.alerts.flights import ALERT_FLIGHT_FIELDS, FlightSet, evalsim_set, simulate_set
+from offline.alerts.previous import previous_rule
 from offline.alerts.rules import consecutive_rule, decision_rule, px4_rule, summarise
+from offline.classifier.consecutive import ConsecutiveConfig
 from offline.manifest import make_manifest
 from offline.sim.assumptions import REGISTER
-from offline.tune.alerts import tune_alerts, write_calibration
 
 FLIGHT_S = 80.0
 EVALSIM_BLOCK = 8  # evalsim simulates 8 flights per batch
@@ -88,7 +89,7 @@ def parse_args(argv):
     return p.parse_args(argv)
 
 
-def _n(hours: float) -> int:
+def flown_flight_count(hours: float) -> int:
     """Flights of FLIGHT_S in ``hours`` flown hours."""
     return max(1, math.ceil(hours * 3600.0 / FLIGHT_S))
 
@@ -109,10 +110,10 @@ def healthy_flight_count(hours: float, per_flight_s: float) -> int:
 
 
 def healthy_sets(hours: float, per_flight_s: float, **kw) -> list[FlightSet]:
-    """Our healthy flights for ``hours`` classified hours: the flown-hours set (``_n(hours)`` flights, the set
+    """Our healthy flights for ``hours`` classified hours: the flown-hours set (``flown_flight_count(hours)`` flights, the set
     earlier runs drew and cached) and, when that falls short, the rest appended as a second set."""
     n = healthy_flight_count(hours, per_flight_s)
-    first = min(n, _n(hours))
+    first = min(n, flown_flight_count(hours))
     sets = [FlightSet("healthy", n_flights=first, **kw)]
     if n > first:
         sets.append(FlightSet("healthy", n_flights=n - first, first_flight=first, **kw))
@@ -158,39 +159,39 @@ def evalsim_cached(cache: str, kind: str, n: int, seed: int, clf, sha: str, log)
     return out
 
 
+def log(message: str) -> None:
+    print(message, file=sys.stderr)
+
+
+def our_flights(args: argparse.Namespace, vehicle, clf, fs: FlightSet) -> list:
+    """One of our flight sets, classified (from ``--cache`` when it was made before for this model)."""
+    return cached(args.cache, set_key(fs, file_sha256(args.model)), lambda: simulate_set(vehicle, fs, clf, log=log))
+
+
 def main(argv=None) -> int:
-    args = parse_args(argv)
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if "--calibrate" in argv:  # the calibration is `propwatch tune alerts`'s, which then runs this evaluation
+        from monitor.cli import main as propwatch
+
+        return propwatch(["tune", "alerts", *(a for a in argv if a != "--calibrate")])
+    return evaluate(parse_args(argv))
+
+
+def evaluate(args: argparse.Namespace) -> int:
+    """Score the rules on independent flights of both simulators; write ``OUT/alerts.json`` and ``OUT/alerts.md``."""
     started = time.monotonic()
     clf = Classifier(args.model)
     vehicle = load_vehicle(args.vehicle)
     cfg = DecisionConfig()
     sha = file_sha256(args.model)
-    log = lambda m: print(m, file=sys.stderr)  # noqa: E731
 
     def ours(fs: FlightSet):
-        return cached(args.cache, set_key(fs, sha), lambda: simulate_set(vehicle, fs, clf, log=log))
+        return our_flights(args, vehicle, clf, fs)
 
     def theirs(kind: str, n: int):
         return evalsim_cached(args.cache, kind, n, args.seed, clf, sha, log)
 
     ours_kw = dict(physics=args.physics)
-    if args.calibrate:
-        fs = FlightSet(
-            "healthy",
-            n_flights=_n(args.calibration_hours),
-            seed=args.calibration_seed,
-            pickup_fraction=args.pickup_fraction if args.physics == "randomised" else 0.0,
-            **ours_kw,
-        )
-        healthy = ours(fs)
-        prov = {"flight_set": fs.__dict__, "simulator": "offline.sim (ours)"}
-        cal = tune_alerts(healthy, args.model, cfg, prov, seed=args.calibration_seed)
-        config = {"flight_set": fs.__dict__}
-        if args.physics == "randomised":
-            config["assumptions"] = REGISTER.to_mapping()
-        path = write_calibration(cal, args.calibration_out, config, args.calibration_seed)
-        ab = {k: None if v is None else (round(v["a"], 4), round(v["b"], 4)) for k, v in cal["fits"].items()}
-        print(f"calibration: {path} (a, b) {ab}", file=sys.stderr)
     if args.seed == args.calibration_seed:
         print("--seed must differ from --calibration-seed (evaluate on flights the calibration never saw)", file=sys.stderr)
         return 2
@@ -320,61 +321,6 @@ def _revision(checkout: str) -> str:
         return f"{Path(checkout).name} {rev.stdout.strip()}"
     except (OSError, subprocess.CalledProcessError):
         return Path(checkout).name
-
-
-# The decision rule's parts (monitor/decision/rule.py imports them), each after what it imports (thresholds reads
-# regime). A checkout from before the package keeps them at monitor/'s root beside its decision.py, as
-# FLAT_DECISION_PARTS (or, before the split, has none).
-DECISION_PARTS = ("config", "rotor_share", "regime", "thresholds", "stream_evidence")
-FLAT_DECISION_PARTS = ("decision_config", "rotor_share", "regime", "decision_thresholds", "stream_evidence")
-
-
-def _load(name: str, path: Path):
-    import importlib.util
-
-    spec = importlib.util.spec_from_file_location(name, path)
-    mod = importlib.util.module_from_spec(spec)
-    sys.modules[name] = mod  # dataclasses look their module up
-    spec.loader.exec_module(mod)
-    return mod
-
-
-def decision_files(monitor_dir: Path) -> tuple[list[tuple[str, Path]], Path]:
-    """A checkout's rule parts as (module name, file), in load order, and the file of its rule."""
-    package = monitor_dir / "decision"
-    if package.is_dir():
-        return [(f"monitor.decision.{p}", package / f"{p}.py") for p in DECISION_PARTS], package / "rule.py"
-    flat = [(f"monitor.{p}", monitor_dir / f"{p}.py") for p in FLAT_DECISION_PARTS]
-    return [(name, path) for name, path in flat if path.is_file()], monitor_dir / "decision.py"
-
-
-def previous_rule(checkout: str):
-    """Another checkout's decision module with its own calibration file, replayed like the shipped one.
-
-    Its parts are loaded from the checkout too (under their own names while its decision module imports them,
-    then this tree's are put back), so the rule replayed is that checkout's, not a mix with this one's."""
-    from offline.alerts.rules import replay_decision
-
-    parts, rule_file = decision_files(Path(checkout) / "monitor")
-    saved = {name: sys.modules.get(name) for name, _ in parts}
-    try:
-        for name, path in parts:
-            _load(name, path)
-        mod = _load("previous_decision", rule_file)
-    finally:
-        for name, own in saved.items():
-            if own is None:
-                sys.modules.pop(name, None)
-            else:
-                sys.modules[name] = own
-    old_cfg = mod.DecisionConfig()  # its own defaults: the rule as that checkout shipped it
-    cal = mod.load_calibration(Path(checkout) / "models" / "decision-calibration.json")
-
-    def run(f):
-        d = mod.Decision(old_cfg, f.rate_hz, f.window, calibration=cal, use_stored_calibration=False)
-        return replay_decision(f, d, with_sets=True)
-
-    return run
 
 
 def markdown(r: dict) -> str:

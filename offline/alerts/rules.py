@@ -7,7 +7,7 @@ alert names, e.g. ``((1,), (1, 2))`` for ``PROP 1 or 1+2?``); an empty
 propeller tuple is an alert that names none (vibration metrics).
 
 * ``decision``: ``monitor.decision.rule.Decision``, the shipped rule, fed step by step as the daemon feeds it.
-* ``consecutive``: the comparison rule (``offline.alerts.consecutive``: P >= 0.9 in 20 windows in a row).
+* ``consecutive``: the comparison rule (``offline.classifier.consecutive``: P >= 0.9 in 20 windows in a row).
 * ``px4_imbalance``: PX4's imbalanced-propeller check (commander FailureDetector::updateImbalancedPropStatus):
   metric = (std(acc_x) + std(acc_y)) / 2 - std(acc_z) from vehicle_imu_status.var_accel, low-passed with a
   5 s time constant, flagged above FD_IMB_PROP_THR (default 30). Here the variances come from the 20 Hz
@@ -24,8 +24,8 @@ import numpy as np
 from monitor.decision.config import DecisionConfig
 from monitor.decision.replay import replay
 from monitor.decision.rule import Decision, WindowEvidence
-from offline.alerts.consecutive import ConsecutiveConfig, replay_consecutive
 from offline.alerts.flights import AlertFlight
+from offline.classifier.consecutive import ConsecutiveConfig, replay_consecutive
 
 PX4_FD_IMB_PROP_THR = 30.0  # PX4 parameter FD_IMB_PROP_THR default
 PX4_IMB_LPF_TAU_S = 5.0  # FailureDetector _imbalanced_prop_lpf_time_constant

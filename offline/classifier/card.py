@@ -149,7 +149,7 @@ def write_card(path: str | Path, manifest: dict, results: list[Result], tables: 
             " (analytic thrust and torque, fault signatures drawn from the register per damaged rotor; the LSTMs "
             "learned one fixed signature each)."
             if cfg["propellers"] == "quadratic" and spec.get("physics") == "randomised"
-            else " (analytic fault signatures of `offline/propellers/faults.py`: the LSTM weights were not built when this model was trained)."
+            else " (analytic fault signatures of `offline/sim/faults.py`: the LSTM weights were not built when this model was trained)."
             if cfg["propellers"] == "quadratic"
             else " (the paper's stacked LSTMs)."
         ),
@@ -230,7 +230,7 @@ def write_card(path: str | Path, manifest: dict, results: list[Result], tables: 
         )
     if spec.get("physics", "fixed") == "fixed":
         lines.append(
-            "- Every damaged blade in training had one guessed signature per type (`offline/propellers/faults.py`): "
+            "- Every damaged blade in training had one guessed signature per type (`offline/sim/faults.py`): "
             "torque per unit thrust up by +5..+25 %, always up. Nobody has measured it; the register of unmeasured "
             "assumptions (`offline/sim/assumptions.py`) gives -8..+10 %, both signs, and `physics=randomised` data "
             "sets draw from it."
@@ -239,7 +239,7 @@ def write_card(path: str | Path, manifest: dict, results: list[Result], tables: 
         lines += [
             "- What tells all four propellers damaged (label 16) from a heavier healthy vehicle (label 1) is the yaw "
             "statistic, and it rests on the simulated blades' drag-torque rise (bent +5..10 %, cracked +2..6 %, "
-            "`offline/propellers/faults.py`), which comes from physical reasoning, not a measurement. If real damage "
+            "`offline/sim/faults.py`), which comes from physical reasoning, not a measurement. If real damage "
             "changes a blade's torque per RPM^2 differently, label 16 falls back to being confused with label 1; the "
             "relative-RPM part (which propeller) does not depend on it.",
             "- A payload is modelled as a point mass at the CG (no yaw inertia). A real payload's inertia lowers the yaw "

@@ -2,7 +2,7 @@
 
 Flights are simulated with shifted conditions (random routes and payloads),
 the classifier runs on every window (hop 1, as the daemon does at 20 Hz) and
-the consecutive-window rule (``offline.alerts.consecutive``, the comparison
+the consecutive-window rule (``offline.classifier.consecutive``, the comparison
 beside the daemon's sequential rule) is replayed on the flight's clock, with its
 defaults and the trade-offs in ``RULES``.
 """
@@ -15,7 +15,7 @@ import numpy as np
 
 from monitor.labels import LABEL_MASKS
 from monitor.vehicle import VehicleConfig
-from offline.alerts.consecutive import ConsecutiveConfig, replay_consecutive
+from offline.classifier.consecutive import ConsecutiveConfig, replay_consecutive
 from offline.classifier.evaluate import Predictor
 from offline.classifier.windows import gather, window_index
 from offline.dataset.generate import DatasetSpec, from_log, routes, simulate_flights

@@ -1,7 +1,7 @@
 """evalsim's unmeasured assumptions, each with its value and why it sits where it does.
 
 Recorded in every set manifest; README.md shows the same table. "training"
-is offline/sim + offline/propellers/faults.py as of this branch.
+is offline/sim + offline/sim/faults.py as of this branch.
 """
 
 from __future__ import annotations

@@ -155,7 +155,7 @@ def _paper(v, seed, i, duration_s) -> FlightSpec:
 
 def _paper_torque_rising(v, seed, i, duration_s) -> FlightSpec:
     """``paper``'s flight i with the damaged blade's drag torque RISING by |δ| at equal speed, as training's
-    ``torque_factor = 1 + gain`` (offline/propellers/faults.py): per unit thrust that is
+    ``torque_factor = 1 + gain`` (offline/sim/faults.py): per unit thrust that is
     (1 + |δ|) / (1 - loss) - 1, i.e. +10..+35 % where ``paper`` has -2..-12 %."""
     spec = _paper(v, seed, i, duration_s)
     d = spec.airframe.damage

@@ -10,7 +10,7 @@ magnitudes, each (B, 4).
 
 Kinds:
 - ``"quadratic"``: kF·ω², kτ·ω² times each condition's analytic signature
-  (``faults.py``), plus its 1P ripple and flutter; needs no weights.
+  (``offline/sim/faults.py``), plus its 1P ripple and flutter; needs no weights.
 - ``"lstm"``: the paper's stacked LSTMs trained on the virtual load cell
   (``models/propellers/*.npz``), stepped statefully at the load cell's 25 ms
   sample period; see ``lstm_runtime.py`` for how they meet the physics rate.
@@ -29,7 +29,7 @@ import numpy as np
 from monitor.errors import ConfigError
 from monitor.resources import shipped
 from monitor.vehicle import VehicleConfig
-from offline.propellers.faults import CONDITIONS, SIGNATURES, FaultSignature, signature_table
+from offline.sim.faults import CONDITIONS, SIGNATURES, FaultSignature, signature_table
 
 MODELS_DIR = shipped("propellers")
 KINDS = ("quadratic", "lstm")

@@ -102,7 +102,7 @@ def metrics_markdown(metrics: dict) -> str:
 
 FRAMING = """What these figures are. The "virtual load cell" (`offline/propellers/loadcell.py`) makes thrust and
 torque from a formula we chose: kF·ω² and kτ·ω² times a fault signature whose magnitudes are guesses
-(`offline/propellers/faults.py`; no damaged-blade measurement exists), plus noise whose size we also chose.
+(`offline/sim/faults.py`; no damaged-blade measurement exists), plus noise whose size we also chose.
 The LSTMs learn that formula back. Their error equals the formula's own error against its noisy samples
 (the "formula (floor)" column): it is set by the chosen noise, not by the network. For normal propellers
 plain kF·ω² scores the same. The LSTMs do not "beat the paper": the paper's figures come from a real
@@ -133,9 +133,9 @@ def train_all(
     import torch
 
     from offline.manifest import make_manifest, write_manifest
-    from offline.propellers.faults import SIGNATURES
     from offline.propellers.loadcell import LoadCellConfig, run_load_cell
     from offline.propellers.lstm_train import TrainConfig, config_dict, evaluate, reload_as_shipped, train_condition
+    from offline.sim.faults import SIGNATURES
 
     if signatures not in SIGNATURE_MODES:
         raise PropwatchError(f"signatures: must be one of {SIGNATURE_MODES}, got {signatures!r}")
@@ -214,10 +214,10 @@ def train_all(
 def rescore_shipped(models_dir: Path, vehicle_path: Path) -> dict:
     """Score the shipped weights on their regenerated training sweeps (fixed signatures, the manifest's seed)
     and rewrite ``metrics.md`` with the formula-floor column; the weights and manifest are not touched."""
-    from offline.propellers.faults import SIGNATURES
     from offline.propellers.loadcell import LoadCellConfig, run_load_cell
     from offline.propellers.lstm_runtime import load_condition_models
     from offline.propellers.lstm_train import TrainConfig, evaluate
+    from offline.sim.faults import SIGNATURES
 
     manifest = json.loads((models_dir / "manifest.json").read_text(encoding="utf-8"))
     if manifest["config"].get("signatures", "fixed") != "fixed":

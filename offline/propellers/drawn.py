@@ -16,9 +16,9 @@ import dataclasses
 import numpy as np
 
 from monitor.vehicle import VehicleConfig
-from offline.propellers.faults import FaultSignature
 from offline.propellers.loadcell import LoadCellConfig, run_load_cell
 from offline.propellers.lstm_train import formula_of
+from offline.sim.faults import FaultSignature
 
 
 def register_signatures(condition: str, seed: int, n_sweeps: int, register=None) -> list[FaultSignature]:

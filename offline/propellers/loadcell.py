@@ -17,7 +17,7 @@ frequency of up to 183 Hz):
 - the propeller: ``kF·ω²`` and ``kτ·ω²`` of the vehicle (the normal propeller is
   the vehicle's), times the condition's mean signature, times its 1P ripple
   (blade angle integrated from ω) and flutter (Ornstein-Uhlenbeck noise);
-  see ``offline.propellers.faults`` for the physical argument;
+  see ``offline.sim.faults`` for the physical argument;
 - the stand: each 25 ms sample is the average over its period (the stand's
   ADC averages; this is what keeps a 100-180 Hz 1P ripple from aliasing into
   full-size errors), plus white sensor noise. RPM is an optical count over the
@@ -47,8 +47,8 @@ from scipy.signal import lfilter
 from monitor.errors import ConfigError
 from monitor.esc import RAD_S_PER_RPM, RPM_PER_RAD_S
 from monitor.vehicle import VehicleConfig
-from offline.propellers.faults import CONDITIONS, SIGNATURES, FaultSignature
 from offline.propellers.thrust_stand import GRAVITY_M_S2
+from offline.sim.faults import CONDITIONS, SIGNATURES, FaultSignature
 
 
 @dataclass(frozen=True)

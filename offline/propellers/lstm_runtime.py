@@ -36,8 +36,8 @@ import numpy as np
 
 from monitor.errors import ModelError
 from monitor.vehicle import VehicleConfig
-from offline.propellers.faults import CONDITIONS, FaultSignature
 from offline.propellers.vibration import FaultVibration
+from offline.sim.faults import CONDITIONS, FaultSignature
 
 State = list[tuple[np.ndarray, np.ndarray]]  # per layer: (h, c), each (H, N): rotors along the fast axis
 

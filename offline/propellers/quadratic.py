@@ -1,7 +1,7 @@
 """Analytic propellers for the simulator: kF·ω², kτ·ω² times each rotor's fault signature.
 
 Works without trained weights; a bent or cracked rotor already differs from a
-normal one through ``offline.propellers.faults``. Implements the simulator's
+normal one through ``offline.sim.faults``. Implements the simulator's
 ``PropellerModel`` protocol: ``reset(omega_rad_s (B,4))`` and
 ``__call__(omega_rad_s (B,4), dt_s) -> (thrust_n, torque_nm)``, magnitudes
 (thrust along body -z, drag torque >= 0; the simulator applies the spin sign).

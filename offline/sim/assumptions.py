@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from monitor.errors import ConfigError
-from offline.propellers.faults import FaultSignature
+from offline.sim.faults import FaultSignature
 
 DISTRIBUTIONS = ("uniform", "loguniform")
 
@@ -67,12 +67,12 @@ class Assumption:
 
 PX4_DOCS = "PX4 v1.14 parameter reference (mc_rate_control / mc_att_control / mc_pos_control params)"
 # Damaged blades: no public load-cell data exists for bent or cracked propellers
-# (../shared/data/README.md); the fixed signatures of offline/propellers/faults.py are one guess inside these ranges.
+# (../shared/data/README.md); the fixed signatures of offline/sim/faults.py are one guess inside these ranges.
 _NO_DATA = "no public load-cell measurement of damaged blades exists (../shared/data/README.md)"
 # A damaged blade's torque per unit thrust, relative to healthy. Its sign is unknown: lost lift lowers the induced
 # drag per thrust (as sqrt(1 - loss)), while profile drag per thrust rises as 1/(1 - loss) and more with a rough
 # crack, and for a 10 % loss the two nearly cancel (README's hand calculation). So the range favours neither sign:
-# a 30 % fall to a 30 % rise, which holds every guess made so far (offline/propellers/faults.py's fixed signatures
+# a 30 % fall to a 30 % rise, which holds every guess made so far (offline/sim/faults.py's fixed signatures
 # +5..+25 %, the evaluation simulator's -12..-2 %). Until 2026-11 it was -10..+30 %, centred on a rise, and the
 # network learned that centre as the sign (the torque-sign check, bench/bench_torque_sign.py).
 TORQUE_PER_THRUST_CHANGE = (-0.30, 0.30)
@@ -159,7 +159,7 @@ def _blade(kind: str, loss_lo, loss_hi, ripple, flutter, fixed: FaultSignature) 
 
 
 def _default_register() -> tuple[Assumption, ...]:
-    from offline.propellers.faults import BENT, CRACKED
+    from offline.sim.faults import BENT, CRACKED
 
     gains = "PX4 controller gain"
     a: list[Assumption] = []

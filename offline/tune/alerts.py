@@ -1,7 +1,7 @@
 """Calibrate the decision's thresholds on healthy flights: the exceedance-rate tail of its CUSUM.
 
-``propwatch tune alerts`` (``make tune-alerts``) runs it through ``offline.alerts.evaluate --calibrate``,
-which then scores the thresholds it wrote on independent flights.
+``propwatch tune alerts`` (``make tune-alerts``, ``main`` here) simulates the healthy calibration flights, writes
+the thresholds, then scores them on independent flights with ``propwatch evaluate alerts`` (``offline.alerts.evaluate``).
 
 Each healthy flight is replayed through ``monitor.decision.rule.Decision`` itself
 (regime holds and discounts included) with its trace on; the traced updates
@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import json
 import re
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -42,9 +43,10 @@ import numpy as np
 from monitor.decision.config import DecisionConfig
 from monitor.decision.rule import Decision
 from monitor.decision.thresholds import STATISTICS, Thresholds, file_sha256, pair_statistic, physics_statistic
-from offline.alerts.flights import AlertFlight
+from offline.alerts.flights import AlertFlight, FlightSet
 from offline.alerts.rules import replay_decision
 from offline.manifest import make_manifest
+from offline.sim.assumptions import REGISTER
 
 MIN_EVENTS = 3
 TAIL_MAX_RATE_PER_H = 10.0  # fit the tail: grid points crossed at most this often (100x the fault target)
@@ -201,3 +203,31 @@ def write_calibration(cal: dict, path: str | Path, config: dict, seed: int) -> P
     tmp.write_text(text + "\n", encoding="utf-8")
     tmp.replace(path)
     return path
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``propwatch tune alerts``: the options of ``propwatch evaluate alerts``; calibrate, then evaluate."""
+    from monitor.model import Classifier
+    from monitor.vehicle import load_vehicle
+    from offline.alerts.evaluate import evaluate, flown_flight_count, our_flights, parse_args
+
+    args = parse_args(["--calibrate", *(sys.argv[1:] if argv is None else argv)])
+    clf = Classifier(args.model)
+    vehicle = load_vehicle(args.vehicle)
+    fs = FlightSet(
+        "healthy",
+        n_flights=flown_flight_count(args.calibration_hours),
+        seed=args.calibration_seed,
+        pickup_fraction=args.pickup_fraction if args.physics == "randomised" else 0.0,
+        physics=args.physics,
+    )
+    healthy = our_flights(args, vehicle, clf, fs)
+    prov = {"flight_set": fs.__dict__, "simulator": "offline.sim (ours)"}
+    cal = tune_alerts(healthy, args.model, DecisionConfig(), prov, seed=args.calibration_seed)
+    config = {"flight_set": fs.__dict__}
+    if args.physics == "randomised":
+        config["assumptions"] = REGISTER.to_mapping()
+    path = write_calibration(cal, args.calibration_out, config, args.calibration_seed)
+    ab = {k: None if v is None else (round(v["a"], 4), round(v["b"], 4)) for k, v in cal["fits"].items()}
+    print(f"calibration: {path} (a, b) {ab}", file=sys.stderr)
+    return evaluate(args)

@@ -3,8 +3,8 @@
     propwatch tune sets [ARGS]    the conformal set rule (<model>.sets.json): offline.tune.sets
     propwatch tune noise [ARGS]   the moment balance's credible-set coverage (Priors.noise_inflation): offline.tune.noise
     propwatch tune alerts [ARGS]  the decision thresholds (models/decision-calibration.json): the tail fit of
-                                  offline.tune.alerts, run by offline.alerts.evaluate --calibrate (which then
-                                  scores the thresholds on independent flights)
+                                  offline.tune.alerts, then the thresholds scored on independent flights
+                                  (propwatch evaluate alerts, whose options it takes)
 
 ``propwatch tune WHAT --help`` lists that tool's options. None changes the simulator or the model: fitting the
 simulator to measured flights is ``propwatch calibrate``.
@@ -15,22 +15,21 @@ from __future__ import annotations
 import argparse
 import importlib
 
-# what -> (module with main(argv), arguments put first, one line)
+# what -> (module with main(argv), one line)
 TOOLS = {
-    "sets": ("offline.tune.sets", (), "set coverage: the conformal rule beside the model"),
-    "noise": ("offline.tune.noise", (), "set coverage of the moment balance alone: its noise inflation"),
-    "alerts": ("offline.alerts.evaluate", ("--calibrate",), "alert thresholds: the decision's calibration file"),
+    "sets": ("offline.tune.sets", "set coverage: the conformal rule beside the model"),
+    "noise": ("offline.tune.noise", "set coverage of the moment balance alone: its noise inflation"),
+    "alerts": ("offline.tune.alerts", "alert thresholds: the decision's calibration file"),
 }
 
 
 def run(what: str, argv: list[str]) -> int:
-    module, first, _ = TOOLS[what]
-    return int(importlib.import_module(module).main([*first, *argv]) or 0)
+    return int(importlib.import_module(TOOLS[what][0]).main(argv) or 0)
 
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="propwatch tune", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("what", choices=sorted(TOOLS), help="; ".join(f"{k}: {v[2]}" for k, v in TOOLS.items()))
+    p.add_argument("what", choices=sorted(TOOLS), help="; ".join(f"{k}: {v[1]}" for k, v in TOOLS.items()))
     p.add_argument("args", nargs=argparse.REMAINDER, help="that tool's own options (propwatch tune WHAT --help)")
     a = p.parse_args(argv)
     return run(a.what, a.args)

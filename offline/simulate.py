@@ -63,7 +63,7 @@ def build_propellers(vehicle, conditions: np.ndarray, kind: str, seed: int):
         from offline.propellers import build_propellers as build
     except ImportError as exc:
         if np.any(conditions != 0) or kind == "lstm":
-            raise ConfigError(f"--propellers {kind} / faulty labels need offline.propellers (issue 3): {exc}") from exc
+            raise ConfigError(f"--propellers {kind} / faulty labels need offline.propellers: {exc}") from exc
         from offline.sim.propeller import QuadraticPropeller
 
         return QuadraticPropeller.for_vehicle(vehicle)
