@@ -1,4 +1,4 @@
-"""Per-flight alert listing for the decision rule (issue 13 diagnosis): which flight alarms, when, on which
+"""Per-flight alert listing for the decision rule: which flight alarms, when, on which
 statistic and propeller, and in which regime.
 
     python -m bench.alerts_flights --set ours-healthy --flights 24 --seed 200

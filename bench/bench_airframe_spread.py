@@ -1,4 +1,4 @@
-"""How localisation falls as the airframe leaves its file, on OUR simulator (issue 12).
+"""How localisation falls as the airframe leaves its file, on OUR simulator.
 
 Randomised flights of our simulator, every term drawn from the assumption register, with the airframe's own terms
 (``offline.sim.assumptions.AIRFRAME_TERMS``: CG offset, motor spread, arm and ESC errors, healthy torque spread) drawn

@@ -14,7 +14,7 @@ other people's jobs, so CPU is the figure to compare):
 
 ``--stages`` adds where this tree's CPU goes, in-process: imports, model load, read (tlog -> streams), grid (the
 20 Hz table), features, network, the decision replay, and the rest of the command (verdict, physics, output).
-Issue 37's target: >= 1,000x real time for the whole command.
+The target: >= 1,000x real time for the whole command.
 """
 
 from __future__ import annotations

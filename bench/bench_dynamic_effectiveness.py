@@ -1,4 +1,4 @@
-"""Can the response to differential commands locate a damaged rotor on an airframe nobody measured? (issue 12)
+"""Can the response to differential commands locate a damaged rotor on an airframe nobody measured?
 
 The moment balance (monitor.decision.effectiveness) reads each rotor's thrust from the steady balance, where a CG offset or
 a motor spread looks exactly like damage. The *dynamic* response is immune to both: write the four commanded ω²

@@ -1,6 +1,6 @@
 """Rotor effectiveness from 5 s of 20 Hz data, on both simulators: a hidden 5, 10, 20 % thrust loss.
 
-Issue 12 asks the moment-balance estimator (monitor.decision.effectiveness) to recover a hidden per-rotor thrust
+The target: the moment-balance estimator (monitor.decision.effectiveness) recovers a hidden per-rotor thrust
 loss of 5, 10 and 20 % within +-2 points from 5 s of 20 Hz data on both simulators, at <= 0.2 ms a window.
 - *ours*: offline.sim with analytic propellers, each rotor in turn scaled to 0.95 / 0.90 / 0.80 of thrust
   (torque per thrust unchanged), random routes;

@@ -1,4 +1,4 @@
-"""False alarms in fast forward flight with blade flapping, on the evaluation-only simulator (issue 13).
+"""False alarms in fast forward flight with blade flapping, on the evaluation-only simulator.
 
 On the one real flight here flown fast (ArduPilot log171) the front rotors' omega^2 shares trim by up to 0.27
 with forward speed (docs/ALERTS.md "On real flights"): the aerodynamic trim of forward flight (blade flapping).

@@ -131,7 +131,7 @@ def senders(args, work: Path, model: Path) -> dict:
         "senders": args.senders,
         "cpu_percent": round(100.0 * (cpu1 - cpu0) / (t1 - t0), 2),
         "senders_answered": answered,
-        "peers_remembered": rep.get("link", {}).get("peers_remembered"),  # absent before issue 15
+        "peers_remembered": rep.get("link", {}).get("peers_remembered"),  # absent from a daemon before the hardening
         "classified_steps": rep["pipeline"]["classified"],
     }
 

@@ -3,7 +3,7 @@
     python -m bench.bench_help [--repeat 3] [--budget-s 1.0]
 
 A fresh process per call is what a user meets (imports included). Prints the best of
---repeat runs per command and whether it is inside the budget (issue 16: < 1 s; torch
+--repeat runs per command and whether it is inside the budget (< 1 s; torch
 is imported only where the work needs it). A budget check printed, not a test assertion:
 timings depend on the machine.
 """

@@ -6,7 +6,7 @@ Prints, per propeller kind: wall and CPU time, aggregate real-time factor
 (flights x simulated seconds / seconds) on each, and the propeller model's own
 CPU cost per physics step. On a shared machine the CPU-time figure is the
 one-core figure; the wall figure includes waiting for the core. Conditions are a fixed random mix (seed 0) of normal,
-bent and cracked rotors. Issue 3's target: >= 500x aggregate at batch 256 on
+bent and cracked rotors. The target: >= 500x aggregate at batch 256 on
 one core with LSTM propellers.
 """
 

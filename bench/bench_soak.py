@@ -37,7 +37,7 @@ import numpy as np
 from bench import REPO
 from bench.bench_daemon import build_inputs, cpu_seconds, free_udp_port, rss_mb
 
-CPU_BUDGET_PERCENT = 5.0  # issue 38's soak budget on the development machine
+CPU_BUDGET_PERCENT = 5.0  # the soak budget on the development machine
 P99_BUDGET_MS = 5.0
 
 

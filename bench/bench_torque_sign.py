@@ -1,4 +1,4 @@
-"""The torque-sign check (issue 12): flip the sign of the damaged blade's torque-per-thrust change.
+"""The torque-sign check: flip the sign of the damaged blade's torque-per-thrust change.
 
 Two randomised data sets of our simulator, identical but for the register's torque-per-thrust range
 of damaged blades: +2..+10 % (what the shipped classifier's training assumed, always up) and

@@ -1,4 +1,4 @@
-"""The hidden-effect matrix: does ``propwatch calibrate`` name what is hidden, and only that? (issue 40)
+"""The hidden-effect matrix: does ``propwatch calibrate`` name what is hidden, and only that?
 
     nice python -m bench.evalsim_calibration --out out/evaluate-calibration          # make evaluate-calibration
     nice python -m bench.evalsim_calibration --out DIR --seeds 2 --nominal 10 --outside-seeds 2   # reduced

@@ -1,5 +1,5 @@
 """When ``propwatch calibrate`` names a motor_efficiency that singles out one rotor, how often does it ask for that
-rotor's propeller to be inspected, and what does the one-rotor reading say? (issue 40)
+rotor's propeller to be inspected, and what does the one-rotor reading say?
 
     nice python -m bench.evalsim_inspect [--seeds 3] [--duration-s 40]
 

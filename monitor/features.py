@@ -260,7 +260,7 @@ class Normalizer:
 
 
 # ---------------------------------------------------------------------------
-# Native-rate evidence (issue 14): computed at the log's own rate (CrazyPAD 100 Hz), not on the
+# Native-rate evidence: computed at the log's own rate (CrazyPAD 100 Hz), not on the
 # 20 Hz model grid, because what a damaged blade adds to a motor command or to the airframe's
 # acceleration lives above 10 Hz and is gone after resampling. One function each, numpy only,
 # so the daemon can call them when its streams are fast enough (``NATIVE_MIN_RATE_HZ``).

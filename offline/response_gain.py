@@ -1,6 +1,6 @@
 """Per-rotor response gain at a log's native rate: the angular acceleration each rotor's command change buys.
 
-Physics (issue 14, "CG offset or damage?"): a damaged propeller lowers its rotor's thrust per command, so
+Physics ("CG offset or damage?"): a damaged propeller lowers its rotor's thrust per command, so
 the body's angular acceleration per change of that rotor's command drops; a mass near a rotor moves the
 trim (a constant moment) and leaves the per-command gains (nearly) alone. Per flight, over each airborne
 stretch, this fits

@@ -1,4 +1,4 @@
-"""The ω²-share baseline: a physics single-fault locator with no training (issue 12).
+"""The ω²-share baseline: a physics single-fault locator with no training.
 
 A propeller that lost thrust is spun faster by the attitude controller to hold
 the vehicle level, so its share of the total ω² rises. Per rotor, the

@@ -1,4 +1,4 @@
-"""``propwatch adapt``: refusals by name, the healthy baseline, and a tiny end-to-end run (issue 14)."""
+"""``propwatch adapt``: refusals by name, the healthy baseline, and a tiny end-to-end run."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""The airframe check (issue 12): a flight whose moment balance no damage on the vehicle file's airframe explains
+"""The airframe check: a flight whose moment balance no damage on the vehicle file's airframe explains
 is scored as an unmeasured airframe and says so; a nominal flight, and a large real fault, are not flagged.
 
 Judged on flights of the evaluation-only simulator (``offline/evalsim``: RotorPy dynamics, its own controller),

@@ -1,4 +1,4 @@
-"""Issue 13's healthy hours are classified hours: how many flights the evaluation flies to reach them."""
+"""The evaluation's healthy hours are classified hours: how many flights the evaluation flies to reach them."""
 
 import hashlib
 import json

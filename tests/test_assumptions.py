@@ -13,7 +13,7 @@ from offline.sim.assumptions import REGISTER, AssumptionRegister, draw_flight, d
 
 VEHICLE = load_vehicle(DEFAULT_VEHICLE)
 
-# What issue 12 asks the register to cover, by entry name.
+# What the register must cover, by entry name.
 REQUIRED = [
     *(
         f"{kind}_{q}"
@@ -64,7 +64,7 @@ def test_register_covers_the_listed_quantities_with_reasons_and_real_ranges():
     # Controller gains stay within the PX4-documented ranges quoted in their reasons.
     assert 0.01 <= REGISTER["mc_rollrate_p"].low and REGISTER["mc_rollrate_p"].high <= 0.5
     assert REGISTER["mc_roll_p"].high <= 8.0
-    # The spread issue 12 quotes for real airframes.
+    # The spread quoted for real airframes.
     assert (REGISTER["motor_efficiency_spread_frac"].low, REGISTER["motor_efficiency_spread_frac"].high) == (0.04, 0.08)
 
 

@@ -112,7 +112,7 @@ def test_a_telemetry_delay_is_an_unexplained_residual_not_a_motor_lag(tables):
 
 @pytest.fixture(scope="module")
 def common_lag_tables(tmp_path_factory):
-    """Issue 40's case: two 80-s flights, a 60 ms lag on all four rotors (the vehicle file says 20 ms)."""
+    """Two 80-s flights, a 60 ms lag on all four rotors (the vehicle file says 20 ms)."""
     from offline.sim.io_tlog import write_tlog
 
     logs = evalsim_flights.simulate_flights(_common_lag_specs())

@@ -1,4 +1,4 @@
-"""One calibrator (issue 40): ``propwatch calibrate``, ``propwatch adapt`` and the CrazyPAD experiment fit with
+"""One calibrator: ``propwatch calibrate``, ``propwatch adapt`` and the CrazyPAD experiment fit with
 ``offline.calibrate`` and nothing else, and on an airframe with a hidden CG offset adapt and calibrate name the
 same cause. The CG flights come from the evaluation-only simulator (``offline/evalsim``) through a .tlog, as a
 user's would.

@@ -1,4 +1,4 @@
-"""The calibrator's steady-state view: what no library term explains is reported, not forced (issue 14)."""
+"""The calibrator's steady-state view: what no library term explains is reported, not forced."""
 
 from __future__ import annotations
 

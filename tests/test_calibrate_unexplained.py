@@ -1,5 +1,5 @@
 """What the library cannot express is reported as an "unexplained residual" with its size and where it sits,
-never forced onto a term (issue 40). Flights of our own simulator (``offline.calibrate.nominal_flights``: the
+never forced onto a term. Flights of our own simulator (``offline.calibrate.nominal_flights``: the
 register drawn, 20 Hz with the link's delay, jitter and drops)."""
 
 from __future__ import annotations

@@ -5,7 +5,7 @@ daemon running the shipped classifier (``models/classifier.onnx``).
   that propeller within 15 s of the onset, and nothing is raised before it;
 - a full (80 s) healthy flight: no alert.
 
-Skipped until the shipped classifier exists (issue 4, ``make classifier``). The
+Skipped until the shipped classifier exists (``make classifier``). The
 flights are simulated here (tmp dir), never committed, each on a random route
 of its own (seeded). Replayed at 4x: faster overruns the daemon on 2 shared
 cores and UDP drops packets, which shows as gaps (the daemon then, rightly,
@@ -32,7 +32,7 @@ from monitor.mavlink.player import read_tlog
 CLASSIFIER = REPO / "models" / "classifier.onnx"
 pytestmark = [
     pytest.mark.slow,
-    pytest.mark.skipif(not CLASSIFIER.is_file(), reason="models/classifier.onnx not built yet (issue 4: make classifier)"),
+    pytest.mark.skipif(not CLASSIFIER.is_file(), reason="models/classifier.onnx not built yet (make classifier)"),
 ]
 # In-flight onsets: {rotor: 1 bent / 2 cracked}, seed. The decision rule learns each flight's baseline over the
 # 10 s of windows after the first one; FAULT follows these onsets by 4.3 s (bent) and 10.5 s (cracked, the smaller

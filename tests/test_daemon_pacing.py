@@ -72,7 +72,7 @@ def test_one_read_takes_every_waiting_datagram_in_order(udpin):
     assert all(received <= read for _, received, read in batch)
     # In arrival order, to within the conversion's jitter: each stamp is the kernel's realtime stamp moved onto
     # perf_counter by reading both clocks at that datagram's read (link.py), two reads that differ by a fraction
-    # of a microsecond per datagram (once 0.4 us out of order, session 16's suite).
+    # of a microsecond per datagram (once 0.4 us out of order in a full test run).
     stamps = [r for _, r, _ in batch]
     assert all(later >= earlier - 10e-6 for earlier, later in zip(stamps, stamps[1:])), stamps
 

@@ -93,7 +93,7 @@ def test_onset_raises_suspect_then_fault_on_the_right_propeller():
 
 
 def test_a_network_pinned_wrong_from_take_off_is_not_an_alarm_but_a_change_is():
-    # A CG offset the network never saw: P(1) ~ 1 from the first window (issue 12). The absolute statistic is
+    # A CG offset the network never saw: P(1) ~ 1 from the first window. The absolute statistic is
     # disabled by a calibration that saw this; the change statistic alerts only on what changes later.
     cal = Calibration({"absolute": None, "change": (8.0, 0.4), "physics": (8.0, 0.4)}, "sha")
     d = Decision(DecisionConfig(fault_evidence="all"), RATE_HZ, WINDOW, model_sha256="sha", calibration=cal)

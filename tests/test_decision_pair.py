@@ -130,7 +130,7 @@ def test_a_small_single_with_a_large_torque_change_is_named_first_when_the_yaw_b
     # shift of the 8 % min_thrust_loss), so no rotor is called; its drag torque per thrust rose 25 %, so the yaw
     # balance moves by (f - c) / 2 ~ -0.11 and alone raises the alert. The rotor whose yaw-free share rose (beyond
     # the healthy YAW_FREE_RISE) is the first hypothesis, the two same-spin pairs after it: no alert names only
-    # propellers that are not faulty (issue 13), and the rotor is the damaged one, not a guess.
+    # propellers that are not faulty, and the rotor is the damaged one, not a guess.
     d = analytic()
     out = fly(d, lambda t: np.ones(4) if t < 30.0 else single_loss(rotor, 0.035, c=0.25), 120.0, seed=4)
     faults = [a for a in out if a.level == "fault"]

@@ -1,6 +1,6 @@
 """The share statistic against regimes that move the shares without a fault, and its calibration file.
 
-Issue 13: a payload picked up mid-flight is a collective step that must re-learn the baseline, not add share
+A payload picked up mid-flight is a collective step that must re-learn the baseline, not add share
 evidence; a small excursion below the reference (half the share shift of ``alerts.min_thrust_loss``) adds
 nothing; slow drifts are absorbed; a calibration made for another share statistic is not used for it.
 """

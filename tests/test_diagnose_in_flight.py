@@ -182,7 +182,7 @@ def test_the_daemons_alert_reads_the_damaged_rotor_against_the_flights_own_start
     assert abs(eff[r - 1] - factor) <= 0.02, readings
     r, factor, eff = readings[1]
     if abs(eff[r - 1] - factor) > 0.02:
-        # Known limit (session 12): the share rule, now calibrated with the airspeed plane, faults 8.5 s after this
+        # Known limit: the share rule, now calibrated with the airspeed plane, faults 8.5 s after this
         # onset, in a 32-deg manoeuvre; the 5 s before it read rotor 4 at 0.987 +- 0.009 against a truth of 0.924
         # (the rule at 5ea08db faulted later and read 0.917). The reading does not skip manoeuvres.
         pytest.xfail(f"effectiveness read in a manoeuvre: {readings[1]}")

@@ -1,4 +1,4 @@
-"""Messages that tell a new user what to do next (issue 16, "finding the way")."""
+"""Messages that tell a new user what to do next ("finding the way")."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""The daemon against faults, floods and forgery (issue 15's table), in process and seeded.
+"""The daemon against faults, floods and forgery (docs/SECURITY.md's table), in process and seeded.
 
 Each test re-runs one row of the table: a sink that fails, finite but
 impossible values, a flood on one frozen timestamp, a frozen/stepping/
@@ -286,7 +286,7 @@ def test_a_lost_motor_stream_pauses_the_sequential_decision_until_it_returns(toy
     assert daemon.decision.windows > held  # evidence flows again
     ev = [(e["event"], e.get("decision")) for e in _events(tmp_path / "ev.jsonl")]
     # Both the step's reason and blind are recorded. Which comes first depends on the wall clock the loop ticks blind
-    # with (after_s 0): in a full test run (session 12) blind came first, in this file alone the step's reason.
+    # with (after_s 0): in a full test run blind came first, in this file alone the step's reason.
     assert ("paused", None) in ev and ("blind", "paused") in ev, ev
     assert ev[-2:] == [("resumed", None), ("recovered", "running")], ev
 

@@ -1,4 +1,4 @@
-"""The tlog reader against the simulator's own truth (issue 2's PX4-like tlog writer):
+"""The tlog reader against the simulator's own truth (its PX4-like tlog writer):
 what the reader puts on the grid is what the simulator flew, to the precision of the wire."""
 
 from __future__ import annotations

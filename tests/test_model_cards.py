@@ -1,4 +1,4 @@
-"""Cards come from code and manifests; manifests are strict JSON (issue 14)."""
+"""Cards come from code and manifests; manifests are strict JSON."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Native-rate evidence (issue 14): motor command activity, vibration energy, the Crazyflie mixer."""
+"""Native-rate evidence: motor command activity, vibration energy, the Crazyflie mixer."""
 
 from __future__ import annotations
 

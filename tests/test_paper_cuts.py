@@ -1,4 +1,4 @@
-"""What a new user trips over first: each test here failed before its fix (issue 39's paper cuts)."""
+"""What a new user trips over first: each test here failed before its fix (paper cuts)."""
 
 from __future__ import annotations
 

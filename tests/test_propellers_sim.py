@@ -6,7 +6,7 @@ import pytest
 from monitor.vehicle import DEFAULT_VEHICLE, load_vehicle
 from offline.propellers import build_propellers
 
-sim = pytest.importorskip("offline.sim.simulator", reason="the simulator (issue 2) is not in this tree")
+sim = pytest.importorskip("offline.sim.simulator", reason="the simulator is not in this tree")
 from offline.sim.propeller import PropellerModel, QuadraticPropeller  # noqa: E402
 
 VEHICLE = load_vehicle(DEFAULT_VEHICLE)

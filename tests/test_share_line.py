@@ -167,7 +167,7 @@ def test_a_loss_at_a_speed_the_plane_has_learnt_keeps_its_weight_while_it_is_hea
     faults = [a for a in out if a.level == "fault"]
     assert faults and 100.0 < faults[0].t_s <= 110.0, [(a.t_s, a.text) for a in out]
     assert all(a.propellers == (2,) for a in out), [(a.t_s, a.text) for a in out]
-    # With the slopes drifting ten times faster (sessions 12-16) the plane's doubt at 2 m/s^2 outgrows the loss's
+    # With the slopes drifting ten times faster the plane's doubt at 2 m/s^2 outgrows the loss's
     # evidence within seconds of the onset: the same loss is heard later than 10 s. What made it quick.
     import monitor.decision.rotor_share as rs
 

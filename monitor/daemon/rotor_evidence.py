@@ -1,4 +1,4 @@
-"""Rotor effectiveness in flight (issue 12, point 3): what each rotor delivers, from the moment balance.
+"""Rotor effectiveness in flight: what each rotor delivers, from the moment balance.
 
 The daemon keeps the last ``window`` consecutive valid grid steps (5 s at 20 Hz) of commanded RPM and body
 rates; when it raises an alert it reads them as ``propwatch diagnose`` reads a log

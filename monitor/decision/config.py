@@ -42,7 +42,7 @@ class DecisionConfig:
     # Pack voltage lost within one window that counts as a sag. Not measured: chosen by hand above the few-percent
     # voltage steps of a pack under changing load; no command in the repository measures its false-sag rate.
     battery_sag_fraction: float = 0.04
-    # The smallest per-rotor thrust loss the omega^2-share evidence must call (issue 13: >= 8 % alerted): the
+    # The smallest per-rotor thrust loss the omega^2-share evidence must call (>= 8 % alerted): the
     # CUSUM's reference is half of its share shift, so smaller excursions (manoeuvres, gusts) add nothing.
     min_thrust_loss: float = 0.08
     # Which statistics may raise FAULT: "physics" (the omega^2 shares alone; the network's statistics raise at most

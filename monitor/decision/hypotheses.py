@@ -1,4 +1,4 @@
-"""The verdict as a small set of propeller-set hypotheses with a stated coverage (issue 12, point 4).
+"""The verdict as a small set of propeller-set hypotheses with a stated coverage.
 
 A flight's score over the 16 propeller sets is the classifier's mean label probability over its windows,
 that times the moment balance's likelihood of each set (``monitor.decision.effectiveness``), or that likelihood

@@ -78,7 +78,7 @@ PLANE_CUT = 0.1
 # balance: the damaged pair's drag torque per omega^2 changes by g = 1 - (1 - f)(1 + c), c the unmeasured change
 # of torque per unit thrust, and the controller re-trims yaw: y = (s1 + s2 - s3 - s4) / 2 moves by +g for 1+2
 # and -g for 3+4. With c = 0 (torque scales with thrust) g = f, so the CUSUM reference is half of
-# alerts.min_thrust_loss; the sign of c is unknown (issue 12), so a shift names both pairs ("1+2 or 3+4?"), the
+# alerts.min_thrust_loss; the sign of c is unknown, so a shift names both pairs ("1+2 or 3+4?"), the
 # one it fits with c = 0 first. YAW_SIGMA: the healthy spread of y (mean over SHARE_AVERAGE_S) around the flight's
 # own first 10 s on 96 randomised healthy flights of our simulator (`python -m bench.alerts_flights --set
 # ours-healthy --seed 100 --flights 96 --share-spread`, or unclassified `python -m bench.decision_constants`): over
@@ -186,12 +186,12 @@ class RotorShare:
     controller to hold roll and pitch: its omega^2 rises by ~f. The yaw
     balance moves the shares too, along (+1, +1, -1, -1) (CCW against CW
     rotors), by an amount that depends on how the damaged blade's torque per
-    thrust changed, which nobody has measured (issue 12): that direction and
+    thrust changed, which nobody has measured: that direction and
     the collective one are projected out (``_YAW_FREE``). What is left of a
     thrust loss on rotor i is +f/2 on i and -f/2 on its same-spin diagonal
     partner, whatever the torque change. The share needs no fault model and
     no training; against the airframe's own baseline it is blind to CG
-    offsets and motor spread (issue 12's baseline names 24 of 24 that way).
+    offsets and motor spread (the baseline names 24 of 24 that way).
 
     What is left lives in two dimensions, the pitch and roll trims (``_AXES``). Baseline: per axis a plane
     ``b + k_v v + k_a f`` in the heading-frame velocity and the body's horizontal specific force (blade flapping

@@ -17,7 +17,7 @@ windows are classified (the daemon: every 0.05 s; diagnose: every hop):
 classified flight (after take-off, and again after a collective step): what
 the network already says about this airframe before anything changed. A
 network that is confidently wrong about a healthy airframe (a CG offset or a
-weak motor it never saw: issue 12) keeps ``A`` growing on every such flight;
+weak motor it never saw) keeps ``A`` growing on every such flight;
 ``C`` adds evidence only for a *change*. ``phys_i`` is physics evidence that
 needs no network: the rise of rotor i's share of omega^2 over its own
 baseline (``RotorShare``), as a log-likelihood ratio per independent sample
@@ -479,7 +479,7 @@ class Decision:
             return list(self._pair_sets)  # set in _levels whenever the pair level rises
         # The network's recent set words a level the network raised: it may raise it (alerts.suspect_evidence /
         # fault_evidence "all") and one of its statistics is at the level on a propeller called. A level physics
-        # raised is worded by physics, which is the wording the evaluation of issue 13 scores (it replays no set).
+        # raised is worded by physics, which is the wording `propwatch evaluate alerts` scores (it replays no set).
         allowed = self._fault_statistics if level == "fault" else self._suspect_statistics
         at_level = self.thresholds.fault if level == "fault" else self.thresholds.suspect
         network_raised = any(self.S[k][i - 1] >= at_level[k] for k in ("absolute", "change") if k in allowed for i in core)

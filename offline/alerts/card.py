@@ -2,7 +2,7 @@
 
     python -m offline.alerts.card out/alerts/alerts.json      # then `make card-text`
 
-Issue 13 asks for the rules side by side in the card: rule x false alarms per hour x detection x median/p95
+The card shows the rules side by side: rule x false alarms per hour x detection x median/p95
 latency x wrong-propeller alerts, with the old window rule and PX4's vibration metric as rows. The table is
 written by code from the evaluation's own JSON (``offline.alerts.evaluate`` writes it), never by hand.
 """
@@ -101,7 +101,7 @@ def card_table(result: dict, source: str) -> CardTable:
     )
     return CardTable(
         key="alert-rules",
-        title="Alert decisions on both simulators (issue 13)",
+        title="Alert decisions on both simulators",
         note=note,
         columns=COLUMNS,
         rows=tuple(rows(result)),

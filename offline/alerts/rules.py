@@ -83,8 +83,8 @@ def px4_rule(threshold: float = PX4_FD_IMB_PROP_THR):
     return run
 
 
-MIN_CALLED_LOSS = 0.08  # issue 13: single-propeller onsets of >= 8 % thrust loss must be alerted
-# Issue 13's onset set: "severities from 5 % to 20 % thrust loss". Our simulator draws each damaged blade's loss
+MIN_CALLED_LOSS = 0.08  # single-propeller onsets of >= 8 % thrust loss must be alerted
+# The onset set: "severities from 5 % to 20 % thrust loss". Our simulator draws each damaged blade's loss
 # from the register (0-15 % at hover), so some pairs hold a propeller below 5 %; they are scored among all pairs
 # and apart (``pair_*_each_5pct``), never dropped.
 MIN_PAIR_LOSS = 0.05
@@ -108,7 +108,7 @@ def summarise(rule_alerts: dict[str, list], healthy: list[AlertFlight], onset: l
     them where a flight does not know its loss); ``single_detected_all`` counts every single onset. An alert
     that names several candidate sets (``PROP 1 or 1+2?``) is wrong only when no set lies within the truth;
     ``set_alerts`` counts the fault alerts after an onset that name more than one set. Pairs: ``overlaps``, a
-    fault alert after the onset names a propeller of the pair; ``contains`` (issue 13's done-when), the alert
+    fault alert after the onset names a propeller of the pair; ``contains`` (the pairs criterion), the alert
     or one of its sets contains both; ``contains`` again over the pairs whose propellers each lose at least
     ``MIN_PAIR_LOSS`` (the issue's 5-20 %; all where a flight does not know its losses), over same-spin diagonal
     pairs (1+2, 3+4: seen only in the yaw balance) and over adjacent ones. ``pair_alerted``: the pair flights with

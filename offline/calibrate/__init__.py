@@ -1,4 +1,4 @@
-"""Sim-to-real calibration (issues 7, 40): show what the simulation gets wrong, name the cause, fix the model.
+"""Sim-to-real calibration: show what the simulation gets wrong, name the cause, fix the model.
 
 ``calibrate(tables, vehicle)`` (calibrate.py) is the library entry point; ``fit.py`` fits the term library
 (terms.py) and selects by held-out BIC through gates whose every verdict is reported, and holds the steady-state

@@ -1,1 +1,1 @@
-"""The CNN fault classifier (issue 4): model, training, ONNX export, evaluation."""
+"""The CNN fault classifier: model, training, ONNX export, evaluation."""

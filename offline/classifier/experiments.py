@@ -95,7 +95,7 @@ EXPERIMENTS: dict[str, tuple[tuple[str, ...], dict]] = {
     # The rows below train on R-varied with 60 flights per label (`--data` pointing at that set): the same recipe, 2x flights.
     "varied x60 flights +yaw robust": (("R-varied",), _YAW_ROBUST_20),
     "varied x60 flights +yaw robust dropout": (("R-varied",), {**_YAW_ROBUST_20, "dropout": 0.3}),
-    # Candidate, not shipped (issue 12): the shipped recipe below on RN-varied and RR-varied pooled (RR:
+    # Candidate, not shipped: the shipped recipe below on RN-varied and RR-varied pooled (RR:
     # `make dataset-randomised AIRFRAME=drawn NAME=RR`, the airframe's CG, motor spread, arm and ESC errors drawn
     # too: an unmeasured airframe); twice the flights at half the window stride, so an epoch holds as many windows
     # as the shipped row. The shipped row stays last.
@@ -103,7 +103,7 @@ EXPERIMENTS: dict[str, tuple[tuple[str, ...], dict]] = {
         ("RN-varied", "RR-varied"),
         {**_YAW_ROBUST_20, "dropout": 0.3, "train_stride": 64},
     ),
-    # Candidate, not shipped (issue 12): the same pooling with RQ-varied, the airframe terms drawn over a
+    # Candidate, not shipped: the same pooling with RQ-varied, the airframe terms drawn over a
     # quarter of the register's ranges (motors +-1-2 %, CG +-2.5 mm: `make dataset-randomised AIRFRAME=drawn NAME=RQ
     # SEED=57 ASSUME="..."` with the ranges of offline.sim.assumptions.scaled_airframe(0.25)). Against the shipped
     # model (`python -m bench.bench_generalisation`): singles under mild spread up, exact labels and set sizes on the
@@ -112,7 +112,7 @@ EXPERIMENTS: dict[str, tuple[tuple[str, ...], dict]] = {
         ("RN-varied", "RQ-varied"),
         {**_YAW_ROBUST_20, "dropout": 0.3, "train_stride": 64},
     ),
-    # Issue 12: the same recipe on RN-varied (`make dataset-randomised`): every flight's physics and fault signature
+    # The same recipe on RN-varied (`make dataset-randomised`): every flight's physics and fault signature
     # drawn from the register of unmeasured assumptions (offline/sim/assumptions.py; torque per thrust of both
     # signs), the airframe's own terms at nominal (a calibrated airframe: `propwatch adapt` measures them).
     "randomised physics x60 +yaw robust dropout": (("RN-varied",), {**_YAW_ROBUST_20, "dropout": 0.3}),

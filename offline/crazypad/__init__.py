@@ -1,4 +1,4 @@
-"""CrazyPAD sim-to-real experiment (issue 8): real Crazyflie 2.1 flights with cut
+"""CrazyPAD sim-to-real experiment: real Crazyflie 2.1 flights with cut
 propellers, tape and CG-offset masses, against the simulator and the classifier.
 
 Modules: ``vehicle`` (Bitcraze motor numbering, hover command), ``mission`` (the

@@ -1,6 +1,6 @@
 """Native-rate evidence per real CrazyPAD flight, and how far each condition moves it from healthy.
 
-Issue 14 asks which evidence separates a CG offset (masses taped or hung near M3,
+Which evidence separates a CG offset (masses taped or hung near M3,
 propellers intact) from a damaged M3 propeller (cuts, tape) on the real flights:
 
 - the **moment pattern**: each motor's mean command share, minus its airframe's healthy

@@ -1,4 +1,4 @@
-"""Labelled fault data sets (issue 4): generation with the hybrid simulator and npz storage.
+"""Labelled fault data sets: generation with the hybrid simulator and npz storage.
 
 A data set is a batch of simulated flights on the 20 Hz grid. Each flight keeps
 its canonical signals (``monitor.features.SIGNALS``), every propeller's

@@ -1,4 +1,4 @@
-"""Evaluation-only second simulator (issue 12, item 2).
+"""Evaluation-only second simulator.
 
 NEVER used for training or model selection: it exists to score what we ship on
 physics we did not assume. It shares no dynamics, propeller or controller code

@@ -33,7 +33,7 @@ ASSUMPTIONS: dict[str, dict[str, str]] = {
     },
     "motor_efficiency_spread": {
         "value": "paper/healthy ±1 %; shift ±4-8 % (thrust, via rotor speed); weak motor -6 %",
-        "why": "real Crazyflies show ±4-8 % (issue 12)",
+        "why": "real Crazyflies show ±4-8 %",
     },
     "cg_offset": {"value": "shift ±1 cm; nuisance 1.5-2.5 cm", "why": "payload mounting"},
     "inertia_error": {"value": "shift ±10 % per axis; nuisance +25 %", "why": "the paper's inertia is computed, not measured"},

@@ -106,7 +106,7 @@ def _blade(kind: str, loss_lo, loss_hi, ripple, flutter, fixed: FaultSignature) 
             *TORQUE_PER_THRUST_CHANGE,
             fixed_c_lo,
             "change of drag torque per unit thrust at low speed, both signs: more profile drag raises it, lost lift "
-            "lowers induced drag and may lower it; nobody has measured which wins (issue 12). The range is "
+            "lowers induced drag and may lower it; nobody has measured which wins. The range is "
             f"symmetric, a 30 % fall to a 30 % rise: the fixed signature's rise ({100 * fixed_c_lo:+.0f} % here, up "
             "to +25 % at full speed) and every other guess so far lie inside it, neither sign is favoured.",
             (4,),
@@ -174,7 +174,7 @@ def _default_register() -> tuple[Assumption, ...]:
             0.0,
             "half-width of the per-motor speed spread (each motor draws uniform in +-spread): healthy CrazyPAD "
             "Crazyflies hold static hover shares of omega^2 such as 1.083 0.864 1.143 0.910 (offline/crazypad/README.md, "
-            "E8), i.e. about +-4-7 % in speed; issue 12 quotes +-4-8 %. ESCs and motors of one batch differ alike.",
+            "E8), i.e. about +-4-7 % in speed; real Crazyflies show +-4-8 %. ESCs and motors of one batch differ alike.",
             group="healthy airframe",
         ),
         Assumption(

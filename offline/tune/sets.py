@@ -213,7 +213,7 @@ def candidate(regions: list[Region], score: str, sparsity_prior: float, coverage
     }
 
 
-SIGN_CHECK_MAX_MOVE = 0.02  # issue 12: single-propeller accuracy may move by at most 2 points when the torque flips
+SIGN_CHECK_MAX_MOVE = 0.02  # single-propeller accuracy may move by at most 2 points when the torque flips
 
 
 def torque_sign_move(up: Region, down: Region, score: str, sparsity_prior: float, classifier_weight: float) -> float:
@@ -449,7 +449,7 @@ def main(argv: list[str] | None = None) -> int:
         metavar=("RISING", "FALLING"),
         default=(),
         help="two data sets alike but for the damaged blades' torque per thrust (rising, falling): only rules whose "
-        "single-propeller accuracy moves <= 2 points between them are chosen (issue 12's torque-sign check)",
+        "single-propeller accuracy moves <= 2 points between them are chosen (the torque-sign check)",
     )
     p.add_argument("--coverage", type=float, default=0.95, help="target coverage (default 0.95)")
     p.add_argument("--dry-run", action="store_true", help="print the figures, write nothing")
