@@ -29,8 +29,8 @@ test: $(STAMP)
 	$(BIN)/python -m pytest -q
 
 lint: $(STAMP)
-	$(BIN)/ruff check monitor offline fleet tests bench
-	$(BIN)/ruff format --check monitor offline fleet tests bench
+	$(BIN)/ruff check monitor offline fleet tests bench examples
+	$(BIN)/ruff format --check monitor offline fleet tests bench examples
 
 # Every script in bench/ runs as a module from the repository root (python -m bench.<name>). `make bench` runs
 # the bench_* timings and the import-graph counts; `make bench-measure` the scripts that measured shipped constants
