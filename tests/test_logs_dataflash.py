@@ -93,7 +93,7 @@ def test_dataflash_without_motor_outputs_is_an_error(tmp_path):
 
 
 def test_motor_outputs_follow_servo_functions_and_frame_checks():
-    from monitor.logs.dataflash import motor_outputs
+    from monitor.logs.ardupilot_params import motor_outputs
 
     p = Path("x.bin")
     assert motor_outputs({"FRAME": 1.0}, p) == (1, 2, 3, 4)  # Copter 3.3 quad X: motor k on output k
@@ -108,9 +108,9 @@ def test_motor_outputs_follow_servo_functions_and_frame_checks():
     }
     assert motor_outputs(params, p) == (2, 1, 5, 6)
     for bad, msg in (
-        ({"FRAME": 0.0}, "not X"),
-        ({"FRAME_CLASS": 2.0}, "not a quadrotor"),
-        ({"FRAME_CLASS": 1.0, "FRAME_TYPE": 3.0}, "not X"),
+        ({"FRAME": 0.0}, r"not a quad-X: the log says FRAME 0 \(Plus\)"),
+        ({"FRAME_CLASS": 2.0}, r"not a quad-X: the log says FRAME_CLASS 2 \(Hexa\)"),
+        ({"FRAME_CLASS": 1.0, "FRAME_TYPE": 3.0}, r"FRAME_TYPE 3 \(H\)"),
         ({"SERVO1_FUNCTION": 33.0}, "Motor1..Motor4"),
     ):
         with pytest.raises(LogFormatError, match=msg):

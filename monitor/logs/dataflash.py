@@ -13,8 +13,19 @@ Messages used, old (Copter 3.3: ``TimeMS``, ``Ch1..``, CURR) and new
 - ATT: Roll, Pitch, Yaw in degrees (yaw 0..360) -> rad.
 - RATE: R, P, Y in deg/s (centi-deg/s in Copter 3.3, told apart by their ratio to the
   IMU gyro) -> rad/s (IMU GyrX/Y/Z in rad/s if RATE is absent).
-- BAT.Volt (V) or CURR.Volt (cV); EV 10/11 armed/disarmed; CTUN.Alt height;
-  IMU Acc (m/s², FRD) and EKF1/NKF1/XKF1 velocity/position (NED) as extras.
+- BAT.Volt (V) or CURR.Volt (cV); EV 10/11 armed/disarmed and ARM.ArmState (4.x);
+  CTUN.Alt height; IMU Acc (m/s², FRD) and EKF1/NKF1/XKF1 velocity/position (NED) as extras.
+
+Logs written by third parties are read as they come:
+- a log that begins at arming has no ARMED event, only the DISARMED one at its end:
+  an event stream says the state before its first event too (the opposite of that
+  event), and with no event at all the airborne rule stands on outputs and height;
+- the motor outputs' lift level comes from the log's MOT_PWM_MIN/MAX and
+  MOT_SPIN_MIN/ARM where it has them (ArduCopter >= 3.5), so a vehicle idling
+  armed on the ground above the default level is not taken as flying;
+- SERVOn_FUNCTION rewritten mid-log (SITL's motor-fault injection): the motors
+  are read on the outputs the mapping at take-off gave them, and each change is
+  a warning with its time after take-off.
 """
 
 from __future__ import annotations
@@ -26,13 +37,12 @@ from pathlib import Path
 import numpy as np
 
 from monitor.errors import LogFormatError
+from monitor.logs.ardupilot_params import ParamHistory, lift_pwm, takeoff_mapping
 from monitor.logs.guards import check_marker_gaps
-from monitor.logs.raw import EVENT_MAX_AGE_US, RawFlight, Stream
+from monitor.logs.raw import EVENT_MAX_AGE_US, LIFT_CMD, RawFlight, Stream
 from monitor.logs.units import V_PER_CV, deg_to_rad, ms_to_us, wrap_pi
 
-WANTED = ["RCOU", "ATT", "RATE", "IMU", "BAT", "CURR", "EV", "CTUN", "EKF1", "NKF1", "XKF1", "PARM"]
-SERVO_FUNCTION_MOTOR1 = 33  # SERVOn_FUNCTION: 33..36 = Motor1..Motor4
-FRAME_CLASS_QUAD, FRAME_TYPE_X, OLD_FRAME_X = 1, 1, 1
+WANTED = ["RCOU", "ATT", "RATE", "IMU", "BAT", "CURR", "EV", "ARM", "CTUN", "EKF1", "NKF1", "XKF1", "PARM"]
 EV_ARMED, EV_DISARMED = 10, 11  # ArduCopter LogEvent DATA_ARMED / DATA_DISARMED
 
 
@@ -42,24 +52,6 @@ def _time_us(msg, names, last_us: int) -> int:
     if "TimeMS" in names:
         return int(ms_to_us(msg.TimeMS))
     return last_us  # EV has no time field in Copter 3.3: it happened at the last stamped message
-
-
-def motor_outputs(params: dict[str, float], path: Path) -> tuple[int, int, int, int]:
-    """1-based output channel of motors 1..4, after checking the frame is a quad X."""
-    if params.get("FRAME_CLASS", FRAME_CLASS_QUAD) != FRAME_CLASS_QUAD:
-        raise LogFormatError(f"{path}: FRAME_CLASS {params['FRAME_CLASS']:g} is not a quadrotor (1): the model is for quad X")
-    frame_type = params.get("FRAME_TYPE", params.get("FRAME", OLD_FRAME_X) if "FRAME_CLASS" not in params else FRAME_TYPE_X)
-    if frame_type != FRAME_TYPE_X:
-        raise LogFormatError(f"{path}: frame type {frame_type:g} is not X (1): the model is for quad X")
-    by_function = {
-        int(v): int(k[5:-9]) for k, v in params.items() if k.startswith("SERVO") and k.endswith("_FUNCTION") and k[5:-9].isdigit()
-    }
-    if any(SERVO_FUNCTION_MOTOR1 + i in by_function for i in range(4)):
-        try:
-            return tuple(by_function[SERVO_FUNCTION_MOTOR1 + i] for i in range(4))  # type: ignore[return-value]
-        except KeyError:
-            raise LogFormatError(f"{path}: SERVOn_FUNCTION does not assign all of Motor1..Motor4") from None
-    return (1, 2, 3, 4)
 
 
 def read_dataflash(path: str | Path) -> RawFlight:
@@ -77,18 +69,18 @@ def read_dataflash(path: str | Path) -> RawFlight:
             if not hasattr(m, "formats"):
                 raise LogFormatError(f"{path}: not an ArduPilot DataFlash log")
             last_us = 0
-            params: dict[str, float] = {}
+            param_log: list[tuple[int, str, float]] = []  # (time, name, value) in the order written
             while True:
                 msg = m.recv_match(type=WANTED)
                 if msg is None:
                     break
                 typ = msg.get_type()
                 names = msg.get_fieldnames()
-                if typ == "PARM":
-                    params[msg.Name] = float(msg.Value)
-                    continue
                 t = _time_us(msg, names, last_us)
                 last_us = max(last_us, t)
+                if typ == "PARM":
+                    param_log.append((t, msg.Name, float(msg.Value)))
+                    continue
                 _collect(typ, {n: getattr(msg, n) for n in names}, t, rows)
             leftover = _cut_off_bytes(path.read_bytes(), {k: f.len for k, f in m.formats.items()})
             m.close()
@@ -105,7 +97,10 @@ def read_dataflash(path: str | Path) -> RawFlight:
         warnings.append(f"{path.name}: last message cut off {leftover} bytes short (truncated log): read up to the damage")
     if not rows["cmd"]:
         raise LogFormatError(f"{path}: no RCOU messages (motor outputs): cannot diagnose")
-    channels = motor_outputs(params, path)
+    history = ParamHistory(param_log)
+    lift = lift_pwm(history.latest())
+    takeoff_us, channels, changes = takeoff_mapping(history, rows["cmd"], lift or LIFT_CMD["us"], path)
+    warnings += [c.warning(takeoff_us) for c in changes]
     for i, (t, outs) in enumerate(rows["cmd"]):
         rows["cmd"][i] = (t, [outs.get(c, np.nan) for c in channels])
     if not rows["att"]:
@@ -146,11 +141,12 @@ def read_dataflash(path: str | Path) -> RawFlight:
         attitude_rad=Stream(att.t_us, att_v),
         rates_rad_s=Stream(rate_s.t_us, rate_v),
         battery_v=stream(rows["bat"]),
-        armed=_events(stream(rows["armed"])),
+        armed=_events(stream(rows["armed"]), min(rows["cmd"][0][0], rows["att"][0][0])),
         height_m=alt,
         accel_frd_m_s2=stream(rows["imu"], [3, 4, 5]),
         vel_ned_m_s=None if ekf is None else Stream(ekf.t_us, ekf.values[:, :3]),
         pos_ned_m=None if ekf is None else Stream(ekf.t_us, ekf.values[:, 3:]),
+        lift_cmd=lift,
         warnings=warnings,
     )
 
@@ -194,9 +190,15 @@ def rate_unit(rate: Stream, gyro: Stream | None) -> tuple[float, str]:
     return (0.01, "centi-degrees/s") if ratio > CDEG_THRESHOLD else (1.0, "deg/s")
 
 
-def _events(s: Stream | None) -> Stream | None:
-    # EV is logged once per change: the state holds until the next event.
-    return None if s is None else Stream(s.t_us, s.values, EVENT_MAX_AGE_US)
+def _events(s: Stream | None, start_us: int) -> Stream | None:
+    """EV / ARM are logged once per change: the state holds until the next event, and before the first
+    event it was the other one (a log that begins at arming holds only the DISARMED event at its end)."""
+    if s is None:
+        return None
+    t, v = s.t_us, s.values
+    if t[0] > start_us:
+        t, v = np.concatenate([[start_us], t]), np.concatenate([[1.0 - v[0]], v])
+    return Stream(t, v, EVENT_MAX_AGE_US)
 
 
 def _collect(typ: str, d: dict, t: int, rows: dict) -> None:
@@ -215,6 +217,8 @@ def _collect(typ: str, d: dict, t: int, rows: dict) -> None:
         rows["bat"].append((t, d["Volt"] * V_PER_CV))
     elif typ == "EV" and d.get("Id") in (EV_ARMED, EV_DISARMED):
         rows["armed"].append((t, 1.0 if d["Id"] == EV_ARMED else 0.0))
+    elif typ == "ARM" and "ArmState" in d:
+        rows["armed"].append((t, 1.0 if d["ArmState"] else 0.0))
     elif typ == "CTUN" and "Alt" in d:
         rows["alt"].append((t, d["Alt"]))
     elif typ in ("EKF1", "NKF1", "XKF1") and "VN" in d and "PN" in d:

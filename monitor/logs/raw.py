@@ -102,6 +102,7 @@ class RawFlight:
     vehicle_type: str = ""  # the log's MAV_TYPE name ("MAV_TYPE_QUADROTOR", ...); "" when it does not say
     extra_streams: dict[str, Stream] = field(default_factory=dict)  # reader-specific, held into FlightTable.extras
     min_height_m: float = DEFAULT_MIN_HEIGHT_M
+    lift_cmd: float | None = None  # the log's own lift level (its autopilot's parameters); None: LIFT_CMD[cmd_unit]
     warnings: list[str] = field(default_factory=list)
 
 
@@ -123,7 +124,7 @@ def rate_warnings(raw: RawFlight, rate_hz: float) -> list[str]:
 
 def airborne_mask(raw: RawFlight, grid: np.ndarray, motor_cmd: np.ndarray, rate_hz: float) -> np.ndarray:
     """Armed, rotors above lift throttle, off the ground (height / land detector when logged)."""
-    lift = LIFT_CMD[raw.cmd_unit]
+    lift = raw.lift_cmd if raw.lift_cmd is not None else LIFT_CMD[raw.cmd_unit]
     # The mean, not each rotor: in hard manoeuvres one rotor can drop to idle while flying.
     # A row with any unknown motor is not counted as airborne (NaN compares False), unless it lies in a short dip.
     mask = _fill_short_gaps(np.mean(motor_cmd, axis=1) > lift, int(round(MAX_THROTTLE_DIP_S * rate_hz)))

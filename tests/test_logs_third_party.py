@@ -1,0 +1,114 @@
+"""Logs as third parties write them, each case made at test time from a real log in ../shared/data.
+
+- an ArduCopter log that begins at arming: no ARMED event, only the DISARMED one at its end;
+- SERVOn_FUNCTION rewritten mid-log (ArduPilot SITL's motor-fault injection);
+- a PX4 1.14+ ULog whose motors are logged only as ``actuator_motors`` (normalised 0..1);
+- motor outputs logged at 10 Hz;
+- a log that is not a quad X, refused by name.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import dataflash_edit as de
+import numpy as np
+import pytest
+
+from monitor.errors import LogFormatError
+from monitor.esc import PAPER_ESC
+from monitor.logs import read_log, read_raw
+from monitor.logs.ardupilot_params import lift_pwm
+from monitor.logs.dataflash import EV_ARMED, EV_DISARMED
+
+DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
+LOG171 = DATA / "ardupilot_log171" / "log171.bin"
+needs_log171 = pytest.mark.skipif(not LOG171.is_file(), reason=f"real ArduPilot log not found at {LOG171}")
+# log171.bin (its README, and the reader): EV ARMED at 72.6 s, the motors idle armed at 1049 µs on the
+# ground until 82.9 s, then take off; no DISARMED event (the flight ends in a flip).
+ARMED_S, TAKEOFF_S = 72.6, 82.9
+
+
+def _begins_at_arming(tmp_path: Path, end_s: float | None = None) -> Path:
+    """log171 as a log written from arming on (LOG_DISARMED 0): no message before arming, no ARMED event,
+    a DISARMED event at its end (``end_s``: cut there)."""
+    msgs, fm = de.messages(LOG171)
+    ev = de.by_name(fm, "EV")
+    out = []
+    for m in msgs:
+        t = de.message_time_us(m, fm)
+        if t is not None and (t < ARMED_S * 1e6 or (end_s is not None and t > end_s * 1e6)):
+            continue
+        if m.type_id == ev.type_id and de.fields(m, fm)["Id"] == EV_ARMED:
+            continue
+        out.append(m)
+    out.append(de.pack(ev, {"Id": EV_DISARMED}))
+    return de.write(tmp_path / "from_arming.bin", out)
+
+
+@pytest.mark.realdata
+@needs_log171
+def test_dataflash_that_begins_at_arming_finds_its_flight(tmp_path):
+    path = _begins_at_arming(tmp_path)
+    raw = read_raw(path)
+    assert raw.armed.values[0] == 1.0 and raw.armed.values[-1] == 0.0  # armed before its only event, the DISARMED
+    table = read_log(path, esc=PAPER_ESC)
+    seg = table.airborne_segments()
+    assert seg, table.warnings
+    start_s = table.timestamp_us[seg[0][0]] / 1e6
+    assert TAKEOFF_S - 0.1 < start_s < TAKEOFF_S + 3.0  # not during the ten seconds idling armed on the ground
+    assert sum(e - s for s, e in seg) / table.rate_hz > 130.0
+    # Armed and idling on the ground only (the same log cut before take-off): never airborne.
+    idle = read_log(_begins_at_arming(tmp_path, end_s=TAKEOFF_S - 0.2), esc=PAPER_ESC)
+    assert len(idle) > 150 and not idle.airborne.any()
+
+
+def test_lift_level_from_the_logs_motor_parameters():
+    # ArduCopter >= 3.5: the in-flight minimum on the output range; a higher armed idle raises it.
+    assert lift_pwm({"MOT_PWM_MIN": 1100.0, "MOT_PWM_MAX": 1900.0, "MOT_SPIN_MIN": 0.15}) == pytest.approx(1220.0)
+    assert lift_pwm({"RC3_MIN": 1000.0, "RC3_MAX": 2000.0, "MOT_PWM_MIN": 0.0, "MOT_SPIN_MIN": 0.1, "MOT_SPIN_ARM": 0.2}) == (
+        pytest.approx(1200.0)
+    )
+    assert lift_pwm({"MOT_SPIN_ARMED": 50.0, "RC3_MIN": 1000.0}) is None  # Copter 3.3: the reader's default level
+
+
+def _servo_fault(tmp_path: Path, change_s: float) -> Path:
+    """log171 with motor 1 on output 2 and motor 2 on output 1 (SERVOn_FUNCTION after the parameter dump), and
+    SERVO2_FUNCTION set to 0 at ``change_s``, as SITL's motor-fault injection does to a motor in flight."""
+    msgs, fm = de.messages(LOG171)
+    parm = de.by_name(fm, "PARM")
+    last_parm = max(i for i, m in enumerate(msgs) if m.type_id == parm.type_id)
+    mapping = [de.pack(parm, {"Name": f"SERVO{n}_FUNCTION", "Value": float(f)}) for n, f in ((1, 34), (2, 33), (3, 35), (4, 36))]
+    at = next(i for i, m in enumerate(msgs) if (de.message_time_us(m, fm) or 0) >= change_s * 1e6)
+    fault = de.pack(parm, {"Name": "SERVO2_FUNCTION", "Value": 0.0})
+    out = msgs[: last_parm + 1] + mapping + msgs[last_parm + 1 : at] + [fault] + msgs[at:]
+    return de.write(tmp_path / "servo_fault.bin", out)
+
+
+@pytest.mark.realdata
+@needs_log171
+def test_servo_function_changed_mid_log_reads_with_the_mapping_at_take_off(tmp_path):
+    change_s = 150.0
+    raw = read_raw(_servo_fault(tmp_path, change_s))
+    plain = read_raw(LOG171)
+    # The mapping at take-off, through the whole log: motor 1 on output 2, motor 2 on output 1.
+    np.testing.assert_array_equal(raw.motor_cmd.values[:, [1, 0, 2, 3]], plain.motor_cmd.values)
+    (said,) = [w for w in raw.warnings if "SERVO2_FUNCTION" in w]
+    assert "from 33 (Motor1) to 0" in said and "mapping at take-off" in said
+    after_s = float(said.split(" s after take-off")[0].rsplit(" ", 1)[-1])
+    assert after_s == pytest.approx(change_s - TAKEOFF_S, abs=0.3)
+    table = read_log(tmp_path / "servo_fault.bin", esc=PAPER_ESC)
+    assert table.airborne.any() and any("SERVO2_FUNCTION" in w for w in table.warnings)
+
+
+@pytest.mark.realdata
+@needs_log171
+def test_servo_function_change_before_a_complete_mapping_is_still_refused(tmp_path):
+    # A log whose mapping never assigns all four motors while they lift is refused, naming the parameter.
+    msgs, fm = de.messages(LOG171)
+    parm = de.by_name(fm, "PARM")
+    last_parm = max(i for i, m in enumerate(msgs) if m.type_id == parm.type_id)
+    half = [de.pack(parm, {"Name": "SERVO1_FUNCTION", "Value": 33.0})]
+    de.write(tmp_path / "half.bin", msgs[: last_parm + 1] + half + msgs[last_parm + 1 :])
+    with pytest.raises(LogFormatError, match="does not assign all of Motor1..Motor4"):
+        read_raw(tmp_path / "half.bin")
