@@ -9,17 +9,20 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import dataflash_edit as de
 import numpy as np
 import pytest
+import ulog_edit as ue
 
 from monitor.errors import LogFormatError
 from monitor.esc import PAPER_ESC
 from monitor.logs import read_log, read_raw
 from monitor.logs.ardupilot_params import lift_pwm
 from monitor.logs.dataflash import EV_ARMED, EV_DISARMED
+from monitor.logs.ulog import motor_pwm_range_us
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 LOG171 = DATA / "ardupilot_log171" / "log171.bin"
@@ -112,3 +115,84 @@ def test_servo_function_change_before_a_complete_mapping_is_still_refused(tmp_pa
     de.write(tmp_path / "half.bin", msgs[: last_parm + 1] + half + msgs[last_parm + 1 :])
     with pytest.raises(LogFormatError, match="does not assign all of Motor1..Motor4"):
         read_raw(tmp_path / "half.bin")
+
+
+ULOGS = DATA / "px4_ulog"
+EVENTS = ULOGS / "sample_px4_events.ulg"
+needs_ulogs = pytest.mark.skipif(not EVENTS.is_file(), reason=f"real PX4 ULogs not found at {ULOGS}")
+
+
+@pytest.mark.realdata
+@needs_ulogs
+def test_ulog_with_only_actuator_motors_is_read_in_its_own_unit(tmp_path, capsys):
+    # sample_px4_events.ulg (PX4 SITL, 1.14-era topics) logs actuator_motors and actuator_outputs at 10 Hz.
+    path = ue.drop_topics(EVENTS, tmp_path / "motors_only.ulg", {"actuator_outputs"})
+    raw = read_raw(path)
+    assert raw.cmd_unit == "norm" and np.nanmax(raw.motor_cmd.values) <= 1.0  # not PWM µs
+    assert raw.norm_range_us == ((1000.0, 2000.0),) * 4  # SITL's pwm_out_sim range
+    both = read_raw(EVENTS)
+    assert both.cmd_unit == "us"  # actuator_outputs, where logged, as before
+    armed = both.motor_cmd.values[:, 0] > 900.0  # 900 µs: disarmed
+    # the range the reader assumes for SITL is the one the log's own PWM outputs show
+    np.testing.assert_allclose(1000.0 + 1000.0 * raw.motor_cmd.values[armed], both.motor_cmd.values[armed], atol=0.5)
+    table, full = read_log(path, esc=PAPER_ESC), read_log(EVENTS, esc=PAPER_ESC)
+    assert table.extras["motor_cmd_unit"] == "norm" and table.extras["esc_cmd_unit"] == "us"
+    assert table.airborne_segments() == full.airborne_segments() != []
+    air = table.airborne
+    slope_rpm_per_us = 2 * PAPER_ESC.a_rpm_per_cmd2 * 1000.0 + PAPER_ESC.b_rpm_per_cmd  # steepest, at 1000 µs
+    np.testing.assert_allclose(table.motor_rpm[air], full.motor_rpm[air], atol=0.5 * slope_rpm_per_us)
+    assert any("actuator_motors (normalised 0..1)" in w for w in table.warnings)
+    # diagnose judges it: no refusal for its command unit
+    from monitor.diagnose.cli import main as diagnose
+
+    diagnose([str(path), "--json"])
+    out = json.loads(capsys.readouterr().out)
+    assert out["verdict"] is not None, out.get("reason")
+
+
+def test_normalised_motor_commands_take_their_pwm_range_from_the_output_parameters():
+    params = {f"PWM_MAIN_FUNC{n}": 100 + n for n in range(1, 5)}
+    params |= {f"PWM_MAIN_MIN{n}": 1100.0 for n in range(1, 5)} | {f"PWM_MAIN_MAX{n}": 1900.0 for n in range(1, 5)}
+    assert motor_pwm_range_us(params, "PX4_FMU_V5")[0] == ((1100.0, 1900.0),) * 4
+    # motors on DShot: no PWM µs, the ESC curve in µs cannot apply
+    dshot = {f"DSHOT_FUNC{n}": 100 + n for n in range(1, 5)}
+    rng, why = motor_pwm_range_us(dshot, "PX4_FMU_V5")
+    assert rng is None and "no PWM" in why
+
+
+@pytest.mark.realdata
+@needs_ulogs
+def test_vtol_and_non_quad_x_allocations_are_refused_by_name(tmp_path, capsys):
+    from monitor.diagnose.cli import main as diagnose
+
+    assert diagnose([str(ULOGS / "sample_log_small.ulg"), "--json"]) == 1
+    out = json.loads(capsys.readouterr().out)
+    assert out["reason"].startswith("not a quad-X")
+    assert "standard VTOL (VT_TYPE 2)" in out["reason"] and "SYS_AUTOSTART 13014" in out["reason"]
+    hexa = ue.rewrite(EVENTS, tmp_path / "hexa.ulg", lambda _n, _k: True, params={"CA_ROTOR_COUNT": 6})
+    with pytest.raises(LogFormatError, match="not a quad-X: the log says CA_ROTOR_COUNT 6"):
+        read_raw(hexa)
+    plus = ue.rewrite(EVENTS, tmp_path / "plus.ulg", lambda _n, _k: True, params={"CA_ROTOR0_PY": 0.0})
+    with pytest.raises(LogFormatError, match="not a quad-X: the log's rotor 1 is at CA_ROTOR0 PX 0.1515, PY 0"):
+        read_raw(plus)
+
+
+@pytest.mark.realdata
+@needs_log171
+def test_motor_outputs_at_10_hz_give_a_table(tmp_path):
+    # log171's RCOU (49 Hz) kept one in five: ~10 Hz, as slow DataFlash and ULog profiles log motor outputs.
+    msgs, fm = de.messages(LOG171)
+    rcou = de.by_name(fm, "RCOU").type_id
+    k = np.cumsum([m.type_id == rcou for m in msgs])  # RCOU messages so far
+    kept = [m for m, n in zip(msgs, k, strict=True) if m.type_id != rcou or n % 5 == 0]
+    slow = read_log(de.write(tmp_path / "rcou_10hz.bin", kept), esc=PAPER_ESC)
+    full = read_log(LOG171, esc=PAPER_ESC)
+    assert 9.0 < slow.extras["stream_rates_hz"]["motor_cmd"] < 11.0 and slow.rate_hz == full.rate_hz
+    assert any(w.startswith("motor_cmd logged at") and "held between samples" in w for w in slow.warnings)
+    _, i, j = np.intersect1d(slow.timestamp_us, full.timestamp_us, return_indices=True)  # the same grid instants
+    assert len(i) > 0.99 * len(full)
+    assert np.mean(slow.airborne[i] != full.airborne[j]) < 0.01
+    air = slow.airborne[i] & full.airborne[j]
+    assert np.isfinite(slow.motor_rpm[i][air]).all()
+    assert abs(np.mean(slow.motor_rpm[i][air]) - np.mean(full.motor_rpm[j][air])) < 50.0
+    # and a 10 Hz actuator_motors ULog (sample_px4_events, natively 10 Hz): see the actuator_motors test

@@ -192,7 +192,7 @@ def envelope_checks(
     """(warnings, refusal reason or None) for a log the model may not fit; ``figures`` gets the numbers."""
     warnings: list[str] = []
     figures = {} if figures is None else figures
-    unit = table.extras.get("motor_cmd_unit")
+    unit = table.extras.get("esc_cmd_unit", table.extras.get("motor_cmd_unit"))  # the unit the ESCs received
     if esc is not None and unit is not None and unit != esc.cmd_unit:
         from monitor.resources import display_path
         from monitor.vehicle import vehicles_for_cmd_unit

@@ -32,9 +32,10 @@ EVENT_MAX_AGE_US = int(np.iinfo(np.int64).max // 2)
 
 # Mean throttle above which the rotors are taken as lifting (airborne rule), per
 # command unit: 15 % of the command range above idle. PX4 idles armed near
-# 1100 µs (PWM_MAIN_MIN), ArduCopter log171 at 1117 µs (MOT_SPIN_ARMED 50); both
-# hover well above 1300 µs. The Crazyflie sends 0 when not flying.
-LIFT_CMD = {"us": 1150.0, "cf16": 0.15 * 65535.0}
+# 1100 µs (PWM_MAIN_MIN), ArduCopter log171 at 1049 µs (MOT_SPIN_ARMED 50); both
+# hover well above 1300 µs. The Crazyflie sends 0 when not flying; PX4's normalised
+# actuator_motors (unit "norm") idles at 0.
+LIFT_CMD = {"us": 1150.0, "cf16": 0.15 * 65535.0, "norm": 0.15}
 # Height above the first sample that counts as off the ground, where a
 # height stream exists (CrazyPAD's README uses z > 0.25 m).
 DEFAULT_MIN_HEIGHT_M = 0.25
@@ -86,7 +87,7 @@ class RawFlight:
     """A decoded log. Required: motor commands, attitude, body rates."""
 
     source: str
-    cmd_unit: str  # "us" (PWM µs) or "cf16" (Crazyflie 0..65535)
+    cmd_unit: str  # "us" (PWM µs), "cf16" (Crazyflie 0..65535) or "norm" (PX4 actuator_motors, 0..1)
     motor_cmd: Stream  # (N, 4) PX4 rotor order
     attitude_rad: Stream  # (N, 3) roll, pitch, yaw (Euler ZYX, FRD/NED); NaN column = not logged
     rates_rad_s: Stream  # (N, 3) body rates FRD
@@ -102,6 +103,8 @@ class RawFlight:
     vehicle_type: str = ""  # the log's MAV_TYPE name ("MAV_TYPE_QUADROTOR", ...); "" when it does not say
     extra_streams: dict[str, Stream] = field(default_factory=dict)  # reader-specific, held into FlightTable.extras
     min_height_m: float = DEFAULT_MIN_HEIGHT_M
+    # "norm" commands: the PWM (min, max) µs each motor's 0..1 spans, from the log's parameters; None: not known.
+    norm_range_us: tuple[tuple[float, float], ...] | None = None
     lift_cmd: float | None = None  # the log's own lift level (its autopilot's parameters); None: LIFT_CMD[cmd_unit]
     warnings: list[str] = field(default_factory=list)
 
@@ -176,11 +179,21 @@ def _plausible_context(s: Stream | None, kind: str, warnings: list, source: str)
     return Stream(s.t_us, values, s.max_age_us)
 
 
+def esc_command(raw: RawFlight, cmd: np.ndarray) -> tuple[str, np.ndarray]:
+    """(unit, (T, 4) commands) as the ESCs received them: PX4's normalised ``norm`` commands become the PWM µs
+    their output range (``raw.norm_range_us``) makes of them; every other unit is the ESCs' own."""
+    if raw.cmd_unit != "norm" or raw.norm_range_us is None:
+        return raw.cmd_unit, cmd
+    lo, hi = (np.array([r[i] for r in raw.norm_range_us]) for i in (0, 1))
+    return "us", lo + cmd * (hi - lo)
+
+
 def to_flight_table(raw: RawFlight, esc: EscCurve | None = None, rate_hz: float = 20.0) -> FlightTable:
     """Resample a decoded log onto the ``rate_hz`` boot-clock grid (zero-order hold, NaN when stale).
 
     ``motor_rpm`` comes from ``esc`` (the vehicle's ESC fit) when its command
-    unit matches the log's; otherwise it is NaN and a warning says why.
+    unit matches that of the commands the ESCs received (``esc_command``);
+    otherwise it is NaN and a warning says why. ``motor_cmd`` keeps the log's unit.
     """
     _check_required(raw)
     period_us(rate_hz)  # raises on a rate that does not give whole µs
@@ -200,14 +213,16 @@ def to_flight_table(raw: RawFlight, esc: EscCurve | None = None, rate_hz: float 
     cmd = held(raw.motor_cmd, 4)
     att = held(raw.attitude_rad, 3)
     rates = held(raw.rates_rad_s, 3)
-    if esc is not None and esc.cmd_unit == raw.cmd_unit:
-        rpm = np.where(np.isfinite(cmd), esc.cmd_to_rpm(np.nan_to_num(cmd)), np.nan)
+    esc_unit, esc_cmd = esc_command(raw, cmd)
+    if esc is not None and esc.cmd_unit == esc_unit:
+        rpm = np.where(np.isfinite(esc_cmd), esc.cmd_to_rpm(np.nan_to_num(esc_cmd)), np.nan)
     else:
         rpm = np.full_like(cmd, np.nan)
         why = "no ESC curve given" if esc is None else f"the ESC curve takes '{esc.cmd_unit}' commands"
-        warnings.append(f"motor commands are in '{raw.cmd_unit}' but {why}: motor RPM unknown")
+        warnings.append(f"motor commands are in '{esc_unit}' but {why}: motor RPM unknown")
     extras: dict = {
         "motor_cmd_unit": raw.cmd_unit,
+        "esc_cmd_unit": esc_unit,
         "stream_rates_hz": {n: getattr(raw, n).rate_hz() for n in ("motor_cmd", "attitude_rad", "rates_rad_s")},
     }
     if raw.vehicle_type:

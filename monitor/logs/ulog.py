@@ -1,7 +1,9 @@
 """PX4 ULog (``.ulg``, pyulog) -> ``RawFlight``.
 
 Topics: actuator_outputs (instance 0, ``output[0..3]`` PWM µs, already in PX4
-motor order), vehicle_attitude (``q``, scalar-first, FRD->NED),
+motor order), else actuator_motors (PX4 >= 1.14, ``control[0..3]``, each motor's
+command normalised 0..1, unit ``norm``; the PWM µs it became, where the log's
+parameters say, is ``RawFlight.norm_range_us``), vehicle_attitude (``q``, scalar-first, FRD->NED),
 vehicle_angular_velocity (``xyz`` rad/s FRD), battery_status (``voltage_v``),
 esc_status (``esc[i].esc_rpm``), and for the airborne rule and calibration
 vehicle_status (arming_state), vehicle_land_detected (landed),
@@ -31,6 +33,7 @@ from monitor.logs.units import quat_wxyz_to_euler_zyx
 
 TOPICS = [
     "actuator_outputs",
+    "actuator_motors",
     "vehicle_attitude",
     "vehicle_angular_velocity",
     "battery_status",
@@ -41,6 +44,14 @@ TOPICS = [
     "sensor_combined",
 ]
 ARMING_STATE_ARMED = 2  # PX4 vehicle_status.arming_state
+QUADROTOR_NAME = "MAV_TYPE_QUADROTOR"
+OUTPUT_FUNCTION_MOTOR1 = 101  # PX4 >= 1.14 <driver>_FUNCn: 101..108 = Motor1..Motor8
+# PX4 output drivers whose channels take PWM µs between <prefix>_MINn and <prefix>_MAXn (PX4 >= 1.14 parameters).
+PWM_PREFIXES = ("PWM_MAIN", "PWM_AUX", "PWM_EXTR")
+# SITL's pwm_out_sim has no MIN/MAX parameters: it maps 0..1 onto 1000..2000 µs (900 disarmed). Checked on
+# ../shared/data/px4_ulog/sample_px4_events.ulg: actuator_outputs = 1000 + 1000 * actuator_motors to within 0.5 µs
+# (tests/test_logs_third_party.py).
+SITL_RANGE_US = (1000.0, 2000.0)
 
 
 def _pyulog():
@@ -95,6 +106,44 @@ def _open_ulog(ULog, path: Path, end: int):
         return ULog(io.BytesIO(fh.read(end)), TOPICS)
 
 
+# PX4 VT_TYPE (vtol_att_control): the kind of VTOL.
+VTOL_TYPES = {0: "tailsitter", 1: "tiltrotor", 2: "standard VTOL"}
+# PX4 >= 1.14 control allocation, quad X (CA_AIRFRAME 0, CA_ROTORn_PX/PY in m FRD, CA_ROTORn_KM > 0 for CCW):
+# rotor n is motor n + 1 in PX4's quad-X order, 1 front-right CCW, 2 rear-left CCW, 3 front-left CW, 4 rear-right CW.
+QUAD_X_SIGNS = ((1, 1, 1), (-1, -1, 1), (1, -1, -1), (-1, 1, -1))  # (PX, PY, KM) signs of rotors 0..3
+CA_AIRFRAME_MULTIROTOR = 0
+
+
+def describe_airframe(params: dict) -> str:
+    """What the log says the vehicle is: its MAV_TYPE, and for a VTOL its VT_TYPE and airframe number."""
+    name = mav_type_name(params.get("MAV_TYPE"))
+    if not name or name.startswith(QUADROTOR_NAME + " "):
+        return name
+    parts = [name]
+    if "VT_TYPE" in params and int(params["VT_TYPE"]) in VTOL_TYPES and "VTOL" in name:
+        parts.append(f"a {VTOL_TYPES[int(params['VT_TYPE'])]} (VT_TYPE {int(params['VT_TYPE'])})")
+    if params.get("SYS_AUTOSTART"):
+        parts.append(f"airframe SYS_AUTOSTART {int(params['SYS_AUTOSTART'])}")
+    return ", ".join(parts)
+
+
+def check_quad_x(params: dict, path: Path) -> None:
+    """Refuse a multirotor whose control-allocation parameters (where logged) are not a quad X, saying what they are."""
+    if params.get("CA_AIRFRAME", CA_AIRFRAME_MULTIROTOR) != CA_AIRFRAME_MULTIROTOR or "CA_ROTOR_COUNT" not in params:
+        return
+    count = int(params["CA_ROTOR_COUNT"])
+    if count != 4:
+        raise LogFormatError(f"{path}: not a quad-X: the log says CA_ROTOR_COUNT {count} rotors; the model is for quad X")
+    for n, signs in enumerate(QUAD_X_SIGNS):
+        got = [params.get(f"CA_ROTOR{n}_{axis}", 0.0) for axis in ("PX", "PY", "KM")]
+        if any(g * s <= 0 for g, s in zip(got, signs, strict=True)):
+            where = ", ".join(f"{axis} {g:g}" for axis, g in zip(("PX", "PY", "KM"), got, strict=True))
+            raise LogFormatError(
+                f"{path}: not a quad-X: the log's rotor {n + 1} is at CA_ROTOR{n} {where}, not PX4's quad X "
+                "(1 front-right CCW, 2 rear-left CCW, 3 front-left CW, 4 rear-right CW)"
+            )
+
+
 def mav_type_name(mav_type) -> str:
     """``MAV_TYPE_QUADROTOR`` for PX4's MAV_TYPE parameter 2 (pymavlink's enum); "" when not logged."""
     if mav_type is None:
@@ -133,6 +182,7 @@ def read_ulog(path: str | Path) -> RawFlight:
             ulog = _open_ulog(ULog, path, end)
     except Exception as exc:  # pyulog raises plain exceptions on bad headers
         raise LogFormatError(f"{path}: not a readable ULog file: {exc}") from exc
+    check_quad_x(ulog.initial_parameters, path)
     warnings = []
     damage = None  # what a missing topic may be owed to
     if getattr(ulog, "file_corruption", False):
@@ -158,9 +208,15 @@ def read_ulog(path: str | Path) -> RawFlight:
         v = None if d is None else _cols(d, fields)
         return None if v is None else Stream.build(d["timestamp"], v if v.shape[1] > 1 else v[:, 0])
 
-    cmd = need("actuator_outputs", [f"output[{i}]" for i in range(4)])
-    if len(cmd) and np.nanmax(cmd.values) <= 1.0:
-        warnings.append("actuator_outputs look normalised (<= 1), not PWM µs: the ESC fit will not apply")
+    cmd_unit, norm_range_us = "us", None
+    if _topic(ulog, "actuator_outputs") is None and _topic(ulog, "actuator_motors") is not None:
+        cmd, cmd_unit = need("actuator_motors", [f"control[{i}]" for i in range(4)]), "norm"
+        norm_range_us, why = motor_pwm_range_us(ulog.initial_parameters, ulog.msg_info_dict.get("ver_hw", ""))
+        warnings.append(f"motor commands from actuator_motors (normalised 0..1): {why}")
+    else:
+        cmd = need("actuator_outputs", [f"output[{i}]" for i in range(4)])
+        if len(cmd) and np.nanmax(cmd.values) <= 1.0:
+            warnings.append("actuator_outputs look normalised (<= 1), not PWM µs: the ESC fit will not apply")
     q = need("vehicle_attitude", [f"q[{i}]" for i in range(4)])
     rates = opt("vehicle_angular_velocity", [f"xyz[{i}]" for i in range(3)])
     if rates is None:
@@ -176,8 +232,9 @@ def read_ulog(path: str | Path) -> RawFlight:
     height = None if pos is None else Stream(pos.t_us, -(pos.values[:, 2] - pos.values[0, 2]))
     return RawFlight(
         source=str(path),
-        vehicle_type=mav_type_name(ulog.initial_parameters.get("MAV_TYPE")),
-        cmd_unit="us",
+        vehicle_type=describe_airframe(ulog.initial_parameters),
+        cmd_unit=cmd_unit,
+        norm_range_us=norm_range_us,
         motor_cmd=cmd,
         attitude_rad=Stream(q.t_us, quat_wxyz_to_euler_zyx(q.values)),
         rates_rad_s=rates,
@@ -191,3 +248,29 @@ def read_ulog(path: str | Path) -> RawFlight:
         pos_ned_m=pos,
         warnings=warnings,
     )
+
+
+def motor_pwm_range_us(params: dict, hardware: str) -> tuple[tuple[tuple[float, float], ...] | None, str]:
+    """(PWM µs that motors 1..4's 0..1 command spans, per motor, or None; how that was found, for a warning).
+
+    Motor k is on the channel n whose ``<prefix>_FUNCn`` is 100 + k; a PWM driver's channel spans
+    ``<prefix>_MINn``..``<prefix>_MAXn``. A motor on no PWM channel (DShot, UAVCAN) has no µs."""
+    ranges, sitl = [], False
+    for k in range(4):
+        found = None
+        for prefix in PWM_PREFIXES:
+            n = next((n for n in range(1, 17) if params.get(f"{prefix}_FUNC{n}") == OUTPUT_FUNCTION_MOTOR1 + k), None)
+            if n is None:
+                continue
+            lo, hi = params.get(f"{prefix}_MIN{n}"), params.get(f"{prefix}_MAX{n}")
+            if lo is not None and hi is not None and 0 < lo < hi:
+                found = (float(lo), float(hi))
+            elif lo is None and hi is None and hardware == "PX4_SITL":
+                found, sitl = SITL_RANGE_US, True
+            break
+        if found is None:
+            return None, f"motor {k + 1} is on no PWM output with a logged range, so its command has no PWM µs"
+        ranges.append(found)
+    lo_us, hi_us = min(r[0] for r in ranges), max(r[1] for r in ranges)
+    where = "SITL's fixed output range" if sitl else "the PWM_*_MIN/MAX parameters"
+    return tuple(ranges), f"PWM {lo_us:g}..{hi_us:g} µs from {where}"
