@@ -111,6 +111,7 @@ def test_motor_outputs_follow_servo_functions_and_frame_checks():
         ({"FRAME": 0.0}, r"not a quad-X: the log says FRAME 0 \(Plus\)"),
         ({"FRAME_CLASS": 2.0}, r"not a quad-X: the log says FRAME_CLASS 2 \(Hexa\)"),
         ({"FRAME_CLASS": 1.0, "FRAME_TYPE": 3.0}, r"FRAME_TYPE 3 \(H\)"),
+        ({"FRAME_CLASS": 1.0, "FRAME_TYPE": 12.0}, r"FRAME_TYPE 12 \(BetaFlightX\): a quad X whose motors"),
         ({"SERVO1_FUNCTION": 33.0}, "Motor1..Motor4"),
     ):
         with pytest.raises(LogFormatError, match=msg):

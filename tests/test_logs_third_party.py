@@ -32,11 +32,13 @@ needs_log171 = pytest.mark.skipif(not LOG171.is_file(), reason=f"real ArduPilot 
 ARMED_S, TAKEOFF_S = 72.6, 82.9
 
 
-def _begins_at_arming(tmp_path: Path, end_s: float | None = None) -> Path:
+def _begins_at_arming(tmp_path: Path, end_s: float | None = None, disarm: str = "EV") -> Path:
     """log171 as a log written from arming on (LOG_DISARMED 0): no message before arming, no ARMED event,
-    a DISARMED event at its end (``end_s``: cut there)."""
+    a DISARMED event at its end (``end_s``: cut there), as an EV message, or as ArduCopter 4's ARM message
+    (``disarm="ARM"``, its format added to the log)."""
     msgs, fm = de.messages(LOG171)
     ev = de.by_name(fm, "EV")
+    arm = de.Format(200, 3 + 5, "ARM", "IB", ("TimeMS", "ArmState"))
     out = []
     for m in msgs:
         t = de.message_time_us(m, fm)
@@ -45,8 +47,14 @@ def _begins_at_arming(tmp_path: Path, end_s: float | None = None) -> Path:
         if m.type_id == ev.type_id and de.fields(m, fm)["Id"] == EV_ARMED:
             continue
         out.append(m)
-    out.append(de.pack(ev, {"Id": EV_DISARMED}))
-    return de.write(tmp_path / "from_arming.bin", out)
+    if disarm == "ARM":
+        fmt = de.by_name(fm, "FMT")
+        cols = {"Type": arm.type_id, "Length": arm.length, "Name": arm.name, "Format": arm.fmt, "Columns": "TimeMS,ArmState"}
+        last_ms = max(de.message_time_us(m, fm) or 0 for m in out) // 1000
+        out = [de.pack(fmt, cols), *out, de.pack(arm, {"TimeMS": last_ms, "ArmState": 0})]
+    else:
+        out.append(de.pack(ev, {"Id": EV_DISARMED}))
+    return de.write(tmp_path / f"from_arming_{disarm}.bin", out)
 
 
 @pytest.mark.realdata
@@ -64,6 +72,9 @@ def test_dataflash_that_begins_at_arming_finds_its_flight(tmp_path):
     # Armed and idling on the ground only (the same log cut before take-off): never airborne.
     idle = read_log(_begins_at_arming(tmp_path, end_s=TAKEOFF_S - 0.2), esc=PAPER_ESC)
     assert len(idle) > 150 and not idle.airborne.any()
+    # ArduCopter 4 logs the disarming as an ARM message (ArmState 0) too: the same reading.
+    arm = read_log(_begins_at_arming(tmp_path, disarm="ARM"), esc=PAPER_ESC)
+    assert arm.airborne_segments() == seg
 
 
 def test_lift_level_from_the_logs_motor_parameters():

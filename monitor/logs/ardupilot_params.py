@@ -33,6 +33,7 @@ FRAME_TYPE_NAMES = {
     0: "Plus", 1: "X", 2: "V", 3: "H", 4: "V-Tail", 5: "A-Tail", 10: "Y6B", 11: "Y6F", 12: "BetaFlightX",
     13: "DJIX", 14: "ClockwiseX", 15: "I", 18: "BetaFlightXReversed", 19: "Y4",
 }  # fmt: skip
+OTHER_X_NUMBERINGS = (12, 13, 14, 18)  # BetaFlightX, DJIX, ClockwiseX, BetaFlightXReversed
 # ArduCopter >= 3.5 defaults (AP_MotorsMulticopter.cpp): MOT_SPIN_ARM 0.10, MOT_SPIN_MIN 0.15 of the output range.
 SPIN_ARM_DEFAULT, SPIN_MIN_DEFAULT = 0.10, 0.15
 
@@ -52,6 +53,11 @@ def check_quad_x(params: dict[str, float], path: Path) -> None:
         key, frame_type = "FRAME_TYPE", params.get("FRAME_TYPE", FRAME_TYPE_X)
     else:
         key, frame_type = "FRAME", params.get("FRAME", OLD_FRAME_X)
+    if frame_type in OTHER_X_NUMBERINGS and key == "FRAME_TYPE":
+        raise LogFormatError(
+            f"{path}: the log says FRAME_TYPE {_name(FRAME_TYPE_NAMES, frame_type)}: a quad X whose motors are "
+            "numbered otherwise than ArduCopter's X (FRAME_TYPE 1), which this reader does not map"
+        )
     if frame_type != FRAME_TYPE_X:
         raise LogFormatError(
             f"{path}: not a quad-X: the log says {key} {_name(FRAME_TYPE_NAMES, frame_type)}; the model is for quad X"
@@ -133,7 +139,7 @@ class ServoChange:
             when = f"at {self.t_us / US_PER_S:.1f} s of the log (no take-off found)"
         else:
             dt = (self.t_us - takeoff_us) / US_PER_S
-            when = f"{dt:.1f} s after take-off" if dt >= 0 else f"{-dt:.1f} s before take-off"
+            when = f"at {dt:.1f} s after take-off" if dt >= 0 else f"at {-dt:.1f} s before take-off"
         return (
             f"{self.name} changed from {_function_name(self.before)} to {_function_name(self.value)} "
             f"{when}: motors read on the outputs the mapping at take-off gave them"
