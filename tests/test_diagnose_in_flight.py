@@ -224,7 +224,7 @@ def test_a_throttle_dip_in_flight_is_not_a_landing():
     cmd[:100] = cmd[-100:] = 1000.0  # on the ground before and after
     cmd[300:305] = 1104.0  # a 0.25 s dip in flight
     cmd[600:640] = 1000.0  # 2 s on the ground: landed and took off again
-    raw = SimpleNamespace(cmd_unit="us", armed=None, landed=None, height_m=None, min_height_m=0.25)
+    raw = SimpleNamespace(cmd_unit="us", armed=None, landed=None, height_m=None, min_height_m=0.25, lift_cmd=None)
     mask = airborne_mask(raw, grid, cmd, rate_hz)
     assert mask[300:305].all() and mask[100:600].all()
     assert not mask[600:640].any() and mask[640:1100].all() and not mask[:100].any() and not mask[1100:].any()
