@@ -207,3 +207,16 @@ def test_motor_outputs_at_10_hz_give_a_table(tmp_path):
     assert np.isfinite(slow.motor_rpm[i][air]).all()
     assert abs(np.mean(slow.motor_rpm[i][air]) - np.mean(full.motor_rpm[j][air])) < 50.0
     # and a 10 Hz actuator_motors ULog (sample_px4_events, natively 10 Hz): see the actuator_motors test
+
+
+@pytest.mark.realdata
+@needs_ulogs
+def test_motors_moved_off_the_first_outputs_are_read_from_actuator_motors(tmp_path):
+    # PX4 >= 1.14 with motor 1 on output 2 and motor 2 on output 1: actuator_outputs[0..3] are not motors 1..4.
+    path = ue.rewrite(
+        EVENTS, tmp_path / "swapped.ulg", lambda _n, _k: True, params={"PWM_MAIN_FUNC1": 102, "PWM_MAIN_FUNC2": 101}
+    )
+    raw, motors = read_raw(path), read_raw(ue.drop_topics(EVENTS, tmp_path / "motors_only.ulg", {"actuator_outputs"}))
+    assert raw.cmd_unit == "norm"
+    np.testing.assert_array_equal(raw.motor_cmd.values, motors.motor_cmd.values)
+    assert any("PWM_MAIN_FUNC1 102, PWM_MAIN_FUNC2 101" in w for w in raw.warnings)

@@ -1,9 +1,10 @@
 """PX4 ULog (``.ulg``, pyulog) -> ``RawFlight``.
 
-Topics: actuator_outputs (instance 0, ``output[0..3]`` PWM µs, already in PX4
-motor order), else actuator_motors (PX4 >= 1.14, ``control[0..3]``, each motor's
-command normalised 0..1, unit ``norm``; the PWM µs it became, where the log's
-parameters say, is ``RawFlight.norm_range_us``), vehicle_attitude (``q``, scalar-first, FRD->NED),
+Topics: actuator_outputs (instance 0, ``output[0..3]`` PWM µs, in PX4 motor
+order where PWM_MAIN_FUNC1..4 are Motor1..4 or not logged), else actuator_motors
+(PX4 >= 1.14, ``control[0..3]``, each motor's command normalised 0..1, unit
+``norm``; the PWM µs it became, where the log's parameters say, is
+``RawFlight.norm_range_us``), vehicle_attitude (``q``, scalar-first, FRD->NED),
 vehicle_angular_velocity (``xyz`` rad/s FRD), battery_status (``voltage_v``),
 esc_status (``esc[i].esc_rpm``), and for the airborne rule and calibration
 vehicle_status (arming_state), vehicle_land_detected (landed),
@@ -209,12 +210,17 @@ def read_ulog(path: str | Path) -> RawFlight:
         return None if v is None else Stream.build(d["timestamp"], v if v.shape[1] > 1 else v[:, 0])
 
     cmd_unit, norm_range_us = "us", None
-    if _topic(ulog, "actuator_outputs") is None and _topic(ulog, "actuator_motors") is not None:
+    moved = motors_off_first_outputs(ulog.initial_parameters)
+    if _topic(ulog, "actuator_motors") is not None and (_topic(ulog, "actuator_outputs") is None or moved):
         cmd, cmd_unit = need("actuator_motors", [f"control[{i}]" for i in range(4)]), "norm"
         norm_range_us, why = motor_pwm_range_us(ulog.initial_parameters, ulog.msg_info_dict.get("ver_hw", ""))
+        if moved:
+            why = f"{moved}, so actuator_outputs[0..3] are not motors 1..4; {why}"
         warnings.append(f"motor commands from actuator_motors (normalised 0..1): {why}")
     else:
         cmd = need("actuator_outputs", [f"output[{i}]" for i in range(4)])
+        if moved:
+            warnings.append(f"{moved}: actuator_outputs[0..3] may not be motors 1..4 (no actuator_motors logged)")
         if len(cmd) and np.nanmax(cmd.values) <= 1.0:
             warnings.append("actuator_outputs look normalised (<= 1), not PWM µs: the ESC fit will not apply")
     q = need("vehicle_attitude", [f"q[{i}]" for i in range(4)])
@@ -248,6 +254,14 @@ def read_ulog(path: str | Path) -> RawFlight:
         pos_ned_m=pos,
         warnings=warnings,
     )
+
+
+def motors_off_first_outputs(params: dict) -> str:
+    """What PX4's main outputs 1..4 carry when that is not motors 1..4 (PWM_MAIN_FUNCn, PX4 >= 1.14), else ""."""
+    funcs = [params.get(f"PWM_MAIN_FUNC{n}") for n in range(1, 5)]
+    if None in funcs or funcs == [OUTPUT_FUNCTION_MOTOR1 + k for k in range(4)]:
+        return ""
+    return ", ".join(f"PWM_MAIN_FUNC{n} {int(f)}" for n, f in enumerate(funcs, start=1))
 
 
 def motor_pwm_range_us(params: dict, hardware: str) -> tuple[tuple[tuple[float, float], ...] | None, str]:
