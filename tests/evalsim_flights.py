@@ -36,7 +36,7 @@ def note_selected(items) -> None:
 
 def _batch_key(spec) -> tuple:
     a = spec.airframe  # offline.evalsim.flight.simulate_flights: one batch shares the nominal vehicle and controller
-    return (a.rotor_positions_frd_m, a.rotor_spin, a.kf_n_per_rad_s2, spec.vel_xy_max_m_s)
+    return (a.rotor_positions_frd_m, a.rotor_spin, a.kf_n_per_rad_s2, spec.nominal, spec.controller_gains)
 
 
 def _fly(specs: list) -> None:

@@ -80,6 +80,10 @@ class Airframe:
     damage: Damage = field(default_factory=Damage)
     payload_kg: float = 0.0
     payload_pickup_time_s: float = 0.0  # payload carried from this time on (0: from the start)
+    # A motor or ESC failure: from ``motor_stop_time_s`` on, PX4 rotor ``motor_stop_rotor`` (1..4; 0: none) gets the
+    # ESC's minimum command whatever the controller asks, and the log shows that command.
+    motor_stop_rotor: int = 0
+    motor_stop_time_s: float = 0.0
 
     def asdict(self) -> dict:
         d = asdict(self)

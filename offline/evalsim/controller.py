@@ -49,6 +49,10 @@ class ControllerGains:
     rate_max_rad_s: float = np.deg2rad(180.0)
     yaw_rate_max_rad_s: float = np.deg2rad(60.0)
     integrator_limit: float = 0.3  # angular-acceleration integrator clamp, as a fraction of 10 rad/s²
+    # On saturation, give up collective thrust before roll and pitch (PX4's control allocator desaturation): the
+    # collective moves so the roll/pitch differential fits the rotors' range. False: the collective is clipped and the
+    # differential scaled to the room left (the gentle sets' allocator; at full collective it keeps no attitude control).
+    collective_yields: bool = False
 
 
 class CascadeController:
@@ -145,11 +149,17 @@ class CascadeController:
         base = thrust_n[:, None] * P[:, 0] + torque_nm[:, 0:1] * P[:, 1] + torque_nm[:, 1:2] * P[:, 2]
         yaw = torque_nm[:, 2:3] * P[:, 3]
         lo, hi = self.t_min_n, self.t_max_n
-        mean = np.clip(base.mean(axis=1, keepdims=True), lo, hi)
         dev = base - base.mean(axis=1, keepdims=True)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            room = np.where(dev > 0, (hi - mean) / dev, np.where(dev < 0, (mean - lo) / -dev, np.inf))
-        base = mean + dev * np.minimum(1.0, room.min(axis=1, keepdims=True))
+        if self.g.collective_yields:
+            width = dev.max(axis=1, keepdims=True) - dev.min(axis=1, keepdims=True)
+            dev = dev * np.minimum(1.0, (hi - lo) / np.maximum(width, 1e-12))
+            lo_mean, hi_mean = lo - dev.min(axis=1, keepdims=True), hi - dev.max(axis=1, keepdims=True)
+            base = np.minimum(np.maximum(base.mean(axis=1, keepdims=True), lo_mean), hi_mean) + dev
+        else:
+            mean = np.clip(base.mean(axis=1, keepdims=True), lo, hi)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                room = np.where(dev > 0, (hi - mean) / dev, np.where(dev < 0, (mean - lo) / -dev, np.inf))
+            base = mean + dev * np.minimum(1.0, room.min(axis=1, keepdims=True))
         with np.errstate(divide="ignore", invalid="ignore"):
             room = np.where(yaw > 0, (hi - base) / yaw, np.where(yaw < 0, (base - lo) / -yaw, np.inf))
         scale = np.clip(room.min(axis=1, keepdims=True), 0.0, 1.0)

@@ -54,6 +54,16 @@ class FlightSpec:
     # The position controller's horizontal speed limit (PX4 MPC_XY_VEL_MAX; evalsim's gentle routes: 3 m/s).
     # Flights of one batch share it (one controller flies them).
     vel_xy_max_m_s: float = ControllerGains.vel_xy_max_m_s
+    # The vehicle as its file says, what the controller is tuned for and knows (mass, inertia, geometry, kF, kτ, ω
+    # limits, ESC curve): None flies the paper quad's controller on the airframe's own geometry (every set before the
+    # ``strangers_*`` sets). Flights of one batch share it.
+    nominal: Airframe | None = None
+    # The controller's gains (None: ``ControllerGains(vel_xy_max_m_s=vel_xy_max_m_s)``). Flights of one batch share them.
+    gains: ControllerGains | None = None
+
+    @property
+    def controller_gains(self) -> ControllerGains:
+        return self.gains if self.gains is not None else ControllerGains(vel_xy_max_m_s=self.vel_xy_max_m_s)
 
     @property
     def faulty_propellers(self) -> tuple[int, ...]:
@@ -155,7 +165,9 @@ def simulate_flights(specs: list[FlightSpec]) -> list[FlightLog]:
         return []
     nb = len(specs)
     afs = [sp.airframe for sp in specs]
-    v0 = afs[0]
+    v0 = specs[0].nominal if specs[0].nominal is not None else afs[0]
+    if len({sp.nominal for sp in specs}) > 1:
+        raise ValueError("simulate_flights: flights of one batch must share the nominal vehicle")
     for a in afs:
         if (a.rotor_positions_frd_m, a.rotor_spin, a.kf_n_per_rad_s2) != (
             v0.rotor_positions_frd_m,
@@ -163,8 +175,8 @@ def simulate_flights(specs: list[FlightSpec]) -> list[FlightLog]:
             v0.kf_n_per_rad_s2,
         ):
             raise ValueError("simulate_flights: flights of one batch must share the nominal vehicle")
-    if len({sp.vel_xy_max_m_s for sp in specs}) > 1:
-        raise ValueError("simulate_flights: flights of one batch must share vel_xy_max_m_s (one controller)")
+    if len({sp.controller_gains for sp in specs}) > 1:
+        raise ValueError("simulate_flights: flights of one batch must share vel_xy_max_m_s and gains (one controller)")
     dt = 1.0 / PHYSICS_RATE_HZ
     pos_every = int(PHYSICS_RATE_HZ // POSITION_RATE_HZ)
 
@@ -187,8 +199,12 @@ def simulate_flights(specs: list[FlightSpec]) -> list[FlightLog]:
         v0.ktau_nm_per_rad_s2,
         v0.omega_min_rad_s,
         v0.omega_max_rad_s,
-        ControllerGains(vel_xy_max_m_s=specs[0].vel_xy_max_m_s),
+        specs[0].controller_gains,
+        v0.esc if specs[0].nominal is not None else PAPER_ESC,
     )
+    stop_rotor = np.array([a.motor_stop_rotor for a in afs])
+    stop_at = np.where(stop_rotor > 0, np.array([a.motor_stop_time_s for a in afs]), np.inf)
+    stop_mask = np.arange(1, 5)[None, :] == stop_rotor[:, None]  # (B, 4)
 
     # Per-flight randomness, drawn up front from the flight's own generator.
     plans = [_plan(sp) for sp in specs]
@@ -329,6 +345,7 @@ def simulate_flights(specs: list[FlightSpec]) -> list[FlightLog]:
             ctrl.position_step(target, pos + pos_err, vel + vel_err, yaw_sp, 1.0 / POSITION_RATE_HZ)
         thrust_cmd = ctrl.rate_step(q_est, gyro, dt)
         pwm = ctrl.pwm_us(thrust_cmd)
+        pwm = np.where(stop_mask & (t >= stop_at)[:, None], ctrl.esc.cmd_min, pwm)
         # The vehicle's ESC: its own curve, RPM sagging with pack voltage; weak motors slower.
         sag = (1.0 - esc_sag * np.maximum(esc_ref - volt, 0.0))[:, None]
         rpm = np.stack([a.esc.cmd_to_rpm(pwm[i]) for i, a in enumerate(afs)]) if distinct_esc else v0.esc.cmd_to_rpm(pwm)
@@ -372,15 +389,17 @@ def simulate_flights(specs: list[FlightSpec]) -> list[FlightLog]:
                 next_step[i] = log_steps[i][next_j[i]] if next_j[i] < n_log[i] else -1
 
         v_prev = s[:, 3:6].copy()
-        s = rk4_step(f, s, frames.px4_to_rotorpy(omega_target), dt)
+        logging = next_step >= 0  # a flight whose log has ended (a shorter one) stays where it is
+        s = np.where(logging[:, None], rk4_step(f, s, frames.px4_to_rotorpy(omega_target), dt), s)
         omega_now = frames.rotorpy_to_px4(s[:, 16:20])
         _, qf_now = damage_factors(omega_now, *dmg)
         qf_now = np.where(damaged[:, None], qf_now, 1.0)
         shaft_w = np.sum(ktau * qf_now * omega_now**3, axis=1)
         battery.step(shaft_w / p_eff, dt)
         volt, amp = battery.voltage_v, battery.current_a
-        if not np.all(np.isfinite(s)) or np.any(s[:, 2] < -50.0):
-            bad = [specs[i].name for i in np.flatnonzero(~np.isfinite(s).all(1) | (s[:, 2] < -50.0))]
+        bad_rows = ~np.isfinite(s).all(1) | (s[:, 2] < -50.0)
+        if np.any(bad_rows):
+            bad = [specs[i].name for i in np.flatnonzero(bad_rows)]
             raise RuntimeError(f"evalsim flights {bad} diverged at t={t:.2f} s")
 
     out = []
@@ -404,7 +423,7 @@ def simulate_flights(specs: list[FlightSpec]) -> list[FlightLog]:
                 thrust_n=r["thrust"],
                 torque_nm=r["torque"],
                 pwm_us=r["pwm"],
-                motor_rpm=PAPER_ESC.cmd_to_rpm(r["pwm"]),
+                motor_rpm=ctrl.esc.cmd_to_rpm(r["pwm"]),
                 battery_v=r["volt"],
                 battery_current_a=r["amp"],
                 waypoint_error_ned_m=r["wperr"],

@@ -20,6 +20,25 @@ NEVER used for training or model selection (see the package docstring).
 | paper_torque_rising | CONTROL: ``paper`` flight for flight (same seeds, routes, losses) but the damaged blade's
   drag torque at equal speed RISES by |δ| (training's ``torque_factor = 1 + gain``) instead of its torque per
   thrust falling by |δ| |
+| strangers_healthy | quad-X airframes of other sizes (``strangers.STRANGER_CLASSES``: 0.5-2.8 kg, arms 0.11-0.30 m,
+  hover RPM x0.64-1.32 of the nominal), class i mod 5, each flight its own quirks (motors ±4-8 %, CG up to 0.09 arm,
+  inertia ±10 %, motor lag x0.85-1.6) and payload (0 to +25 % of the mass, off the CG); one flight in 4 of each class
+  flies hard manoeuvres (12 m/s, 40° tilt, 3 m/s climbs; the heavy classes saturate outputs). Healthy |
+| strangers_onset | as strangers_healthy (gentle), class (i // 4) mod 5, propeller i mod 4 + 1 loses 6-20 % thrust at
+  hover from a recorded time (30-60 % of the flight; ``fault_onset_boot_s`` in truth) |
+| strangers_takeoff | the same, propeller i mod 4 + 1 damaged from take-off, 10-25 % loss; ``cg_offset_m`` and
+  ``cg_offset_arm_fraction`` (quirk and payload together) in truth |
+| strangers_stopped | the same, motor i mod 4 + 1's output forced to the ESC's minimum at a recorded time (35-75 % of
+  the flight; ``stop_boot_s``), the log ending ``strangers.STOP_TAIL_S`` later |
+| strangers_memory | airframe a = i // 12 (class a mod 5, quirks drawn once): 3 healthy references (no payload, light
+  wind), then 9 later flights with a payload of 0 to +25 % placed anew each time: 4 healthy (one hard), 3 with one
+  propeller damaged from take-off and 2 damaged in the air (6-20 % loss) |
+
+Every ``strangers_*`` flight ends in landing and disarm, carries its airframe's own AUTOPILOT_VERSION uid and its own
+date (``strangers_memory``: one per airframe, a day apart), and its truth records the class, payload, CG offset,
+onset/stop on the boot clock and the share of samples with an output at its limit (``saturated_fraction``).
+Evaluation seed: ``names.STRANGERS_EVAL_SEED``, committed before the first-flight thresholds were set; develop on
+``names.STRANGERS_DEV_SEED``.
 
 ``flights`` is the number of flights; labels / nuisances / patterns cycle, so
 ``flights=32`` on ``paper`` gives every label twice. Flight i of a set depends
@@ -42,7 +61,7 @@ from monitor.vehicle import DEFAULT_VEHICLE, load_vehicle
 from offline.evalsim.airframe import Airframe, Damage
 from offline.evalsim.environment import Sensors, Telemetry, Wind
 from offline.evalsim.flight import FlightSpec, simulate_flights, truth
-from offline.evalsim.names import DEFAULT_DURATION_S, SET_NAMES
+from offline.evalsim.names import DEFAULT_DURATION_S, SET_NAMES, STRANGER_SETS
 from offline.fleet_sim import append_autopilot_version, vehicle_uid
 from offline.manifest import make_manifest, write_manifest
 from offline.sim.io_tlog import DEFAULT_WALL_BOOT_US, write_tlog
@@ -382,16 +401,30 @@ def build_set(
     name: str, flights: int | None = None, seed: int = 0, duration_s: float = DEFAULT_DURATION_S, vehicle_path=DEFAULT_VEHICLE
 ) -> list[FlightSpec]:
     """The flight specs of set ``name`` (``flights`` defaults to one cycle of its labels / effects)."""
-    if name not in _BUILDERS:
+    if name not in _BUILDERS and name not in STRANGER_SETS:
         raise ValueError(f"unknown evalsim set {name!r}; choose from {', '.join(SET_NAMES)}")
     if duration_s < 5.0:
         raise ValueError(f"duration_s: at least 5 s, got {duration_s}")
-    builder, default_n = _BUILDERS[name]
+    if name in STRANGER_SETS:
+        from offline.evalsim.strangers import BUILDERS
+
+        builder, default_n = BUILDERS[name]
+    else:
+        builder, default_n = _BUILDERS[name]
     n = default_n if flights is None else int(flights)
     if n < 1:
         raise ValueError(f"flights: at least 1, got {flights}")
     v = load_vehicle(vehicle_path)
     return [builder(v, seed, i, float(duration_s)) for i in range(n)]
+
+
+def batches(specs: list[FlightSpec]) -> list[list[FlightSpec]]:
+    """``specs`` in batches of at most ``BATCH`` flights that share one controller (nominal vehicle and gains), in
+    order of first appearance; a flight is the same whichever batch flies it."""
+    groups: dict[tuple, list[FlightSpec]] = {}
+    for s in specs:
+        groups.setdefault((s.nominal, s.controller_gains), []).append(s)
+    return [g[b : b + BATCH] for g in groups.values() for b in range(0, len(g), BATCH)]
 
 
 def write_set(
@@ -413,19 +446,25 @@ def write_set(
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     entries = []
-    for b in range(0, len(specs), BATCH):
-        chunk = specs[b : b + BATCH]
+    for chunk in batches(specs):
         logs = simulate_flights(chunk)
         for spec, log in zip(chunk, logs, strict=True):
             tlog = f"{spec.name}.tlog"
-            if name == "vehicles":  # each airframe's flights a day apart, ending in landing and disarm, with its uid
-                a, k = divmod(int(spec.name.rsplit("_", 1)[1]), VEHICLE_FLIGHTS)
+            i = int(spec.name.rsplit("_", 1)[1])
+            if name in STRANGER_SETS:  # landing and disarm, a date per flight, the airframe's uid, the size in truth
+                from offline.evalsim.strangers import write_flight
+
+                t = write_flight(name, seed, i, spec, log, out)
+            elif name == "vehicles":  # each airframe's flights a day apart, ending in landing and disarm, with its uid
+                a, k = divmod(i, VEHICLE_FLIGHTS)
                 write_tlog(out / tlog, log, 0, wall_boot_us=DEFAULT_WALL_BOOT_US + k * DAY_US, landing=True)
                 append_autopilot_version(out / tlog, vehicle_uid(a))
+                t = truth(spec, file=tlog)
+                write_json(out / f"{spec.name}.json", t)
             else:
                 write_tlog(out / tlog, log, 0)
-            t = truth(spec, file=tlog)
-            write_json(out / f"{spec.name}.json", t)
+                t = truth(spec, file=tlog)
+                write_json(out / f"{spec.name}.json", t)
             entries.append(
                 {
                     "file": tlog,
@@ -439,6 +478,7 @@ def write_set(
             )
         if progress is not None:
             progress(len(chunk))
+    entries.sort(key=lambda e: e["file"])
     manifest = make_manifest(
         "propwatch-evalsim-set",
         {"set": name, "flights": len(specs), "duration_s": duration_s, "vehicle_path": str(DEFAULT_VEHICLE)},
