@@ -90,6 +90,19 @@ def test_damaged_rotor_makes_less_thrust_from_takeoff_and_after_onset(flights):
     assert np.median(factor[log.time_s > onset + 0.1]) < 0.95
 
 
+def test_truth_puts_onset_and_stop_on_the_boot_clock(flights):
+    from offline.evalsim.strangers import stranger_truth
+
+    t = {n: stranger_truth(n.rsplit("_", 1)[0], SEED, 0, *flights[n], "f.tlog", 1) for n in flights if n.endswith("_0000")}
+    assert t["strangers_takeoff_0000"]["fault_onset_boot_s"] is None  # damaged from take-off
+    onset = flights["strangers_onset_0000"][0].airframe.damage.onset_time_s
+    assert t["strangers_onset_0000"]["fault_onset_boot_s"] == pytest.approx(5.0 + onset)  # the log's boot offset
+    stop = flights["strangers_stopped_0000"][0].airframe.motor_stop_time_s
+    assert t["strangers_stopped_0000"]["stop_boot_s"] == pytest.approx(5.0 + stop)
+    assert t["strangers_stopped_0000"]["stopped_motor"] == 1 and t["strangers_healthy_0000"]["stopped_motor"] == 0
+    assert all(np.isfinite(x["first_10s_median_rpm"]) for x in t.values())
+
+
 def test_stopped_motor_output_sits_at_minimum_after_its_time(flights):
     spec, log = flights["strangers_stopped_0000"]
     rotor, t_stop = spec.airframe.motor_stop_rotor, spec.airframe.motor_stop_time_s

@@ -331,7 +331,7 @@ def stranger_truth(set_name: str, seed: int, i: int, spec: FlightSpec, log: Flig
     boot_s = BOOT_OFFSET_US / US_PER_S
     cg = float(np.hypot(*af.cg_offset_frd_m[:2]))
     stop = af.motor_stop_rotor
-    onset = af.damage.onset_time_s if af.damage.faulty else None
+    onset = af.damage.onset_time_s if af.damage.faulty and af.damage.onset_time_s > 0 else None  # None: from take-off
     reference = load_vehicle(DEFAULT_VEHICLE).hover_omega_rad_s
     events = ([onset] if onset is not None else []) + ([af.motor_stop_time_s] if stop else [])
     first_event = min(events, default=np.inf)
