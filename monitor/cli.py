@@ -33,7 +33,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "keygen": ("monitor.daemon.keygen", "write a new MAVLink 2 signing key for the monitor (mode 0600)"),
     "replay": ("monitor.mavlink.player", "replay a .tlog as if it were PX4"),
     "fleet": ("fleet.cli", "fleet: ingest many logs into a health database (Ray), web report"),
-    "baseline": ("monitor.memory.cli", "a vehicle's healthy normal from its own flights: learn, show, note"),
+    "baseline": ("monitor.memory.cli", "a vehicle's healthy normal from its own flights: learn, show, note, reset"),
 }
 # Former commands: each still runs as its new form, after a line on stderr naming it.
 DEPRECATED: dict[str, tuple[str, ...]] = {"evalsim": ("evaluate", "evalsim")}

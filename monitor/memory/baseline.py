@@ -12,17 +12,20 @@
      "events": [{"event": "props-replaced", "date": "2026-05-04", "epoch": 2}, ...]}
 
 The normal is computed from the flights of the current epoch (``active``); earlier ones stay as history. Saving is
-atomic (a temporary file, fsync, rename): a power cut mid-write leaves the old file or the new one, never half.
+atomic (``monitor.memory.atomic``): a power cut mid-write leaves the old file or the new one, never half. Reading
+checks every field against what a flight can produce (``FlightSummary.check``) and names the first bad one; a file's
+version is handled in one place (``file_version``, ``READERS``).
 """
 
 from __future__ import annotations
 
+import datetime as _dt
 import json
-import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from monitor.errors import ConfigError
+from monitor.memory.atomic import write_atomic
 from monitor.memory.normal import Normal, normal_of
 from monitor.memory.summary import FlightSummary
 
@@ -45,6 +48,10 @@ EVENTS = {
 
 class BaselineError(ConfigError):
     """A baseline that cannot be used: unreadable, another vehicle's, from a future version, too few flights."""
+
+
+class BaselineNewerError(BaselineError):
+    """A baseline written by a newer propwatch: kept as it is, never read or replaced by this one."""
 
 
 @dataclass
@@ -131,37 +138,23 @@ class VehicleBaseline:
 
     @classmethod
     def from_dict(cls, d: dict, origin: str) -> VehicleBaseline:
-        if not isinstance(d, dict) or d.get("format") != FORMAT:
-            raise BaselineError(
-                f"{origin}: not a propwatch vehicle baseline (format {d.get('format') if isinstance(d, dict) else None!r})"
-            )
-        if not isinstance(d.get("version"), int) or d["version"] > VERSION:
-            raise BaselineError(f"{origin}: baseline version {d.get('version')!r} is newer than this propwatch reads ({VERSION})")
-        try:
-            v = d["vehicle"]
-            b = cls(
-                vehicle_id=None if v["id"] is None else str(v["id"]),
-                id_source=None if v.get("id_source") is None else str(v["id_source"]),
-                motor_names=tuple(str(x) for x in v["motor_names"]),
-                basis=str(v["basis"]),
-                epoch=int(d["epoch"]),
-                flights=list(d["flights"]),
-                events=list(d["events"]),
-                cg_damage_separable=None if v.get("cg_damage_separable") is None else bool(v["cg_damage_separable"]),
-            )
-            if len(b.motor_names) != 4:
-                raise ValueError(f"motor_names: 4 rotors, got {len(b.motor_names)}")
-            for f in b.flights:
-                FlightSummary.from_dict(f["summary"], f"{origin}: flight {f.get('name')}")
-                int(f["epoch"])
-        except (KeyError, TypeError, ValueError) as exc:
-            raise BaselineError(f"{origin}: corrupt vehicle baseline: {exc!r}") from exc
-        except ConfigError as exc:  # a flight's summary
-            raise BaselineError(f"corrupt vehicle baseline: {exc}") from exc
-        return b
+        """A baseline from its JSON object, every field checked (``BaselineError`` naming the first bad one); a file
+        of another version goes through ``READERS`` (``BaselineNewerError`` where newer than ``VERSION``)."""
+        return READERS[file_version(d, origin)](d, origin)
 
     def save(self, path: str | Path) -> Path:
-        return write_atomic(Path(path), json.dumps(self.to_dict(), indent=1, allow_nan=False) + "\n")
+        return write_atomic(Path(path), self.to_text())
+
+    def to_text(self) -> str:
+        return json.dumps(self.to_dict(), indent=1, allow_nan=False) + "\n"
+
+    @classmethod
+    def from_text(cls, text: str, origin: str) -> VehicleBaseline:
+        try:
+            d = json.loads(text)
+        except (ValueError, RecursionError) as exc:  # JSONDecodeError is a ValueError
+            raise BaselineError(f"{origin}: corrupt vehicle baseline (not JSON: {str(exc)[:200]})") from exc
+        return cls.from_dict(d, origin)
 
     @classmethod
     def load(cls, path: str | Path) -> VehicleBaseline:
@@ -170,31 +163,124 @@ class VehicleBaseline:
             text = path.read_text(encoding="utf-8")
         except (OSError, UnicodeDecodeError) as exc:
             raise BaselineError(f"{path}: cannot read the vehicle baseline: {exc}") from exc
-        try:
-            d = json.loads(text)
-        except json.JSONDecodeError as exc:
-            raise BaselineError(f"{path}: corrupt vehicle baseline (not JSON: {exc})") from exc
-        return cls.from_dict(d, str(path))
+        return cls.from_text(text, str(path))
 
 
-def write_atomic(path: Path, text: str) -> Path:
-    """Write ``text`` to ``path`` so that a crash leaves either the old file or the new one."""
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    try:
-        with open(tmp, "w", encoding="utf-8") as fh:
-            fh.write(text)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-        dfd = os.open(path.parent, os.O_RDONLY)
+# -- reading a file, one version at a time -------------------------------------------------------------------------
+
+
+def file_version(d, origin: str) -> int:
+    """The version of a baseline's JSON object: one this propwatch reads (a key of ``READERS``), else raise."""
+    if not isinstance(d, dict) or d.get("format") != FORMAT:
+        raise BaselineError(
+            f"{origin}: not a propwatch vehicle baseline (format {d.get('format') if isinstance(d, dict) else None!r})"
+        )
+    version = d.get("version")
+    if type(version) is not int or version < 1:
+        raise BaselineError(f"{origin}: field version: {version!r} is not a baseline version")
+    if version > VERSION:
+        raise BaselineNewerError(f"{origin}: baseline version {version} is newer than this propwatch reads ({VERSION})")
+    if version not in READERS:
+        raise BaselineError(f"{origin}: baseline version {version} is no longer read (this propwatch reads {sorted(READERS)})")
+    return version
+
+
+class _Fields:
+    """Typed access to a JSON object's fields; each failure names the field (``flights[2].epoch``)."""
+
+    def __init__(self, origin: str) -> None:
+        self.origin = origin
+
+    def fail(self, where: str, why: str) -> BaselineError:
+        return BaselineError(f"{self.origin}: field {where}: {why}")
+
+    def get(self, d, key: str, where: str, kinds: tuple, optional: bool = False):
+        if not isinstance(d, dict):
+            raise self.fail(where.rpartition(".")[0] or where, f"not an object ({type(d).__name__})")
+        if key not in d:
+            if optional:
+                return None
+            raise self.fail(where, "missing")
+        x = d[key]
+        if optional and x is None:
+            return None
+        if not any(type(x) is k for k in kinds):  # bool is not an int here
+            raise self.fail(where, f"{_short(x)} is not {' or '.join(k.__name__ for k in kinds)}")
+        return x
+
+    def date(self, d, key: str, where: str) -> str | None:
+        x = self.get(d, key, where, (str,), optional=True)
+        if x is not None:
+            try:
+                _dt.date.fromisoformat(x)
+            except ValueError:
+                raise self.fail(where, f"{_short(x)} is not a date (YYYY-MM-DD)") from None
+        return x
+
+    def epoch(self, d, where: str, last: int) -> int:
+        e = self.get(d, "epoch", where, (int,))
+        if not 0 <= e <= last:
+            raise self.fail(where, f"{e} is not in [0, {last}] (the baseline's epoch)")
+        return e
+
+
+def _short(x) -> str:
+    r = repr(x)
+    return r if len(r) <= 60 else r[:57] + "..."
+
+
+SOURCES = ("declared", "no fault")  # a flight the operator declared healthy; one that raised nothing in the daemon
+
+
+def _read_v1(d: dict, origin: str) -> VehicleBaseline:
+    f = _Fields(origin)
+    v = f.get(d, "vehicle", "vehicle", (dict,))
+    vid = f.get(v, "id", "vehicle.id", (str,), optional=True)
+    id_source = f.get(v, "id_source", "vehicle.id_source", (str,), optional=True)
+    names = f.get(v, "motor_names", "vehicle.motor_names", (list,))
+    if len(names) != 4 or not all(type(x) is str for x in names) or len(set(names)) != 4:
+        raise f.fail("vehicle.motor_names", f"{_short(names)} is not 4 distinct rotor names")
+    basis = f.get(v, "basis", "vehicle.basis", (str,))
+    if basis not in ("omega2", "command"):
+        raise f.fail("vehicle.basis", f"{basis!r} is neither 'omega2' nor 'command'")
+    cg = f.get(v, "cg_damage_separable", "vehicle.cg_damage_separable", (bool,), optional=True)
+    epoch = f.get(d, "epoch", "epoch", (int,))
+    if epoch < 0:
+        raise f.fail("epoch", f"{epoch} is negative")
+    flights = f.get(d, "flights", "flights", (list,))
+    for i, fl in enumerate(flights):
+        at = f"flights[{i}]"
+        name = f.get(fl, "name", f"{at}.name", (str,))
+        f.date(fl, "date", f"{at}.date")
+        f.epoch(fl, f"{at}.epoch", epoch)
+        source = f.get(fl, "source", f"{at}.source", (str,))
+        if source not in SOURCES:
+            raise f.fail(f"{at}.source", f"{source!r} is not one of {', '.join(SOURCES)}")
+        f.get(fl, "excluded", f"{at}.excluded", (str,), optional=True)
+        summ = f.get(fl, "summary", f"{at}.summary", (dict,))
+        n = f.get(summ, "n", f"{at}.summary.n", (int,))
+        if n < 1:
+            raise f.fail(f"{at}.summary.n", f"{n} steps: a flight of a baseline was airborne")
         try:
-            os.fsync(dfd)
-        finally:
-            os.close(dfd)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
-    return path
+            s = FlightSummary.from_dict(summ, f"{origin}: {at}.summary ({_short(name)})")
+        except ConfigError as exc:
+            raise BaselineError(str(exc)) from exc
+        if s.basis != basis:
+            raise f.fail(f"{at}.summary.basis", f"{s.basis!r}, the baseline's is {basis!r}")
+    events = f.get(d, "events", "events", (list,))
+    for i, ev in enumerate(events):
+        at = f"events[{i}]"
+        name = f.get(ev, "event", f"{at}.event", (str,))
+        if name not in EVENTS:
+            raise f.fail(f"{at}.event", f"{_short(name)} is not a known event")
+        f.date(ev, "date", f"{at}.date")
+        f.epoch(ev, f"{at}.epoch", epoch)
+    return VehicleBaseline(vid, id_source, tuple(names), basis, epoch, list(flights), list(events), cg)
+
+
+# The one place a file's version is turned into a baseline: a reader per version this propwatch reads. A new version
+# adds its reader here (an older one's reader may fill the new fields) and raises VERSION.
+READERS = {1: _read_v1}
 
 
 def is_vehicle_baseline(path: str | Path) -> bool:

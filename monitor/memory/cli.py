@@ -3,10 +3,15 @@
     propwatch baseline learn LOG... --out B.json [--vehicle-id ID] [--format F] [--vehicle YAML] [--json]
     propwatch baseline show B.json [--json]
     propwatch baseline note B.json --event props-replaced|motor-replaced|... [--date YYYY-MM-DD]
+    propwatch baseline reset --state-dir DIR --vehicle KEY
 
 ``learn`` reads flights the operator declares healthy (at least 3, of one vehicle: the logs' own ids, or
 ``--vehicle-id`` for logs without one) and writes B.json; ``diagnose LOG --baseline B.json`` then judges a flight
-against it. ``note`` records maintenance; an event that changes the airframe restarts the normal.
+against it. ``note`` records maintenance; an event that changes the airframe restarts the normal. ``reset`` moves a
+daemon's baseline of one vehicle aside (dated, beside it) so that its history starts again from the next flight:
+the daemon never replaces a baseline it cannot read, so this is the way on from one.
+A ``learn --out`` or ``note`` on a baseline in a state dir (``DIR/vehicles/KEY/baseline.json``) writes under the state
+dir's write lock, as the daemon does; ``learn`` there never replaces a baseline (``reset`` it first).
 Exit 2 with one line naming the file and the reason on bad input; nothing is written then.
 """
 
@@ -18,7 +23,9 @@ import json
 import sys
 from pathlib import Path
 
+from monitor.errors import PropwatchError
 from monitor.memory.baseline import EVENTS, MIN_FLIGHTS, BaselineError, VehicleBaseline
+from monitor.memory.store import StateDir, state_dir_of
 
 
 def _date(text: str) -> str:
@@ -47,6 +54,9 @@ def parse_args(argv):
     np_.add_argument("baseline", type=Path)
     np_.add_argument("--event", required=True, help=f"one of: {', '.join(EVENTS)}")
     np_.add_argument("--date", type=_date, default=None, help="the event's date (default today, UTC)")
+    rp = sub.add_parser("reset", help="move a vehicle's baseline in a daemon's state dir aside (dated) and start afresh")
+    rp.add_argument("--state-dir", required=True, type=Path, help="the daemon's state dir (its --state-dir)")
+    rp.add_argument("--vehicle", required=True, help="the vehicle key, as under DIR/vehicles/ (uid-... or sysid-N)")
     return p.parse_args(argv)
 
 
@@ -87,6 +97,42 @@ def text(b: VehicleBaseline, d: dict) -> str:
     return "\n".join(lines)
 
 
+def _write(path: Path, change, plain_old: bool) -> VehicleBaseline:
+    """Apply ``change`` (the baseline there, or None -> the baseline to write) to ``path``: read, changed and written
+    under the state dir's write lock where ``path`` is a baseline in one; else as a plain file, read first only with
+    ``plain_old``."""
+    in_state = state_dir_of(path)
+    if in_state is None:
+        b = change(VehicleBaseline.load(path) if plain_old else None)
+        b.save(path)
+        return b
+    root, key = in_state
+    with StateDir.open(root, create=False) as sd:
+        return sd.update(key, change)
+
+
+def _learnt(new: VehicleBaseline, path: Path):
+    def change(old):
+        if old is not None:
+            raise BaselineError(
+                f"{path} already holds this vehicle's history ({len(old.flights)} flights): "
+                "`propwatch baseline reset` moves it aside first"
+            )
+        return new
+
+    return change
+
+
+def _noted(path: Path, event: str, date: str):
+    def change(b):
+        if b is None:
+            raise BaselineError(f"{path}: no vehicle baseline there")
+        b.note(event, date)
+        return b
+
+    return change
+
+
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     try:
@@ -96,17 +142,21 @@ def main(argv: list[str] | None = None) -> int:
 
             esc = load_vehicle(args.vehicle or DEFAULT_VEHICLE).esc
             flights = [read_flight(p, args.fmt, esc) for p in args.logs]
-            b = learn_from_logs(flights, args.vehicle_id)
-            b.save(args.out)
+            b = _write(args.out, _learnt(learn_from_logs(flights, args.vehicle_id), args.out), plain_old=False)
         elif args.cmd == "show":
             b = VehicleBaseline.load(args.baseline)
-        else:
-            b = VehicleBaseline.load(args.baseline)
-            restarted = b.note(args.event, args.date or _dt.datetime.now(_dt.timezone.utc).date().isoformat())
-            b.save(args.baseline)
-            print(f"{args.baseline}: {args.event} recorded" + ("; the normal restarts from the next flight" if restarted else ""))
+        elif args.cmd == "note":
+            date = args.date or _dt.datetime.now(_dt.timezone.utc).date().isoformat()
+            _write(args.baseline, _noted(args.baseline, args.event, date), plain_old=True)
+            restarts = EVENTS.get(args.event)  # note() refused an unknown event above
+            print(f"{args.baseline}: {args.event} recorded" + ("; the normal restarts from the next flight" if restarts else ""))
             return 0
-    except BaselineError as exc:
+        else:
+            with StateDir.open(args.state_dir, create=False) as sd:
+                moved = sd.reset(args.vehicle)
+            print(f"vehicle {args.vehicle}: baseline moved aside to {moved}; its history starts again from the next flight")
+            return 0
+    except (PropwatchError, OSError) as exc:  # BaselineError, StateDirError, disk full: one line, nothing written
         print(f"propwatch baseline: error: {exc}", file=sys.stderr)
         return 2
     d = describe(b)

@@ -1,11 +1,12 @@
 """A flight's rotor shares and regime as sufficient statistics (``FlightSummary``), fed one step or a whole table.
 
-Per accepted step t (airborne, all four values finite, past the take-off settle time; an unknown tilt reads 0): x_t the four rotors'
-omega^2 (kRPM^2, from the ESC fit or ESC telemetry), or the raw command where no RPM is known (``basis``); the
-share s_t = x_t / mean(x_t); the regime f_t = (1, roll_rad, pitch_rad). Kept: sums of s, f f^T and f s^T (the
-regression of shares on tilt: forward flight into wind tilts the vehicle and shifts load between front and rear
-rotors), the mean collective, and 2-s block means of s (how much a mean over a few seconds still wanders within one
-flight). Feeding a table in one call or step by step gives the same sums (a test checks it).
+Per accepted step t (airborne, all four values finite and non-negative, past the take-off settle time; an unknown
+tilt, or one beyond +-pi, reads 0): x_t the four rotors' omega^2 (kRPM^2, from the ESC fit or ESC telemetry), or
+the raw command where no RPM is known (``basis``); the share s_t = x_t / mean(x_t); the regime
+f_t = (1, roll_rad, pitch_rad). Kept: sums of s, f f^T and f s^T (the regression of shares on tilt: forward flight
+into wind tilts the vehicle and shifts load between front and rear rotors), the mean collective, and 2-s block means
+of s (how much a mean over a few seconds still wanders within one flight). Feeding a table in one call or step by
+step gives the same sums (a test checks it).
 """
 
 from __future__ import annotations
@@ -24,6 +25,13 @@ SETTLE_S = 2.0
 # the thresholds of monitor/memory/thresholds.py were measured with it (`make tune-memory`).
 BLOCK_S = 2.0
 N_REGIME = 3  # (1, roll, pitch)
+# What a flight can produce, the bounds a stored summary is checked against (``FlightSummary.check``). Chosen, not
+# measured: longer than any multirotor flight, faster than any log or grid rate, past any rotor's omega^2 (kRPM^2)
+# or raw command (PWM us).
+MAX_FLIGHT_S = 86400.0
+MAX_RATE_HZ = 10000.0
+MAX_COLLECTIVE = 1.0e7
+MAX_TILT_RAD = np.pi  # roll and pitch are Euler angles
 
 
 @dataclass
@@ -88,14 +96,65 @@ class FlightSummary:
                 sum_block=np.asarray(d["sum_block"], dtype=np.float64).reshape(4),
                 sum_block_outer=np.asarray(d["sum_block_outer"], dtype=np.float64).reshape(4, 4),
             )
-        except (KeyError, TypeError, ValueError) as exc:
+        except (KeyError, TypeError, ValueError, OverflowError) as exc:
             raise ConfigError(f"{origin}: malformed flight summary: {exc!r}") from exc
-        if s.basis not in ("omega2", "command") or s.n < 0 or not s.rate_hz > 0:
-            raise ConfigError(f"{origin}: malformed flight summary: basis {s.basis!r}, n {s.n}, rate {s.rate_hz}")
-        for name in ("sum_share", "ftf", "fts", "sum_block", "sum_block_outer"):
-            if not np.all(np.isfinite(getattr(s, name))):
-                raise ConfigError(f"{origin}: flight summary field {name} holds a non-finite value")
+        s.check(origin)
         return s
+
+    def check(self, origin: str = "summary") -> None:
+        """Raise ``ConfigError`` naming the first field no flight can produce. Each accepted step adds a share vector
+        in [0, 4] that sums to 4, a regime (1, roll, pitch) with tilts within +-pi, and a positive collective; each
+        2-s block, the mean of its steps' shares. The sums of n steps are bounded accordingly."""
+        n, nb = self.n, self.n_blocks
+        tol = 1e-6 * (max(n, 1) + 1.0)
+
+        def bad(name: str, why: str):
+            return ConfigError(f"{origin}: flight summary field {name}: {why}")
+
+        if self.basis not in ("omega2", "command"):
+            raise bad("basis", f"{self.basis!r} is neither 'omega2' nor 'command'")
+        if not 0 < self.rate_hz <= MAX_RATE_HZ:
+            raise bad("rate_hz", f"{self.rate_hz!r} is not in (0, {MAX_RATE_HZ:g}]")
+        if not 0 <= n <= self.rate_hz * MAX_FLIGHT_S:
+            raise bad("n", f"{n} steps is not in [0, {MAX_FLIGHT_S:g} s at {self.rate_hz:g} Hz]")
+        for name in ("sum_share", "ftf", "fts", "sum_block", "sum_block_outer"):
+            if not np.all(np.isfinite(getattr(self, name))):
+                raise bad(name, "holds a non-finite value")
+        if not (np.isfinite(self.sum_collective) and 0 <= self.sum_collective <= MAX_COLLECTIVE * n):
+            raise bad("sum_collective", f"{self.sum_collective!r} is not in [0, {MAX_COLLECTIVE:g} n] (n {n})")
+        if np.any(self.sum_share < -tol) or np.any(self.sum_share > 4 * n + tol) or abs(self.sum_share.sum() - 4 * n) > tol:
+            raise bad("sum_share", f"{self.sum_share.tolist()} is not n shares in [0, 4] summing to 4 (n {n})")
+        t = MAX_TILT_RAD
+        ftf, fts = self.ftf, self.fts
+        if (
+            abs(ftf[0, 0] - n) > tol
+            or np.any(np.abs(ftf - ftf.T) > tol * t * t)
+            or np.any(np.abs(ftf[0, 1:]) > t * n + tol)
+            or np.any(np.diag(ftf)[1:] < -tol)
+            or np.any(np.diag(ftf)[1:] > t * t * n + tol)
+            or np.any(ftf[0, 1:] ** 2 > n * np.diag(ftf)[1:] + tol * t * t * n)
+        ):
+            raise bad("ftf", f"is not the regime sums of {n} steps with tilts within +-{t:.4g} rad")
+        if (
+            np.any(np.abs(fts[0] - self.sum_share) > tol)
+            or np.any(np.abs(fts[1:]) > 4 * t * n + tol)
+            or np.any(np.abs(fts.sum(axis=1) - 4 * ftf[0]) > tol * t)
+        ):
+            raise bad("fts", f"is not the regime-by-share sums of {n} steps")
+        block = max(int(round(BLOCK_S * self.rate_hz)), 1)
+        if not 0 <= nb * block <= n:
+            raise bad("n_blocks", f"{nb} blocks of {block} steps do not fit in {n} steps")
+        sb, sbo = self.sum_block, self.sum_block_outer
+        btol = 1e-6 * (nb + 1.0)
+        if np.any(sb < -btol) or np.any(sb > 4 * nb + btol) or abs(sb.sum() - 4 * nb) > btol:
+            raise bad("sum_block", f"{sb.tolist()} is not {nb} block means in [0, 4] summing to 4")
+        if (
+            np.any(np.abs(sbo - sbo.T) > 16 * btol)
+            or np.any(np.abs(sbo) > 16 * nb + btol)
+            or abs(sbo.sum() - 16 * nb) > 16 * btol
+            or np.any(np.diag(sbo) * max(nb, 1) < sb**2 - 16 * btol * max(nb, 1))
+        ):
+            raise bad("sum_block_outer", f"is not the outer products of {nb} block means")
 
 
 class ShareAccumulator:
@@ -116,7 +175,7 @@ class ShareAccumulator:
             return False
         self._since_takeoff += 1
         x = np.asarray(x, dtype=np.float64)
-        if self._since_takeoff <= self._settle or not np.all(np.isfinite(x)):
+        if self._since_takeoff <= self._settle or not np.all(np.isfinite(x) & (x >= 0)):
             return False
         roll_rad, pitch_rad = _tilt(roll_rad), _tilt(pitch_rad)
         mean = float(np.mean(x))
@@ -136,7 +195,7 @@ class ShareAccumulator:
         self._since_takeoff = since
         with np.errstate(invalid="ignore"):
             mean = np.mean(x, axis=1)
-            ok &= np.all(np.isfinite(x), axis=1) & (mean > 0)
+            ok &= np.all(np.isfinite(x) & (x >= 0), axis=1) & (mean > 0)
         if not ok.any():
             return
         s = x[ok] / mean[ok, None]
@@ -166,10 +225,12 @@ class ShareAccumulator:
 
 
 def _tilt(a):
-    """A tilt angle for the regime; unknown (a log without it, CrazyPAD's pitch) reads 0: no tilt regime is learnt."""
+    """A tilt angle for the regime; unknown (a log without it, CrazyPAD's pitch) or not an Euler angle (beyond +-pi)
+    reads 0: no tilt regime is learnt from it."""
     if isinstance(a, np.ndarray):
-        return np.nan_to_num(a, nan=0.0, posinf=0.0, neginf=0.0)
-    return float(a) if np.isfinite(a) else 0.0
+        a = np.nan_to_num(a, nan=0.0, posinf=0.0, neginf=0.0)
+        return np.where(np.abs(a) <= MAX_TILT_RAD, a, 0.0)
+    return float(a) if np.isfinite(a) and abs(a) <= MAX_TILT_RAD else 0.0
 
 
 def rotor_values(table: FlightTable) -> tuple[np.ndarray, str]:
