@@ -44,24 +44,62 @@ class Normal:
         return self.cov * (1.0 + 1.0 / self.n_flights) + self.within_block_cov / blocks
 
 
+@dataclass(frozen=True)
+class FlightStack:
+    """The per-flight terms of a normal, stacked once (``of``): the normal of any subset of the flights (``normal``,
+    leave-one-out in ``monitor.memory.learn.outliers``) is then one vectorised pass, not a loop over summaries."""
+
+    n: np.ndarray  # (k,) accepted steps
+    w: np.ndarray  # (k, 2, 2) within-flight tilt scatter
+    v: np.ndarray  # (k, 2, 4) within-flight tilt-by-share scatter
+    mean_share: np.ndarray  # (k, 4)
+    mean_tilt: np.ndarray  # (k, 2) mean (roll, pitch)
+    within: np.ndarray  # (k, 4, 4) 2-s block means' covariance (zeros where fewer than 3 blocks)
+    has_within: np.ndarray  # (k,) bool
+
+    @classmethod
+    def of(cls, summaries: list[FlightSummary]) -> FlightStack:
+        k = len(summaries)
+        n = np.array([s.n for s in summaries], dtype=np.float64)
+        ftf = np.array([s.ftf for s in summaries]).reshape(k, 3, 3)
+        fts = np.array([s.fts for s in summaries]).reshape(k, 3, 4)
+        nn = np.maximum(n, 1.0)[:, None, None]
+        w = ftf[:, 1:, 1:] - ftf[:, 0, 1:, None] * ftf[:, 0, None, 1:] / nn
+        v = fts[:, 1:] - ftf[:, 0, 1:, None] * fts[:, 0, None, :] / nn
+        covs = [s.within_cov() for s in summaries]
+        within = np.array([np.zeros((4, 4)) if c is None else c for c in covs]).reshape(k, 4, 4)
+        return cls(
+            n,
+            w,
+            v,
+            np.array([s.mean_share() for s in summaries]).reshape(k, 4),
+            np.array([s.mean_regime()[1:] for s in summaries]).reshape(k, 2),
+            within,
+            np.array([c is not None for c in covs], dtype=bool),
+        )
+
+    def normal(self, keep: np.ndarray | None = None) -> Normal:
+        """The normal of the flights ``keep`` (a (k,) mask; default all) that have accepted steps."""
+        keep = (self.n > 0) if keep is None else (np.asarray(keep, dtype=bool) & (self.n > 0))
+        if not keep.any():
+            raise ValueError("normal_of: no flight with airborne steps")
+        slopes = np.linalg.solve(
+            self.w[keep].sum(axis=0) + TILT_RIDGE_RAD2 * self.n[keep].sum() * np.eye(2), self.v[keep].sum(axis=0)
+        )
+        c = self.mean_share[keep] - self.mean_tilt[keep] @ slopes
+        m = len(c)
+        own = np.cov(c.T, ddof=1) if m > 1 else np.zeros((4, 4))
+        prior = np.asarray(th.PRIOR_COV, dtype=np.float64)
+        cov = (th.PRIOR_FLIGHTS * prior + (m - 1) * own) / (th.PRIOR_FLIGHTS + m - 1)
+        wk = keep & self.has_within
+        wcov = self.within[wk].mean(axis=0) if wk.any() else np.zeros((4, 4))
+        return Normal(c.mean(axis=0), slopes, cov, own, wcov, m)
+
+
 def slopes_of(summaries: list[FlightSummary]) -> np.ndarray:
-    w = sum(s.ftf[1:, 1:] - np.outer(s.ftf[0, 1:], s.ftf[0, 1:]) / max(s.n, 1) for s in summaries)
-    v = sum(s.fts[1:] - np.outer(s.ftf[0, 1:], s.fts[0]) / max(s.n, 1) for s in summaries)
-    n = sum(s.n for s in summaries)
-    return np.linalg.solve(w + TILT_RIDGE_RAD2 * n * np.eye(2), v)
+    return FlightStack.of(summaries).normal().slopes
 
 
 def normal_of(summaries: list[FlightSummary]) -> Normal:
     """The normal of ``summaries`` (at least one flight with accepted steps)."""
-    summaries = [s for s in summaries if s.n > 0]
-    if not summaries:
-        raise ValueError("normal_of: no flight with airborne steps")
-    slopes = slopes_of(summaries)
-    c = np.array([s.mean_share() - s.mean_regime()[1:] @ slopes for s in summaries])
-    m = len(c)
-    own = np.cov(c.T, ddof=1) if m > 1 else np.zeros((4, 4))
-    prior = np.asarray(th.PRIOR_COV, dtype=np.float64)
-    cov = (th.PRIOR_FLIGHTS * prior + (m - 1) * own) / (th.PRIOR_FLIGHTS + m - 1)
-    within = [w for s in summaries if (w := s.within_cov()) is not None]
-    wcov = np.mean(within, axis=0) if within else np.zeros((4, 4))
-    return Normal(c.mean(axis=0), slopes, cov, own, wcov, m)
+    return FlightStack.of(summaries).normal()

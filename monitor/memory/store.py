@@ -64,6 +64,11 @@ def safe_key(key: str) -> str:
     return key
 
 
+def baseline_path(root: str | Path, key: str) -> Path:
+    """Where a vehicle's baseline lives in the state dir ``root``."""
+    return Path(root) / VEHICLES / safe_key(key) / BASELINE_FILE
+
+
 def _check_owned(st: os.stat_result, where: str) -> None:
     if st.st_uid != os.geteuid():
         raise StateDirError(f"{where} is owned by uid {st.st_uid}, not by this user (uid {os.geteuid()})")
@@ -151,7 +156,7 @@ class StateDir:
         self.close()
 
     def path(self, key: str) -> Path:
-        return self.root / VEHICLES / safe_key(key) / BASELINE_FILE
+        return baseline_path(self.root, key)
 
     # -- locks
     def _lock_fd(self, name: str) -> int:

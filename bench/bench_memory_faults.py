@@ -1,0 +1,297 @@
+"""A vehicle's history under faults: SIGKILL at random moments of landings, two daemons at once, a disk filling.
+
+    python -m bench.bench_memory_faults                        # all three, sized for a 2-core machine (~3 minutes)
+    python -m bench.bench_memory_faults --only kill9 --landings 30
+    python -m bench.bench_memory_faults --only daemons --pairs 5
+    python -m bench.bench_memory_faults --only diskfull
+
+Each starts from a state dir holding one vehicle's 200-flight baseline (synthetic healthy flights of one quirky
+airframe, the summaries of ``monitor.memory.summary`` as the daemon makes them).
+
+- ``kill9``: a process lands flights one after another through the daemon's memory (``VehicleMemory``: identify,
+  20 Hz steps, disarm, learn) and prints each result; it is killed with SIGKILL after a random delay (up to twice a
+  landing's time), then restarted, until ``--landings`` landings have begun. After every kill: the file loads, holds
+  every flight reported learnt, and at most the one flight in progress more.
+- ``daemons``: ``--pairs`` times, two ``propwatch monitor`` processes started at once on one state dir (udpin on
+  loopback, nothing sent): exactly one runs; the other exits 2 naming the first's pid.
+- ``diskfull``: the state dir on a tmpfs (in a user and mount namespace: ``unshare``) with room for the baseline
+  but not for a second copy of it: a landing is "not learnt: disk full", the file is unchanged and loads, no
+  temporary file is left; with room made, the next landing is learnt.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import random
+import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+
+RATE_HZ = 20.0
+KEY = "sysid-1"
+QUIRKY = np.array([1.03, 0.97, 0.95, 1.05])
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def flight_summary(k: int, seconds: float = 40.0):
+    """The summary a healthy flight of the quirky airframe leaves (seeded by ``k``)."""
+    from monitor.memory.summary import ShareAccumulator
+
+    rng = np.random.default_rng(1000 + k)
+    n = int(seconds * RATE_HZ)
+    share = QUIRKY * (1 + 0.003 * rng.standard_normal(4))
+    x = 36.0 * share * (1 + 0.01 * rng.standard_normal((n, 4)))
+    acc = ShareAccumulator("omega2", RATE_HZ)
+    acc.table(x, 0.01 * rng.standard_normal(n), 0.01 * rng.standard_normal(n), np.ones(n, dtype=bool))
+    return acc.summary
+
+
+def seed_state(root: Path, flights: int = 200) -> Path:
+    """A state dir with one vehicle's ``flights``-flight baseline; returns the baseline's path."""
+    from monitor.memory.baseline import VehicleBaseline
+    from monitor.memory.store import StateDir
+
+    b = VehicleBaseline(KEY, "daemon", ("1", "2", "3", "4"), "omega2")
+    for k in range(flights):
+        b.add(f"flight {k + 1}", "2026-05-01", flight_summary(k), "no fault")
+    with StateDir.open(root) as sd:
+        sd.update(KEY, lambda _: b)
+        return sd.path(KEY)
+
+
+def fly(mem, k: int, seconds: float = 35.0) -> None:
+    """One flight through the daemon's memory: 2 s on the ground, ``seconds`` airborne, 3 s on the ground at idle."""
+    rng = np.random.default_rng(5000 + k)
+    share = QUIRKY * (1 + 0.003 * rng.standard_normal(4))
+    n_gnd, n_air = int(2 * RATE_HZ), int(seconds * RATE_HZ)
+    for i in range(n_gnd + n_air + int(3 * RATE_HZ)):
+        air = n_gnd <= i < n_gnd + n_air
+        rpm = 6000.0 * np.sqrt(share * (1 + 0.01 * rng.standard_normal(4))) if air else np.full(4, 1000.0)
+        mem.step(i / RATE_HZ, air, rpm, 0.01 * rng.standard_normal(), 0.01 * rng.standard_normal())
+
+
+def child_landings(state: Path, first: int) -> None:
+    """Land flights forever (killed from outside): 'landing K' before each disarm, then 'RESULT|FLIGHTS'."""
+    from monitor.daemon.memory import VehicleMemory
+
+    mem = VehicleMemory(state, RATE_HZ)
+    mem.identify(sysid=1)
+    print("ready", flush=True)
+    k = first
+    while True:
+        fly(mem, k)
+        print(f"landing {k}", flush=True)
+        what = mem.disarmed(None)
+        n = len(mem.baseline.flights) if mem.baseline is not None else -1
+        print(f"{what}|{n}", flush=True)
+        k += 1
+
+
+def _child(args: list[str], **kw) -> subprocess.Popen:
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    return subprocess.Popen([sys.executable, "-m", "bench.bench_memory_faults", *args], env=env, text=True, **kw)
+
+
+def bench_kill9(landings: int, seed: int) -> dict:
+    from monitor.memory.baseline import VehicleBaseline
+    from monitor.memory.store import StateDir
+
+    rng = random.Random(seed)
+    work = Path(tempfile.mkdtemp(prefix="pw-kill9-"))
+    path = seed_state(work / "state")
+    reported = len(VehicleBaseline.load(path).flights)
+    begun, kills, lost, unreadable, learnt, not_learnt, stale, mid_landing = 0, 0, 0, 0, 0, 0, 0, 0
+    landing_s = 2.5  # refined from the first landings
+    t_start = time.monotonic()
+    while begun < landings:
+        p = _child(["--child-landings", str(work / "state"), str(1000 * kills)], stdout=subprocess.PIPE)
+        assert p.stdout.readline().strip() == "ready"
+        lines: list[str] = []
+        reader = threading.Thread(target=lambda: lines.extend(p.stdout), daemon=True)
+        reader.start()
+        time.sleep(rng.uniform(0.0, 2.0 * landing_s))
+        p.send_signal(signal.SIGKILL)
+        p.wait()
+        reader.join(timeout=10)
+        kills += 1
+        mid = False  # killed between a landing's disarm and its result: while learning or writing
+        for line in lines:
+            line = line.strip()
+            mid = line.startswith("landing")
+            if line.startswith("landing"):
+                begun += 1
+            elif "|" in line:
+                what, n = line.rsplit("|", 1)
+                if what == "learnt":
+                    learnt += 1
+                    reported = max(reported, int(n))
+                else:
+                    not_learnt += 1
+        mid_landing += mid
+        stale += sum(1 for q in path.parent.iterdir() if q.name.endswith(".tmp"))
+        try:
+            now = len(VehicleBaseline.load(path).flights)
+        except Exception:  # noqa: BLE001 - counted: the figure this bench is for
+            unreadable += 1
+            continue
+        if now < reported:
+            lost += reported - now
+        reported = max(reported, now)
+        if begun and learnt:
+            landing_s = (time.monotonic() - t_start) / max(begun, 1)
+    with StateDir.open(work / "state") as sd:
+        removed = sd.hold()
+        final = len(sd.load(KEY).flights)
+    shutil.rmtree(work, ignore_errors=True)
+    return {
+        "landings_begun": begun,
+        "kills": kills,
+        "kills_mid_landing": mid_landing,
+        "reported_learnt": learnt,
+        "reported_not_learnt": not_learnt,
+        "learnt_flights_lost": lost,
+        "unreadable_after_a_kill": unreadable,
+        "temporary_files_seen_after_kills": stale,
+        "temporary_files_removed_at_next_start": len(removed),
+        "flights_in_file_at_end": final,
+    }
+
+
+def bench_daemons(pairs: int) -> dict:
+    work = Path(tempfile.mkdtemp(prefix="pw-daemons-"))
+    seed_state(work / "state")
+    ran, refused, named, both_ran = 0, 0, 0, 0
+    for i in range(pairs):
+        procs = [
+            _daemon(work / "state", 14700 + 2 * i + j, work / f"ev{i}{j}.jsonl") for j in range(2)
+        ]  # started within a millisecond of each other
+        time.sleep(4.0)
+        codes = [p.poll() for p in procs]
+        for p in procs:
+            if p.poll() is None:
+                p.send_signal(signal.SIGTERM)
+        outs = [p.communicate(timeout=30)[1] for p in procs]
+        running = [j for j, c in enumerate(codes) if c is None]
+        ran += len(running)
+        both_ran += len(running) == 2
+        for j, c in enumerate(codes):
+            if c == 2:
+                refused += 1
+                other = procs[1 - j].pid
+                named += f"pid {other}" in outs[j]
+    shutil.rmtree(work, ignore_errors=True)
+    return {"pairs": pairs, "ran": ran, "refused_exit_2": refused, "refusal_named_the_holder": named, "both_ran": both_ran}
+
+
+def _daemon(state: Path, port: int, events: Path) -> subprocess.Popen:
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    cmd = [sys.executable, "-m", "monitor.cli", "monitor", "--connect", f"udpin:127.0.0.1:{port}"]
+    cmd += ["--state-dir", str(state), "--events", str(events)]
+    return subprocess.Popen(cmd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+
+
+def bench_diskfull() -> dict:
+    """Re-run inside a user and mount namespace where a tmpfs can be mounted."""
+    if shutil.which("unshare") is None:
+        return {"skipped": "no unshare(1)"}
+    r = subprocess.run(
+        [
+            "unshare",
+            "--user",
+            "--map-root-user",
+            "--mount",
+            sys.executable,
+            "-m",
+            "bench.bench_memory_faults",
+            "--inside-diskfull",
+        ],
+        env={**os.environ, "PYTHONPATH": str(ROOT)},
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    if r.returncode != 0:
+        return {"skipped": f"unshare failed: {r.stderr.strip()[-300:]}"}
+    return json.loads(r.stdout.strip().splitlines()[-1])
+
+
+def inside_diskfull() -> dict:
+    from monitor.daemon.memory import VehicleMemory
+    from monitor.memory.baseline import VehicleBaseline
+
+    mnt = Path(tempfile.mkdtemp(prefix="pw-tmpfs-"))
+    seeded = Path(tempfile.mkdtemp(prefix="pw-seed-")) / "state"
+    size = seed_state(seeded).stat().st_size
+    # Room for the file and more than another copy; a filler leaves a third of one: the next write must fail.
+    subprocess.run(["mount", "-t", "tmpfs", "-o", f"size={int(size * 2.5) + 65536}", "tmpfs", str(mnt)], check=True)
+    state = mnt / "state"
+    shutil.copytree(seeded, state)
+    os.chmod(state, 0o700)
+    path = state / "vehicles" / KEY / "baseline.json"
+    before = path.read_bytes()
+    filler = mnt / "filler"
+    free = shutil.disk_usage(mnt).free
+    filler.write_bytes(b"\0" * max(free - int(size * 0.33), 0))
+    mem = VehicleMemory(state, RATE_HZ)
+    mem.identify(sysid=1)
+    fly(mem, 1)
+    full = mem.disarmed(None)
+    unchanged = path.read_bytes() == before
+    loads = len(VehicleBaseline.load(path).flights)
+    left = [q.name for q in path.parent.iterdir() if q.name != "baseline.json"]
+    filler.unlink()
+    fly(mem, 2)
+    after = mem.disarmed(None)
+    n_after = len(VehicleBaseline.load(path).flights)
+    subprocess.run(["umount", str(mnt)], check=False)
+    return {
+        "baseline_bytes": size,
+        "landing_on_a_full_disk": full,
+        "file_unchanged": unchanged,
+        "flights_in_file": loads,
+        "temporary_files_left": left,
+        "landing_with_room_again": after,
+        "flights_after": n_after,
+    }
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(prog="python -m bench.bench_memory_faults", description=__doc__.split("\n\n")[0])
+    p.add_argument("--only", choices=("kill9", "daemons", "diskfull"), action="append")
+    p.add_argument("--landings", type=int, default=30, help="kill9: landings begun (each ~2 s of CPU at 200 flights)")
+    p.add_argument("--pairs", type=int, default=5, help="daemons: pairs started at once")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--child-landings", nargs=2, metavar=("STATE", "FIRST"), help=argparse.SUPPRESS)
+    p.add_argument("--inside-diskfull", action="store_true", help=argparse.SUPPRESS)
+    a = p.parse_args(argv)
+    if a.child_landings:
+        child_landings(Path(a.child_landings[0]), int(a.child_landings[1]))
+        return 0
+    if a.inside_diskfull:
+        print(json.dumps(inside_diskfull()))
+        return 0
+    out = {}
+    for name in a.only or ("kill9", "daemons", "diskfull"):
+        t = time.monotonic()
+        if name == "kill9":
+            out[name] = bench_kill9(a.landings, a.seed)
+        elif name == "daemons":
+            out[name] = bench_daemons(a.pairs)
+        else:
+            out[name] = bench_diskfull()
+        out[name]["wall_s"] = round(time.monotonic() - t, 1)
+        print(json.dumps({name: out[name]}), flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
