@@ -282,11 +282,17 @@ class StateDir:
         with self._vehicle_dir(key, create=False) as kfd:
             return self._load_at(kfd, key)
 
-    def update(self, key: str, change: Callable[[VehicleBaseline | None], VehicleBaseline | None]) -> VehicleBaseline | None:
+    def update(
+        self,
+        key: str,
+        change: Callable[[VehicleBaseline | None], VehicleBaseline | None],
+        wait_s: float | None = None,
+    ) -> VehicleBaseline | None:
         """Read this vehicle's baseline, ``change`` it (None: write nothing) and write the result, all under the
-        write lock. A baseline that cannot be read is never replaced: ``load``'s errors pass through and nothing
-        is written. ``OSError`` of the write (ENOSPC: disk full) passes through with the old file untouched."""
-        with self.writing(), self._vehicle_dir(key, create=True) as kfd:
+        write lock (waiting up to ``wait_s`` for it: ``writing``). A baseline that cannot be read is never replaced:
+        ``load``'s errors pass through and nothing is written. ``OSError`` of the write (ENOSPC: disk full) passes
+        through with the old file untouched."""
+        with self.writing(wait_s), self._vehicle_dir(key, create=True) as kfd:
             new = change(self._load_at(kfd, key))
             if new is not None:
                 write_at(kfd, BASELINE_FILE, new.to_text())
