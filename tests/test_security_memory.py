@@ -152,6 +152,7 @@ IMPOSSIBLE = [
     ("flights.0.summary.n_blocks", 10**6, "n_blocks"),
     ("flights.0.summary.ftf.1.1", -1.0, "ftf"),
     ("flights.0.summary.ftf.0.1", 1e6, "ftf"),
+    ("flights.0.summary.ftf.1.2", 1e4, "ftf"),
     ("flights.0.summary.fts.1.2", 1e9, "fts"),
     ("flights.0.summary.sum_collective", -1.0, "sum_collective"),
     ("flights.0.summary.sum_block.0", 1e300, "sum_block"),
@@ -181,6 +182,19 @@ def test_an_impossible_value_is_refused_in_one_line_naming_the_field(tmp_path, c
     assert baseline_main(["show", str(p)]) == 2
     e = capsys.readouterr().err
     assert e.count("\n") == 1 and named in e and "Traceback" not in e
+
+
+@pytest.mark.parametrize("field", ["ftf", "sum_block_outer"])
+def test_sums_that_are_not_scatters_are_refused(tmp_path, field):
+    # symmetric, every entry within its bounds, yet no set of steps or blocks sums to it (not positive semi-definite)
+    d = baseline().to_dict()
+    m = np.asarray(d["flights"][0]["summary"][field])
+    a, b = (1, 2) if field == "ftf" else (0, 1)
+    m[a, b] = m[b, a] = -1.5 * np.sqrt(m[a, a] * m[b, b]) - 1e-3
+    d["flights"][0]["summary"][field] = m.tolist()
+    (tmp_path / "B.json").write_text(json.dumps(d))
+    with pytest.raises(BaselineError, match=rf"field {field}:"):
+        VehicleBaseline.load(tmp_path / "B.json")
 
 
 def test_non_numbers_and_nesting_bombs_are_refused_in_one_line(tmp_path):

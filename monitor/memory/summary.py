@@ -132,7 +132,7 @@ class FlightSummary:
             or np.any(np.abs(ftf[0, 1:]) > t * n + tol)
             or np.any(np.diag(ftf)[1:] < -tol)
             or np.any(np.diag(ftf)[1:] > t * t * n + tol)
-            or np.any(ftf[0, 1:] ** 2 > n * np.diag(ftf)[1:] + tol * t * t * n)
+            or np.linalg.eigvalsh((ftf + ftf.T) / 2).min() < -tol * t * t  # a sum of f f^T
         ):
             raise bad("ftf", f"is not the regime sums of {n} steps with tilts within +-{t:.4g} rad")
         if (
@@ -152,7 +152,7 @@ class FlightSummary:
             np.any(np.abs(sbo - sbo.T) > 16 * btol)
             or np.any(np.abs(sbo) > 16 * nb + btol)
             or abs(sbo.sum() - 16 * nb) > 16 * btol
-            or np.any(np.diag(sbo) * max(nb, 1) < sb**2 - 16 * btol * max(nb, 1))
+            or np.linalg.eigvalsh((sbo + sbo.T) / 2 - np.outer(sb, sb) / max(nb, 1)).min() < -16 * btol  # a scatter
         ):
             raise bad("sum_block_outer", f"is not the outer products of {nb} block means")
 
