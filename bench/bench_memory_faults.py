@@ -116,7 +116,7 @@ def bench_kill9(landings: int, seed: int) -> dict:
         p = _child(["--child-landings", str(work / "state"), str(1000 * kills)], stdout=subprocess.PIPE)
         assert p.stdout.readline().strip() == "ready"
         lines: list[str] = []
-        reader = threading.Thread(target=lambda: lines.extend(p.stdout), daemon=True)
+        reader = threading.Thread(target=lines.extend, args=(p.stdout,), daemon=True)
         reader.start()
         time.sleep(rng.uniform(0.0, 2.0 * landing_s))
         p.send_signal(signal.SIGKILL)
