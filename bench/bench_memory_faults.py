@@ -81,7 +81,7 @@ def fly(mem, k: int, seconds: float = 35.0) -> None:
 
 def child_landings(state: Path, first: int) -> None:
     """Land flights forever (killed from outside): 'landing K' before each disarm, then 'RESULT|FLIGHTS'."""
-    from monitor.daemon.memory import VehicleMemory
+    from monitor.daemon.memory_adapter import VehicleMemory
 
     mem = VehicleMemory(state, RATE_HZ)
     mem.identify(sysid=1)
@@ -225,7 +225,7 @@ def bench_diskfull() -> dict:
 
 
 def inside_diskfull() -> dict:
-    from monitor.daemon.memory import VehicleMemory
+    from monitor.daemon.memory_adapter import VehicleMemory
     from monitor.memory.baseline import VehicleBaseline
 
     mnt = Path(tempfile.mkdtemp(prefix="pw-tmpfs-"))

@@ -116,7 +116,7 @@ def test_reset_moves_the_baseline_aside_dated_and_says_where(state, capsys):
 
 
 def test_the_daemon_survives_a_baseline_whose_flights_have_no_steps(tmp_path):
-    from monitor.daemon.memory import VehicleMemory
+    from monitor.daemon.memory_adapter import VehicleMemory
 
     sd = StateDir.open(tmp_path)
     sd.update(KEY, lambda _: baseline())

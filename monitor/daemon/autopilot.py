@@ -101,16 +101,26 @@ class Autopilot:
                 log.info("link up: autopilot heartbeat received")
                 self.announce.set_status(f"link up: autopilot {self.system_id}")
         elif kind == "AUTOPILOT_VERSION" and self.memory is not None:
-            self.memory.identify(self.system_id, int(getattr(msg, "uid", 0) or 0) or None)
+            notice = self.memory.identify(self.system_id, int(getattr(msg, "uid", 0) or 0) or None, self.armed)
+            if notice:
+                self.announce.record({"event": "vehicle_identity", "notice": notice, "vehicle": self.memory.key})
         elif kind == "COMMAND_ACK" and msg.command == MAV_CMD_SET_MESSAGE_INTERVAL:
             self.counters.acks[int(msg.result)] += 1
             if msg.result != 0:
                 log.warning("stream-rate request refused by the autopilot (MAV_RESULT %d)", msg.result)
 
+    def rebooted(self) -> None:
+        """The autopilot's boot time went back: a new boot, whose uid is asked for and taken again."""
+        if self.memory is not None:
+            self.memory.new_boot()
+            self.version_requests, self.next_version_request = 0, 0.0
+
     def _disarmed(self) -> None:
         """Landing and disarm: the flight may become the vehicle's history (monitor.daemon.memory_adapter)."""
         auth = self.link.flight_authenticated if getattr(self.link, "gate", None) is not None else None
         what = self.memory.disarmed(auth)
+        if self.memory.needs_uid:  # a uid that came in flight was ignored: ask again on the ground
+            self.version_requests, self.next_version_request = 0, 0.0
         if what != "no flight":
             self.announce.record({"event": "vehicle_memory", "flight": what, "status": self.memory.status().lstrip("; ")})
 
@@ -126,7 +136,7 @@ class Autopilot:
         if link.request_streams and talking and self.slow and now >= self.next_request:
             self._request_streams(sorted(self.slow))
             self.next_request = now + link.request_retry_s
-        if self.memory is not None and talking and self.memory.uid is None and now >= self.next_version_request:
+        if self.memory is not None and talking and self.memory.needs_uid and now >= self.next_version_request:
             # the vehicle's identity for its memory: the board's uid (AUTOPILOT_VERSION), asked for a few times
             self.link.request_message(self.system_id, self.decoder.component_id, AUTOPILOT_VERSION_ID)
             self.version_requests += 1

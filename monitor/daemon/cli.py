@@ -1,6 +1,6 @@
 """``propwatch monitor`` (and ``python -m monitor``): the onboard monitor daemon.
 
-    propwatch monitor --connect udpin:0.0.0.0:14540 [--config /etc/propwatch/monitor.yaml]
+    propwatch monitor --connect udpin:127.0.0.1:14540 [--config /etc/propwatch/monitor.yaml]
                       [--events PATH] [--model PATH] [--vehicle PATH] [--report PATH]
 
 Exits 0 on SIGTERM/SIGINT or at the end of a .tlog; 2 with one clear line on
@@ -24,6 +24,7 @@ from monitor.daemon.memory_adapter import VehicleMemory
 from monitor.daemon.pipeline import Pipeline
 from monitor.daemon.sdnotify import Notifier
 from monitor.daemon.service import Daemon
+from monitor.logs.raw import LIFT_CMD
 from monitor.model import Classifier, choose_esc
 from monitor.vehicle import DEFAULT_VEHICLE, load_vehicle
 
@@ -35,7 +36,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument(
         "--connect",
         required=True,
-        help="pymavlink URL: udpin:0.0.0.0:14540, udpout:H:P, tcp:H:P, /dev/ttyAMA0,921600, or a .tlog",
+        help="pymavlink URL: udpin:127.0.0.1:14540, udpout:H:P, tcp:H:P, /dev/ttyAMA0,921600, or a .tlog",
     )
     p.add_argument("--config", help="monitor YAML (see deploy/monitor.yaml); defaults for every key")
     p.add_argument(
@@ -93,7 +94,10 @@ def main(argv: list[str] | None = None) -> int:
     events = EventWriter(args.events or cfg.events_path or None, cfg.blind.events_retry_s, cfg.blind.events_backlog)
     # The geometry for the moment balance's rotor effectiveness: as diagnose, --vehicle else the default vehicle.
     state_dir = cfg.state_dir if args.state_dir is None else args.state_dir
-    memory = VehicleMemory(state_dir, cfg.resample.rate_hz) if state_dir else None
+    # Outputs at or below lift throttle (the log readers' airborne rule) are idle: what ends a flight without a
+    # landed state. A second daemon on the state dir stops here (StateDirBusy: exit 2 naming the holder).
+    idle_rpm = float(esc.cmd_to_rpm(LIFT_CMD[esc.cmd_unit]))
+    memory = VehicleMemory(state_dir, cfg.resample.rate_hz, idle_rpm=idle_rpm) if state_dir else None
     daemon = Daemon(cfg, link, pipeline, events, Notifier(), vehicle=load_vehicle(vehicle or DEFAULT_VEHICLE), memory=memory)
 
     def on_signal(signum, _frame):

@@ -1,35 +1,43 @@
 """The daemon's adapter of vehicle memory (``monitor.memory``): one baseline per vehicle in the state dir, judged
 from take-off, learnt on landing.
 
-State dir layout: ``STATE_DIR/vehicles/<vehicle key>/baseline.json`` (``monitor.memory.baseline`` format; the key
-is ``uid-<autopilot uid>`` where AUTOPILOT_VERSION gave one, else ``sysid-<n>``). ``propwatch baseline note`` on
-that file records maintenance; the daemon re-reads it at each take-off and before each write, so a note made while
-it runs is kept.
+State dir (``monitor.memory.store``): ``STATE_DIR/vehicles/<vehicle key>/baseline.json`` (``monitor.memory.baseline``
+format; the key is ``uid-<autopilot uid>`` where AUTOPILOT_VERSION gave one, else ``sysid-<n>``). The daemon holds the
+state dir's lock for its run: a second daemon on it refuses to start (``StateDirBusy``, naming the holder's pid). A
+state dir that is not safely ours (another user's, writable by others, a link below it) turns the memory off for the
+run, said in STATUS and the log; monitoring goes on. ``propwatch baseline note`` on a baseline records maintenance
+under the same write lock; the daemon re-reads the file at each take-off and inside its own write.
 
 - With a ready baseline, each second airborne the flight so far is judged against it (``monitor.memory.judge``): a
   confident verdict naming one set is a FAULT; a fault-level one whose set is not yet one, a SUSPECT naming every
   set it keeps. Each is announced once per flight, from the first seconds after take-off, so
   damage present before take-off is heard in flight.
-- A flight is learnt when it ended in landing and disarm, flew at least ``MIN_LEARN_S`` past take-off, raised no
+- A flight ends at disarm after a landing (the autopilot's landed state), or, where the autopilot sends none, after
+  ``IDLE_LANDED_S`` of outputs at idle. It is learnt when it flew at least ``MIN_LEARN_S`` past take-off, raised no
   SUSPECT and no FAULT from any evidence, was judged healthy where a baseline exists, and, with signing on, every
-  frame it used was verified. A flight whose stream merely stopped never disarms in our eyes and is never learnt.
-- Writes are atomic (``write_atomic``). A state dir that cannot be written is said in STATUS; monitoring goes on.
+  frame it used was verified. Every flight's outcome (learnt, or not learnt and why) is logged and returned for the
+  events file. A flight whose stream merely stopped never disarms in our eyes and is never learnt.
+- A baseline that cannot be read, is of a newer propwatch or of another airframe is never replaced: learning for
+  that vehicle pauses, STATUS says why and names ``propwatch baseline reset``.
+- Identity: the autopilot's uid is taken once per autopilot boot (``new_boot``); a different uid while armed, or a
+  second one in the same boot, is ignored and announced; a new vehicle after a reboot is announced. STATUS names the
+  vehicle whose history is used.
 """
 
 from __future__ import annotations
 
 import datetime as _dt
+import errno
 import logging
-import re
 from pathlib import Path
 
 import numpy as np
 
 from monitor.decision.rule import Announcement
-from monitor.errors import PropwatchError
-from monitor.memory.baseline import BASELINE_FILE, MIN_FLIGHTS, VehicleBaseline
+from monitor.memory.baseline import MIN_FLIGHTS, BaselineError, VehicleBaseline
 from monitor.memory.judge import judge, statistic_of
 from monitor.memory.learn import set_aside_outliers
+from monitor.memory.store import StateDir, StateDirBusy, StateDirError, baseline_path
 from monitor.memory.summary import ShareAccumulator
 
 log = logging.getLogger("propwatch.monitor")
@@ -39,6 +47,12 @@ JUDGE_PERIOD_S = 1.0
 # Accepted seconds before the first judgement (two 2-s blocks of the flight's own wander): chosen, not measured,
 # the fewest blocks that give a wander at all.
 MIN_JUDGE_S = 4.0
+# Outputs at idle this long before a disarm end a flight where the autopilot sends no landed state. Chosen, not
+# measured: twice PX4's land detector trigger time (LNDMC_TRIG_TIME, 1 s).
+IDLE_LANDED_S = 2.0
+# Longest wait at a landing for another writer of the state dir (`propwatch baseline note`: milliseconds): the loop
+# waits in it, and the unit's watchdog (WatchdogSec=10, pinged every 5 s) must still be pinged in time. Chosen.
+WRITE_WAIT_S = 3.0
 SEVERITY = {"fault": 2, "suspect": 4}  # MAV_SEVERITY_CRITICAL / WARNING, as the decision's own alerts
 
 
@@ -54,19 +68,54 @@ def vehicle_key(uid: int | None, sysid: int | None) -> str | None:
     return None if sysid is None else f"sysid-{int(sysid)}"
 
 
+class _NotHealthy(Exception):
+    """The flight is unlike the vehicle's history as read inside the write: not learnt, nothing written."""
+
+
 class VehicleMemory:
-    def __init__(self, state_dir: str | Path, rate_hz: float, motor_names=("1", "2", "3", "4")) -> None:
+    def __init__(
+        self, state_dir: str | Path, rate_hz: float, motor_names=("1", "2", "3", "4"), idle_rpm: float | None = None
+    ) -> None:
+        """Open and hold the state dir. Raises ``StateDirBusy`` where another daemon holds it; any other reason it
+        cannot be used turns the memory off for the run (``status`` says why). ``idle_rpm``: the mean rotor speed
+        at or below which the outputs are at idle (None: a flight ends only by a landed state)."""
         self.state_dir = Path(state_dir)
         self.rate_hz = float(rate_hz)
         self.motor_names = tuple(motor_names)
+        self.idle_rpm = idle_rpm
         self.uid: int | None = None
         self.sysid: int | None = None
+        self._uid_this_boot = False  # a uid was taken since the autopilot's last boot: no other until the next one
         self.baseline: VehicleBaseline | None = None
         self.normal = None
-        self._problem = ""  # why the state dir cannot be used ('' = fine)
-        self._status: str | None = None  # STATUS suffix, made again only when the baseline or the problem changes
+        self.off = ""  # the state dir cannot be used this run ('' = it can)
+        self.paused = ""  # learning paused for this vehicle: its baseline cannot be used
+        self.problem = ""  # the last write failed ('' once one succeeds)
+        self._status: str | None = None  # STATUS suffix, made again only when something it shows changes
         self.learnt = 0
+        self.store: StateDir | None = None
+        try:
+            self.store = StateDir.open(self.state_dir)
+            removed = self.store.hold()
+        except StateDirBusy:
+            if self.store is not None:
+                self.store.close()
+            raise
+        except (StateDirError, OSError) as exc:
+            if self.store is not None:
+                self.store.close()
+            self.store = None
+            self.off = f"vehicle memory off for this run: {exc}"
+            log.error("%s; monitoring goes on", self.off)
+        else:
+            if removed:
+                log.warning("vehicle memory: removed %d temporary files a crash left: %s", len(removed), ", ".join(removed))
         self._reset_flight()
+
+    def close(self) -> None:
+        if self.store is not None:
+            self.store.close()
+            self.store = None
 
     # -- identity and the file
     @property
@@ -76,53 +125,91 @@ class VehicleMemory:
     @property
     def path(self) -> Path | None:
         k = self.key
-        return None if k is None else self.state_dir / "vehicles" / re.sub(r"[^A-Za-z0-9_.-]", "_", k) / BASELINE_FILE
-
-    def identify(self, sysid: int | None = None, uid: int | None = None) -> None:
-        changed = (uid and uid != self.uid) or (self.uid is None and sysid is not None and sysid != self.sysid)
-        self.sysid = sysid if sysid is not None else self.sysid
-        self.uid = uid or self.uid
-        if changed and not self.in_flight:
-            self.load()
-
-    def load(self) -> None:
-        """(Re-)read this vehicle's baseline; a missing file is an empty history, a bad one is said and not used."""
-        p = self.path
-        if p is None:
-            return
-        self.normal, self._status = None, None
-        if not p.is_file():
-            self.baseline = None
-            return
-        try:
-            self.baseline = VehicleBaseline.load(p)
-            self.problem = ""
-        except PropwatchError as exc:
-            self.baseline, self.problem = None, f"vehicle baseline unusable: {exc}"
-            log.error("%s", self.problem)
-            return
-        if self.baseline.ready and tuple(self.baseline.motor_names) == self.motor_names:
-            self.normal = self.baseline.normal()
+        return None if k is None else baseline_path(self.state_dir, k)
 
     @property
-    def problem(self) -> str:
-        return self._problem
+    def needs_uid(self) -> bool:
+        """Whether an AUTOPILOT_VERSION uid is still to be taken in this autopilot boot."""
+        return not self._uid_this_boot
 
-    @problem.setter
-    def problem(self, text: str) -> None:
-        self._problem, self._status = text, None
+    def new_boot(self) -> None:
+        """The autopilot rebooted (its boot time went back): the next uid it gives is taken, and announced if new."""
+        self._uid_this_boot = False
+
+    def identify(self, sysid: int | None = None, uid: int | None = None, armed: bool = False) -> str | None:
+        """The autopilot's system id (the first one stays) or uid (once per boot, never while armed or in flight).
+        Returns a notice to announce (log and events) where a uid was ignored or the vehicle changed, else None."""
+        before = self.key
+        notice = None
+        if sysid is not None and self.sysid is None:
+            self.sysid = sysid
+        if uid and uid == self.uid:
+            self._uid_this_boot = True
+        elif uid:
+            if armed or self.acc is not None:  # asked again after the disarm (needs_uid)
+                notice = f"vehicle uid {uid:016x} while armed ignored: this flight stays {before}'s"
+            elif self._uid_this_boot:
+                notice = f"a second vehicle uid {uid:016x} in one autopilot boot ignored: still {before}"
+            else:
+                if self.uid is not None:
+                    notice = f"vehicle changed: uid {self.uid:016x} -> {uid:016x}; the history of uid-{uid:016x} is used"
+                self.uid, self._uid_this_boot = uid, True
+        if notice:
+            log.warning("vehicle memory: %s", notice)
+        if self.key != before and self.acc is None:
+            self.load()
+        return notice
+
+    def load(self) -> None:
+        """(Re-)read this vehicle's baseline: a missing file is an empty history; one that cannot be used pauses
+        learning for the vehicle (never replaced)."""
+        k = self.key
+        if k is None or self.store is None:
+            return
+        self.normal, self.baseline, self._status = None, None, None
+        paused = ""
+        try:
+            self.baseline = self.store.load(k)
+        except (BaselineError, StateDirError, OSError) as exc:
+            paused = f"{exc}"
+        if self.baseline is not None and (
+            tuple(self.baseline.motor_names) != self.motor_names or self.baseline.basis != "omega2"
+        ):
+            paused = (
+                f"{self.path}: rotors {list(self.baseline.motor_names)} on {self.baseline.basis} shares, this monitor's "
+                f"{list(self.motor_names)} on omega2 (another airframe)"
+            )
+            self.baseline = None
+        if self.baseline is not None and self.baseline.ready:
+            try:
+                self.normal = self.baseline.normal()
+            except (ValueError, np.linalg.LinAlgError) as exc:  # checked values that still give no normal
+                paused, self.baseline = f"{self.path}: its flights give no normal ({exc})", None
+        if paused:
+            why = (
+                f"learning paused for {k}: {paused}; "
+                f"`propwatch baseline reset --state-dir {self.state_dir} --vehicle {k}` moves it aside"
+            )
+            if why != self.paused:
+                log.error("vehicle memory: %s", why)
+            self.paused = why
+            return
+        self.paused = ""
 
     def status(self) -> str:
-        """The STATUS suffix: what the flight is compared with, or why with no history. Read at every grid step: made
-        once per change of the baseline or the problem."""
+        """The STATUS suffix: the vehicle and what the flight is compared with, or why with no history. Read at
+        every grid step: made once per change."""
         if self._status is None:
-            if self.problem:
-                self._status = f"; {self.problem}"
+            k = self.key or "an unknown vehicle"
+            if self.off or self.paused:
+                self._status = f"; {self.off or self.paused}"
+            elif self.problem:
+                self._status = f"; vehicle {k}: {self.problem}"
             elif self.normal is not None:
-                self._status = f"; vehicle memory: {self.baseline.compared_with_text()}"
+                self._status = f"; vehicle {k}: {self.baseline.compared_with_text()}"
             else:
-                k = 0 if self.baseline is None else len(self.baseline.active())
-                self._status = f"; no vehicle baseline yet ({k} of {MIN_FLIGHTS} flights)"
+                n = 0 if self.baseline is None else len(self.baseline.active())
+                self._status = f"; no vehicle baseline yet for {k} ({n} of {MIN_FLIGHTS} flights)"
         return self._status
 
     # -- the flight
@@ -134,6 +221,8 @@ class VehicleMemory:
         self._announced: set[str] = set()
         self._next_judge = 0
         self.last_verdict: dict | None = None
+        self._idle_since: float | None = None  # boot time (s) the outputs went to idle while airborne
+        self._last_t = 0.0
 
     def discard(self, why: str) -> None:
         """The flight so far is no evidence (reboot, clock step): never learnt."""
@@ -143,6 +232,19 @@ class VehicleMemory:
 
     def alert_raised(self) -> None:
         self.alerted = True
+
+    def _track_idle(self, t_s: float, airborne: bool, motor_rpm) -> None:
+        self._last_t = t_s
+        idle = (
+            airborne
+            and self.idle_rpm is not None
+            and motor_rpm is not None
+            and float(np.mean(motor_rpm)) <= self.idle_rpm  # NaN compares False: not idle
+        )
+        if not idle:
+            self._idle_since = None
+        elif self._idle_since is None:
+            self._idle_since = t_s
 
     def step(self, t_s: float, airborne: bool, motor_rpm, roll_rad: float, pitch_rad: float) -> Announcement | None:
         if airborne and not self.in_flight:
@@ -154,8 +256,10 @@ class VehicleMemory:
             self.in_flight, self.landed = False, True
         if self.acc is None:
             return None
+        self._track_idle(t_s, airborne, motor_rpm)
         x = np.full(4, np.nan) if motor_rpm is None else (np.asarray(motor_rpm, dtype=np.float64) / 1000.0) ** 2
-        self.acc.step(x, roll_rad, pitch_rad, airborne)
+        # Outputs at idle are on the ground (no landed state to say so): not flight evidence.
+        self.acc.step(x, roll_rad, pitch_rad, airborne and self._idle_since is None)
         s = self.acc.summary
         if self.normal is None or not airborne or s.n < self._next_judge or s.seconds < MIN_JUDGE_S:
             return None
@@ -180,42 +284,66 @@ class VehicleMemory:
         )
 
     def disarmed(self, authenticated: bool | None) -> str:
-        """Disarm: learn the flight where it qualifies. ``authenticated`` None: signing off. Returns what happened."""
-        acc, landed, alerted, verdict = self.acc, self.landed, self.alerted, self.last_verdict
+        """Disarm: learn the flight where it qualifies. ``authenticated`` None: signing off. Returns what happened
+        ("no flight" where nothing flew since the last disarm; else "learnt" or "not learnt: why"), logged."""
+        acc, landed, alerted = self.acc, self.landed, self.alerted
+        idle_s = (self._last_t - self._idle_since + 1.0 / self.rate_hz) if self._idle_since is not None else 0.0
         self._reset_flight()
-        if acc is None or not landed:
+        if acc is None:
             return "no flight"
         s = acc.summary
         why = ""
-        if s.seconds < MIN_LEARN_S:
+        if not landed and idle_s < IDLE_LANDED_S:
+            why = f"disarmed in the air (no landed state, outputs at idle {idle_s:.1f} of {IDLE_LANDED_S:g} s before disarm)"
+        elif s.seconds < MIN_LEARN_S:
             why = f"too short to count ({s.seconds:.0f} of {MIN_LEARN_S:.0f} s)"
         elif alerted:
             why = "it raised an alert"
         elif authenticated is False:
             why = "not every frame was signed and verified"
-        elif self.path is None:
+        elif self.off:
+            why = self.off
+        elif self.key is None:
             why = "vehicle unknown"
+        if not why:
+            self.load()  # notes made while we flew; a baseline that became unusable pauses learning
+            why = self.paused and f"learning paused for {self.key} (its baseline cannot be used)"
         if why:
-            log.info("vehicle memory: flight not learnt: %s", why)
-            return f"not learnt: {why}"
+            return self._said(f"not learnt: {why}")
         try:
-            self.load()  # notes made while we flew
-            if self.normal is not None:
-                verdict = judge(self.normal, s)
-                if verdict["label"] != 1 or verdict["confidence"] == "suspect":
-                    return "not learnt: not healthy against the vehicle's history"
-            b = self.baseline or VehicleBaseline(self.key, "daemon", self.motor_names, "omega2")
-            b.add(f"flight {len(b.flights) + 1}", today_utc(), s, "no fault")
-            for name in set_aside_outliers(b):
-                log.warning("vehicle memory: %s set aside: unlike the vehicle's other flights", name)
-            self.path.parent.mkdir(parents=True, exist_ok=True)
-            b.save(self.path)
-        except (OSError, PropwatchError) as exc:
-            self.problem = f"state dir not writable ({self.state_dir}): {exc}"
+            self.store.update(self.key, lambda b: self._learn(b, s), WRITE_WAIT_S)
+        except _NotHealthy:
+            return self._said("not learnt: not healthy against the vehicle's history")
+        except StateDirBusy as exc:
+            return self._said(f"not learnt: {exc}")
+        except (BaselineError, StateDirError) as exc:
+            self.load()
+            return self._said(f"not learnt: learning paused for {self.key}: {exc}")
+        except OSError as exc:
+            full = exc.errno in (errno.ENOSPC, errno.EDQUOT)
+            self.problem = "disk full" if full else f"state dir not writable ({self.state_dir}): {exc}"
+            self._status = None
             log.error("vehicle memory: %s; monitoring goes on", self.problem)
-            return f"not learnt: {self.problem}"
-        self.problem = ""
+            return self._said(f"not learnt: {self.problem}")
+        self.problem, self._status = "", None
         self.learnt += 1
         self.load()
         log.info("vehicle memory: flight learnt (%.0f s); %s", s.seconds, self.status().lstrip("; "))
         return "learnt"
+
+    def _learn(self, b: VehicleBaseline | None, s) -> VehicleBaseline:
+        """Inside the state dir's write lock: the flight judged against the baseline as it is on disk, then added."""
+        if b is not None and b.ready:
+            v = judge(b.normal(), s)
+            if v["label"] != 1 or v["confidence"] == "suspect":
+                raise _NotHealthy
+        b = b or VehicleBaseline(self.key, "daemon", self.motor_names, "omega2")
+        b.add(f"flight {len(b.flights) + 1}", today_utc(), s, "no fault")
+        for name in set_aside_outliers(b):
+            log.warning("vehicle memory: %s set aside: unlike the vehicle's other flights", name)
+        return b
+
+    @staticmethod
+    def _said(what: str) -> str:
+        log.info("vehicle memory: flight %s", what)
+        return what

@@ -166,6 +166,8 @@ class Daemon:
             what = self.pipeline.clock_events.popleft()
             if self.memory is not None:
                 self.memory.discard(what)
+            if "reboot" in what:
+                self.autopilot.rebooted()
             reason = "autopilot rebooted" if "reboot" in what else "clock jumped" if "jumped" in what else "clock stepped back"
             self.decide.transition(self.blind.enter(reason, what))
         for step in steps:
