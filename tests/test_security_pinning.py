@@ -118,7 +118,7 @@ def _two_vehicles(flight):  # noqa: F811
     return sign_and_pack(flight, None), sign_and_pack(healthy, None, sys_id=2)
 
 
-def test_two_autopilots_on_one_link_with_no_system_id_are_both_refused_and_announced(
+def test_two_autopilots_on_one_link_with_no_system_id_the_first_heard_is_kept_and_the_other_announced(
     tmp_path,
     toy,  # noqa: F811
     flight,  # noqa: F811
@@ -129,11 +129,11 @@ def test_two_autopilots_on_one_link_with_no_system_id_are_both_refused_and_annou
     frames = [(t, f, 0) for t, f, _ in merged(v1, v2, offsets=[0.0, -0.3])]  # one router, both vehicles
     daemon, got, _ = run_senders(tmp_path, toy, frames, {}, [(HOST, 0)])
     rep = daemon.report()
-    assert rep["link"]["pin"]["system_id"] is None and "system 1" in rep["link"]["pin"]["conflict"]
-    assert "system 2" in rep["link"]["pin"]["conflict"]
-    assert rep["pipeline"]["steps"] == 0 and got == [[]]  # neither is taken for the other
-    said = [r.getMessage() for r in caplog.records if "two autopilot candidates" in r.getMessage()]
-    assert said and "link.system_id" in said[0]
+    assert rep["link"]["pin"]["system_id"] == 2  # heard first; monitoring never stops for the second
+    assert rep["link"]["pin"]["conflict"].startswith("system 1 ") and "system 2 " in rep["link"]["pin"]["conflict"]
+    assert rep["pipeline"]["steps"] > 0 and got[0]
+    said = [r.getMessage() for r in caplog.records if "refused: another autopilot, heard after system 2" in r.getMessage()]
+    assert len(said) == 1 and "link.system_id" in said[0]
 
 
 @pytest.mark.parametrize("pin", ["system_id", "autopilot_address"])
@@ -177,3 +177,77 @@ def test_a_network_link_without_signing_warns_once_that_it_trusts_the_network(ca
     said = [r for r in caplog.records if "TRUSTS THE NETWORK" in r.getMessage()]
     assert len(said) == 1 and said[0].levelno == logging.WARNING
     assert "autopilot_address" in said[0].getMessage()
+
+
+# -- the pin cannot be silenced: one packet, a second address, another computer --------------------------------
+
+
+class _Clock:
+    def __init__(self) -> None:
+        self.t = 0.0
+
+    def __call__(self) -> float:
+        return self.t
+
+
+def _beat(sys_id: int = 1):
+    from fuzz_helpers import decoded
+
+    return decoded(mavlink.MAVLink_heartbeat_message(2, 12, 128 | 1, 0, 4, 3), sys_id)
+
+
+def _pin(**kw):
+    from monitor.daemon.pin import AutopilotPin
+
+    clock = _Clock()
+    return AutopilotPin(kw.pop("system_id", None), 1, kw.pop("address", None), 2.0, clock=clock, **kw), clock
+
+
+AUTOPILOT, SECOND = ("127.0.0.1", 14580), ("127.0.0.1", 40404)
+
+
+def test_the_same_system_from_a_second_address_is_announced_and_ignored_and_the_first_stays_pinned(caplog):
+    pin, clock = _pin()
+    for k in range(4):  # the autopilot, then a copy of its heartbeat from another port, each second
+        clock.t = float(k)
+        assert pin.admit(_beat(), AUTOPILOT) == (k >= 2)
+        assert not pin.admit(_beat(), SECOND)
+    assert pin.system_id == 1 and pin.address == AUTOPILOT
+    said = [r.getMessage() for r in caplog.records if "the same system from another address" in r.getMessage()]
+    assert len(said) == 1 and "127.0.0.1:40404" in said[0] and "link.autopilot_address" in said[0]
+
+
+def test_one_packet_first_cannot_hold_the_pin():
+    pin, clock = _pin()
+    assert not pin.admit(_beat(1), SECOND)  # a spoofer's single heartbeat, heard first
+    for k in range(1, 10):
+        clock.t = float(k)
+        pin.admit(_beat(1), AUTOPILOT)
+    assert pin.pinned and pin.address == AUTOPILOT  # forgotten once silent, the autopilot pinned after it
+
+
+def test_by_default_only_an_autopilot_on_this_computer_is_listened_to(caplog):
+    pin, clock = _pin()
+    for k in range(4):
+        clock.t = float(k)
+        assert not pin.admit(_beat(), ("10.0.0.5", 14550))
+    assert not pin.pinned
+    assert any("an autopilot on another computer" in r.getMessage() for r in caplog.records)
+    pin, clock = _pin(address=("10.0.0.5", 14550))  # named: listened to
+    for k in range(4):
+        clock.t = float(k)
+        pin.admit(_beat(), ("10.0.0.5", 14550))
+    assert pin.pinned
+
+
+def test_every_example_and_default_listens_on_loopback():
+    import re
+
+    from monitor.daemon.config import MonitorConfig
+
+    where = ["monitor/daemon/cli.py", "deploy/README.md", "deploy/propwatch-monitor.service", "deploy/monitor.yaml", "README.md"]
+    where += [str(p.relative_to(ROOT)) for p in (ROOT / "docs").glob("*.md") if p.name != "SECURITY.md"]  # it cites the old
+    texts = [(ROOT / p).read_text() for p in where]
+    listens = [m for t in texts for m in re.findall(r"udpin:([\w.]+):\d+", t)]
+    assert listens and set(listens) == {"127.0.0.1"}, listens
+    assert MonitorConfig().link.autopilot_address == ""  # '' = the one loopback address that pins first

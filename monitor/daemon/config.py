@@ -94,13 +94,13 @@ class LinkConfig:
     allow_addresses: tuple[str, ...] = ()
     allow_sources: tuple[str, ...] = ()
     max_peers: int = 8  # udpin: distinct sender addresses remembered for the report (replies go only to the autopilot's)
-    # The pinned autopilot (monitor.daemon.pin): on udpin its "HOST:PORT" ('' = the one address whose HEARTBEATs
-    # pin it first; a second candidate before that is refused with it). Its system id is learnt only from its
-    # HEARTBEATs on that link (system_id 0), and nothing else ever moves the pin.
+    # The pinned autopilot (monitor.daemon.pin): on udpin its "HOST:PORT" ('' = the one loopback address whose
+    # HEARTBEATs pin it first; another candidate is announced and ignored, one on another computer never pins). Its
+    # system id is learnt only from its HEARTBEATs on that link (system_id 0), and nothing else ever moves the pin.
     autopilot_address: str = ""
     # "HOST:PORT" that also get our HEARTBEAT, STATUSTEXT and NAMED_VALUE_FLOAT (never a command); nobody else does.
     ground_stations: tuple[str, ...] = ()
-    pin_wait_s: float = 2.0  # a candidate autopilot's HEARTBEATs span this long, no other heard, before it is pinned
+    pin_wait_s: float = 2.0  # a candidate autopilot's HEARTBEATs span this long before it is pinned (first heard wins)
     # udpin: sleep through the datagrams that cannot complete the next 20 Hz step and read them together
     # (monitor.daemon.pacing): measured 85 -> 55-60 wake-ups/s at 20 Hz; latency still counts from each arrival.
     pace_reads: bool = True

@@ -3,14 +3,17 @@
 The autopilot's system id is learnt only from autopilot HEARTBEATs (component
 ``autopilot_component_id``, a real autopilot type) that came over the pinned
 link: on ``udpin`` the configured ``link.autopilot_address``, or else the one
-address whose heartbeats pinned it; a serial device or TCP peer is a link of
-its own. A candidate is pinned once its heartbeats span ``wait_s`` of monotonic
-time (``link.pin_wait_s``; at least two heartbeats: a sequence, not one frame),
-time enough for a second candidate to be heard. Two candidates before that (two system ids, or one system id from two
-addresses) are both refused, for the rest of the run, and announced: the
-operator sets ``link.system_id`` / ``link.autopilot_address``. Once pinned,
-frames from any other address are refused, and so are other systems' autopilot
-components; the pin is never moved to a newcomer.
+loopback address whose heartbeats pinned it (an autopilot on another computer
+is listened to only where ``link.autopilot_address`` names it; a router on
+this computer forwards); a serial device or TCP peer is a link of its own. A
+candidate is pinned once its heartbeats span ``wait_s`` of monotonic time
+(``link.pin_wait_s``; at least two heartbeats: a sequence, not one frame). The
+first candidate heard has the pin to itself while it keeps beating: a second
+one (another system id, or the same system id from another address) is
+announced and ignored, never a reason to stop listening; a candidate silent
+for ``CANDIDATE_SILENT_S`` is forgotten, so one packet cannot hold the pin.
+Once pinned, frames from any other address are refused, and so are other
+systems' autopilot components; the pin is never moved to a newcomer.
 
 Every refusal is counted by reason (``refused``); each (reason, source) is
 written to the journal once (``announced`` bounds the set).
@@ -18,6 +21,7 @@ written to the journal once (``announced`` bounds the set).
 
 from __future__ import annotations
 
+import ipaddress
 import logging
 import time
 from collections import Counter
@@ -30,6 +34,8 @@ log = logging.getLogger("propwatch.monitor.link")
 
 PIN_WAIT_S = 2.0  # PX4 sends HEARTBEAT at 1 Hz: pinned at its third, about 2 s after it is first heard
 MAX_CANDIDATES = 16
+# A candidate silent this long (or the pin's wait, if longer) is forgotten: three of PX4's 1 Hz heartbeats missed.
+CANDIDATE_SILENT_S = 3.0
 MAX_ANNOUNCED = 64
 Origin = tuple[str, int] | None  # a udpin sender; None: the link has one peer (serial, TCP, udpout)
 
@@ -41,6 +47,13 @@ def is_autopilot_heartbeat(msg: Any, component_id: int) -> bool:
         and getattr(msg, "autopilot", MAV_AUTOPILOT_INVALID) != MAV_AUTOPILOT_INVALID
         and getattr(msg, "type", MAV_TYPE_GCS) not in _NOT_AUTOPILOT_TYPES
     )
+
+
+def is_loopback(host: str) -> bool:
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return host == "localhost"
 
 
 def describe(sys_id: int, origin: Origin) -> str:
@@ -66,7 +79,7 @@ class AutopilotPin:
         self.clock = clock
         self.system_id: int | None = None  # pinned
         self.address: Origin = address  # pinned (configured, or learnt with the system id)
-        self.conflict = ""  # two candidates: nothing is admitted for the rest of the run
+        self.conflict = ""  # the last candidate ignored because another was heard first (for the report)
         self._candidates: dict[tuple[int, Origin], list[float]] = {}  # -> heartbeat times (monotonic)
         self.refused: Counter = Counter()
         self.announced: set[tuple[str, str]] = set()
@@ -100,25 +113,33 @@ class AutopilotPin:
             if comp_id == self.component_id and sys_id != self.system_id:
                 return "another autopilot", describe(sys_id, origin)
             return "", ""
-        if self.conflict:
-            return "two autopilot candidates, none pinned", self.conflict
         if not is_autopilot_heartbeat(msg, self.component_id):
             return "before the autopilot was pinned", "any"
+        if origin is not None and self.configured_address is None and not is_loopback(origin[0]):
+            return "an autopilot on another computer (link.autopilot_address names one to listen to)", f"{origin[0]}:{origin[1]}"
         if self.configured_system_id is not None and sys_id != self.configured_system_id:
             return "another autopilot", describe(sys_id, origin)
         return self._candidate(sys_id, origin)
 
     def _candidate(self, sys_id: int, origin: Origin) -> tuple[str, str]:
+        now = self.clock()
+        silent = max(self.wait_s, CANDIDATE_SILENT_S)
+        for k in [k for k, beats in self._candidates.items() if now - beats[-1] > silent]:
+            del self._candidates[k]
         key = (sys_id, origin)
-        if key not in self._candidates and len(self._candidates) < MAX_CANDIDATES:
+        if key not in self._candidates:
+            if len(self._candidates) >= MAX_CANDIDATES:
+                return "before the autopilot was pinned", "any"
             self._candidates[key] = []
-        if len(self._candidates) > 1:
-            self.conflict = " and ".join(describe(*k) for k in self._candidates)
-            hint = "link.system_id" if len({s for s, _ in self._candidates}) > 1 else "link.autopilot_address"
-            log.error("two autopilot candidates (%s): both refused until %s is configured", self.conflict, hint)
-            return "two autopilot candidates, none pinned", self.conflict
+        self._candidates[key].append(now)
+        first = next(iter(self._candidates))  # the earliest heard of those still beating
+        if key != first:
+            same = sys_id == first[0]
+            self.conflict = f"{describe(*key)} ignored: {describe(*first)} heard first"
+            what = "the same system from another address" if same else "another autopilot"
+            hint = "link.autopilot_address" if same else "link.system_id"
+            return f"{what}, heard after {describe(*first)} ({hint} chooses)", describe(*key)
         beats = self._candidates[key]
-        beats.append(self.clock())
         if len(beats) >= 2 and beats[-1] - beats[0] >= self.wait_s:
             self.system_id, self.address = sys_id, origin if origin is not None else self.address
             self._candidates.clear()
