@@ -372,6 +372,38 @@ def test_a_second_holder_is_refused_naming_the_first_and_a_killed_holder_frees_i
         assert sd.hold() == []
 
 
+def test_a_holder_that_has_not_yet_written_its_pid_is_still_named(tmp_path):
+    # Two daemons started at once: the loser can read the lock file between the winner's lock and its pid, and find
+    # the previous holder's pid there (gone) or none. It reads again until the pid is a live process.
+    root = tmp_path / "state"
+    StateDir.open(root).close()
+    dead = subprocess.Popen([sys.executable, "-c", "pass"])
+    dead.wait()
+    (root / "daemon.lock").write_text(f"{dead.pid}\n")
+    late = _python(
+        f"""
+        import fcntl, os, sys, time
+        fd = os.open({str(root / "daemon.lock")!r}, os.O_RDWR)
+        fcntl.flock(fd, fcntl.LOCK_EX)
+        print("locked", flush=True)
+        time.sleep(0.2)
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, f"{{os.getpid()}}\\n".encode(), 0)
+        sys.stdin.read()
+        """,
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+    )
+    try:
+        assert late.stdout.readline().strip() == "locked"
+        with StateDir.open(root) as sd, pytest.raises(StateDirBusy) as err:
+            sd.hold()
+        assert err.value.pid == late.pid, str(err.value)
+    finally:
+        late.kill()
+        late.wait(timeout=30)
+
+
 def test_two_writers_at_once_lose_no_flight(tmp_path):
     root = tmp_path / "state"
     StateDir.open(root).close()

@@ -110,6 +110,28 @@ def _read_pid(fd: int) -> int | None:
     return int(text) if text.isdigit() else None
 
 
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def _holder_pid(fd: int) -> int | None:
+    """The pid in a lock file whose lock another process holds. The holder writes it just after taking the lock: a
+    reader in between sees none or the previous holder's (gone), so it reads again for up to half a second."""
+    pid = None
+    for _ in range(20):
+        pid = _read_pid(fd)
+        if pid is not None and _alive(pid):
+            break
+        time.sleep(0.025)
+    return pid
+
+
 class StateDir:
     """An opened state dir (``StateDir.open``); ``close`` releases its descriptors and locks."""
 
@@ -185,7 +207,7 @@ class StateDir:
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
-            pid = _read_pid(fd)
+            pid = _holder_pid(fd)
             os.close(fd)
             who = f"pid {pid}" if pid is not None else "a process that wrote no pid"
             raise StateDirBusy(f"state dir {self.root} is in use by another propwatch monitor ({who})", pid) from None
