@@ -346,25 +346,25 @@ def _python(code: str, **kw) -> subprocess.Popen:
     return subprocess.Popen([sys.executable, "-c", textwrap.dedent(code)], env=env, text=True, **kw)
 
 
+def _holder(code: str) -> subprocess.Popen:
+    """A process that runs ``code`` (taking the state dir's lock), prints 'held' and waits; the line is read here."""
+    p = _python(code + '\nprint("held", flush=True)\nsys.stdin.read()\n', stdin=subprocess.PIPE, stdout=subprocess.PIPE)
+    assert p.stdout.readline().strip() == "held"
+    return p
+
+
+def _refused_by(root: Path) -> StateDirBusy:
+    with StateDir.open(root) as sd, pytest.raises(StateDirBusy) as err:
+        sd.hold()
+    return err.value
+
+
 def test_a_second_holder_is_refused_naming_the_first_and_a_killed_holder_frees_it(tmp_path):
     root = tmp_path / "state"
-    holder = _python(
-        f"""
-        import sys
-        from monitor.memory.store import StateDir
-        sd = StateDir.open({str(root)!r})
-        sd.hold()
-        print("held", flush=True)
-        sys.stdin.read()
-        """,
-        stdin=subprocess.PIPE,
-        stdout=subprocess.PIPE,
-    )
+    holder = _holder(f"import sys\nfrom monitor.memory.store import StateDir\nStateDir.open({str(root)!r}).hold()")
     try:
-        assert holder.stdout.readline().strip() == "held"
-        with StateDir.open(root) as sd, pytest.raises(StateDirBusy) as err:
-            sd.hold()
-        assert err.value.pid == holder.pid and f"pid {holder.pid}" in str(err.value)
+        err = _refused_by(root)
+        assert err.pid == holder.pid and f"pid {holder.pid}" in str(err)
     finally:
         holder.send_signal(signal.SIGKILL)
         holder.wait(timeout=30)
@@ -380,25 +380,13 @@ def test_a_holder_that_has_not_yet_written_its_pid_is_still_named(tmp_path):
     dead = subprocess.Popen([sys.executable, "-c", "pass"])
     dead.wait()
     (root / "daemon.lock").write_text(f"{dead.pid}\n")
-    late = _python(
-        f"""
-        import fcntl, os, sys, time
-        fd = os.open({str(root / "daemon.lock")!r}, os.O_RDWR)
-        fcntl.flock(fd, fcntl.LOCK_EX)
-        print("locked", flush=True)
-        time.sleep(0.2)
-        os.ftruncate(fd, 0)
-        os.pwrite(fd, f"{{os.getpid()}}\\n".encode(), 0)
-        sys.stdin.read()
-        """,
-        stdin=subprocess.PIPE,
-        stdout=subprocess.PIPE,
+    lock = str(root / "daemon.lock")
+    late = _holder(
+        f"import fcntl, os, sys, threading, time\nfd = os.open({lock!r}, os.O_RDWR)\nfcntl.flock(fd, fcntl.LOCK_EX)\n"
+        "threading.Timer(0.2, lambda: (os.ftruncate(fd, 0), os.pwrite(fd, f'{os.getpid()}\\n'.encode(), 0))).start()"  # the pid 0.2 s late
     )
     try:
-        assert late.stdout.readline().strip() == "locked"
-        with StateDir.open(root) as sd, pytest.raises(StateDirBusy) as err:
-            sd.hold()
-        assert err.value.pid == late.pid, str(err.value)
+        assert _refused_by(root).pid == late.pid
     finally:
         late.kill()
         late.wait(timeout=30)

@@ -228,7 +228,7 @@ class StateDir:
                     break
                 except BlockingIOError:
                     if time.monotonic() >= deadline:
-                        pid = _read_pid(fd)
+                        pid = _holder_pid(fd)
                         raise StateDirBusy(
                             f"state dir {self.root}: another writer (pid {pid}) held it for more than {wait_s:g} s", pid
                         ) from None
