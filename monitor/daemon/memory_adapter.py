@@ -258,8 +258,10 @@ class VehicleMemory:
             return None
         self._track_idle(t_s, airborne, motor_rpm)
         x = np.full(4, np.nan) if motor_rpm is None else (np.asarray(motor_rpm, dtype=np.float64) / 1000.0) ** 2
-        # Outputs at idle are on the ground (no landed state to say so): not flight evidence.
-        self.acc.step(x, roll_rad, pitch_rad, airborne and self._idle_since is None)
+        # Outputs at idle (below the log readers' lift throttle) lift nothing: not flight evidence. Skipped, not a
+        # landing: a dip to idle in flight does not restart the take-off settle time.
+        if self._idle_since is None or not airborne:
+            self.acc.step(x, roll_rad, pitch_rad, airborne)
         s = self.acc.summary
         if self.normal is None or not airborne or s.n < self._next_judge or s.seconds < MIN_JUDGE_S:
             return None
