@@ -34,8 +34,8 @@ def test_simulate_writes_what_diagnose_reads_and_says_what_it_simulated(simulate
     out, stdout = simulated
     lines = stdout.splitlines()
     assert lines == [
-        f"{out / 'flight_000.tlog'}: 12 s, propeller 3 bent, payload 0 kg",
-        f"{out / 'flight_001.tlog'}: 12 s, propeller 3 bent, payload 0 kg",
+        f"{out / 'flight_000.tlog'}: 2024-06-01, 12 s, propeller 3 bent from take-off, payload 0 kg",
+        f"{out / 'flight_001.tlog'}: 2024-06-02, 12 s, propeller 3 bent from take-off, payload 0 kg",
         f"ground truth: {out / 'sidecar.json'}",
     ]
     code = propwatch(["diagnose", str(out / "flight_000.tlog"), "--json"])

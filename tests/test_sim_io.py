@@ -143,7 +143,8 @@ def test_cli_tlog_format(tmp_path):
     out = tmp_path / "t"
     assert simulate_main(["--out", str(out), "--duration-s", "2", "--format", "tlog", "--propellers", "quadratic"]) == 0
     msgs = read_tlog(out / "flight_000.tlog")
-    assert len(msgs["ATTITUDE"]) == 100  # 50 Hz
+    # 2 s of flight at 50 Hz, then the landing tail (offline.sim.io_tlog.landing_tail: 1 s landed, 2 s disarmed)
+    assert len(msgs["ATTITUDE"]) == 100 + 150
     assert json.loads((out / "sidecar.json").read_text())["flights"][0]["label"] == 1
 
 

@@ -126,8 +126,13 @@ def simulate(
     seed=0,
     progress: bool = False,
     per_flight: PerFlightTerms | None = None,
+    motor_stop_s: np.ndarray | None = None,
 ) -> FlightLog:
     """Simulate B flights through ``waypoints_ned_m`` (B, N, 3); see the module doc for seeds.
+
+    ``motor_stop_s`` (B, 4): from this flight time on (s; inf: never) a motor's command is held at the ESC's
+    minimum, as an ESC or output that stopped: the controller still asks, the motor no longer follows, and the
+    log shows the output at its minimum.
 
     ``per_flight``: each flight's own drawn physics (``offline.sim.perflight``: motors, ESC, geometry,
     inertia, drag, gusty wind, battery sag, controller gains, gyro bias and noise levels) in place of
@@ -226,6 +231,12 @@ def simulate(
     if pf is not None:
         noise_std = pf.gyro_noise_std_rad_s[:, None]
     prop = _checked(propellers, (n, 4))  # the first step only
+    stop_s = None
+    if motor_stop_s is not None:
+        stop_s = np.asarray(motor_stop_s, dtype=np.float64)
+        if stop_s.shape != (n, 4) or np.any(np.isnan(stop_s)) or np.any(stop_s < 0):
+            raise ConfigError(f"motor_stop_s: expected (B, 4) = ({n}, 4) times >= 0 (inf: never), got shape {stop_s.shape}")
+        first_stop_k = int(np.ceil(stop_s.min() * sim.physics_rate_hz)) if np.isfinite(stop_s.min()) else None
     j_ctrl = 0
     for k in range(sim.n_physics_steps):
         if k % k_pos == 0:
@@ -244,6 +255,8 @@ def simulate(
             j_ctrl += 1
             omega_cmd = update_attitude(cstate, q, gyro)
             clip_in_place(omega_cmd, omega_lo, omega_hi)
+            if stop_s is not None and first_stop_k is not None and k >= first_stop_k:
+                omega_cmd[stop_s <= k * dt] = omega_lo
             omega_target = motor_target(omega_cmd)
         thrust, torque = step(state, omega_target, prop)
         prop = propellers
