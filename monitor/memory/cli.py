@@ -5,13 +5,14 @@
     propwatch baseline note B.json --event props-replaced|motor-replaced|... [--date YYYY-MM-DD]
     propwatch baseline reset --state-dir DIR --vehicle KEY
 
-``learn`` reads flights the operator declares healthy (at least 3, of one vehicle: the logs' own ids, or
-``--vehicle-id`` for logs without one) and writes B.json; ``diagnose LOG --baseline B.json`` then judges a flight
-against it. ``note`` records maintenance; an event that changes the airframe restarts the normal. ``reset`` moves a
-daemon's baseline of one vehicle aside (dated, beside it) so that its history starts again from the next flight:
-the daemon never replaces a baseline it cannot read, so this is the way on from one.
-A ``learn --out`` or ``note`` on a baseline in a state dir (``DIR/vehicles/KEY/baseline.json``) writes under the state
-dir's write lock, as the daemon does; ``learn`` there never replaces a baseline (``reset`` it first).
+learn reads flights the operator declares healthy (at least 3, of one vehicle: the logs' own ids, or
+--vehicle-id for logs without one) and writes B.json; diagnose LOG --baseline B.json then judges a flight
+against it. Learning into an existing baseline file of the same vehicle adds the flights and keeps its notes and
+history; a file that is not a baseline is never overwritten. note records maintenance; an event that changes the
+airframe restarts the normal. reset moves a daemon's baseline of one vehicle aside (dated, beside it) so that its
+history starts again from the next flight: the daemon never replaces a baseline it cannot read, so this is the
+way on from one. A learn --out or note on a baseline in a state dir (DIR/vehicles/KEY/baseline.json) writes under
+the state dir's write lock, as the daemon does; learn there never replaces a baseline (reset it first).
 Exit 2 with one line naming the file and the reason on bad input; nothing is written then.
 """
 
@@ -26,6 +27,51 @@ from pathlib import Path
 from monitor.errors import PropwatchError
 from monitor.memory.baseline import EVENTS, MIN_FLIGHTS, BaselineError, VehicleBaseline
 from monitor.memory.store import StateDir, state_dir_of
+
+LOG_NAMES = {"tlog": "a MAVLink telemetry log", "ulog": "a PX4 ULog", "dataflash": "an ArduPilot DataFlash log"}
+
+
+def flight_log_kind(path: Path) -> str | None:
+    """What kind of flight log ``path`` is (its first bytes, or a CSV log's name), None where it is none."""
+    from monitor.errors import LogFormatError
+    from monitor.logs import detect_format
+
+    try:
+        return LOG_NAMES.get(detect_format(path), "a flight log")
+    except LogFormatError:
+        return "a CSV flight log" if ".csv" in "".join(path.suffixes).lower() else None
+
+
+def load_baseline(path: Path) -> VehicleBaseline:
+    """``path``'s baseline; a flight log given in its place is named as one."""
+    if path.is_file() and (kind := flight_log_kind(path)) is not None:
+        raise BaselineError(f"{path} is a flight log, not a baseline ({kind}): give the B.json that baseline learn wrote")
+    return VehicleBaseline.load(path)
+
+
+def learn_into(out: Path, learnt: VehicleBaseline) -> tuple[VehicleBaseline, VehicleBaseline | None]:
+    """The baseline to write at ``out``, and the one ``out`` held (None where it did not exist): ``learnt``, or
+    ``out``'s own baseline of the same vehicle with the flights it lacks added to its current normal, its notes and
+    history kept. Raises ``BaselineError``, writing nothing, where ``out`` is not a baseline or another vehicle's."""
+    if not out.exists():
+        return learnt, None
+    if out.is_file() and (kind := flight_log_kind(out)) is not None:
+        raise BaselineError(f"--out {out} is a flight log ({kind}), not a baseline: nothing overwritten; give a new file name")
+    try:
+        old = VehicleBaseline.load(out)
+    except BaselineError as exc:
+        raise BaselineError(
+            f"--out {out} exists and is not a baseline ({exc}): nothing overwritten; give a new file name"
+        ) from exc
+    kept = VehicleBaseline.from_dict(old.to_dict(), str(out))
+    old.check_vehicle(learnt.vehicle_id, learnt.motor_names, learnt.basis, f"--out {out}")
+    if old.vehicle_id is None:
+        old.vehicle_id, old.id_source = learnt.vehicle_id, learnt.id_source
+    if old.cg_damage_separable is None:
+        old.cg_damage_separable = learnt.cg_damage_separable
+    known = {(f["name"], f["date"]) for f in old.active()}
+    old.flights += [{**f, "epoch": old.epoch} for f in learnt.flights if (f["name"], f["date"]) not in known]
+    return old, kept
 
 
 def _date(text: str) -> str:
@@ -86,8 +132,14 @@ def text(b: VehicleBaseline, d: dict) -> str:
     lines = [f"vehicle {d['vehicle_id']} ({d['id_source']}), rotors {', '.join(d['motor_names'])}, {d['basis']} shares"]
     if d["ready"]:
         lines.append(b.compared_with_text())
-        lines.append("  normal share per rotor:  " + "  ".join(f"{x:.4f}" for x in d["normal_share"]))
-        lines.append("  flight-to-flight spread: " + "  ".join(f"{x:.4f}" for x in d["spread_share"]))
+        names = d["motor_names"]
+        lines.append(f"  each rotor's {d['basis']} share, in % of the rotors' mean:")
+        lines.append(
+            "    normal:                  " + ", ".join(f"{m} {100 * x:.2f} %" for m, x in zip(names, d["normal_share"]))
+        )
+        lines.append(
+            "    flight-to-flight spread: " + ", ".join(f"{m} {100 * x:.2f} %" for m, x in zip(names, d["spread_share"]))
+        )
     else:
         lines.append(f"no vehicle baseline yet ({len(d['flights'])} of {MIN_FLIGHTS} flights)")
     for f in d["flights"]:
@@ -142,10 +194,23 @@ def main(argv: list[str] | None = None) -> int:
 
             esc = load_vehicle(args.vehicle or DEFAULT_VEHICLE).esc
             flights = [read_flight(p, args.fmt, esc) for p in args.logs]
-            b = _write(args.out, _learnt(learn_from_logs(flights, args.vehicle_id), args.out), plain_old=False)
+            learnt = learn_from_logs(flights, args.vehicle_id)
+            before = None
+            if state_dir_of(args.out) is not None:
+                b = _write(args.out, _learnt(learnt, args.out), plain_old=False)
+            else:
+                b, before = learn_into(args.out, learnt)
+                b.save(args.out)
+            if before is not None and not args.json:
+                print(
+                    f"{args.out}: learnt into the baseline it held: {len(b.flights) - len(before.flights)} flights added, "
+                    f"its {len(before.flights)} earlier flights and {len(before.events)} "
+                    f"note{'' if len(before.events) == 1 else 's'} kept"
+                )
         elif args.cmd == "show":
-            b = VehicleBaseline.load(args.baseline)
+            b = load_baseline(args.baseline)
         elif args.cmd == "note":
+            load_baseline(args.baseline)  # a flight log given as the baseline is named as one
             date = args.date or _dt.datetime.now(_dt.timezone.utc).date().isoformat()
             _write(args.baseline, _noted(args.baseline, args.event, date), plain_old=True)
             restarts = EVENTS.get(args.event)  # note() refused an unknown event above

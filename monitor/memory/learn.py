@@ -10,6 +10,7 @@ the rest would call FAULTY is refused, naming its rotor(s) (``HealthyOutlierErro
 
 from __future__ import annotations
 
+import dataclasses
 import datetime as _dt
 from dataclasses import dataclass
 from pathlib import Path
@@ -37,6 +38,7 @@ class LoggedFlight:
     id_source: str | None
     date: str | None  # YYYY-MM-DD of take-off, UTC, where the log carries a clock
     start_utc_us: int | None
+    path: str = ""  # as given; named instead of ``name`` where two logs share a file name
 
 
 def flight_date(utc_us: int | None) -> str | None:
@@ -71,7 +73,14 @@ def read_flight(path: str | Path, fmt: str | None, esc, rate_hz: float = 20.0) -
         id_source=None if ident is None else ident.vehicle_id_source,
         date=flight_date(start),
         start_utc_us=start,
+        path=str(path),
     )
+
+
+def distinct_names(flights: list[LoggedFlight]) -> list[str]:
+    """Each flight's file name, or its path where another flight has the same file name."""
+    seen = [f.name for f in flights]
+    return [f.path or f.name if seen.count(f.name) > 1 else f.name for f in flights]
 
 
 def outliers(summaries: list[FlightSummary]):
@@ -170,6 +179,7 @@ def _build(names, summaries, motor_names, vehicle_id, id_source, dates, source, 
 
 def learn_from_logs(flights: list[LoggedFlight], vehicle_id: str | None = None) -> VehicleBaseline:
     """``propwatch baseline learn``: one vehicle's flights (by the logs' ids, or ``vehicle_id`` for logs without)."""
+    flights = [dataclasses.replace(f, name=n) for f, n in zip(flights, distinct_names(flights), strict=True)]
     ids = {f.vehicle_id for f in flights if f.vehicle_id is not None}
     if len(ids) > 1:
         raise BaselineError(f"the logs are of {len(ids)} vehicles ({', '.join(sorted(ids))}): learn one vehicle at a time")
