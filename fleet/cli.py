@@ -1,4 +1,4 @@
-"""``propwatch fleet ingest|report``: a fleet's logs into a propeller-health database, and its web report.
+"""propwatch fleet ingest|report: a fleet's logs into a propeller-health database, and its web report.
 
     propwatch fleet ingest LOG_OR_DIR... --db fleet.duckdb [--ray auto|ADDRESS|off] [--workers N]
                            [--format crazypad] [--vehicle YAML] [--model ONNX ...]

@@ -48,6 +48,23 @@ def check_reachable(address: str, deadline_s: float = CONNECT_DEADLINE_S) -> Non
         raise FleetError(f"Ray cluster at {address}: something answers there, but not a Ray (gRPC) head node")
 
 
+# Ray's logger of its token set-up: at a new local instance it logs, on the user's terminal, that token authentication
+# is on (and how to turn it off). The instance is this command's own, on this machine, and keeps the token.
+TOKEN_SETUP_LOGGER = "ray._private.authentication.authentication_token_setup"
+
+
+@contextlib.contextmanager
+def quiet_token_notice():
+    """Ray's token set-up logs only errors while this runs."""
+    log = logging.getLogger(TOKEN_SETUP_LOGGER)
+    level = log.level
+    log.setLevel(logging.ERROR)
+    try:
+        yield
+    finally:
+        log.setLevel(level)
+
+
 @contextlib.contextmanager
 def ray_session(address: str = "auto", workers: int | None = None):
     """Yield the ``ray`` module connected as asked; shut down only what this call started."""
@@ -62,7 +79,8 @@ def ray_session(address: str = "auto", workers: int | None = None):
     if address == "auto":
         if workers:
             kwargs["num_cpus"] = int(workers)
-        ray.init(address="local", **kwargs)
+        with quiet_token_notice():
+            ray.init(address="local", **kwargs)
         watcher = reaper.start(os.getpid())  # what this instance started goes with this process, even killed
     else:
         join(ray, address, kwargs)

@@ -1,14 +1,15 @@
-"""``propwatch evaluate SUITE``: every evaluation under one command, one suite each.
+"""propwatch evaluate SUITE: every evaluation under one command, one suite each.
 
     propwatch evaluate classifier [ARGS]  accuracy, confusion and fault precision/recall per data set, beside
-                                          the paper (offline.classifier.evaluate_cli)
+                                          the paper
     propwatch evaluate alerts [ARGS]      the decision rule's false alarms per hour and detection delays on
-                                          independent flights of both simulators (offline.alerts.evaluate)
+                                          independent flights of both simulators
     propwatch evaluate evalsim [ARGS]     write a named evaluation-only set from the second simulator, never
-                                          for training (offline.evalsim.cli)
+                                          for training
 
-``propwatch evaluate SUITE --help`` lists a suite's options. The form before suites is deprecated (``propwatch evaluate --data ...``):
-the classifier suite runs, with a line on stderr naming the new form.
+'propwatch evaluate SUITE --help' lists a suite's options.
+The form before suites ('propwatch evaluate --data ...') is deprecated: the classifier suite runs, with a line on
+stderr naming the new form.
 """
 
 from __future__ import annotations

@@ -69,7 +69,7 @@ def test_a_loaded_vehicle_given_as_healthy_is_refused_by_name():
     from monitor.vehicle import load_vehicle
 
     bad = str(CRAZYPAD / "add_weight_W3_near_M3" / "E9_log00.csv.gz")
-    with pytest.raises(NotHealthyError, match=r"add_weight_W3_near_M3/E9_log00\.csv\.gz: refused as healthy: rotor 2 \(M3\)"):
+    with pytest.raises(NotHealthyError, match=r"add_weight_W3_near_M3/E9_log00\.csv\.gz: refused as healthy: rotor M3 share"):
         read_healthy(HEALTHY_E9[:3] + [bad], "crazypad", load_vehicle(CRAZYFLIE))
 
 

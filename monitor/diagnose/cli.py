@@ -48,7 +48,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         "--vehicle",
         default=None,
         metavar="YAML|DIR",
-        help="vehicle YAML (ESC curve), or a `propwatch adapt` folder",
+        help="vehicle YAML (ESC curve), or a folder written by propwatch adapt",
     )
     # Windows are 5 s long; at a 1 s hop consecutive ones share 4 s: a finer hop costs
     # inference time without adding information to a post-flight verdict.

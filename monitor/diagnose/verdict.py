@@ -22,6 +22,7 @@ Times are seconds after take-off (the first airborne sample), never the autopilo
 
 from __future__ import annotations
 
+import re
 from dataclasses import asdict, dataclass, field
 
 # PX4 quad-X: where each rotor sits and which way it spins (monitor/vehicle.py's rotor positions).
@@ -249,6 +250,8 @@ def verdict_of(result: dict) -> Verdict:
     compared = _compared(result)
     v = result.get("verdict")
     if v is None:
+        reason = result.get("reason") or ""
+        other_vehicle = re.search(r"try (--vehicle \S+?(?: or --vehicle \S+?)*)\)?$", reason)
         return Verdict(
             "no verdict",
             "none",
@@ -256,8 +259,10 @@ def verdict_of(result: dict) -> Verdict:
             (),
             (),
             names,
-            "No verdict: " + plain_reason(result.get("reason") or ""),
-            "Nothing was judged: check the propellers as before any flight; to have them judged, diagnose a log "
+            "No verdict: " + plain_reason(reason),
+            f"Nothing was judged: diagnose this log again with {other_vehicle.group(1)}."
+            if other_vehicle
+            else "Nothing was judged: check the propellers as before any flight; to have them judged, diagnose a log "
             "of a minute of steady flight with motor outputs and attitude.",
             takeoff_boot_s=takeoff,
             compared_with=compared,
@@ -355,7 +360,8 @@ def verdict_of(result: dict) -> Verdict:
         headline += f"{when}: inspect {what}" + (
             f" ({_and([_num(i, names) for i in extra])} flagged by the fault classifier alone)" if extra else ""
         )
-        step = f"Inspect {'all four propellers' if len(inspect) == 4 else 'propellers ' + what} before the next flight; replace any that is chipped, cracked or bent."
+        whom = "all four propellers" if len(inspect) == 4 else ("propeller " if len(inspect) == 1 else "propellers ") + what
+        step = f"Inspect {whom} before the next flight; replace any that is chipped, cracked or bent."
     else:
         step = "No propeller to single out: check all four as before any flight, and diagnose the next flight."
     why = why_alike(sets, physics) if len(sets) > 1 else "The evidence points this way but not strongly enough to be sure."

@@ -1,4 +1,4 @@
-"""``propwatch baseline``: a vehicle's healthy normal from its own flights.
+"""propwatch baseline: a vehicle's healthy normal from its own flights.
 
     propwatch baseline learn LOG... --out B.json [--vehicle-id ID] [--format F] [--vehicle YAML] [--json]
     propwatch baseline show B.json [--json]

@@ -97,17 +97,19 @@ def outliers(summaries: list[FlightSummary]):
             yield i, v
 
 
-def _rotors(v: dict) -> str:
-    return " or ".join("+".join(map(str, h["faulty_propellers"])) for h in v["hypotheses"])
+def _rotors(v: dict, motor_names=("1", "2", "3", "4")) -> str:
+    """The hypotheses' rotors by the vehicle's own names (PX4 numbers 1..4 index ``motor_names``)."""
+    return " or ".join("+".join(motor_names[p - 1] for p in h["faulty_propellers"]) for h in v["hypotheses"])
 
 
-def check_outliers(names: list[str], summaries: list[FlightSummary]) -> None:
-    """Raise naming the flight and rotor(s) where a declared-healthy flight is FAULTY against the others."""
+def check_outliers(names: list[str], summaries: list[FlightSummary], motor_names=("1", "2", "3", "4")) -> None:
+    """Raise naming the flight and rotor(s), by the vehicle's own rotor names, where a declared-healthy flight is
+    FAULTY against the others."""
     found = next(outliers(summaries), None)
     if found is not None:
         i, v = found
         raise HealthyOutlierError(
-            f"{names[i]}: given as healthy, but against the other {len(summaries) - 1} flights rotor {_rotors(v)} lies "
+            f"{names[i]}: given as healthy, but against the other {len(summaries) - 1} flights rotor {_rotors(v, motor_names)} lies "
             f"beyond their spread (statistic {v['fault_statistic']:.1f} >= {v['thresholds']['fault']:g}); "
             "inspect that propeller, or leave the flight out"
         )
@@ -128,7 +130,9 @@ def set_aside_outliers(b: VehicleBaseline) -> list[str]:
         if found is None:
             break
         i, v = found
-        act[i]["excluded"] = f"unlike the other {len(act) - 1} flights: rotor {_rotors(v)} (statistic {v['fault_statistic']:.1f})"
+        act[i]["excluded"] = (
+            f"unlike the other {len(act) - 1} flights: rotor {_rotors(v, b.motor_names)} (statistic {v['fault_statistic']:.1f})"
+        )
         out.append(act[i]["name"])
     return out
 
@@ -170,7 +174,7 @@ def _build(names, summaries, motor_names, vehicle_id, id_source, dates, source, 
     if len({tuple(motor_names[i]) for i in flown}) != 1 or len({summaries[i].basis for i in flown}) != 1:
         raise BaselineError("the flights mix airframes (rotor names or share basis differ): give one vehicle's flights")
     if check_healthy:
-        check_outliers([names[i] for i in flown], [summaries[i] for i in flown])
+        check_outliers([names[i] for i in flown], [summaries[i] for i in flown], tuple(motor_names[flown[0]]))
     b = VehicleBaseline(vehicle_id, id_source, tuple(motor_names[flown[0]]), summaries[flown[0]].basis)
     for i in flown:
         b.add(names[i], dates[i], summaries[i], source)

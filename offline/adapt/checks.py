@@ -103,8 +103,8 @@ def check_consistent(tables: list[FlightTable], names: list[str]) -> None:
             problems.append(
                 (
                     float(np.abs(dev[k])),
-                    f"{name}: refused as healthy: rotor {k + 1} ({tables[i].motor_names[k]}) share {shares[i, k]:.3f} is "
-                    f"{dev[k]:+.1f} spreads from the other healthy logs' {others[:, k].mean():.3f} "
+                    f"{name}: refused as healthy: rotor {tables[i].motor_names[k]} share {100 * shares[i, k]:.1f} % is "
+                    f"{dev[k]:+.1f} spreads from the other healthy logs' {100 * others[:, k].mean():.1f} % "
                     f"(limit {OUTLIER_SPREADS:g}): a faulty or loaded vehicle",
                 )
             )

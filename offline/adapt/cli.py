@@ -1,11 +1,11 @@
-"""``propwatch adapt --healthy LOG... --vehicle V.yaml --out DIR [--json] [--labelled LOG[=ROTORS]...]``.
+"""propwatch adapt --healthy LOG... --vehicle V.yaml --out DIR [--json] [--labelled LOG[=ROTORS]...]
 
 Calibrates the vehicle on its healthy logs, simulates and trains a classifier around the
 calibrated vehicle (and, for comparison, around the nominal one), and writes into DIR: the
-model (``classifier.onnx``), the calibrated vehicle (``vehicle.yaml``), the healthy baseline
-(``baseline.json``), the manifest and the card. ``propwatch diagnose LOG --vehicle DIR`` then
-uses them. A ``--labelled`` log is scored with its truth when written ``LOG=3`` or ``LOG=1+2``
-(faulty rotors, PX4 order) or ``LOG=healthy``.
+model (classifier.onnx), the calibrated vehicle (vehicle.yaml), the healthy baseline
+(baseline.json), the manifest and the card. 'propwatch diagnose LOG --vehicle DIR' then
+uses them. A --labelled log is scored with its truth when written LOG=3 or LOG=1+2
+(faulty rotors, PX4 order) or LOG=healthy.
 
 Exit code: 0 done; 2 bad input (a "healthy" log that is not, another vehicle type, a bad file).
 """

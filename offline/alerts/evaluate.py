@@ -1,4 +1,4 @@
-"""``propwatch evaluate alerts`` (``make evaluate-alerts``); with ``--calibrate`` it is ``propwatch tune alerts``.
+"""propwatch evaluate alerts (make evaluate-alerts); with --calibrate it is propwatch tune alerts.
 
 Calibrate (``offline.tune.alerts``, first when ``--calibrate``): healthy flights (seeds from
 ``--calibration-seed``) -> ``models/decision-calibration.json``.
@@ -84,7 +84,7 @@ def parse_args(argv):
     p.add_argument(
         "--compare-with",
         default="",
-        help="a checkout (e.g. ../main) whose monitor/decision/rule.py and models/decision-calibration.json give one more row",
+        help="a checkout (e.g. ../main) whose decision rule and models/decision-calibration.json give one more row",
     )
     return p.parse_args(argv)
 

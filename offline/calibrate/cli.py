@@ -1,7 +1,7 @@
 """``propwatch calibrate MEASURED [MEASURED...] --vehicle models/vehicle.yaml [--json] [--out calibrated.yaml] [--report DIR]``
 
-Reads measured flights in any format ``diagnose`` reads (``--format`` for CSV
-mappings), plus the simulator's ``.npz``; fits the candidate model terms and
+Reads measured flights in any format diagnose reads (--format for CSV
+mappings), plus the simulator's .npz; fits the candidate model terms and
 names the cause; writes the calibrated vehicle and a report with plots.
 """
 

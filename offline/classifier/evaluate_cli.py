@@ -1,7 +1,8 @@
-"""``propwatch evaluate``: accuracy, confusion matrix PNG and fault precision/recall per data set, beside the paper.
+"""propwatch evaluate classifier: accuracy, confusion matrix PNG and fault precision/recall per data set, beside
+the paper.
 
 The model is an ONNX file (what ships) or a torch checkpoint (.pt). For a data
-set the model was trained on, only its held-out flights are scored (``--split test``).
+set the model was trained on, only its held-out flights are scored (--split test).
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""``propwatch export``: checkpoint (.pt) -> ONNX file for the monitor, checked by loading it back."""
+"""propwatch export: checkpoint (.pt) -> ONNX file for the monitor, checked by loading it back."""
 
 from __future__ import annotations
 

@@ -1,7 +1,7 @@
-"""``propwatch train``: train the CNN on one or more data sets (npz) and save a checkpoint.
+"""propwatch train: train the CNN on one or more data sets (npz) and save a checkpoint.
 
-torch is imported when training starts, not to parse arguments (``--help`` stays fast); options left
-out take ``offline.classifier.train.TrainConfig``'s defaults.
+torch is imported when training starts, not to parse arguments (--help stays fast); options left out take
+the training configuration's defaults (TrainConfig).
 """
 
 from __future__ import annotations

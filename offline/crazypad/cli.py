@@ -1,13 +1,12 @@
-"""``propwatch crazypad``: the sim-to-real experiment on real Crazyflie flights.
+"""propwatch crazypad: the sim-to-real experiment on real Crazyflie flights.
 
-    propwatch crazypad analyse   [--data DIR] [--json]          per-condition command shares, per airframe
+    propwatch crazypad analyse   [--data DIR] [--json]              per-condition command shares, per airframe
     propwatch crazypad calibrate [--data DIR] [--out DIR] [--json]  steady-state calibration per airframe
     propwatch crazypad run --out DIR [--data DIR] [--flights-per-label N] [--epochs N] [--ship]
 
-``run`` calibrates, simulates, trains (nominal / calibrated / per airframe),
-diagnoses every held-out real flight and writes ``crazypad-report.{json,md}``;
-``--ship`` then copies the both-airframes calibrated model to
-``models/crazyflie-classifier.onnx`` with its manifest.
+run calibrates, simulates, trains (nominal / calibrated / per airframe), diagnoses every held-out real flight
+and writes crazypad-report.json and .md; --ship then copies the both-airframes calibrated model to
+models/crazyflie-classifier.onnx with its manifest.
 """
 
 from __future__ import annotations
@@ -28,13 +27,20 @@ from offline.crazypad.data import DEFAULT_ROOT, load_manifest, select
 
 DEFAULT_VEHICLE = shipped("crazyflie.yaml")
 SHIPPED_MODEL = shipped("crazyflie-classifier.onnx")
+SUBCOMMANDS = {
+    "analyse": "each airframe's per-condition command shares, healthy against cut propellers",
+    "calibrate": "the steady-state calibration of each airframe (writes a vehicle YAML per airframe with --out)",
+    "run": "calibrate, simulate, train and diagnose every held-out real flight; --ship installs the model",
+}
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="propwatch crazypad", description=__doc__.split("\n\n")[0])
-    sub = p.add_subparsers(dest="cmd", required=True)
-    for name in ("analyse", "calibrate", "run"):
-        s = sub.add_parser(name)
+    p = argparse.ArgumentParser(
+        prog="propwatch crazypad", description=__doc__.split(": ", 1)[1], formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    sub = p.add_subparsers(dest="cmd", required=True, metavar="{analyse,calibrate,run}")
+    for name, help_ in SUBCOMMANDS.items():
+        s = sub.add_parser(name, help=help_, description=help_)
         s.add_argument("--data", default=str(DEFAULT_ROOT), help="CrazyPAD folder (default: ../shared/data/crazypad)")
         s.add_argument("--vehicle", default=str(DEFAULT_VEHICLE), help="nominal vehicle YAML")
         if name != "run":

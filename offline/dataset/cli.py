@@ -1,10 +1,10 @@
-"""``propwatch dataset``: generate the paper's fault data sets (A, B, C) or custom ones, one npz + manifest each.
+"""propwatch dataset: generate the paper's fault data sets (A, B, C) or custom ones, one npz + manifest each.
 
 Examples:
   propwatch dataset --sets A,B,C --fault bent --out out/data            # A-bent.npz, B-bent.npz, C-bent.npz
   propwatch dataset --name R --waypoints random --payload 0,0.6 --wind 3 --fault mixed --out out/data
   propwatch dataset --name RR --waypoints random --payload 0,0.6 --fault varied --physics randomised \
-      --propellers quadratic --out out/data  # every flight's physics drawn from offline/sim/assumptions.py
+      --propellers quadratic --out out/data  # every flight's physics drawn from the simulator's assumption register
 """
 
 from __future__ import annotations
@@ -47,7 +47,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--flights-per-label", type=int, default=2, help="simulated flights for each of the 16 labels (default 2)")
     p.add_argument("--duration", type=float, default=80.0, help="seconds per flight (paper: 80)")
     p.add_argument(
-        "--propellers", choices=("lstm", "quadratic"), default="lstm", help="propeller model (offline.propellers; default lstm)"
+        "--propellers", choices=("lstm", "quadratic"), default="lstm", help="propeller model: learnt (lstm, default) or quadratic"
     )
     p.add_argument("--wind", type=float, default=0.0, help="max steady wind, m/s (random per vehicle variant)")
     p.add_argument("--motor-efficiency-spread", type=float, default=0.0, help="+- fraction per rotor per variant")

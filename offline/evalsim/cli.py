@@ -1,4 +1,4 @@
-"""``propwatch evaluate evalsim``: write a named evaluation-only set (tlog + truth JSON per flight + manifest).
+"""propwatch evaluate evalsim: write a named evaluation-only set (tlog + truth JSON per flight + manifest).
 
 NEVER for training or model selection.
 """

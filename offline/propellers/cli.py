@@ -1,12 +1,12 @@
-"""``propwatch train-propellers``: virtual load cell -> one stacked LSTM per condition -> models/propellers.
+"""propwatch train-propellers: virtual load cell -> one stacked LSTM per condition -> models/propellers.
 
     propwatch train-propellers --out models/propellers [--seed S] [--epochs N] [--vehicle models/vehicle.yaml]
         [--signatures fixed|register [--sweeps 10]]
     propwatch train-propellers --out models/propellers --rescore
     propwatch train-propellers --fit-stand FILE.csv [FILE.csv ...] [--json]
 
-The first form reproduces the shipped weights (``<condition>.npz``) and writes
-``manifest.json`` (load-cell and training config, seed, git revision, the
+The first form reproduces the shipped weights (<condition>.npz) and writes
+manifest.json (load-cell and training config, seed, git revision, the
 test-split MAPE table beside the paper's figures and a kF·ω² fit). The second
 reads real RCbenchmark/Tyto exports and prints the ESC->RPM, kF and kτ fits.
 """
@@ -249,7 +249,7 @@ def main(argv: list[str] | None = None) -> int:
         "--signatures",
         choices=SIGNATURE_MODES,
         default="fixed",
-        help="register: train bent/cracked on sweeps whose signatures are drawn from offline/sim/assumptions.py",
+        help="register: train bent/cracked on sweeps whose signatures are drawn from the simulator's assumption register",
     )
     ap.add_argument("--sweeps", type=int, default=10, help="with --signatures register: sweeps per damaged condition")
     ap.add_argument(

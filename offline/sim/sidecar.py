@@ -10,6 +10,7 @@ import numpy as np
 
 from monitor.config import to_mapping
 from monitor.labels import label_from_mask
+from monitor.resample import US_PER_S
 from monitor.vehicle import VehicleConfig
 from offline.manifest import make_manifest
 
@@ -54,7 +55,7 @@ def make_sidecar(
             }
         )
         if start_utc_us is not None:
-            flights[-1]["start_utc"] = _dt.datetime.fromtimestamp(start_utc_us[i] / 1e6, _dt.timezone.utc).isoformat()
+            flights[-1]["start_utc"] = _dt.datetime.fromtimestamp(start_utc_us[i] / US_PER_S, _dt.timezone.utc).isoformat()
     config = {
         "vehicle": to_mapping(vehicle),
         "vehicle_path": vehicle_path,

@@ -1,13 +1,13 @@
-"""``propwatch tune``: fit what sits beside a shipped model to its outputs on our simulator's flights.
+"""propwatch tune: fit what sits beside a shipped model to its outputs on our simulator's flights.
 
-    propwatch tune sets [ARGS]    the conformal set rule (<model>.sets.json): offline.tune.sets
-    propwatch tune noise [ARGS]   the moment balance's credible-set coverage (Priors.noise_inflation): offline.tune.noise
-    propwatch tune alerts [ARGS]  the decision thresholds (models/decision-calibration.json): the tail fit of
-                                  offline.tune.alerts, then the thresholds scored on independent flights
-                                  (propwatch evaluate alerts, whose options it takes)
+    propwatch tune sets [ARGS]    the conformal set rule (<model>.sets.json)
+    propwatch tune noise [ARGS]   the moment balance's credible-set coverage (its noise inflation)
+    propwatch tune alerts [ARGS]  the decision thresholds (models/decision-calibration.json): a tail fit, then
+                                  the thresholds scored on independent flights (propwatch evaluate alerts,
+                                  whose options it takes)
 
-``propwatch tune WHAT --help`` lists that tool's options. None changes the simulator or the model: fitting the
-simulator to measured flights is ``propwatch calibrate``.
+'propwatch tune WHAT --help' lists that tool's options. None changes the simulator or the model: fitting the
+simulator to measured flights is 'propwatch calibrate'.
 """
 
 from __future__ import annotations
