@@ -33,6 +33,14 @@ from monitor.mavlink import esc as mavlink_esc  # noqa: E402
 from monitor.model import Classifier  # noqa: E402
 from monitor.vehicle import GRAVITY_M_S2  # noqa: E402
 
+# Replays over UDP at this multiple of the recorded pace. Nothing over UDP has backpressure: a datagram the daemon
+# has not read when the socket's buffer is full is lost, so a fast replay tests the machine's spare cores, not the
+# daemon. At 2x the daemon needs 4-5 % of a core (toy model; 19-20 % at 8-10x, from /proc/PID/stat between "ready"
+# and the end of the replay) and the buffer holds about 1 s of datagrams while it waits for one. Measured with
+# `pytest tests/test_daemon_process.py` beside four `python -c "while True: pass"` (load 12-15 on 2 cores): at
+# 8-10x, 30 % of the datagrams were lost and 2 tests raised no FAULT or classified too little; at 2x none was lost.
+UDP_SPEED = 2.0
+
 HOVER_PWM_US = 1450.0
 FAULT_PWM_US = 60.0  # the faulty rotor's extra command
 WALL_T0_S = 1.7e9

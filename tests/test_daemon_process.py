@@ -19,7 +19,7 @@ from pathlib import Path
 
 import pytest
 from pymavlink.dialects.v20 import common as mavlink
-from test_daemon_helpers import synth_flight, toy_model, write_tlog
+from test_daemon_helpers import UDP_SPEED, synth_flight, toy_model, write_tlog
 
 REPO = Path(__file__).resolve().parent.parent
 PY = sys.executable
@@ -154,7 +154,7 @@ def fly_over_udp(tmp_path, model, frames, speed, config_text="", extra=()):
 
 def test_faulty_propeller_alert_over_udp_against_the_replay_stub(tmp_path, model):
     frames = synth_flight(ALERT_FLIGHT_S, faulty=(3,), fault_from_s=ONSET_S)
-    d, _, events, requests, received, report = fly_over_udp(tmp_path, model, frames, speed=8)
+    d, _, events, requests, received, report = fly_over_udp(tmp_path, model, frames, speed=UDP_SPEED)
     faults = [e for e in events if e["level"] == "fault"]
     assert faults, d.text
     first = faults[0]
@@ -170,11 +170,11 @@ def test_faulty_propeller_alert_over_udp_against_the_replay_stub(tmp_path, model
     assert texts and all(t["text"].startswith("PROP 3 ") for t in texts), texts
     assert any(t["text"].startswith("PROP 3 FAULT p=") and t["severity"] in (2, 4) for t in texts), texts
     assert all(len(t["text"]) <= 50 for t in texts)
-    # Only stream-rate requests, at >= 20 Hz for the fast streams, each acknowledged.
-    cmds = [m for m in received if m["mavpackettype"] == "COMMAND_LONG"]
-    assert cmds and all(m["command"] == 511 for m in cmds)
-    fast = {r["message_id"]: r["interval_us"] for r in requests if r["message_id"] in (30, 36)}
-    assert set(fast) == {30, 36} and max(fast.values()) <= 50_000
+    # Only stream-rate requests, at >= 20 Hz for the fast streams, each acknowledged. This flight's streams are fast
+    # enough: whether the rate window that straddles the pin saw them slow, and so asked, is the machine's timing; the
+    # slow stream below is always asked for.
+    assert all(m["command"] == 511 for m in received if m["mavpackettype"] == "COMMAND_LONG"), d.text
+    assert all(r["interval_us"] <= 50_000 for r in requests if r["message_id"] in (30, 36)), requests
     assert all(r["from"] == [1, 191] and r["result"] == 0 for r in requests)
     assert report["acks"].get("0", 0) == len(requests)
     assert {m["mavpackettype"] for m in received} <= {"HEARTBEAT", "STATUSTEXT", "COMMAND_LONG", "NAMED_VALUE_FLOAT"}
@@ -183,7 +183,7 @@ def test_faulty_propeller_alert_over_udp_against_the_replay_stub(tmp_path, model
 
 def test_healthy_flight_raises_no_alert_and_no_requests_when_switched_off(tmp_path, model):
     cfg = "link:\n  request_streams: false\nalerts:\n  named_value_float: true\n"
-    d, _, events, requests, received, report = fly_over_udp(tmp_path, model, synth_flight(30.0, seed=7), 10, cfg)
+    d, _, events, requests, received, report = fly_over_udp(tmp_path, model, synth_flight(30.0, seed=7), UDP_SPEED, cfg)
     assert events == [] and report["alerts"] == 0
     assert report["pipeline"]["classified"] > 300  # it did classify the flight
     assert not [m for m in received if m["mavpackettype"] == "COMMAND_LONG"]
@@ -467,7 +467,7 @@ def test_udpout_daemon_announces_itself_to_a_listening_autopilot(tmp_path, model
             "--connect",
             f"udpin:127.0.0.1:{port}",
             "--speed",
-            "5",
+            str(UDP_SPEED),
             "--linger",
             "1.0",
             "--received",
@@ -490,10 +490,17 @@ def test_udpout_daemon_announces_itself_to_a_listening_autopilot(tmp_path, model
 def test_slow_stream_is_reported_and_requested_again(tmp_path, model):
     """PX4's onboard default SERVO_OUTPUT_RAW rate (10 Hz) is below the grid: warn, and ask again."""
     cfg = "link:\n  rate_check_period_s: 1.0\n  request_retry_s: 1.0\n"
-    d, _, _, requests, _, _ = fly_over_udp(tmp_path, model, synth_flight(6.0, servo_hz=10.0), speed=1, config_text=cfg)
+    d, _, _, requests, received, report = fly_over_udp(
+        tmp_path, model, synth_flight(6.0, servo_hz=10.0), speed=1, config_text=cfg
+    )
     assert "stream SERVO_OUTPUT_RAW at" in d.text and "need >= 16 Hz" in d.text, d.text
     servo = [r for r in requests if r["message_id"] == 36]
     assert len(servo) >= 2 and all(r["interval_us"] <= 50_000 for r in servo)
+    # Only stream-rate requests, from the monitor's component, each acknowledged.
+    cmds = [m for m in received if m["mavpackettype"] == "COMMAND_LONG"]
+    assert cmds and all(m["command"] == 511 and m["_from"] == [1, 191] for m in cmds), cmds
+    assert all(r["from"] == [1, 191] and r["result"] == 0 for r in requests)
+    assert report["acks"].get("0", 0) == len(requests)
     # 50 Hz is fine: it may only look slow in the one 1 s rate window that straddles the end of the
     # replay (a partial window); a real misreport would repeat in every window of the 6 s flight.
     assert d.text.count("stream ATTITUDE at") <= 1, d.text
