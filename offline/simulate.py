@@ -1,7 +1,7 @@
 """``propwatch simulate``: simulated flights with ground truth, as npz or PX4-like .tlog.
 
     propwatch simulate --out DIR [--flights K] [--label N] [--fault bent|cracked|stopped] [--onset S]
-                       [--vehicle-id K] [--payload-kg X] [--waypoints-seed S] [--seed S]
+                       [--vehicle-id K] [--first-flight K] [--payload-kg X] [--waypoints-seed S] [--seed S]
                        [--duration-s 80] [--format tlog|npz]
                        [--vehicle PATH] [--propellers lstm|quadratic] [--waypoint-set A|B]
 
@@ -9,7 +9,9 @@ Writes ``flight_000.tlog``... (what ``propwatch diagnose`` reads; the default) o
 for training) plus ``sidecar.json`` (ground truth and provenance) into DIR. The flights are one vehicle's: flight
 k starts k days after the first (2024-06-01), and each .tlog ends as PX4 ends a mission, landed then disarmed, so
 the monitor's vehicle memory and the fleet see a flight that ended. ``--vehicle-id K`` writes the board's id
-(AUTOPILOT_VERSION ``uid``) into every .tlog, as a ground station records it on connect. Files are written under
+(AUTOPILOT_VERSION ``uid``) into every .tlog, as a ground station records it on connect; ``--first-flight K`` goes
+on with the vehicle's flights in a later run (``flight_00K.tlog`` on, K days after the first, ground truth in
+``sidecar_00K.json``). Files are written under
 temporary names and renamed, and the sidecar last, so a failed run leaves no sidecar describing missing flights.
 
 ``write_flights(out, SimulateSpec(...))`` does the same from Python.
@@ -50,6 +52,7 @@ class SimulateSpec:
     fault: str = "bent"  # bent | cracked (the propeller) | stopped (the motor's output held at its minimum)
     onset_s: float | None = None  # seconds after the start of the flight; None: damaged from take-off
     vehicle_id: int | None = None  # board id K in every .tlog: offline.fleet_sim's vehicle_K, read back as 505700000000000K
+    first_flight: int = 0  # the flights are this vehicle's K, K+1, ...: named, dated and routed from K on
     payload_kg: float = 0.0
     waypoints_seed: int | None = None  # default: seed
     waypoint_set: str | None = None  # "A" | "B": the paper's named route
@@ -77,6 +80,8 @@ class SimulateSpec:
                 raise ConfigError(f"--onset: must be inside the flight (0 to {self.duration_s:g} s), got {self.onset_s:g}")
         if self.fault == "stopped" and self.label != 1 and self.onset_s is None:
             raise ConfigError("--fault stopped: a vehicle with a stopped motor never takes off; give --onset S (in the air)")
+        if self.first_flight < 0:
+            raise ConfigError(f"--first-flight: must be >= 0, got {self.first_flight}")
         if self.vehicle_id is not None and not 1 <= self.vehicle_id < 2**32:
             raise ConfigError(f"--vehicle-id: must be 1..{2**32 - 1}, got {self.vehicle_id}")
 
@@ -111,6 +116,13 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         help="the damage starts S seconds into the flight, in the air (default: damaged from take-off)",
     )
     p.add_argument("--vehicle-id", type=int, default=None, metavar="K", help="write board id K into every .tlog")
+    p.add_argument(
+        "--first-flight",
+        type=int,
+        default=0,
+        metavar="K",
+        help="number, date and route the flights from the vehicle's flight K on (a later run into the same folder)",
+    )
     p.add_argument("--payload-kg", type=float, default=0.0, help="payload added to the vehicle's mass")
     p.add_argument("--waypoints-seed", type=int, default=None, help="seed of the random waypoints (default: --seed)")
     p.add_argument("--waypoint-set", choices=("A", "B"), default=None, help="fly the paper's named route instead")
@@ -136,6 +148,7 @@ def spec_from_args(args: argparse.Namespace) -> SimulateSpec:
         fault=args.fault,
         onset_s=args.onset,
         vehicle_id=args.vehicle_id,
+        first_flight=args.first_flight,
         payload_kg=args.payload_kg,
         waypoints_seed=args.waypoints_seed,
         waypoint_set=args.waypoint_set,
@@ -160,14 +173,14 @@ def build_propellers(vehicle, conditions: np.ndarray, kind: str, seed: int):
     return build(vehicle, conditions, kind=kind, rng_seed=seed)
 
 
-def _propeller_model(vehicle, spec: SimulateSpec, conditions: np.ndarray, n: int):
+def _propeller_model(vehicle, spec: SimulateSpec, conditions: np.ndarray, n: int, seed: int):
     """The propellers' model: damaged from take-off, or switched at the onset (``offline.dataset.onset``)."""
     if spec.onset_s is None or not conditions.any():
-        return build_propellers(vehicle, conditions, spec.propellers, spec.seed)
+        return build_propellers(vehicle, conditions, spec.propellers, seed)
     from offline.dataset.onset import SwitchedPropellers
 
-    before = build_propellers(vehicle, np.zeros_like(conditions), spec.propellers, spec.seed)
-    after = build_propellers(vehicle, conditions, spec.propellers, spec.seed + 1)
+    before = build_propellers(vehicle, np.zeros_like(conditions), spec.propellers, seed)
+    after = build_propellers(vehicle, conditions, spec.propellers, seed + 1)
     return SwitchedPropellers(before, after, np.full(n, spec.onset_s))
 
 
@@ -180,7 +193,8 @@ def write_flights(out: str | Path, spec: SimulateSpec = SimulateSpec()) -> list[
     rate = TLOG_RATE_HZ if spec.format == "tlog" else SimConfig().log_rate_hz
     sim = dataclasses.replace(SimConfig(), duration_s=spec.duration_s, log_rate_hz=rate)
 
-    n = spec.flights
+    n, k0 = spec.flights, spec.first_flight
+    seed = spec.seed + k0  # another run's flights: their own noise
     faulty = [p - 1 for p in faulty_for(spec.label)]
     conditions = np.zeros((n, 4), dtype=np.int64)  # the propellers' (offline.propellers codes)
     truth = np.zeros((n, 4), dtype=np.int64)  # the sidecar's (offline.sim.sidecar.CONDITION_NAMES)
@@ -195,16 +209,16 @@ def write_flights(out: str | Path, spec: SimulateSpec = SimulateSpec()) -> list[
     if spec.waypoint_set:
         waypoints = np.broadcast_to(waypoint_set(spec.waypoint_set), (n, 5, 3)).copy()
     else:
-        waypoints = random_waypoints(n, 5, seed=wseed)
+        waypoints = random_waypoints(k0 + n, 5, seed=wseed)[k0:]  # flight k's route whichever run flies it
     payload = np.full(n, spec.payload_kg)
-    propellers = _propeller_model(vehicle, spec, conditions, n)
+    propellers = _propeller_model(vehicle, spec, conditions, n, seed)
     log = simulate(
         vehicle,
         waypoints,
         propellers,
         sim,
         payload_kg=payload,
-        seed=spec.seed,
+        seed=seed,
         progress=n * sim.duration_s > 60,
         motor_stop_s=stop_s,
     )
@@ -213,21 +227,22 @@ def write_flights(out: str | Path, spec: SimulateSpec = SimulateSpec()) -> list[
     if spec.format == "npz":
         files = [out / "flights.npz"]
     else:
-        files = [out / f"flight_{i:03d}.tlog" for i in range(n)]
+        files = [out / f"flight_{k0 + i:03d}.tlog" for i in range(n)]
+    sidecar_path = out / ("sidecar.json" if k0 == 0 else f"sidecar_{k0:03d}.json")
     sidecar = make_sidecar(
         vehicle,
         sim,
         waypoints,
         truth,
         payload,
-        spec.seed,
+        seed,
         spec.propellers,
         waypoints_seed=None if spec.waypoint_set else wseed,
         vehicle_path=str(spec.vehicle),
         vehicle_sources=loaded.sources,
         files=[f.name for f in files] if spec.format == "tlog" else [f"flights.npz[{i}]" for i in range(n)],
         onset_s=spec.onset_s if faulty else None,
-        start_utc_us=[DEFAULT_WALL_BOOT_US + i * DAY_US for i in range(n)] if spec.format == "tlog" else None,
+        start_utc_us=[DEFAULT_WALL_BOOT_US + (k0 + i) * DAY_US for i in range(n)] if spec.format == "tlog" else None,
         vehicle_uid=None if spec.vehicle_id is None else f"{vehicle_uid(spec.vehicle_id - 1):016x}",
         waypoint_set=spec.waypoint_set,
         format=spec.format,
@@ -240,15 +255,15 @@ def write_flights(out: str | Path, spec: SimulateSpec = SimulateSpec()) -> list[
                 f,
                 log,
                 i,
-                wall_boot_us=DEFAULT_WALL_BOOT_US + i * DAY_US,
+                wall_boot_us=DEFAULT_WALL_BOOT_US + (k0 + i) * DAY_US,
                 battery_full_v=vehicle.battery_full_v,
                 battery_capacity_mah=vehicle.battery_capacity_mah,
                 landing=True,
             )
             if spec.vehicle_id is not None:
                 append_autopilot_version(f, vehicle_uid(spec.vehicle_id - 1))
-    write_manifest(out / "sidecar.json", sidecar)
-    return files + [out / "sidecar.json"]
+    write_manifest(sidecar_path, sidecar)
+    return files + [sidecar_path]
 
 
 def run(args: argparse.Namespace) -> list[Path]:

@@ -104,3 +104,18 @@ def test_help_lists_the_labels_and_shows_no_markup(capsys):
     text = capsys.readouterr().out
     assert " 4 3 " in text and "16 1+2+3+4" in text and " 1 healthy" in text
     assert "`" not in text and "offline." not in text and "monitor." not in text
+
+
+def test_a_later_run_goes_on_with_the_vehicles_flights(tmp_path):
+    write_flights(tmp_path, SimulateSpec(flights=2, duration_s=3.0, vehicle_id=4, propellers="quadratic"))
+    files = write_flights(
+        tmp_path, SimulateSpec(flights=1, label=3, duration_s=3.0, vehicle_id=4, first_flight=2, propellers="quadratic")
+    )
+    assert [f.name for f in files] == ["flight_002.tlog", "sidecar_002.json"]
+    assert (tmp_path / "sidecar.json").is_file()  # the first run's truth stays
+    idents = [identify(tmp_path / f"flight_{k:03d}.tlog", "tlog") for k in range(3)]
+    assert np.allclose(np.diff([i.utc_minus_boot_us / 1e6 for i in idents]), DAY_S)
+    later = json.loads(files[-1].read_text())["flights"][0]
+    assert later["start_utc"][:10] == "2024-06-03" and later["faulty_propellers"] == [2]
+    first = json.loads((tmp_path / "sidecar.json").read_text())["flights"][0]
+    assert later["waypoints_ned_m"] != first["waypoints_ned_m"]  # its own route
