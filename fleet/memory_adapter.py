@@ -3,9 +3,9 @@ healthy flights before it.
 
 After the workers have written their rows (each with its flight's share summary), ``judge_store`` walks every
 vehicle's flights in order of the logs' own clocks. A flight is compared with the vehicle's flights before it that
-raised nothing (no FAULTY, not suspect) once there are ``MIN_FLIGHTS`` of them: the same ``VehicleBaseline``,
-normal and ``judge`` as ``propwatch diagnose LOG --baseline B.json`` with B learnt from those flights, so both give
-the same verdict. Flights that raised nothing before a normal existed are checked against each other once there are
+raised nothing (no FAULTY, not suspect) once there are ``MIN_FLIGHTS`` of them: the same ``VehicleBaseline`` and
+the same ``judgement`` and ``with_memory`` (``monitor.diagnose.memory_adapter``) as ``propwatch diagnose LOG
+--baseline B.json`` with B learnt from those flights, so both give the same verdict, and the site renders it. Flights that raised nothing before a normal existed are checked against each other once there are
 enough, and one the others call FAULTY is set aside (``monitor.memory.learn.set_aside_outliers``). A log without a clock of its own is judged against the baseline as it stands (every timed flight)
 and never becomes history. A flight judged before keeps its verdict unless ``rediagnose``: a log older than flights
 already judged changes them only then.
@@ -15,9 +15,8 @@ from __future__ import annotations
 
 import json
 
-from monitor.labels import LABEL_TABLE
-from monitor.memory.baseline import MIN_FLIGHTS, VehicleBaseline
-from monitor.memory.judge import judge
+from monitor.diagnose.memory_adapter import judgement, with_memory
+from monitor.memory.baseline import VehicleBaseline
 from monitor.memory.learn import set_aside_outliers
 from monitor.memory.summary import FlightSummary
 
@@ -51,7 +50,7 @@ def judge_store(con, rediagnose: bool = False) -> int:
             log_hash, _, start, time_known, status, summ, memory, label, conf, names, path, diagnosis = r
             summary = FlightSummary.from_dict(json.loads(summ), path)
             if memory is None or rediagnose:
-                upd = _judge_row(history, summary, time_known)
+                upd = _judge_row(history, summary, time_known, json.loads(diagnosis) if diagnosis else {})
                 updates.append((log_hash, upd))
                 label, conf, memory = upd.get("verdict_label", label), upd.get("confidence", conf), upd["memory"]
                 status = upd.get("status", status)
@@ -72,7 +71,9 @@ def judge_store(con, rediagnose: bool = False) -> int:
     return len(updates)
 
 
-def _judge_row(b: VehicleBaseline, summary: FlightSummary, time_known) -> dict:
+def _judge_row(b: VehicleBaseline, summary: FlightSummary, time_known, diagnosis: dict) -> dict:
+    """The row's memory columns, and where the history judged the flight its verdict columns: ``judgement`` and
+    ``with_memory``, as ``propwatch diagnose --baseline`` with ``b``."""
     cw = b.compared_with()
     upd = {
         "baseline_flights": cw["flights"],
@@ -80,20 +81,17 @@ def _judge_row(b: VehicleBaseline, summary: FlightSummary, time_known) -> dict:
         "compared_with_last": cw["last"],
         "compared_with_logs": [f["name"] for f in b.active()],
     }
-    if not b.ready or summary.basis != b.basis:
-        why = f"no vehicle baseline yet ({cw['flights']} of {MIN_FLIGHTS} flights)" if not b.ready else "another share basis"
-        upd["memory"] = json.dumps({"note": why})
+    if b.ready and summary.basis != b.basis:
+        upd["memory"] = json.dumps({"note": "another share basis"})
         return upd
-    v = judge(b.normal(), summary)
-    v["compared_with"] = cw
-    v["compared_with_text"] = b.compared_with_text() + (
-        "" if time_known else "; time unknown: judged against the baseline at ingest"
-    )
-    upd.update(
-        memory=json.dumps(v, allow_nan=False),
-        verdict_label=int(v["label"]),
-        faulty_propellers=list(LABEL_TABLE[v["label"]]),
-        confidence=v["confidence"],
-        status="ok",
-    )
+    judged = judgement(diagnosis, summary, b, "" if time_known else "; time unknown: judged against the baseline at ingest")
+    upd["memory"] = json.dumps(judged, allow_nan=False)
+    v = with_memory(diagnosis, judged)["verdict"]
+    if v is not None and v.get("source") == "vehicle memory":
+        upd.update(
+            verdict_label=int(v["label"]),
+            faulty_propellers=list(v["faulty_propellers"]),
+            confidence=v["confidence"],
+            status="ok",
+        )
     return upd

@@ -24,7 +24,6 @@ The site is written into a temporary folder and swapped in, so a reader never se
 
 from __future__ import annotations
 
-import dataclasses
 import hashlib
 import html
 import json
@@ -38,8 +37,9 @@ import numpy as np
 from fleet.errors import FleetError
 from fleet.schema import open_db
 from fleet.svg import COLORS, Series, line_chart
+from monitor.diagnose.memory_adapter import with_memory
 from monitor.diagnose.report import verdict_html
-from monitor.diagnose.verdict import POSITION, Verdict, compared_with_words, flight_seconds, set_words, verdict_of
+from monitor.diagnose.verdict import POSITION, Verdict, flight_seconds, set_words, verdict_of
 
 RECENT_FLIGHTS = 3
 TREND_FLIGHTS = 10
@@ -224,19 +224,24 @@ def _judged_by_memory(f: dict) -> bool:
     return isinstance(memory, dict) and "note" not in memory
 
 
-def row_verdict(f: dict) -> Verdict:
-    """The verdict of one database row: its stored diagnosis through ``monitor.diagnose.verdict``, exactly as
-    ``propwatch diagnose`` prints it, with "compared with" from the vehicle memory's columns (``baseline_flights``,
-    ``compared_with_first``, ``compared_with_last``; absent, NULL or not judged: none)."""
-    if f.get("diagnosis"):
-        res = json.loads(f["diagnosis"])
-    else:
-        res = {"log": f.get("path"), "error": f.get("error") or "not diagnosed"}
-    v = verdict_of(res)
+def row_result(f: dict) -> dict:
+    """One database row as the ``diagnose --json`` object it stands for: its stored diagnosis, compared with its
+    vehicle's history (``with_memory``, as ``propwatch diagnose --baseline``) where the vehicle memory judged it."""
+    if not f.get("diagnosis"):
+        return {"log": f.get("path"), "error": f.get("error") or "not diagnosed"}
+    res = json.loads(f["diagnosis"])
     if not _judged_by_memory(f):
-        return v
-    said = compared_with_words(f.get("baseline_flights"), _day(f.get("compared_with_first")), _day(f.get("compared_with_last")))
-    return dataclasses.replace(v, compared_with=said) if said else v
+        return res
+    if not f.get("memory"):  # a store without the judgement itself: what it was compared with, from the columns
+        first, last = _day(f.get("compared_with_first")), _day(f.get("compared_with_last"))
+        return res | {"baseline": {"compared_with": {"flights": f.get("baseline_flights"), "first": first, "last": last}}}
+    return with_memory(res, json.loads(f["memory"]))
+
+
+def row_verdict(f: dict) -> Verdict:
+    """The verdict of one database row: ``row_result`` through ``monitor.diagnose.verdict``, exactly as ``propwatch
+    diagnose`` (``--baseline`` where the vehicle memory compared it) prints it."""
+    return verdict_of(row_result(f))
 
 
 def verdict_cells(v: Verdict) -> str:
@@ -637,7 +642,7 @@ def flight_section(f: dict, verdict: Verdict | None = None, picture: str | None 
     """One flight: the verdict as ``propwatch diagnose`` words it, its evidence in pictures, where it came from."""
     e = html.escape
     verdict = verdict or row_verdict(f)
-    d = json.loads(f["diagnosis"]) if f["diagnosis"] else {}
+    d = row_result(f) if f["diagnosis"] else {}
     names = f["propeller_names"] or ["1", "2", "3", "4"]
     meta = [
         ("log", f["path"]),

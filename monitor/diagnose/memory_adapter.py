@@ -16,7 +16,7 @@ from monitor.diagnose.engine import Diagnosis
 from monitor.labels import LABEL_TABLE
 from monitor.memory.baseline import MIN_FLIGHTS, VehicleBaseline
 from monitor.memory.judge import judge
-from monitor.memory.summary import summarize
+from monitor.memory.summary import FlightSummary, summarize
 
 
 def log_vehicle_id(path: str | Path, fmt: str | None) -> str | None:
@@ -31,11 +31,25 @@ def log_vehicle_id(path: str | Path, fmt: str | None) -> str | None:
 
 
 def judge_flight(d: Diagnosis, table, baseline: VehicleBaseline, vehicle_id: str | None) -> dict:
-    """The ``baseline`` object of the diagnose JSON; replaces ``d.verdict`` by the vehicle-memory verdict where the
-    baseline is ready. Raises ``BaselineError`` where the log is another vehicle's (identity or rotors)."""
+    """The ``baseline`` object of the diagnose JSON; replaces ``d``'s verdict by the vehicle-memory verdict where the
+    baseline judged the flight (``with_memory``). Raises ``BaselineError`` where the log is another vehicle's
+    (identity or rotors)."""
     s = summarize(table)
     baseline.check_vehicle(vehicle_id, table.motor_names, s.basis, str(table.source or "log"))
-    out = {"compared_with": baseline.compared_with(), "compared_with_text": baseline.compared_with_text()}
+    out = judgement(d.to_json(), s, baseline)
+    res = with_memory(d.to_json(), out)
+    d.verdict, d.reason, d.propellers = res["verdict"], res["reason"], res["propellers"]
+    d.hypotheses, d.hypothesis_rule = res["hypotheses"], res["hypothesis_rule"]
+    return out
+
+
+def judgement(result: dict, s: FlightSummary, baseline: VehicleBaseline, compared_note: str = "") -> dict:
+    """The ``baseline`` object of the diagnose JSON for the flight whose nominal diagnosis is ``result`` (a
+    ``--json`` object) and whose rotor shares are ``s``, against ``baseline``: what it was compared with, and the
+    judgement (``monitor.memory.judge``) or a ``note`` saying why the verdict stays the nominal one.
+    ``compared_note`` is added to ``compared_with_text``. ``propwatch diagnose --baseline`` and the fleet both
+    judge here."""
+    out = {"compared_with": baseline.compared_with(), "compared_with_text": baseline.compared_with_text() + compared_note}
     if not baseline.ready:
         out["note"] = f"no vehicle baseline yet ({len(baseline.active())} of {MIN_FLIGHTS} flights): not compared"
         return out
@@ -46,12 +60,24 @@ def judge_flight(d: Diagnosis, table, baseline: VehicleBaseline, vehicle_id: str
     if baseline.cg_damage_separable is False and v["faulty_propellers"]:
         v = as_imbalance(v)
     out.update(v)
-    if _in_flight_change(d) and not v["faulty_propellers"]:
+    if _in_flight_change(result) and not v["faulty_propellers"]:
         # A propeller damaged mid-flight: the in-flight rule compared the flight with its own start and found the
         # change; the whole flight's shares mix the healthy part before it in, so its answer stands.
         out["note"] = "the in-flight rule's change stands: the whole flight against the vehicle's history did not name it"
+    return out
+
+
+def with_memory(result: dict, judged: dict | None) -> dict:
+    """``result`` (a diagnose ``--json`` object, its nominal diagnosis) with its ``baseline`` object ``judged``
+    (``judgement``): where that judged the flight (a label and no note), the verdict, propellers and hypotheses are
+    the vehicle memory's and the nominal verdict stays in ``verdict.nominal``. Every rendering of a flight compared
+    with its vehicle's history (text, JSON, PNG, the fleet's row and site) renders this."""
+    out = dict(result)
+    out["baseline"] = judged
+    if not judged or "label" not in judged or "note" in judged:
         return out
-    _apply(d, v, table.motor_names, out["compared_with_text"])
+    motor_names = [p.get("name") or str(p["propeller"]) for p in result.get("propellers") or []] or ["1", "2", "3", "4"]
+    out.update(_applied(result, judged, motor_names, judged["compared_with_text"]))
     return out
 
 
@@ -78,42 +104,47 @@ def as_imbalance(v: dict) -> dict:
     }
 
 
-def _in_flight_change(d: Diagnosis) -> bool:
-    return d.verdict is not None and d.verdict.get("source") == "in-flight change"
+def _in_flight_change(result: dict) -> bool:
+    return (result.get("verdict") or {}).get("source") == "in-flight change"
 
 
-def _apply(d: Diagnosis, v: dict, motor_names, compared: str) -> None:
-    nominal = d.verdict
+def _applied(result: dict, v: dict, motor_names, compared: str) -> dict:
+    """The keys of ``result`` the vehicle memory's judgement ``v`` replaces."""
+    nominal = result.get("verdict")
     label = v["label"]
-    d.verdict = {
-        "label": label,
-        "faulty_propellers": list(LABEL_TABLE[label]),
-        "faulty_names": [motor_names[i - 1] for i in LABEL_TABLE[label]],
-        "confidence": v["confidence"],
-        "source": "vehicle memory",
-        "compared_with": compared,
-        "fault_probability": None if nominal is None else nominal.get("fault_probability"),
-        "nominal": None
-        if nominal is None
-        else {k: nominal[k] for k in ("label", "faulty_propellers", "confidence") if k in nominal},
-    }
-    d.reason = None
     suspect = set(v.get("suspect_propellers", [])) | {k for h in v["hypotheses"] for k in h["faulty_propellers"]}
-    for p in d.propellers:
+    propellers = []
+    for p in result.get("propellers") or []:
         bad = p["propeller"] in LABEL_TABLE[label]
-        p["faulty"] = bad and v["confidence"] == "confident"
-        p["suspect"] = not p["faulty"] and p["propeller"] in suspect
-    d.hypotheses = [
-        {
-            "faulty_propellers": h["faulty_propellers"],
-            "statistic": h["statistic"],
-            "cause": h.get("cause")
-            or (
-                "as this vehicle's healthy flights"
-                if not h["faulty_propellers"]
-                else "damaged propeller " + "+".join(map(str, h["faulty_propellers"]))
-            ),
-        }
-        for h in v["hypotheses"]
-    ]
-    d.hypothesis_rule = None
+        faulty = bad and v["confidence"] == "confident"
+        propellers.append({**p, "faulty": faulty, "suspect": not faulty and p["propeller"] in suspect})
+    return {
+        "verdict": {
+            "label": label,
+            "faulty_propellers": list(LABEL_TABLE[label]),
+            "faulty_names": [motor_names[i - 1] for i in LABEL_TABLE[label]],
+            "confidence": v["confidence"],
+            "source": "vehicle memory",
+            "compared_with": compared,
+            "fault_probability": None if nominal is None else nominal.get("fault_probability"),
+            "nominal": None
+            if nominal is None
+            else {k: nominal[k] for k in ("label", "faulty_propellers", "confidence") if k in nominal},
+        },
+        "reason": None,
+        "propellers": propellers,
+        "hypotheses": [
+            {
+                "faulty_propellers": h["faulty_propellers"],
+                "statistic": h["statistic"],
+                "cause": h.get("cause")
+                or (
+                    "as this vehicle's healthy flights"
+                    if not h["faulty_propellers"]
+                    else "damaged propeller " + "+".join(map(str, h["faulty_propellers"]))
+                ),
+            }
+            for h in v["hypotheses"]
+        ],
+        "hypothesis_rule": None,
+    }
