@@ -77,3 +77,34 @@ def test_logs_with_one_file_name_are_named_by_their_paths(tmp_path, capsys):
     assert baseline(["learn", *logs, "--out", str(tmp_path / "B.json")]) == 2
     err = capsys.readouterr().err
     assert all(p in err for p in logs) and "no vehicle identity in the log: give --vehicle-id" in err, err
+
+
+def _diagnose_text(capsys, log, b) -> str:
+    from monitor.cli import main as propwatch
+
+    propwatch(["diagnose", str(log), "--baseline", str(b)])
+    return capsys.readouterr().out
+
+
+def test_diagnose_says_when_nothing_ties_the_log_to_the_baseline(flights, tmp_path, capsys):
+    b = tmp_path / "B.json"
+    assert baseline(["learn", *flights[1:], "--out", str(b)]) == 0  # flights of 2024-06-02 to 06-04
+    capsys.readouterr()
+    text = _diagnose_text(capsys, flights[1], b)
+    assert "(but this log is one of the baseline's own flights (flight_001.tlog): compared with itself)" in text.replace(
+        "\n    ", " "
+    ), text
+    text = _diagnose_text(capsys, flights[0], b).replace("\n    ", " ")
+    assert "(but this flight (2024-06-01) is older than the baseline's newest flight (2024-06-04))" in text, text
+    anon = write_flights(tmp_path / "anon", SimulateSpec(duration_s=20.0, first_flight=5, propellers="quadratic"))[0]
+    text = _diagnose_text(capsys, anon, b).replace("\n    ", " ")
+    assert "(but this log carries no vehicle id: nothing ties it to vehicle 5057000000000005)" in text, text
+    from monitor.cli import main as propwatch
+
+    propwatch(["diagnose", str(anon), "--baseline", str(b), "--json"])
+    assert json.loads(capsys.readouterr().out)["baseline"]["caveats"] == [
+        "this log carries no vehicle id: nothing ties it to vehicle 5057000000000005"
+    ]
+    text = _diagnose_text(capsys, write_flights(tmp_path / "later", SimulateSpec(duration_s=20.0, vehicle_id=5,
+                                                 first_flight=4, propellers="quadratic"))[0], b)  # fmt: skip
+    assert "(but" not in text and "caveat" not in text, text  # a later flight of the vehicle: nothing to say

@@ -15,7 +15,7 @@ from pathlib import Path
 
 from monitor.decision.rotor_share import BASELINE_S
 from monitor.diagnose.engine import Diagnosis, default_model, diagnose_file, round_floats
-from monitor.diagnose.memory_adapter import judge_flight, log_vehicle_id
+from monitor.diagnose.memory_adapter import judge_flight, log_date, log_vehicle_id
 from monitor.diagnose.verdict import POSITION, flight_seconds, set_words, verdict_of
 from monitor.errors import PropwatchError
 from monitor.logs.guards import DEFAULT_MAX_SECONDS
@@ -162,12 +162,17 @@ def render_text(result: dict) -> str:
     return "\n".join(textwrap.fill(ln, TEXT_WIDTH, subsequent_indent="    ", break_on_hyphens=False) for ln in lines)
 
 
-def memory_text(b: dict) -> str:
-    """The vehicle-memory comparison in two lines: what the flight was compared with, and what it showed."""
+def memory_text(b: dict, names=("1", "2", "3", "4")) -> str:
+    """The vehicle-memory comparison in two lines, rotors by the vehicle's own names: what the flight was compared
+    with (and what does not tie the log to it), and what it showed."""
+    caveats = "".join(f"\n    caveat: {c}" for c in b.get("caveats") or ())
     if "deviation_sigma" not in b:
-        return f"  vehicle memory: {b['compared_with_text']}: {b['note']}"
-    dev = ", ".join(f"{i + 1}: {x:+.1f}" for i, x in enumerate(b["deviation_sigma"]))
-    return f"  vehicle memory: {b['compared_with_text']}\n    each rotor's share against its normal (spreads) {dev}; {b['rule']}"
+        return f"  vehicle memory: {b['compared_with_text']}: {b['note']}{caveats}"
+    dev = ", ".join(f"{names[i]}: {x:+.1f}" for i, x in enumerate(b["deviation_sigma"]))
+    return (
+        f"  vehicle memory: {b['compared_with_text']}{caveats}\n"
+        f"    each rotor's share against its normal (spreads) {dev}; {b['rule']}"
+    )
 
 
 EXIT_NOT_CONFIDENT = 3
@@ -242,7 +247,7 @@ def main(argv: list[str] | None = None) -> int:
         res_baseline = None
         if memory is not None:
             try:
-                res_baseline = judge_flight(d, table, memory, log_vehicle_id(path, args.fmt))
+                res_baseline = judge_flight(d, table, memory, log_vehicle_id(path, args.fmt), log_date(path, args.fmt, table))
             except PropwatchError as exc:
                 results.append({"log": path, "error": str(exc)})
                 print(f"propwatch diagnose: error: {exc}", file=sys.stderr)
@@ -267,7 +272,7 @@ def main(argv: list[str] | None = None) -> int:
         if not args.json:
             print(format_text(d, res))
             if memory is not None:
-                print(memory_text(res["baseline"]))
+                print(memory_text(res["baseline"], [p["name"] for p in res.get("propellers") or []] or ("1", "2", "3", "4")))
     if progress is not None:
         progress.close()
     if args.json:

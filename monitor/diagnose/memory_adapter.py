@@ -30,13 +30,49 @@ def log_vehicle_id(path: str | Path, fmt: str | None) -> str | None:
         return None
 
 
-def judge_flight(d: Diagnosis, table, baseline: VehicleBaseline, vehicle_id: str | None) -> dict:
+def log_date(path: str | Path, fmt: str | None, table) -> str | None:
+    """The log's take-off date (UTC, ``YYYY-MM-DD``) from its own clock, None where it carries none."""
+    from monitor.logs import detect_format
+    from monitor.logs.identity import identify, plausible_utc
+    from monitor.memory.learn import flight_date
+
+    try:
+        offset = identify(Path(path), fmt or detect_format(Path(path))).utc_minus_boot_us
+    except Exception:  # noqa: BLE001 - a log without a readable clock is still judged, its date unknown
+        return None
+    air = table.airborne.nonzero()[0]
+    if offset is None or not len(air):
+        return None
+    start = int(table.timestamp_us[air[0]]) + int(offset)
+    return flight_date(start) if plausible_utc(start) else None
+
+
+def ties(baseline: VehicleBaseline, s: FlightSummary, vehicle_id: str | None, date: str | None) -> list[str]:
+    """What ties a log to the baseline it is judged against, where something does not: a log without a vehicle id,
+    one of the baseline's own flights, a flight older than the baseline's newest."""
+    out = []
+    if vehicle_id is None:
+        who = f"vehicle {baseline.vehicle_id}" if baseline.vehicle_id else "a vehicle the baseline does not name either"
+        out.append(f"this log carries no vehicle id: nothing ties it to {who}")
+    own = next((f for f in baseline.flights if f.get("summary") == s.to_dict()), None)
+    if own is not None:
+        out.append(f"this log is one of the baseline's own flights ({own['name']}): compared with itself")
+    dates = [f["date"] for f in baseline.active() if f.get("date")]
+    if own is None and date is not None and dates and date < max(dates):
+        out.append(f"this flight ({date}) is older than the baseline's newest flight ({max(dates)})")
+    return out
+
+
+def judge_flight(d: Diagnosis, table, baseline: VehicleBaseline, vehicle_id: str | None, date: str | None = None) -> dict:
     """The ``baseline`` object of the diagnose JSON; replaces ``d``'s verdict by the vehicle-memory verdict where the
-    baseline judged the flight (``with_memory``). Raises ``BaselineError`` where the log is another vehicle's
-    (identity or rotors)."""
+    baseline judged the flight (``with_memory``). ``vehicle_id`` and ``date`` are the log's own (None: it carries
+    none); where they do not tie the log to the baseline, its ``caveats`` say so. Raises ``BaselineError`` where
+    the log is another vehicle's (identity or rotors)."""
     s = summarize(table)
     baseline.check_vehicle(vehicle_id, table.motor_names, s.basis, str(table.source or "log"))
     out = judgement(d.to_json(), s, baseline)
+    if caveats := ties(baseline, s, vehicle_id, date):
+        out["caveats"] = caveats
     res = with_memory(d.to_json(), out)
     d.verdict, d.reason, d.propellers = res["verdict"], res["reason"], res["propellers"]
     d.hypotheses, d.hypothesis_rule = res["hypotheses"], res["hypothesis_rule"]

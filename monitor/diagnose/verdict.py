@@ -133,10 +133,14 @@ def compared_with_words(flights: int | None, first: str | None, last: str | None
 
 
 def _compared(result: dict) -> str | None:
-    c = (result.get("baseline") or {}).get("compared_with")
+    """What the flight was compared with, and what does not tie the log to it (the baseline's ``caveats``)."""
+    b = result.get("baseline") or {}
+    c = b.get("compared_with")
     if not isinstance(c, dict):
         return None
-    return compared_with_words(c.get("flights"), c.get("first"), c.get("last"))
+    words = compared_with_words(c.get("flights"), c.get("first"), c.get("last"))
+    caveats = b.get("caveats") or []
+    return f"{words} (but {'; '.join(caveats)})" if words and caveats else words
 
 
 def _classifier_probability(v: dict) -> list[float] | None:
