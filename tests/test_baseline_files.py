@@ -11,7 +11,7 @@ import shutil
 import pytest
 
 from monitor.memory.cli import main as baseline
-from offline.sim.cli import SimulateSpec, write_flights
+from offline.simulate import SimulateSpec, write_flights
 
 
 @pytest.fixture(scope="module")

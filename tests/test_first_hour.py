@@ -115,7 +115,7 @@ def test_a_healthy_flight_refused_names_the_rotor_by_the_vehicles_own_name():
 def test_fleet_ingest_does_not_print_rays_token_notice(tmp_path):
     pytest.importorskip("ray")
     pytest.importorskip("duckdb")
-    from offline.sim.cli import SimulateSpec, write_flights
+    from offline.simulate import SimulateSpec, write_flights
 
     write_flights(tmp_path / "logs", SimulateSpec(duration_s=15.0, propellers="quadratic"))
     r = subprocess.run(

@@ -25,7 +25,7 @@ def fleet(tmp_path_factory):
     pytest.importorskip("duckdb")
     pytest.importorskip("torch")  # simulate's learnt propellers
     from fleet.ingest import ingest
-    from offline.sim.cli import SimulateSpec, write_flights
+    from offline.simulate import SimulateSpec, write_flights
 
     root = tmp_path_factory.mktemp("fleet")
     for vid, (healthy, label, damaged) in VEHICLES.items():

@@ -12,9 +12,9 @@ from pymavlink import mavutil
 from test_sim_io import read_tlog
 
 from monitor.logs.identity import identify
-from offline.sim.cli import SimulateSpec, write_flights
-from offline.sim.cli import main as simulate_main
 from offline.sim.io_npz import read_npz
+from offline.simulate import SimulateSpec, write_flights
+from offline.simulate import main as simulate_main
 
 DAY_S = 86_400
 
