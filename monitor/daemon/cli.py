@@ -45,7 +45,8 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     )
     p.add_argument("--model", help="classifier ONNX (overrides model_path)")
     p.add_argument(
-        "--vehicle", help="vehicle YAML whose ESC curve overrides the model's, or a `propwatch adapt` folder (its model too)"
+        "--vehicle",
+        help="vehicle YAML whose ESC curve overrides the model's, or a folder written by propwatch adapt (its model too)",
     )
     p.add_argument("--report", help="write counters and latency percentiles as JSON at exit")
     p.add_argument(

@@ -1,4 +1,4 @@
-"""``propwatch inspect LOG [--json] [--csv DIR]``: what propwatch read from a log.
+"""propwatch inspect LOG [--json] [--csv DIR]: what propwatch read from a log.
 
 Per message (tlog, DataFlash) or topic (ULog): count, mean rate, time span,
 the longest gap and the number of gaps (an interval over 5x the median and
@@ -6,9 +6,9 @@ the longest gap and the number of gaps (an interval over 5x the median and
 functions = motor mapping, frame / vehicle type), the motor command range per
 rotor (vehicle's name beside its PX4 number), and the 20 Hz grid diagnose uses.
 
-``--csv DIR`` writes ``LOG.signals.csv`` (the resampled signals) and
-``LOG.features.csv`` (exactly the features diagnose feeds the model, with
-``window_end`` = 1 at the last step of every window it classifies). Times are
+--csv DIR writes LOG.signals.csv (the resampled signals) and
+LOG.features.csv (exactly the features diagnose feeds the model, with
+window_end = 1 at the last step of every window it classifies). Times are
 seconds on the autopilot's boot clock (tlog: the ground station's receive clock).
 """
 
