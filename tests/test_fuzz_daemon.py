@@ -361,3 +361,16 @@ def test_blind_notices_are_rate_limited(toy):
 def test_plausible_config_bounds():
     with pytest.raises(Exception, match="plausible.pwm_max_us"):
         PlausibleConfig(pwm_min_us=1000.0, pwm_max_us=900.0)
+
+
+def test_an_autopilot_heard_long_after_start_up_is_not_a_frozen_clock(toy, tmp_path):
+    """The monitor waits for its autopilot (here longer than ``frozen_clock_s``): the autopilot's first messages, whose
+    clock is being confirmed, are no clock standing still (the try-out started the replay after the monitor, and the
+    ground station read "BLIND: autopilot clock frozen")."""
+    daemon, link = make_daemon(toy, tmp_path / "ev.jsonl", BLIND_FAST)
+    time.sleep(0.3)  # three frozen_clock_s with nothing from the autopilot
+    feed(daemon, px4_stream(100.0, 104.0), tick_every=1)
+    assert daemon.blind.spells == 0 and not any(t.startswith("PROPWATCH BLIND") for t, _ in link.statustexts())
+    time.sleep(0.3)  # the autopilot falls silent, then speaks again: its clock moves on
+    feed(daemon, px4_stream(104.02, 106.0), tick_every=1)
+    assert daemon.blind.spells == 0, daemon.notifier.statuses()

@@ -14,7 +14,7 @@ import time
 import pytest
 from fuzz_helpers import RecordingNotifier
 from pymavlink.dialects.v20 import common as mavlink
-from test_daemon_helpers import synth_flight, toy_model
+from test_daemon_helpers import UDP_SPEED, synth_flight, toy_model
 
 from monitor.daemon.cli import guard
 from monitor.daemon.config import monitor_config_from_mapping
@@ -31,7 +31,7 @@ WRONG_KEY = bytes(range(1, 33))
 # Take-off at 2 s, the pin's 2 s of heartbeats, a 5-s window, then about 8 s of saturated windows for the toy
 # network's FAULT (the decision rule's analytic threshold): a FAULT by ~17 s, with margin.
 FLIGHT_S = 24.0
-SPEED = 8.0
+SPEED = UDP_SPEED  # the daemon in a thread of this process, beside the sender
 
 
 @pytest.fixture(scope="module")

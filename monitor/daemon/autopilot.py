@@ -85,6 +85,11 @@ class Autopilot:
         self.rates[kind] += 1
         now = time.monotonic()
         if kind in self.fast:
+            last = max(self.last_fast_rx.values(), default=None)
+            if last is None or now - last >= self.cfg.blind.frozen_clock_s:
+                # The first fast message, or the first after a silence: a frozen clock is one that stands still while
+                # messages keep coming, so its time counts from here (the decoder confirms a clock over a few samples)
+                self.clock_moved_at = now
             self.last_fast_rx[kind] = now
         if dec.clock_us != self.clock_us:
             self.clock_us, self.clock_moved_at = dec.clock_us, now
