@@ -558,9 +558,13 @@ def apply_in_flight_fault(d: Diagnosis, motor_names, unfit: list[str] = ()) -> N
     if d.verdict is None or not change:
         return
     if unfit:
+        # As the evidence line and the JSON tell it: seconds after take-off, and the sets of that first fault alert.
+        first = next((a for a in d.decision.get("alerts") or [] if a["level"] == "fault"), None)
+        sets = first["hypothesis_sets"] if first else change["hypothesis_sets"]
+        takeoff_s = d.segments[0]["start_boot_s"] if d.segments else 0.0
         d.warnings.append(
-            f"the in-flight rule reached fault level at {change['first_fault_boot_s']:.1f} s "
-            f"({' or '.join('+'.join(map(str, s)) for s in change['hypothesis_sets'])}) but this log is not like the "
+            f"the in-flight rule reached fault level at {change['first_fault_boot_s'] - takeoff_s:.0f} s after take-off "
+            f"({' or '.join('+'.join(map(str, s)) for s in sets)}) but this log is not like the "
             f"flights its thresholds were calibrated on ({'; '.join(unfit)}): the verdict stays the whole flight's"
         )
         return
