@@ -37,8 +37,9 @@ from monitor.vehicle import GRAVITY_M_S2  # noqa: E402
 # has not read when the socket's buffer is full is lost, so a fast replay tests the machine's spare cores, not the
 # daemon. At 2x the daemon needs 4-5 % of a core (toy model; 19-20 % at 8-10x, from /proc/PID/stat between "ready"
 # and the end of the replay) and the buffer holds about 1 s of datagrams while it waits for one. Measured with
-# `pytest tests/test_daemon_process.py` beside four `python -c "while True: pass"` (load 12-15 on 2 cores): at
-# 8-10x, 30 % of the datagrams were lost and 2 tests raised no FAULT or classified too little; at 2x none was lost.
+# `pytest tests/test_daemon_process.py tests/test_fuzz_link.py tests/test_security_pinning.py
+# tests/test_security_signing.py` beside four `python -c "while True: pass"` (load 8-15 on 2 cores): at 8-10x,
+# 30 % of the datagrams were lost and 4 tests raised no FAULT or saw lost samples as a clock jump; at 2x all 39 passed.
 UDP_SPEED = 2.0
 
 HOVER_PWM_US = 1450.0

@@ -101,3 +101,65 @@ def _sidecar(path: str) -> str:
         if k >= first:
             return name.name
     raise AssertionError(f"no sidecar for {path}")
+
+
+CRAZYFLIE = REPO / "models" / "crazyflie.yaml"
+# (folder, fleet ingest --format, diagnose's options for its logs)
+REAL = [
+    ("px4_ulog", None, []),
+    ("ardupilot_log171", None, []),
+    ("crazypad/motor", "crazypad", ["--format", "crazypad", "--vehicle", str(CRAZYFLIE)]),
+    ("crazypad/controller", "crazypad-controller", ["--format", "crazypad-controller", "--vehicle", str(CRAZYFLIE)]),
+]
+
+
+@pytest.mark.slow
+@pytest.mark.realdata
+@pytest.mark.skipif(not (DATA / "crazypad").is_dir(), reason=f"real logs not found at {DATA}")
+def test_the_site_says_what_diagnose_says_on_every_real_log(tmp_path, capsys):
+    """Every flight log in ../shared/data through the fleet (its row and site) and through ``propwatch diagnose``
+    with the model and vehicle the fleet chose: the same verdict, word for word (no history: the nominal one)."""
+    pytest.importorskip("duckdb")
+    from fleet.ingest import ingest
+    from fleet.report import row_verdict, write_site
+    from fleet.worker import IngestSettings
+    from monitor.diagnose.verdict import verdict_of
+
+    db = tmp_path / "real.duckdb"
+    options = {}
+    for folder, fmt, opts in REAL:
+        ingest([str(DATA / folder)], db, IngestSettings(csv_format=fmt), ray_address="off", progress=False)
+        options[folder] = opts
+    write_site(db, tmp_path / "site", pictures="none")
+    site = "".join(p.read_text() for p in (tmp_path / "site").rglob("*.html")).replace("&#x27;", "'")
+    rows = rows_of(db)
+    assert len(rows) == sum(1 for f, *_ in REAL for p in (DATA / f).rglob("*") if p.suffix in (".ulg", ".bin", ".gz"))
+    for r in rows:
+        opts = next(o for f, o in options.items() if r["path"].startswith(str(DATA / f)))
+        code = propwatch(["diagnose", r["path"], "--json", "--hop", str(IngestSettings().hop), *opts])
+        out = capsys.readouterr().out
+        if r["status"] == "error":
+            assert code == 2, (r["path"], out)
+            continue
+        res = json.loads(out)
+        said, shown = verdict_of(res), row_verdict(r)
+        assert shown.to_json() == said.to_json(), (r["path"], shown.headline, said.headline)
+        assert said.headline in site, (r["path"], said.headline)
+
+
+@pytest.mark.realdata
+@pytest.mark.skipif(not (DATA / "ardupilot_log171").is_dir(), reason=f"log171 not found at {DATA}")
+def test_a_warning_tells_the_in_flight_fault_as_the_evidence_and_the_json_do(capsys):
+    """log171: the in-flight rule's first FAULT, which the log does not fit, in seconds after take-off and with the
+    sets of that alert, in the warning as in the evidence line and the JSON."""
+    log = DATA / "ardupilot_log171" / "log171.bin"
+    propwatch(["diagnose", str(log), "--json"])
+    res = json.loads(capsys.readouterr().out)
+    first = next(a for a in res["decision"]["alerts"] if a["level"] == "fault")
+    after_s = first["t_boot_s"] - res["airborne_segments"][0]["start_boot_s"]
+    sets = " or ".join("+".join(map(str, s)) for s in first["hypothesis_sets"])
+    warning = next(w for w in res["warnings"] if w.startswith("the in-flight rule reached fault level"))
+    assert f"at {after_s:.0f} s after take-off ({sets})" in warning, (warning, first)
+    propwatch(["diagnose", str(log)])
+    text = capsys.readouterr().out.replace("\n    ", " ")
+    assert f"at {after_s:.0f} s after take-off" in text.split("warning:")[0]  # the evidence line: the same instant
