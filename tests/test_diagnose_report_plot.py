@@ -57,7 +57,7 @@ def test_report_names_empty_panels_not_logged(tmp_path, monkeypatch):
 
     named = []
     original = report._not_logged
-    monkeypatch.setattr(report, "_not_logged", lambda ax, what: named.append(what) or original(ax, what))
+    monkeypatch.setattr(report, "_not_logged", lambda ax, what, *why: named.append(what) or original(ax, what, *why))
 
     n = 200
     t_us = (np.arange(n) * 50_000).astype(np.int64)
@@ -98,3 +98,64 @@ def test_the_share_band_follows_the_vehicle_memory_where_it_compared_the_flight(
     np.testing.assert_allclose(half, [3 * 0.0125, 3 * 0.01, 3 * 0.01, 3 * 0.0125])  # 3 spreads
     assert not band[0, 0] <= share[0, 0] <= band[0, 1]  # rotor 1 is outside its normal, as the memory said
     assert report.memory_band(share, None) is None and report.memory_band(share, {"note": "no baseline yet"}) is None
+
+
+def _table(airborne: np.ndarray):
+    from monitor.flight import FlightTable
+
+    n = len(airborne)
+    return FlightTable(
+        source="x.csv",
+        rate_hz=20.0,
+        timestamp_us=(np.arange(n) * 50_000).astype(np.int64),
+        motor_cmd=np.full((n, 4), 1500.0),
+        motor_rpm=np.full((n, 4), 7000.0),
+        roll_rad=np.zeros(n),
+        pitch_rad=np.zeros(n),
+        yaw_rad=np.zeros(n),
+        roll_rate_rad_s=np.zeros(n),
+        pitch_rate_rad_s=np.zeros(n),
+        yaw_rate_rad_s=np.zeros(n),
+        battery_v=np.full(n, 16.0),
+        airborne=airborne,
+    )
+
+
+def test_a_flight_airborne_for_a_second_is_not_called_never_airborne(monkeypatch):
+    pytest.importorskip("matplotlib")
+    import matplotlib.pyplot as plt
+
+    from monitor.diagnose.engine import Diagnosis
+    from monitor.diagnose.verdict import verdict_of
+
+    named = []
+    original = report._not_logged
+    monkeypatch.setattr(report, "_not_logged", lambda ax, what, *why: named.append(what) or original(ax, what, *why))
+    airborne = np.zeros(200, bool)
+    airborne[20:36] = True  # 0.8 s: less than one 2-s mean
+    d = Diagnosis("x.csv", None, 0, [], reason="test")
+    plt.close(report.figure(verdict_of(d.to_json()), d, _table(airborne)))
+    assert "airborne too briefly for a 2-s mean: the share" in named and not any("never airborne" in w for w in named)
+
+
+def test_the_next_step_is_never_drawn_over_the_first_panels_caption():
+    pytest.importorskip("matplotlib")
+    import dataclasses
+
+    import matplotlib.pyplot as plt
+
+    from monitor.diagnose.engine import Diagnosis
+    from monitor.diagnose.verdict import verdict_of
+
+    d = Diagnosis("x.csv", None, 0, [], reason="test")
+    v = verdict_of(d.to_json())
+    for words in (1, 30, 60):  # one, two and three lines of next step
+        long = dataclasses.replace(v, headline="Propeller 3 (front-left) " * 6, next_step="inspect it " * words)
+        fig = report.figure(long, d, _table(np.ones(400, bool)))
+        fig.canvas.draw()
+        r = fig.canvas.get_renderer()
+        nxt = next(t for t in fig.texts if t.get_gid() == "verdict-next").get_window_extent(r)
+        head = fig._suptitle.get_window_extent(r)
+        caption = fig.axes[0].title.get_window_extent(r)
+        plt.close(fig)
+        assert nxt.y0 > caption.y1 and head.y0 > nxt.y1, (words, nxt, caption, head)

@@ -98,9 +98,16 @@ def memory_band(share: np.ndarray, memory: dict | None) -> np.ndarray | None:
     return np.stack([normal - 3 * spread, normal + 3 * spread], axis=1)
 
 
-def _not_logged(ax, what: str) -> None:
+def _not_logged(ax, what: str, why: str = "not logged") -> None:
     ax.set_yticks([])
-    ax.text(0.5, 0.5, f"{what}: not logged", transform=ax.transAxes, ha="center", va="center", color="0.4", fontsize=11)
+    ax.text(0.5, 0.5, f"{what}: {why}", transform=ax.transAxes, ha="center", va="center", color="0.4", fontsize=11)
+
+
+# Figure fractions of the 12-inch report figure: a 13-pt headline line, a 9.5-pt next-step line (x 1.2 line
+# spacing), and the first panel's two 8-pt caption lines with their padding.
+HEADLINE_LINE = 13 * 1.2 / 72 / 12
+NEXT_LINE = 9.5 * 1.2 / 72 / 12
+CAPTION_ABOVE = 0.04
 
 
 def figure(v: Verdict, d: Diagnosis, table: FlightTable, memory: dict | None = None):
@@ -118,6 +125,12 @@ def figure(v: Verdict, d: Diagnosis, table: FlightTable, memory: dict | None = N
     zero = v.takeoff_boot_s if v.takeoff_boot_s is not None else (float(t_boot[0]) if len(t_boot) else 0.0)
     t = t_boot - zero
     fig = plt.figure(figsize=(12, 12))
+    headline = textwrap.wrap(v.headline, 95)
+    next_step = textwrap.wrap("Next step: " + v.next_step, 140)
+    # Stacked from the top, in figure fractions of this 12-inch figure: the headline's lines (13 pt), the next step's
+    # (9.5 pt), then the first panel's two-line caption above its axes, so none is drawn over another.
+    next_y = 0.985 - HEADLINE_LINE * len(headline) - 0.006
+    top = next_y - NEXT_LINE * len(next_step) - CAPTION_ABOVE
     gs = fig.add_gridspec(
         7,
         2,
@@ -125,7 +138,7 @@ def figure(v: Verdict, d: Diagnosis, table: FlightTable, memory: dict | None = N
         height_ratios=(0.7, 0.7, 0.7, 0.7, 1.2, 1.1, 1.0),
         hspace=0.45,
         wspace=0.12,
-        top=0.88,
+        top=top,
         bottom=0.05,
         left=0.07,
         right=0.98,
@@ -133,11 +146,10 @@ def figure(v: Verdict, d: Diagnosis, table: FlightTable, memory: dict | None = N
     ax = [fig.add_subplot(gs[0, 0])]
     ax += [fig.add_subplot(gs[k, 0], sharex=ax[0]) for k in range(1, 7)]
     names = [f"{v.names[i]} {POSITION[i + 1]}" for i in range(4)]
-    headline = "\n".join(textwrap.wrap(v.headline, 95))
     colour = {"damaged": "tab:red", "inspect": "darkorange", "imbalance": "darkorange", "healthy": "tab:green"}
-    fig.suptitle(headline, x=0.07, y=0.985, ha="left", fontsize=13, weight="bold", color=colour.get(v.state, "0.2"))
+    fig.suptitle("\n".join(headline), x=0.07, y=0.985, ha="left", fontsize=13, weight="bold", color=colour.get(v.state, "0.2"))
     fig._suptitle.set_gid("verdict-headline")
-    nxt = fig.text(0.07, 0.93, "\n".join(textwrap.wrap("Next step: " + v.next_step, 140)), fontsize=9.5, va="top")
+    nxt = fig.text(0.07, next_y, "\n".join(next_step), fontsize=9.5, va="top")
     nxt.set_gid("verdict-next")
     share, band = thrust_shares(table)
     vehicle_band = memory_band(share, memory)
@@ -165,7 +177,12 @@ def figure(v: Verdict, d: Diagnosis, table: FlightTable, memory: dict | None = N
                 lo, hi = min(lo, band[i, 0]), max(hi, band[i, 1])
             a.set_ylim(100 * lo - 1, 100 * hi + 1)
         else:
-            _not_logged(a, "never airborne, so the share" if np.isfinite(table.motor_cmd).any() else "motor outputs")
+            if not np.isfinite(table.motor_cmd).any():
+                _not_logged(a, "motor outputs")
+            elif table.airborne.any():  # airborne, but not for one 2-s mean (the text's "airborne 0-1 s")
+                _not_logged(a, "airborne too briefly for a 2-s mean: the share", "not drawn")
+            else:
+                _not_logged(a, "never airborne: the share", "not drawn")
         a.text(
             0.005,
             0.92,
