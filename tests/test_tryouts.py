@@ -56,7 +56,7 @@ def test_the_section_has_the_two_tryouts():
 def test_a_propeller_that_bends_in_the_air_reaches_the_ground_station_as_prop_3_fault(tmp_path):
     out = run_block(tryout_blocks()[0], tmp_path)
     texts = re.findall(r'"text": "(PROP [^"]*)"', out)
-    assert any(t.startswith("PROP 3 FAULT") for t in texts), out + (tmp_path / "tryout" / "monitor.log").read_text()
+    assert any(t.startswith("PROP 3 FAULT") for t in texts), out + (tmp_path / "tryout" / "journal.txt").read_text()
     assert all(t.startswith("PROP 3 ") for t in texts), texts
 
 
