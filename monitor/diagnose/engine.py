@@ -44,6 +44,14 @@ from monitor.decision.replay import FlightSteps, replay
 from monitor.decision.rule import Decision, WindowEvidence
 from monitor.decision.thresholds import file_sha256
 from monitor.diagnose.physics import SET_PRIOR, PhysicsEvidence, own_baseline, physics_evidence
+from monitor.diagnose.physics_first import (
+    motor_output_alarms,
+    network_alone,
+    physics_replay,
+    physics_verdict,
+    propellers_for,
+)
+from monitor.diagnose.shares import ShareEvidence, has_outputs, share_evidence
 from monitor.errors import ModelError
 from monitor.esc import EscCurve
 from monitor.features import compute_features, signals_needed, sliding_windows, valid_windows
@@ -89,6 +97,7 @@ LARGE_ATTITUDE_RAD = np.deg2rad(45.0)
 LARGE_ATTITUDE_MAX_FRACTION = 0.01
 QUADROTOR = "MAV_TYPE_QUADROTOR"  # the one vehicle type the models are for (pymavlink's MAV_TYPE name)
 RPM_FEATURES = ("rpm_1", "rpm_2", "rpm_3", "rpm_4", "rpm_mean")
+FLAG_LEVEL = 0.9  # the classifier's FAULTY level (DecisionConfig.faulty_probability): below it, alone, a note
 
 
 @dataclass
@@ -109,6 +118,8 @@ class Diagnosis:
     hypotheses: list[dict] | None = None  # the model's conformal set (monitor.decision.hypotheses), when it has a rule
     hypothesis_rule: dict | None = None  # that rule: score, threshold, coverage, calibration flights
     physics_basis: str | None = None  # which windows the physics evidence read, when not the whole flight's
+    shares: ShareEvidence | None = None  # the flight's own balance from its rotors' shares (no network, no airframe file)
+    network: dict = field(default_factory=dict)  # {"used": bool, "why_not": str | None}: whether the classifier spoke
 
     def to_json(self) -> dict:
         """The ``--json`` object (every key documented in docs/diagnose-json.md).
@@ -135,6 +146,8 @@ class Diagnosis:
             "rotor_effectiveness": self.physics.rotor_effectiveness if self.physics else None,
             "rotor_effectiveness_std": self.physics.rotor_effectiveness_std if self.physics else None,
             **({"rotor_effectiveness_basis": self.physics_basis} if self.physics_basis else {}),
+            "shares": self.shares.to_json() if self.shares is not None else None,
+            "network": self.network or None,
         }
 
 
@@ -186,10 +199,31 @@ def _t_s(table: FlightTable, i) -> np.ndarray:
     return np.asarray(table.timestamp_us)[i] / US_PER_S
 
 
+def log_refusal(table: FlightTable) -> str | None:
+    """Why this log gets no verdict at all (None: it gets one): not a quad-X, never airborne, or no motor outputs
+    or attitude in flight. Everything else is judged, by physics at least."""
+    vehicle_type = table.extras.get("vehicle_type", "")
+    if vehicle_type and not vehicle_type.startswith(QUADROTOR + " "):
+        return f"not a quad-X multicopter: the log says {vehicle_type}; propwatch knows four rotors in PX4 quad-X order"
+    air = table.airborne
+    if not air.any():
+        return "no airborne flight found (armed, throttle above idle, off the ground)"
+    if not has_outputs(table):
+        return "motor outputs unknown during flight: the shares of the four rotors need them"
+    if not (np.isfinite(table.roll_rad[air]).any() or np.isfinite(table.yaw_rad[air]).any()):
+        return "attitude unknown during flight: the flight cannot be told level from tilted"
+    return None
+
+
 def envelope_checks(
     table: FlightTable, clf: Classifier, esc: EscCurve | None = None, figures: dict | None = None
 ) -> tuple[list[str], str | None]:
-    """(warnings, refusal reason or None) for a log the model may not fit; ``figures`` gets the numbers."""
+    """(warnings, why the classifier is silent on this log or None) -- ``figures`` gets the numbers.
+
+    The classifier speaks only on the airframe it was trained on: same command unit, every signal it reads, and the
+    airborne RPM inside its training envelope's warning bounds. (The response to differential thrust does not tell
+    airframes apart at 20 Hz: on the model's own airframe in our simulator it spans x0.04-0.60 of the file's,
+    `python -m bench.airframe_response`.)"""
     warnings: list[str] = []
     figures = {} if figures is None else figures
     unit = table.extras.get("esc_cmd_unit", table.extras.get("motor_cmd_unit"))  # the unit the ESCs received
@@ -203,14 +237,7 @@ def envelope_checks(
             f"ESC curve takes '{esc.cmd_unit}' (another class of vehicle); use a model trained for it"
             + (f": try {' or '.join(fits)}" if fits else "")
         )
-    vehicle_type = table.extras.get("vehicle_type", "")
-    if vehicle_type and not vehicle_type.startswith(QUADROTOR + " "):
-        return warnings, (
-            f"not a quad-X multicopter: the log says {vehicle_type}; the model knows four rotors in PX4 quad-X order"
-        )
     air = table.airborne
-    if not air.any():
-        return warnings, "no airborne flight found (armed, throttle above idle, off the ground)"
     sig = table.signals()
     for f in clf.info.features:
         for name in signals_needed(f):
@@ -222,10 +249,8 @@ def envelope_checks(
                 )
                 return warnings, f"{what} unknown during flight: the model needs it for feature {f}"
     warn, refusal = rpm_envelope(table, clf, figures)
-    if refusal:
-        return warnings, refusal
-    if warn:
-        warnings.append(warn)
+    if refusal or warn:
+        return warnings, refusal or warn.split(": the verdict is")[0]
     tilt = np.maximum(np.abs(table.roll_rad[air]), np.abs(table.pitch_rad[air]))
     big = float(np.mean(np.nan_to_num(tilt) > LARGE_ATTITUDE_RAD))
     figures["large_attitude_fraction"] = round(big, 4)
@@ -287,8 +312,7 @@ def diagnose_table(
         raise ModelError(f"{table.source}: table at {table.rate_hz} Hz but the model expects {info.sample_rate_hz} Hz")
     warnings = list(table.warnings)
     figures: dict = {}
-    env_warn, refusal = envelope_checks(table, clf, esc, figures)
-    warnings += env_warn
+    refusal = log_refusal(table)
     segs = [
         {
             "start_boot_s": float(_t_s(table, a)),
@@ -300,14 +324,21 @@ def diagnose_table(
     d = Diagnosis(table.source, None, 0, warnings, refusal, segments=segs, hop_steps=hop, envelope=figures)
     if refusal:
         return d
-    feats = compute_features(table.signals(), info.features)
-    ends = window_ends(table, feats, info.window, hop)
-    if len(ends) == 0:
+    d.shares = share_evidence(table)
+    alarms = motor_output_alarms(table, esc)
+    env_warn, silent = envelope_checks(table, clf, esc, figures)
+    warnings += env_warn
+    feats = compute_features(table.signals(), info.features) if silent is None else None
+    ends = window_ends(table, feats, info.window, hop) if silent is None else np.empty(0, dtype=np.int64)
+    if silent is None and len(ends) == 0:
         longest = max((s["steps"] for s in segs), default=0)
-        d.reason = (
+        silent = (
             f"no usable window: {info.window} consecutive airborne steps with every signal measured are needed "
             f"({info.window / table.rate_hz:g} s); longest airborne segment has {longest} steps"
         )
+    d.network = {"used": silent is None, "why_not": silent}
+    if silent is not None:
+        physics_only(d, table, clf, info.window, hop, alarms)
         return d
     labels, faults = predict_at(clf, feats, ends, info.window, batch)
     mean_labels = labels.mean(axis=0)
@@ -364,7 +395,73 @@ def diagnose_table(
         weigh_in_flight_sets(d, table.motor_names)
     elif physics_why_not:
         d.warnings.append(physics_why_not)
+    network_as_note(d, table)
+    apply_motor_output(d, table, alarms)
     return d
+
+
+def physics_only(d: Diagnosis, table: FlightTable, clf: Classifier, window: int, hop: int, alarms: list) -> None:
+    """The verdict where the classifier is silent (``d.network.why_not``): physics alone
+    (``monitor.diagnose.physics_first``), and a warning that says so."""
+    d.decision = physics_replay(table, clf.path, window, hop)
+    unfit = [] if d.envelope.get("large_attitude_fraction", 0.0) <= LARGE_ATTITUDE_MAX_FRACTION else ["a flip or crash"]
+    if "large_attitude_fraction" not in d.envelope:
+        air = table.airborne
+        tilt = np.maximum(np.abs(table.roll_rad[air]), np.abs(table.pitch_rad[air]))
+        big = float(np.mean(np.nan_to_num(tilt) > LARGE_ATTITUDE_RAD))
+        d.envelope["large_attitude_fraction"] = round(big, 4)
+        if big > LARGE_ATTITUDE_MAX_FRACTION:
+            unfit = [f"{100 * big:.1f} % of the airborne time beyond 45 deg"]
+    d.verdict, d.hypotheses, reason = physics_verdict(table, d.shares, d.decision, alarms, unfit)
+    d.warnings.append("physics only: this airframe is not the one the network was trained on (" + d.network["why_not"] + ")")
+    if unfit and (d.decision or {}).get("in_flight_fault"):
+        d.warnings.append(f"the in-flight rule reached fault level but {'; '.join(unfit)}: its answer is not the verdict")
+    if d.verdict is None:
+        d.reason = reason
+        return
+    d.propellers = propellers_for(d.verdict["label"], d.verdict["confidence"], table.motor_names)
+
+
+def network_as_note(d: Diagnosis, table: FlightTable) -> None:
+    """Where the network alone names the verdict's propellers (physics names none of them and the network's own
+    probability stays below its FAULTY level), the verdict is physics' and the network's answer a note."""
+    v = d.verdict
+    if v is None or v.get("source"):
+        return
+    hyps = d.hypotheses if d.hypotheses is not None else (d.physics.hypotheses if d.physics else None)
+    physics_sets = [tuple(h["faulty_propellers"]) for h in d.physics.hypotheses] if d.physics is not None else None
+    p = v.get("network_fault_probability") or v.get("fault_probability")
+    if not network_alone(v, hyps, d.shares, physics_sets, p):
+        return
+    named = sorted({i for h in (hyps or [{"faulty_propellers": v["faulty_propellers"]}]) for i in h["faulty_propellers"]})
+    pv, ph, _ = physics_verdict(table, d.shares, None, [], [])
+    if pv is None:
+        return
+    pv["network"] = {k: v[k] for k in ("label", "faulty_propellers", "confidence") if k in v}
+    pv["fault_probability"] = v.get("fault_probability")
+    if v.get("network_fault_probability"):
+        pv["network_fault_probability"] = v["network_fault_probability"]
+    d.verdict, d.hypotheses = pv, ph
+    d.propellers = propellers_for(pv["label"], pv["confidence"], table.motor_names)
+    for prop, q in zip(d.propellers, p or []):
+        prop["fault_probability"] = float(q)
+    names = "+".join(table.motor_names[i - 1] for i in named)
+    why = (
+        "the balance of forces calls the flight healthy"
+        if physics_sets
+        else f"physics names none of them, and its own probability stays below {100 * FLAG_LEVEL:.0f} %"
+    )
+    d.warnings.append(f"the fault classifier alone points at {names} ({why}): a note, not a propeller to inspect")
+
+
+def apply_motor_output(d: Diagnosis, table: FlightTable, alarms: list) -> None:
+    """A stopped or saturated motor is the verdict whatever the propellers show (a motor or ESC failure)."""
+    if not alarms or d.verdict is None:
+        return
+    pv, ph, _ = physics_verdict(table, d.shares, None, alarms, [])
+    pv["before"] = {k: d.verdict[k] for k in ("label", "faulty_propellers", "confidence") if k in d.verdict}
+    d.verdict, d.hypotheses = pv, ph
+    d.propellers = propellers_for(pv["label"], pv["confidence"], table.motor_names)
 
 
 def weigh_in_flight_sets(d: Diagnosis, motor_names) -> None:

@@ -96,6 +96,9 @@ def judgement(result: dict, s: FlightSummary, baseline: VehicleBaseline, compare
     if baseline.cg_damage_separable is False and v["faulty_propellers"]:
         v = as_imbalance(v)
     out.update(v)
+    if (result.get("verdict") or {}).get("source") == "motor output":
+        out["note"] = "a stopped or saturated motor stands: the vehicle's history judges propellers, not motors"
+        return out
     if _in_flight_change(result) and not v["faulty_propellers"]:
         # A propeller damaged mid-flight: the in-flight rule compared the flight with its own start and found the
         # change; the whole flight's shares mix the healthy part before it in, so its answer stands.

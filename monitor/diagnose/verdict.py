@@ -158,7 +158,7 @@ def _verdict_sets(result: dict) -> list[tuple[int, ...]]:
     hyps = result.get("hypotheses") or []
     if v.get("imbalance_rotors"):
         return [tuple(v["imbalance_rotors"])]
-    if result.get("hypothesis_rule") is not None or v.get("source") == "in-flight change":
+    if result.get("hypothesis_rule") is not None or v.get("source") in ("in-flight change", "first flight", "motor output"):
         sets = [tuple(h["faulty_propellers"]) for h in hyps if "faulty_propellers" in h]
         if sets:
             return sets
@@ -197,6 +197,24 @@ def _evidence(result: dict, names, takeoff: float | None) -> list[str]:
             + (f" (each to within {100 * max(std):.0f} %)" if std else "")
             + "."
         )
+    sh = result.get("shares")
+    if sh and sh.get("level_shares"):
+        what = "omega^2" if sh.get("basis") == "omega2" else "motor output"
+        out.append(
+            f"Shares ({what}, physics): "
+            + ", ".join(f"{_num(i + 1, names)} {100 * x:.0f} %" for i, x in enumerate(sh["level_shares"]))
+            + " of the mean of the four in level flight"
+            + (
+                f"; {_num(sh['top_rotor'], names)} stands {100 * sh['standout']:.1f} points above the next "
+                f"(healthy airframes reach {100 * sh['standout_threshold']:.0f})"
+                if sh.get("top_rotor")
+                else ""
+            )
+            + "."
+        )
+    net = result.get("network") or {}
+    if net and not net.get("used"):
+        out.append("Fault classifier: silent (physics only: this airframe is not the one the network was trained on).")
     dec = result.get("decision")
     if dec:
         faults = [a for a in dec.get("alerts", []) if a.get("level") == "fault"]
@@ -278,11 +296,15 @@ def verdict_of(result: dict) -> Verdict:
     change = flight_seconds(v["change_boot_s"], takeoff) if v.get("source") == "in-flight change" else None
     when = f" (from {change:.0f} s after take-off)" if change is not None else ""
     named = {i for s in sets for i in s}
-    extra = _flagged_extra(result, named)
+    flagged = _flagged_extra(result, named)
+    if flagged and not v.get("network"):  # the network alone: a note, never a propeller to inspect
+        evidence.append(
+            f"Note: the fault classifier alone flags {_and([_num(i, names) for i in flagged])}; physics does not "
+            f"name {'it' if len(flagged) == 1 else 'them'}, so {'it is' if len(flagged) == 1 else 'they are'} not "
+            "asked for."
+        )
+    extra: list[int] = []
     also = ""
-    if extra:
-        nums = _and([_num(i, names) for i in extra])
-        also = f"; also inspect {nums}, which the fault classifier alone flags"
     common = dict(
         names=names,
         evidence=tuple(evidence),
@@ -291,6 +313,58 @@ def verdict_of(result: dict) -> Verdict:
         takeoff_boot_s=takeoff,
         warnings=warnings,
     )
+    if v.get("source") == "motor output":
+        k = v["faulty_propellers"][0]
+        kinds = {a["rotor"]: a["kind"] for a in v.get("motor_output") or []}
+        kind = kinds.get(k, "stopped")
+        since = flight_seconds(v["change_boot_s"], takeoff)
+        what = "stopped (its output at the bottom of its range)" if kind == "stopped" else "saturated (its output at full)"
+        return Verdict(
+            "damaged",
+            conf,
+            (k,),
+            (),
+            ((k,),),
+            headline=f"Motor {_num(k, names)} ({POSITION[k]}) {what} from {since:.0f} s after take-off, while the others "
+            "flew: a motor or ESC failure, not a propeller.",
+            next_step=f"Check motor {_num(k, names)}, its ESC and wiring before the next flight; then its propeller.",
+            **common,
+        )
+    if v.get("source") == "first flight":
+        if sets and sets[0]:
+            k = sets[0][0]
+            sh = result.get("shares") or {}
+            lvl = sh.get("level_shares") or [1.0] * 4
+            harder = 100 * (lvl[k - 1] - 1.0)
+            n = _num(k, names)
+            return Verdict(
+                "inspect",
+                conf,
+                (),
+                (k,),
+                ((k,), ()),
+                headline=f"Rotor {n} works {harder:.0f} % harder than the mean of the four: a damaged propeller {n}, or "
+                "this airframe's balance; 3 healthy flights of this vehicle will tell.",
+                next_step=f"Inspect propeller {n} before the next flight; replace it if it is chipped, cracked or bent. "
+                "If it is intact, learn this vehicle's normal (propwatch baseline learn) from 3 healthy flights.",
+                why="Without the vehicle's history, a CG off towards this rotor or a weaker motor moves its share as "
+                "a damaged propeller does.",
+                **common,
+            )
+        return Verdict(
+            "healthy",
+            conf,
+            (),
+            (),
+            ((),),
+            headline="No damage seen.",
+            next_step="Fly as usual. A first flight cannot see a propeller damaged before take-off that moves its "
+            "rotor's share no more than this airframe's own balance does: 3 healthy flights of this vehicle "
+            "(propwatch baseline learn) will.",
+            why="No rotor's share stands out beyond what healthy airframes show; without the vehicle's history, "
+            "damage present from take-off smaller than its own balance cannot be seen.",
+            **common,
+        )
     if v.get("imbalance_rotors"):
         rotors = tuple(v["imbalance_rotors"])
         where = _and([rotor_words(i, names) for i in rotors])
