@@ -98,19 +98,22 @@ def test_report_writes_png_and_html(capsys, model, logs, tmp_path):
     assert "Propeller 3 (front-left) is damaged: replace it." in html and "f3.tlog.png" in html and "Airborne" in html
 
 
-def test_outside_envelope_is_refused_not_classified(capsys, logs, tmp_path):
-    # A model trained around 2000 RPM must not classify a vehicle hovering near 7100 RPM (1500 µs).
+def test_outside_envelope_is_not_classified_but_judged_by_physics(capsys, logs, tmp_path):
+    # A model trained around 2000 RPM must not classify a vehicle hovering near 7100 RPM (1500 µs): the network is
+    # silent, and the flight is judged by its shares alone (never a confident verdict on a first flight).
     far = build_model(tmp_path / "far.onnx", trained_rpm=2000.0)
     code, res = run(capsys, logs[1], "--model", far, "--json")
-    assert code == 1 and res["verdict"] is None and res["windows"] == 0
-    assert "outside the model's envelope" in res["reason"]
+    assert code == 3 and res["windows"] == 0 and res["reason"] is None
+    assert res["network"]["used"] is False and "outside the model's envelope" in res["network"]["why_not"]
+    assert res["verdict"]["source"] == "first flight" and res["verdict"]["confidence"] != "confident"
+    assert any(w.startswith("physics only: this airframe is not the one the network was trained on") for w in res["warnings"])
     assert res["envelope"]["trained_mean_rpm"] == 2000.0 and res["envelope"]["rpm_ratio"] > 3
     assert res["envelope"]["rpm_z"] > 4
-    # Moderately off (x1.2, about 1.2 training std): classified, with a warning.
+    # Moderately off (x1.2, about 1.2 training std): beyond the envelope's warning bound, so silent too.
     near = build_model(tmp_path / "near.onnx", trained_rpm=float(PAPER_ESC.cmd_to_rpm(HOVER_PWM_US)) / 1.2)
     code, res = run(capsys, logs[0], "--model", near, "--json")
-    assert code in (0, 3) and res["verdict"]["label"] == 1
-    assert any("outside the model's envelope" in w for w in res["warnings"])
+    assert code == 3 and res["verdict"]["label"] == 1 and res["network"]["used"] is False
+    assert "outside the model's envelope" in res["network"]["why_not"]
 
 
 def test_errors_exit_non_zero_through_propwatch(capsys, model, tmp_path):
@@ -140,8 +143,10 @@ def test_log171_gets_a_verdict_or_a_reason(capsys, model):
 @pytest.mark.skipif(not CRAZYPAD_HEALTHY.is_file(), reason=f"CrazyPAD data not found at {CRAZYPAD_HEALTHY}")
 def test_crazypad_with_a_px4_model_is_outside_the_envelope(capsys, model, tmp_path):
     code, res = run(capsys, CRAZYPAD_HEALTHY, "--format", "crazypad", "--model", model, "--json")
-    assert code == 1 and res["verdict"] is None
-    assert "outside the model's envelope" in res["reason"] and "'cf16'" in res["reason"]
+    # The network is silent (its ESC curve takes another unit); the shares of the raw outputs still judge the flight.
+    assert code == 3 and res["network"]["used"] is False and res["shares"]["basis"] == "command"
+    assert "outside the model's envelope" in res["network"]["why_not"] and "'cf16'" in res["network"]["why_not"]
+    assert res["verdict"]["source"] == "first flight" and res["verdict"]["faulty_propellers"] == []
     assert any("'cf16'" in w for w in res["warnings"])
     # With a Crazyflie ESC curve the RPM is known, but pitch and body rates are not logged in this config.
     cf = build_model(
@@ -157,7 +162,8 @@ def test_crazypad_with_a_px4_model_is_outside_the_envelope(capsys, model, tmp_pa
         trained_rpm=15000.0,
     )
     code, res = run(capsys, CRAZYPAD_HEALTHY, "--format", "crazypad", "--model", cf, "--json")
-    assert code == 1 and "pitch_rad unknown during flight" in res["reason"]
+    assert code == 3 and "pitch_rad unknown during flight" in res["network"]["why_not"]
+    assert res["verdict"]["source"] == "first flight" and res["shares"]["basis"] == "omega2"
 
 
 def test_reports_of_same_named_logs_do_not_overwrite(capsys, model, tmp_path):

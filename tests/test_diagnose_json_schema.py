@@ -119,7 +119,7 @@ def test_one_numbering_in_json_and_text(outputs, capsys):
 def test_a_log_the_network_refuses_is_still_judged_against_the_vehicles_history(outputs):
     """The comparison with the vehicle's own flights needs no classifier: outside the network's envelope (a model
     trained at 2000 RPM) the nominal verdict is none, and vehicle memory's stands in its place."""
-    assert outputs["refusal"]["verdict"] is None
+    assert outputs["refusal"]["network"]["used"] is False and outputs["refusal"]["verdict"]["source"] == "first flight"
     judged = outputs["memory_refused"]
-    assert judged["verdict"]["source"] == "vehicle memory" and judged["verdict"]["nominal"] is None
+    assert judged["verdict"]["source"] == "vehicle memory" and judged["verdict"]["nominal"]["label"] >= 1
     assert judged["verdict"]["faulty_propellers"] == judged["baseline"]["faulty_propellers"]
