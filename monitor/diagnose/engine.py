@@ -200,8 +200,8 @@ def _t_s(table: FlightTable, i) -> np.ndarray:
 
 
 def log_refusal(table: FlightTable) -> str | None:
-    """Why this log gets no verdict at all (None: it gets one): not a quad-X, never airborne, or no motor outputs
-    or attitude in flight. Everything else is judged, by physics at least."""
+    """Why this log gets no verdict at all (None: it gets one): not a quad-X, never airborne, or no motor outputs in
+    flight. Everything else is judged, by physics at least (an unknown tilt reads as level: ``monitor.memory``)."""
     vehicle_type = table.extras.get("vehicle_type", "")
     if vehicle_type and not vehicle_type.startswith(QUADROTOR + " "):
         return f"not a quad-X multicopter: the log says {vehicle_type}; propwatch knows four rotors in PX4 quad-X order"
@@ -210,8 +210,6 @@ def log_refusal(table: FlightTable) -> str | None:
         return "no airborne flight found (armed, throttle above idle, off the ground)"
     if not has_outputs(table):
         return "motor outputs unknown during flight: the shares of the four rotors need them"
-    if not (np.isfinite(table.roll_rad[air]).any() or np.isfinite(table.yaw_rad[air]).any()):
-        return "attitude unknown during flight: the flight cannot be told level from tilted"
     return None
 
 

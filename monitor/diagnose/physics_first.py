@@ -3,7 +3,8 @@
 Every quad-X log with motor outputs and attitude in flight gets one. In order, the first that speaks is the verdict:
 
 1. **motor output** (``monitor.decision.motor_output``): one output pinned at an end of its range while the others
-   fly; a motor or ESC failure, named as such, never as a propeller.
+   fly. At the bottom: the motor or its ESC cut out, named as such, never as a propeller. At the top: that corner is
+   at its limit (a failing motor, a damaged propeller, or a load off centre towards it), not sure which.
 2. **in-flight change**: the shared decision rule (``monitor.decision``) replayed over the log with no network
    evidence; its physics statistics (each rotor's share against the flight's own first seconds, and the yaw
    balance) reached fault level. Its thresholds were calibrated on healthy flights of our simulator to a
@@ -123,7 +124,9 @@ def physics_verdict(
             "label": label,
             "faulty_propellers": [a.rotor],
             "faulty_names": [names[a.rotor - 1]],
-            "confidence": "confident",
+            # a motor whose output sat at the bottom while the others flew cut out; one at full is at its limit: a
+            # failing motor or ESC, a damaged propeller, or a load off centre towards it (CrazyPAD's weights)
+            "confidence": "confident" if a.kind == "stopped" else "ambiguous",
             "source": MOTOR_OUTPUT,
             "motor_output": [x.to_json() for x in alarms],
             "change_boot_s": a.since_s,

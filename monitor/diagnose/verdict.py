@@ -316,18 +316,32 @@ def verdict_of(result: dict) -> Verdict:
     if v.get("source") == "motor output":
         k = v["faulty_propellers"][0]
         kinds = {a["rotor"]: a["kind"] for a in v.get("motor_output") or []}
-        kind = kinds.get(k, "stopped")
         since = flight_seconds(v["change_boot_s"], takeoff)
-        what = "stopped (its output at the bottom of its range)" if kind == "stopped" else "saturated (its output at full)"
+        n = _num(k, names)
+        if kinds.get(k, "stopped") == "stopped":
+            return Verdict(
+                "damaged",
+                conf,
+                (k,),
+                (),
+                ((k,),),
+                headline=f"Motor {n} ({POSITION[k]}) stopped from {since:.0f} s after take-off: its output sat at the "
+                "bottom of its range while the others flew; a motor or ESC failure, not a propeller.",
+                next_step=f"Check motor {n}, its ESC and wiring before the next flight; then its propeller.",
+                **common,
+            )
         return Verdict(
-            "damaged",
+            "inspect",
             conf,
-            (k,),
             (),
+            (k,),
             ((k,),),
-            headline=f"Motor {_num(k, names)} ({POSITION[k]}) {what} from {since:.0f} s after take-off, while the others "
-            "flew: a motor or ESC failure, not a propeller.",
-            next_step=f"Check motor {_num(k, names)}, its ESC and wiring before the next flight; then its propeller.",
+            headline=f"Motor {n} ({POSITION[k]}) at full output from {since:.0f} s after take-off while the others were "
+            f"not: that corner is at its limit.",
+            next_step=f"Check motor {n} and its ESC, inspect propeller {n}, and check that the load sits centred "
+            "before the next flight.",
+            why="A failing motor or ESC, a damaged propeller and a load off centre towards it all ask that motor for "
+            "everything it has.",
             **common,
         )
     if v.get("source") == "first flight":
