@@ -29,6 +29,7 @@ from monitor.daemon.memory_adapter import VehicleMemory
 from monitor.daemon.pipeline import Pipeline, StepResult
 from monitor.daemon.rotor_evidence import RecentEffectiveness
 from monitor.decision.hypotheses import FlightSets
+from monitor.decision.motor_output import MotorOutputWatch
 from monitor.decision.regime import StepInputs
 from monitor.decision.rotor_share import BASELINE_S
 from monitor.decision.rule import Announcement, Decision, WindowEvidence
@@ -56,8 +57,10 @@ class DecisionStage:
         flight_sets: FlightSets | None,
         rotors: RecentEffectiveness | None,
         memory: VehicleMemory | None,
+        motor_output: MotorOutputWatch | None = None,
     ):
         self.decision = decision
+        self.motor_output = motor_output  # a motor stopped or saturated (commanded RPM only); None: not watched
         self.flight_sets = flight_sets  # the set over the last second's windows words an alert; None without a rule
         self.rotors = rotors  # None without the vehicle's geometry
         self.memory = memory  # None without a state dir
@@ -84,6 +87,10 @@ class DecisionStage:
             a = self.memory.step(t, step.airborne, rpm, step.roll_rad, step.pitch_rad)
             if a is not None:
                 out.alerts.append(self._raised(a, step.time_boot_ms))
+        if self.motor_output is not None and rpm is not None:
+            m = self.motor_output.step(t, rpm, step.airborne)
+            if m is not None:
+                out.alerts.append(self._raised(m.announcement(), step.time_boot_ms))
         if self._airborne and not step.airborne and self.flight_sets:
             self.flight_sets.reset()  # landed: the next flight gets a new set
         self._airborne = step.airborne

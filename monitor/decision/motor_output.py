@@ -39,6 +39,14 @@ class MotorOutputAlarm:
         """STATUSTEXT (<= 50 characters)."""
         return f"MOTOR {self.rotor} {'STOPPED' if self.kind == 'stopped' else 'SATURATED'}"
 
+    def announcement(self):
+        """The rule's ``Announcement`` of it: a FAULT naming the motor (CRITICAL: the vehicle may not hold), or a
+        WARNING for a saturated one (a corner at its limit)."""
+        from monitor.decision.rule import MAV_SEVERITY_CRITICAL, MAV_SEVERITY_WARNING, Announcement
+
+        sev = MAV_SEVERITY_CRITICAL if self.kind == "stopped" else MAV_SEVERITY_WARNING
+        return Announcement(self.t_s, "fault", (self.rotor,), self.text, sev, (), "motor output", (), ((self.rotor,),))
+
     def to_json(self) -> dict:
         return {"t_boot_s": round(self.t_s, 2), "since_boot_s": round(self.since_s, 2), "rotor": self.rotor, "kind": self.kind}
 
@@ -82,8 +90,16 @@ class MotorOutputWatch:
         return out
 
 
+def watch_for(rate_hz: float, esc, motor_source: str = "command") -> MotorOutputWatch | None:
+    """The daemon's watch over commanded RPM (its ends from the ESC curve); None where the motor stream is ESC
+    telemetry, which has no fixed range."""
+    if esc is None or motor_source == "esc":
+        return None
+    return MotorOutputWatch(rate_hz, float(esc.cmd_to_rpm(esc.cmd_min)), float(esc.cmd_to_rpm(esc.cmd_max)))
+
+
 def pinned(u: np.ndarray, k: int) -> str:
-    """"stopped", "saturated" or "" for rotor k (0-based) given the four outputs as fractions of the range."""
+    """ "stopped", "saturated" or "" for rotor k (0-based) given the four outputs as fractions of the range."""
     others = float(np.median(np.delete(u, k)))
     if u[k] <= PINNED_LOW_U and others >= OTHERS_LOW_U:
         return "stopped"

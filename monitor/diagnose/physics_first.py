@@ -149,10 +149,7 @@ def physics_verdict(
         return v, hyps, None
     if shares is None or not shares.judged:
         secs = 0.0 if shares is None else shares.seconds
-        return None, None, (
-            f"too little level flight to judge: {secs:.1f} s of airborne outputs past take-off, "
-            f"{5.0:g} s needed"
-        )
+        return None, None, (f"too little level flight to judge: {secs:.1f} s of airborne outputs past take-off, {5.0:g} s needed")
     k = shares.named_rotor
     label = label_for([k] if k else [])
     v = {
