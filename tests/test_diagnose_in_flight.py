@@ -228,3 +228,25 @@ def test_a_throttle_dip_in_flight_is_not_a_landing():
     mask = airborne_mask(raw, grid, cmd, rate_hz)
     assert mask[300:305].all() and mask[100:600].all()
     assert not mask[600:640].any() and mask[640:1100].all() and not mask[:100].any() and not mask[1100:].any()
+
+
+@pytest.mark.slow
+def test_without_the_network_the_shares_name_the_propeller_damaged_mid_flight(evalsim_onsets, tmp_path):
+    """The same four flights with the network silent (a model trained on another airframe, around 2000 RPM): the
+    rule replayed on the shares and the yaw balance alone names each damaged rotor after its onset, and never a
+    healthy one. A tool that guesses a rotor passes one in four."""
+    far = build_model(tmp_path / "far.onnx", trained_rpm=2000.0)
+    for path, truth in evalsim_onsets:
+        code, out, _ = run([path, "--model", far, "--json"])
+        res = json.loads(out)
+        v = res["verdict"]
+        assert res["network"]["used"] is False and res["decision"]["network"] is False
+        assert v["source"] == "in-flight change", (path.name, v, res["warnings"])
+        # the damaged rotor first; beside it at most its same-spin pair, which the shares cannot always rule out
+        assert v["faulty_propellers"] == truth["faulty_propellers"], (path.name, v, res["hypotheses"])
+        rotor = truth["faulty_propellers"][0]
+        pair = [1, 2] if rotor in (1, 2) else [3, 4]
+        assert all(h["faulty_propellers"] in ([rotor], pair) for h in res["hypotheses"]), res["hypotheses"]
+        onset_boot_s = BOOT_OFFSET_US / US_PER_S + truth["fault_onset_s"]
+        assert onset_boot_s < v["change_boot_s"] < onset_boot_s + 15.0
+        assert code == (0 if v["confidence"] == "confident" else 3)
