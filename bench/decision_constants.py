@@ -34,6 +34,7 @@ from monitor.decision.effectiveness import (
     Priors,
     RotorGeometry,
 )
+from monitor.decision.network_gate import RPM_RATIO_WARN, RPM_Z_WARN
 from monitor.decision.regime import COLLECTIVE_MEDIAN_S, heading_velocity
 from monitor.decision.replay import FlightSteps, replay
 from monitor.decision.rotor_share import (
@@ -49,7 +50,7 @@ from monitor.decision.rotor_share import (
     RotorShare,
 )
 from monitor.decision.rule import Decision, WindowEvidence
-from monitor.diagnose.engine import LARGE_ATTITUDE_MAX_FRACTION, RPM_RATIO_WARN, RPM_Z_WARN, rpm_envelope
+from monitor.diagnose.engine import LARGE_ATTITUDE_MAX_FRACTION, rpm_envelope
 from monitor.model import Classifier
 from monitor.vehicle import REPO_ROOT, load_vehicle
 
@@ -397,7 +398,7 @@ def envelope_rows(flights: list, model: str) -> list[dict]:
     warned = sum(a > RPM_Z_WARN or not RPM_RATIO_WARN[0] <= r <= RPM_RATIO_WARN[1] for a, r in zip(z, ratio))
     return [
         {
-            "constant": "diagnose.engine.RPM_Z_WARN / RPM_RATIO_WARN",
+            "constant": "decision.network_gate.RPM_Z_WARN / RPM_RATIO_WARN",
             "shipped": [RPM_Z_WARN, list(RPM_RATIO_WARN)],
             "measured": {
                 "rpm_z_min_max": [min(z), max(z)],

@@ -65,3 +65,19 @@ def test_on_the_ground_and_after_landing_nothing_is_carried_over():
     alarms = scan(t, rpm, air, RATE_HZ, LO, HI)
     assert [(a.rotor, round(a.since_s, 2)) for a in alarms] == [(4, 12.5), (4, 17.0)]
     assert [a.to_json() for a in stepwise(t, rpm, air)] == [a.to_json() for a in alarms]
+
+
+def test_the_network_gate_silences_the_classifier_off_its_airframe_only():
+    from monitor.decision.network_gate import MIN_S, NetworkGate
+
+    trained = 6400.0
+    home, stranger = NetworkGate(trained, RATE_HZ), NetworkGate(trained, RATE_HZ)
+    for j in range(int(12 * RATE_HZ)):
+        home.step(np.full(4, trained * 1.05), True)
+        stranger.step(np.full(4, trained * 0.68), True)  # a bigger propeller: hover at 2/3 of the RPM
+        if j + 1 < MIN_S * RATE_HZ:
+            assert home.speaks and stranger.speaks  # too soon to say: as before
+    assert home.speaks and not stranger.speaks and abs(stranger.ratio - 0.68) < 1e-9
+    stranger.step(None, False)  # landed: the next flight is judged again
+    assert stranger.speaks and stranger.ratio is None
+    assert NetworkGate(None, RATE_HZ).speaks  # a model without RPM statistics always speaks

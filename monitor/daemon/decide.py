@@ -22,6 +22,8 @@ import logging
 import math
 from dataclasses import dataclass, field
 
+import numpy as np
+
 from monitor.daemon.announce import Alert, Announcer
 from monitor.daemon.autopilot import MOTOR_STREAM, Autopilot
 from monitor.daemon.blind import BlindTracker, Transition
@@ -29,7 +31,8 @@ from monitor.daemon.memory_adapter import VehicleMemory
 from monitor.daemon.pipeline import Pipeline, StepResult
 from monitor.daemon.rotor_evidence import RecentEffectiveness
 from monitor.decision.hypotheses import FlightSets
-from monitor.decision.motor_output import MotorOutputWatch
+from monitor.decision.motor_output import MotorOutputWatch, watch_for
+from monitor.decision.network_gate import NetworkGate, trained_mean_rpm
 from monitor.decision.regime import StepInputs
 from monitor.decision.rotor_share import BASELINE_S
 from monitor.decision.rule import Announcement, Decision, WindowEvidence
@@ -50,6 +53,17 @@ class StepOutcome:
     memory_status: str = ""  # STATUS: the vehicle's memory (its baseline, or how many flights it still needs)
 
 
+def stage_watches(config, pipeline: Pipeline) -> tuple[MotorOutputWatch | None, NetworkGate]:
+    """The stage's watches beside the rule: a stopped or saturated motor, and whether the classifier knows the
+    airframe."""
+    rate_hz = config.resample.rate_hz
+    info = pipeline.classifier.info
+    return (
+        watch_for(rate_hz, pipeline.esc, config.input.motor_source),
+        NetworkGate(trained_mean_rpm(info.metadata, info.features), rate_hz),
+    )
+
+
 class DecisionStage:
     def __init__(
         self,
@@ -58,9 +72,11 @@ class DecisionStage:
         rotors: RecentEffectiveness | None,
         memory: VehicleMemory | None,
         motor_output: MotorOutputWatch | None = None,
+        gate: NetworkGate | None = None,
     ):
         self.decision = decision
         self.motor_output = motor_output  # a motor stopped or saturated (commanded RPM only); None: not watched
+        self.gate = gate  # whether the classifier knows this airframe (its RPM); None: it always speaks
         self.flight_sets = flight_sets  # the set over the last second's windows words an alert; None without a rule
         self.rotors = rotors  # None without the vehicle's geometry
         self.memory = memory  # None without a state dir
@@ -95,6 +111,8 @@ class DecisionStage:
             self.flight_sets.reset()  # landed: the next flight gets a new set
         self._airborne = step.airborne
         self.decision.step(t, inputs or StepInputs.of_state(step.airborne))
+        if self.gate is not None:
+            self.gate.step(rpm, step.airborne)
         if step.valid:  # STATUS reads the shares' learning on a deciding step, the memory's on it or on the ground
             out.shares_learning = self._shares_learning()
         if self.memory is not None and (step.valid or not step.airborne):
@@ -102,10 +120,13 @@ class DecisionStage:
         self.pause(paused)
         if not step.valid or step.fault_probability is None:
             return out
-        hyps = None  # the set is worked out only if an alert words it (RecentSet)
-        if self.flight_sets and step.label_probability is not None:
-            hyps = self.flight_sets.add_deferred(step.label_probability)
-        ev = WindowEvidence(step.fault_probability, step.label_probability, hypotheses=hyps)
+        if self.gate is not None and not self.gate.speaks:  # physics alone: the network's window is no evidence
+            ev = WindowEvidence(np.full(4, np.nan))
+        else:
+            hyps = None  # the set is worked out only if an alert words it (RecentSet)
+            if self.flight_sets and step.label_probability is not None:
+                hyps = self.flight_sets.add_deferred(step.label_probability)
+            ev = WindowEvidence(step.fault_probability, step.label_probability, hypotheses=hyps)
         for a in self.decision.window_evidence(t, ev):
             out.alerts.append(self._raised(a, step.time_boot_ms, step))
         return out

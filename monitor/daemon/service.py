@@ -21,7 +21,7 @@ from monitor.daemon.announce import Announcer, Counters
 from monitor.daemon.autopilot import Autopilot
 from monitor.daemon.blind import BlindTracker
 from monitor.daemon.config import MonitorConfig
-from monitor.daemon.decide import Decider, DecisionStage
+from monitor.daemon.decide import Decider, DecisionStage, stage_watches
 from monitor.daemon.events import EventWriter
 from monitor.daemon.link import Link
 from monitor.daemon.memory_adapter import VehicleMemory
@@ -30,7 +30,6 @@ from monitor.daemon.pipeline import Pipeline
 from monitor.daemon.rotor_evidence import RecentEffectiveness
 from monitor.daemon.sdnotify import Notifier
 from monitor.decision.hypotheses import FlightSets, load_rule
-from monitor.decision.motor_output import watch_for
 from monitor.decision.rule import Decision
 from monitor.decision.thresholds import file_sha256
 
@@ -73,8 +72,8 @@ class Daemon:
         horizon = max(1, round(config.resample.rate_hz / config.inference.every_k_steps))
         # Rotor effectiveness from the moment balance of the 5 s before an alert (in its event); needs the geometry.
         rotors = RecentEffectiveness(vehicle, pipeline.window, config.resample.rate_hz) if vehicle is not None else None
-        watch = watch_for(config.resample.rate_hz, pipeline.esc, config.input.motor_source)  # a stopped or saturated motor
-        self.stage = DecisionStage(decision, FlightSets(rule, horizon) if rule is not None else None, rotors, memory, watch)
+        sets = FlightSets(rule, horizon) if rule is not None else None
+        self.stage = DecisionStage(decision, sets, rotors, memory, *stage_watches(config, pipeline))
         # The stage's judges, for reports and tests (the message path goes through ``decide`` only).
         self.decision, self.rotors, self.esc_telemetry = decision, rotors, self.stage.esc_telemetry
         self.stop = threading.Event()

@@ -40,6 +40,7 @@ import numpy as np
 from monitor.decision.config import DecisionConfig
 from monitor.decision.effectiveness import PRE_CHANGE_MARGIN_S
 from monitor.decision.hypotheses import SetRule, flight_score, hypothesis_set, load_rule
+from monitor.decision.network_gate import RPM_FEATURES, RPM_RATIO_REFUSE, RPM_RATIO_WARN, RPM_Z_REFUSE, RPM_Z_WARN
 from monitor.decision.replay import FlightSteps, replay
 from monitor.decision.rule import Decision, WindowEvidence
 from monitor.decision.thresholds import file_sha256
@@ -80,23 +81,12 @@ def default_model(vehicle_yaml: str | None) -> Path:
     return DEFAULT_MODEL
 
 
-# Airborne RPM against what the model saw in training (its normaliser's mean and
-# std per RPM feature): the typical |z| of each rotor's RPM over the flight. A
-# flight inside the training distribution sits within ~2 std; beyond WARN the model
-# extrapolates, beyond REFUSE it would be guessing. The ratio of means too. Chosen, not
-# measured: 96 randomised healthy flights of our simulator (seed 100,
-# `python -m bench.decision_constants`) read rpm_z 0.07-2.21 and rpm_ratio 0.87-1.18;
-# 1 of them passes a WARN bound, none a REFUSE one.
-RPM_Z_WARN, RPM_Z_REFUSE = 2.0, 3.0
-RPM_RATIO_WARN = (0.85, 1.15)
-RPM_RATIO_REFUSE = (0.6, 1.6)
 # The paper's flights are gentle; beyond this attitude the model has not been trained.
 LARGE_ATTITUDE_RAD = np.deg2rad(45.0)
 # Of the airborne time: beyond it, a warning (and no in-flight verdict). Chosen, not measured; no healthy flight of
 # our simulator passes 45 deg (`python -m bench.decision_constants`: largest fraction 0).
 LARGE_ATTITUDE_MAX_FRACTION = 0.01
 QUADROTOR = "MAV_TYPE_QUADROTOR"  # the one vehicle type the models are for (pymavlink's MAV_TYPE name)
-RPM_FEATURES = ("rpm_1", "rpm_2", "rpm_3", "rpm_4", "rpm_mean")
 FLAG_LEVEL = 0.9  # the classifier's FAULTY level (DecisionConfig.faulty_probability): below it, alone, a note
 
 
