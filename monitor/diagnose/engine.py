@@ -384,8 +384,38 @@ def diagnose_table(
     elif physics_why_not:
         d.warnings.append(physics_why_not)
     network_as_note(d, table)
+    unsupported_not_confident(d, table)
     apply_motor_output(d, table, alarms)
     return d
+
+
+def unsupported_not_confident(d: Diagnosis, table: FlightTable) -> None:
+    """The network alone is never confident. Where the verdict is the network's whole-flight answer (no conformal
+    rule fused it with the balance of forces), it is confident only where the balance allows that one set and no
+    other, or the shares name the same one rotor; otherwise a propeller answer is ``suspect``, and a healthy answer
+    (sure or not) becomes physics' first-flight verdict, what the network said kept in ``verdict.network``. (CrazyPAD, whose logs give no balance: 21 confident verdicts of the Crazyflie's
+    own model were wrong, 14 of them "healthy" on a cut propeller, `python -m bench.crazypad_first_flight`.)"""
+    v = d.verdict
+    if v is None or v.get("source") or d.hypothesis_rule is not None:
+        return  # a conformal rule's set already weighs the balance with the network
+    named = list(v["faulty_propellers"])
+    if named and v.get("confidence") != "confident":
+        return
+    if d.physics is not None and [h["faulty_propellers"] for h in d.physics.hypotheses] == [named]:
+        return  # the balance of forces allows this one set and no other
+    if len(named) == 1 and d.shares is not None and d.shares.named_rotor == named[0]:
+        return
+    if named:
+        name_verdict(d, v["label"], "suspect", table.motor_names)
+        return
+    pv, ph, _ = physics_verdict(table, d.shares, None, [], [])
+    if pv is None:
+        v["confidence"] = "uncertain"
+        return
+    pv["network"] = {k: v[k] for k in ("label", "faulty_propellers", "confidence") if k in v}
+    pv["fault_probability"] = v.get("fault_probability")
+    d.verdict, d.hypotheses = pv, ph
+    d.propellers = propellers_for(pv["label"], pv["confidence"], table.motor_names)
 
 
 def physics_only(d: Diagnosis, table: FlightTable, clf: Classifier, window: int, hop: int, alarms: list) -> None:
