@@ -10,8 +10,9 @@ Per grid step, each rotor's output as a fraction of the command range, ``u = (rp
 other three's median is at least ``OTHERS_LOW_U``, and **pinned high** at ``u >= PINNED_HIGH_U`` while their
 median is at most ``OTHERS_HIGH_U``. A rotor pinned for ``PINNED_S`` of airborne steps in a row is named once per
 flight. Chosen, not fitted: a healthy flight's outputs meet an end only for a fraction of a second in a hard
-manoeuvre, and the alarm must come within 1 s; `python -m bench.motor_output` counts alarms on healthy flights of
-our simulator (hard manoeuvres included) and the delay on stopped motors.
+manoeuvre, and the alarm must come within 1 s. Checked, never tuned, on the evaluation-only simulator's healthy
+(hard manoeuvres included) and stopped-motor flights of other airframes: `python -m bench.strangers --set
+strangers_healthy` and `--set strangers_stopped` (figures in docs/PHYSICS_FIRST.md).
 """
 
 from __future__ import annotations
