@@ -27,7 +27,9 @@ def model(tmp_path_factory):
 @pytest.fixture(scope="module")
 def logs(tmp_path_factory):
     d = tmp_path_factory.mktemp("logs")
-    return {k: write_tlog(d / f"f{k}.tlog", duration_s=25.0, faulty=k or None, seed=k) for k in range(5)}
+    # A damaged rotor's output 120 us above the others': enough for its share to stand out beyond healthy airframes
+    # (monitor.diagnose.shares), so physics and the toy network agree and a confident verdict may be given.
+    return {k: write_tlog(d / f"f{k}.tlog", duration_s=25.0, faulty=k or None, seed=k, excess_pwm=120.0) for k in range(5)}
 
 
 def run(capsys, *argv) -> tuple[int, dict]:
