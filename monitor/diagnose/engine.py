@@ -324,6 +324,11 @@ def diagnose_table(
             f"no usable window: {info.window} consecutive airborne steps with every signal measured are needed "
             f"({info.window / table.rate_hz:g} s); longest airborne segment has {longest} steps"
         )
+    physics_why_not = None
+    rule = load_rule(clf.path)
+    if silent is None and vehicle is not None:
+        d.physics, physics_why_not = physics_evidence(table, vehicle, window=info.window)
+        silent = balance_unlike_model(d.physics, rule)
     d.network = {"used": silent is None, "why_not": silent}
     if silent is not None:
         physics_only(d, table, clf, info.window, hop, alarms)
@@ -334,10 +339,6 @@ def diagnose_table(
     p = faults.mean(axis=0)
     d.windows = len(ends)
     cfg = DecisionConfig()
-    physics_why_not = None
-    if vehicle is not None:
-        d.physics, physics_why_not = physics_evidence(table, vehicle, window=info.window)
-    rule = load_rule(clf.path)
     network_p = None
     if rule is not None:
         label, scores = apply_rule(d, rule, mean_labels)
@@ -418,9 +419,28 @@ def unsupported_not_confident(d: Diagnosis, table: FlightTable) -> None:
     d.propellers = propellers_for(pv["label"], pv["confidence"], table.motor_names)
 
 
+def balance_unlike_model(physics: PhysicsEvidence | None, rule: SetRule | None) -> str | None:
+    """Why the model's airframe is not this one, from the flight's response: the balance of forces (its moments
+    against the vehicle file's mass, inertia and geometry) favours an unmeasured airframe over the file's by more
+    than the model's rule allows (``airframe_log_bayes_factor_max``: at most 2 % of its calibration flights of the
+    model's own airframe exceed it). None: the balance does not say so (or there is no balance or rule)."""
+    if physics is None or rule is None or rule.airframe_log_bayes_factor_max is None:
+        return None
+    bf = physics.airframe_log_bayes_factor
+    if bf is None or bf <= rule.airframe_log_bayes_factor_max:
+        return None
+    return (
+        f"its balance of forces does not fit the model's airframe (log Bayes factor {bf:.1f} for an unmeasured "
+        f"airframe, beyond {rule.airframe_log_bayes_factor_max:.1f}): another airframe, or this one far from its file "
+        "(a CG offset, a motor spread; `propwatch adapt` on its healthy flights calibrates it)"
+    )
+
+
 def physics_only(d: Diagnosis, table: FlightTable, clf: Classifier, window: int, hop: int, alarms: list) -> None:
     """The verdict where the classifier is silent (``d.network.why_not``): physics alone
-    (``monitor.diagnose.physics_first``), and a warning that says so."""
+    (``monitor.diagnose.physics_first``), and a warning that says so. The balance of forces against the vehicle
+    file's mass and inertia is not this airframe's, so it is dropped."""
+    d.physics = None
     d.decision = physics_replay(table, clf.path, window, hop)
     unfit = [] if d.envelope.get("large_attitude_fraction", 0.0) <= LARGE_ATTITUDE_MAX_FRACTION else ["a flip or crash"]
     if "large_attitude_fraction" not in d.envelope:
@@ -556,23 +576,7 @@ def apply_rule(d: Diagnosis, rule: SetRule, mean_labels: np.ndarray) -> tuple[in
     if threshold is None:  # an older rule file without the classifier's own threshold
         score, threshold = rule.score, rule.threshold
     bf = d.physics.airframe_log_bayes_factor if d.physics is not None else None
-    airframe = "as its file says"
-    if (
-        ll is not None
-        and bf is not None
-        and rule.airframe_log_bayes_factor_max is not None
-        and rule.unmeasured_threshold is not None
-        and bf > rule.airframe_log_bayes_factor_max
-    ):
-        # The balance says the airframe is not the vehicle file's: score it as an unmeasured one, where a motor
-        # spread or CG offset looks like damage, and say so.
-        airframe, ll, threshold = "unmeasured", np.asarray(d.physics.log_likelihood_unmeasured), rule.unmeasured_threshold
-        d.warnings.append(
-            f"airframe check: the moment balance favours an unmeasured airframe over the vehicle file's by log Bayes "
-            f"factor {bf:.1f} (> {rule.airframe_log_bayes_factor_max:.1f}): a CG offset or motor spread beyond "
-            "nominal looks like damage here, so the hypotheses are those of an unmeasured airframe; calibrate this "
-            "vehicle with `propwatch adapt` on its healthy flights"
-        )
+    airframe = "as its file says"  # an airframe the balance says is not the file's never reaches here (balance_unlike_model)
     scores = flight_score(mean_labels, ll, score, rule.sparsity_prior, rule.classifier_weight)
     d.hypotheses = hypothesis_set(scores, threshold)
     d.hypothesis_rule = {
