@@ -56,7 +56,7 @@ MOTOR_WORDS = ("motor", "esc", "stopp", "saturat", "pinned")
 
 def ensure_flights(set_name: str, seed: int, flights: int, duration_s: float, out: Path) -> Path:
     """The folder holding at least ``flights`` flights of ``set_name`` (simulated here when it does not)."""
-    from offline.evalsim.sets import write_set
+    from offline.evalsim.catalog import write_set
 
     d = out / "flights" / f"{set_name}_seed{seed}_{duration_s:g}s"
     m = d / "manifest.json"

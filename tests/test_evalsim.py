@@ -234,7 +234,8 @@ def test_flight_is_deterministic_and_independent_of_its_batch(flights):
 
 
 def test_build_set_is_deterministic_and_extends():
-    from offline.evalsim.sets import SET_NAMES, build_set
+    from offline.evalsim.catalog import build_set
+    from offline.evalsim.names import SET_NAMES
 
     for name in SET_NAMES:
         a = build_set(name, 4, seed=3, duration_s=20.0)

@@ -13,8 +13,8 @@ import evalsim_flights  # noqa: E402
 
 from monitor.esc import RPM_PER_RAD_S  # noqa: E402
 from monitor.vehicle import DEFAULT_VEHICLE, load_vehicle  # noqa: E402
+from offline.evalsim.catalog import build_set  # noqa: E402
 from offline.evalsim.names import STRANGER_SETS, STRANGERS_DEV_SEED, STRANGERS_EVAL_SEED  # noqa: E402
-from offline.evalsim.sets import build_set  # noqa: E402
 from offline.evalsim.strangers import STRANGER_CLASSES, nominal_airframe, saturated_fraction, uid_of  # noqa: E402
 
 DURATION_S = 6.0

@@ -201,5 +201,3 @@ def test_sample_px4_events_names_no_propeller_where_only_the_classifier_flags(di
     assert res["verdict"]["network"]["confidence"] == "ambiguous"  # "no damage or 3+4": the classifier's set
     assert any("fault classifier alone points at 3+4" in w for w in res["warnings"])
     assert res["shares"]["named_rotor"] is None
-
-

@@ -23,7 +23,7 @@ def main(argv: list[str] | None = None) -> int:
     a = p.parse_args(argv)
     from tqdm import tqdm
 
-    from offline.evalsim.sets import build_set, write_set  # the simulator (rotorpy, torch): only for work
+    from offline.evalsim.catalog import build_set, write_set  # the simulator (rotorpy, torch): only for work
 
     n = len(build_set(a.set, a.flights, a.seed, a.duration_s))
     with tqdm(total=n, unit="flight", desc=f"evalsim {a.set}") as bar:

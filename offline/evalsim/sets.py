@@ -61,7 +61,7 @@ from monitor.vehicle import DEFAULT_VEHICLE, load_vehicle
 from offline.evalsim.airframe import Airframe, Damage
 from offline.evalsim.environment import Sensors, Telemetry, Wind
 from offline.evalsim.flight import FlightSpec, simulate_flights, truth
-from offline.evalsim.names import DEFAULT_DURATION_S, SET_NAMES, STRANGER_SETS
+from offline.evalsim.names import DEFAULT_DURATION_S, SET_NAMES
 from offline.fleet_sim import append_autopilot_version, vehicle_uid
 from offline.manifest import make_manifest, write_manifest
 from offline.sim.io_tlog import DEFAULT_WALL_BOOT_US, write_tlog
@@ -401,16 +401,16 @@ def build_set(
     name: str, flights: int | None = None, seed: int = 0, duration_s: float = DEFAULT_DURATION_S, vehicle_path=DEFAULT_VEHICLE
 ) -> list[FlightSpec]:
     """The flight specs of set ``name`` (``flights`` defaults to one cycle of its labels / effects)."""
-    if name not in _BUILDERS and name not in STRANGER_SETS:
+    if name not in _BUILDERS:
         raise ValueError(f"unknown evalsim set {name!r}; choose from {', '.join(SET_NAMES)}")
+    return build_specs(_BUILDERS[name], flights, seed, duration_s, vehicle_path)
+
+
+def build_specs(builder_and_n, flights, seed, duration_s, vehicle_path=DEFAULT_VEHICLE) -> list[FlightSpec]:
+    """``flights`` specs of one builder (``(builder(v, seed, i, duration_s), default flights)``)."""
+    builder, default_n = builder_and_n
     if duration_s < 5.0:
         raise ValueError(f"duration_s: at least 5 s, got {duration_s}")
-    if name in STRANGER_SETS:
-        from offline.evalsim.strangers import BUILDERS
-
-        builder, default_n = BUILDERS[name]
-    else:
-        builder, default_n = _BUILDERS[name]
     n = default_n if flights is None else int(flights)
     if n < 1:
         raise ValueError(f"flights: at least 1, got {flights}")
@@ -434,15 +434,19 @@ def write_set(
     seed: int = 0,
     duration_s: float = DEFAULT_DURATION_S,
     progress: Callable[[int], None] | None = None,
+    specs: list[FlightSpec] | None = None,
+    writer: Callable | None = None,
 ) -> Path:
     """Simulate set ``name`` into ``out_dir``: one .tlog + one truth .json per flight + manifest.json.
 
+    ``specs`` and ``writer(i, spec, log, out) -> truth`` come from another module's sets
+    (``offline.evalsim.catalog``); by default this module's set ``name`` and its own writing.
     Files are written to temporary names and renamed, the manifest last, so a
     folder with a manifest is complete.
     """
     from offline.evalsim.assumptions import ASSUMPTIONS
 
-    specs = build_set(name, flights, seed, duration_s)
+    specs = build_set(name, flights, seed, duration_s) if specs is None else specs
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     entries = []
@@ -451,10 +455,8 @@ def write_set(
         for spec, log in zip(chunk, logs, strict=True):
             tlog = f"{spec.name}.tlog"
             i = int(spec.name.rsplit("_", 1)[1])
-            if name in STRANGER_SETS:  # landing and disarm, a date per flight, the airframe's uid, the size in truth
-                from offline.evalsim.strangers import write_flight
-
-                t = write_flight(name, seed, i, spec, log, out)
+            if writer is not None:
+                t = writer(i, spec, log, out)
             elif name == "vehicles":  # each airframe's flights a day apart, ending in landing and disarm, with its uid
                 a, k = divmod(i, VEHICLE_FLIGHTS)
                 write_tlog(out / tlog, log, 0, wall_boot_us=DEFAULT_WALL_BOOT_US + k * DAY_US, landing=True)
