@@ -92,7 +92,8 @@ def _lag_all_fitted(f):
         return p["motor_time_constant_s"], s["motor_time_constant_s"]
     if "rotor_time_constant" in f:
         p, s = f["rotor_time_constant"]
-        return float(np.mean(list(p.values()))), float(np.mean(list(s.values())))
+        taus = [k for k in p if k.startswith("tau_")]
+        return float(np.mean([p[k] for k in taus])), float(np.mean([s[k] for k in taus]))
     return None
 
 

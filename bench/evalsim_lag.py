@@ -57,15 +57,15 @@ def summarise(r) -> dict:
             continue
         out[name] = {
             "identifiable": all(fit.identifiable.values()),
-            "params_ms": {k: round(1000 * v, 1) for k, v in fit.params(TERMS[name]).items()},
-            "std_ms": {k: round(1000 * v, 1) for k, v in fit.stds(TERMS[name]).items()},
+            "params_ms": {k: round(1000 * v, 1) for k, v in fit.params(TERMS[name]).items() if k.endswith("_s")},
+            "std_ms": {k: round(1000 * v, 1) for k, v in fit.stds(TERMS[name]).items() if k.endswith("_s")},
             "delta_bic": round(first.base_bic - fit.bic, 1),
             "rms_reduction_pct": round(100 * (1 - relative_rms(fit.held_rms, base_rms)), 2),
             "worst_signal_ratio": round(worst_signal(fit.held_rms, base_rms), 3),
         }
     for f in r.findings:
         if f["effect"] in LAG_TERMS:
-            out["named_params_ms"] = {k: round(1000 * v, 1) for k, v in f["params"].items()}
+            out["named_params_ms"] = {k: round(1000 * v, 1) for k, v in f["params"].items() if k.endswith("_s")}
     return out
 
 

@@ -66,6 +66,9 @@ class VehicleConfig:
     linear_drag_n_per_m_s: Vec3 = (0.0, 0.0, 0.0)
     wind_ned_m_s: Vec3 = (0.0, 0.0, 0.0)
     gyro_bias_frd_rad_s: Vec3 = (0.0, 0.0, 0.0)
+    # Rotor + motor bell inertia about the spin axis: spinning a rotor up takes motor torque whose reaction
+    # yaws the body (J dω/dt, the drag torque's sign). 0 leaves the spin-up reaction out.
+    rotor_inertia_kg_m2: float = 0.0
 
     def __post_init__(self) -> None:
         for name in (
@@ -99,6 +102,8 @@ class VehicleConfig:
                 raise ConfigError(f"motor_time_constant_ratio[{i}]: must be in (0, 20], got {r}")
         if any(d < 0 for d in self.linear_drag_n_per_m_s):
             raise ConfigError("linear_drag_n_per_m_s: must be >= 0")
+        if not self.rotor_inertia_kg_m2 >= 0:
+            raise ConfigError(f"rotor_inertia_kg_m2: must be >= 0, got {self.rotor_inertia_kg_m2}")
 
     # Derived arrays (cheap; the simulator caches what it needs).
     @property

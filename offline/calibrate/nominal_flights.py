@@ -3,7 +3,7 @@
 The gates of ``offline.calibrate.fit`` are set on these (``python -m offline.calibrate.derive_gates``):
 flights where no term of the library is off its nominal value, so whatever the calibrator names there is
 named wrongly. Every other entry of the assumption register (``offline/sim/assumptions.py``) is drawn per
-flight: wind and turbulence, controller gains, battery sag and the ESC's voltage dependence, rotor inertia,
+flight: wind and turbulence, controller gains, battery sag and the ESC's voltage dependence,
 quadratic drag, blade flapping, IMU and attitude noise, and the telemetry's attitude delay, jitter and drops.
 The entries the term library fits (``LIBRARY_ENTRIES``) stay at their nominal values.
 
@@ -25,7 +25,13 @@ from offline.sim.telemetry import degrade_flight
 
 # Register entries a term of offline.calibrate.terms fits, or that say the airframe differs from its file
 # (AIRFRAME_TERMS, held at nominal by ``nominal_airframe``): fixed at their nominal values.
-LIBRARY_ENTRIES = ("inertia_error_frac", "linear_drag_n_per_m_s", "motor_time_constant_s", "gyro_bias_frd_rad_s")
+LIBRARY_ENTRIES = (
+    "inertia_error_frac",
+    "linear_drag_n_per_m_s",
+    "motor_time_constant_s",
+    "gyro_bias_frd_rad_s",
+    "rotor_inertia_kg_m2",
+)
 MOTOR_GROUP = ("motor_cmd", "motor_rpm")
 ESTIMATOR_GROUPS = (
     ("roll_rad", "pitch_rad", "yaw_rad"),

@@ -12,7 +12,11 @@ Model (body FRD, world NED, PX4 quad-X rotor order; see ``monitor.vehicle``):
   unbalance ratio (eqs. 14-17, ``F = w**2 / U_r**2``) is the speed scale
   ``1 / U_r(w)``;
 - rotor i pushes ``f_i = kf * w_i**2`` along body -z at ``r_i`` and twists
-  the body by ``spin_i * ktau * w_i**2`` about +z;
+  the body by ``spin_i * (ktau * w_i**2 + J_r * dw_i/dt)`` about +z: the drag
+  torque plus the reaction of spinning the rotor up (``rotor_inertia_kg_m2``;
+  ``dw_i/dt = (target_i - w_i) / tau_i`` exactly, from the first-order lag). The
+  reaction leads the drag torque, so in yaw it offsets part of the motor lag
+  that roll and pitch see in full;
 - moments are taken about the centre of gravity, ``r_i - cg_offset_frd_m``;
 - drag is linear in the air-relative body velocity
   (``linear_drag_n_per_m_s``, ``wind_ned_m_s``);
@@ -75,12 +79,17 @@ def first_order_lag(u: np.ndarray, tau_s, dt_s: float) -> np.ndarray:
 
 
 def rotor_forces(seg: Segment, vehicle: VehicleConfig, speed_scale: SpeedScale = None) -> tuple[np.ndarray, np.ndarray]:
-    """Per-rotor thrust (N) and drag torque magnitude (N m) on the fine grid, each (T_fine, 4)."""
+    """Per-rotor thrust (N) and yaw torque magnitude (N m: drag plus spin-up reaction) on the fine grid, each (T_fine, 4)."""
     w_cmd = target_omega_rad_s(seg, vehicle, fine=True)
     e = np.asarray(vehicle.motor_efficiency) if speed_scale is None else speed_scale(w_cmd)
-    w = first_order_lag(e * w_cmd, vehicle.rotor_time_constants_s, seg.dt_fine_s)
+    target = e * w_cmd
+    taus = vehicle.rotor_time_constants_s
+    w = first_order_lag(target, taus, seg.dt_fine_s)
     w2 = np.maximum(w, 0.0) ** 2
-    return vehicle.kf_n_per_rad_s2 * w2, vehicle.ktau_nm_per_rad_s2 * w2
+    torque = vehicle.ktau_nm_per_rad_s2 * w2
+    if vehicle.rotor_inertia_kg_m2 > 0:
+        torque = torque + vehicle.rotor_inertia_kg_m2 * (target - w) / taus
+    return vehicle.kf_n_per_rad_s2 * w2, torque
 
 
 def body_moments(f: np.ndarray, tau: np.ndarray, vehicle: VehicleConfig) -> np.ndarray:

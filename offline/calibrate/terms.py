@@ -31,6 +31,33 @@ class Term:
     why: str  # the physical cause, for the report
 
 
+# Rotor inertia's resolution: the inertia whose spin-up reaction leads the yaw drag torque by
+# ROTOR_INERTIA_LEAD_RESOLUTION_S at hover. Near hover the yaw torque of rotor i moves as
+# 2 ktau w_h dw + J_r d(dw)/dt, a lead of J_r / (2 ktau w_h) seconds (52 ms per 1e-5 kg m^2 on models/vehicle.yaml);
+# 10 ms is the lag terms' own resolution, so the two are judged alike.
+ROTOR_INERTIA_LEAD_RESOLUTION_S = 0.01
+# Upper bound: a 300 ms lead, as the lag terms' 0.3 s.
+ROTOR_INERTIA_MAX_LEAD_S = 0.3
+
+
+def _rotor_inertia_resolution(v: VehicleConfig) -> float:
+    return ROTOR_INERTIA_LEAD_RESOLUTION_S * 2.0 * v.ktau_nm_per_rad_s2 * v.hover_omega_rad_s
+
+
+def _rotor_inertia_max(v: VehicleConfig) -> float:
+    return ROTOR_INERTIA_MAX_LEAD_S / ROTOR_INERTIA_LEAD_RESOLUTION_S * _rotor_inertia_resolution(v)
+
+
+# The rotor inertia as a term of its own: get, set, scale, lower, upper.
+_ROTOR_INERTIA_ALONE = (
+    lambda v: np.array([v.rotor_inertia_kg_m2]),
+    lambda v, x: dataclasses.replace(v, rotor_inertia_kg_m2=float(x[0])),
+    lambda v: np.array([_rotor_inertia_resolution(v)]),
+    lambda _v: np.zeros(1),
+    lambda v: np.array([_rotor_inertia_max(v)]),
+)
+
+
 def _const(*v: float) -> Callable[[VehicleConfig], np.ndarray]:
     return lambda _veh: np.array(v, dtype=np.float64)
 
@@ -40,9 +67,15 @@ def _set_cg(v: VehicleConfig, x: np.ndarray) -> VehicleConfig:
 
 
 def _set_rotor_taus(v: VehicleConfig, x: np.ndarray) -> VehicleConfig:
-    """Per-rotor time constants (s) written as their mean and each rotor's ratio to it."""
-    tau = float(np.mean(x))
-    return dataclasses.replace(v, motor_time_constant_s=tau, motor_time_constant_ratio=tuple(float(t) / tau for t in x))
+    """Per-rotor time constants (s) written as their mean and each rotor's ratio to it; then the rotor inertia."""
+    taus = x[:4]
+    tau = float(np.mean(taus))
+    return dataclasses.replace(
+        v,
+        motor_time_constant_s=tau,
+        motor_time_constant_ratio=tuple(float(t) / tau for t in taus),
+        rotor_inertia_kg_m2=float(x[4]),
+    )
 
 
 def _set_esc(v: VehicleConfig, x: np.ndarray) -> VehicleConfig:
@@ -105,25 +138,35 @@ TERMS: dict[str, Term] = {
         ),
         Term(
             "motor_time_constant",
-            ("motor_time_constant_s",),
-            lambda v: np.array([v.motor_time_constant_s]),
-            lambda v, x: dataclasses.replace(v, motor_time_constant_s=float(x[0])),
-            _const(0.01),
-            _const(0.003),
-            _const(0.3),
-            ("motor_time_constant_s",),
-            "rotors lag the ESC command: moments trail the commands",
+            ("motor_time_constant_s", "rotor_inertia_kg_m2"),
+            lambda v: np.array([v.motor_time_constant_s, v.rotor_inertia_kg_m2]),
+            lambda v, x: dataclasses.replace(v, motor_time_constant_s=float(x[0]), rotor_inertia_kg_m2=float(x[1])),
+            lambda v: np.array([0.01, _rotor_inertia_resolution(v)]),
+            _const(0.003, 0.0),
+            lambda v: np.array([0.3, _rotor_inertia_max(v)]),
+            ("motor_time_constant_s", "rotor_inertia_kg_m2"),
+            "rotors lag the ESC command: moments trail the commands (the rotors' spin-up reaction, which leads the "
+            "drag torque in yaw, fitted with the lag)",
         ),
         Term(
             "rotor_time_constant",
-            ("tau_1_s", "tau_2_s", "tau_3_s", "tau_4_s"),
-            lambda v: v.rotor_time_constants_s,
+            ("tau_1_s", "tau_2_s", "tau_3_s", "tau_4_s", "rotor_inertia_kg_m2"),
+            lambda v: np.append(v.rotor_time_constants_s, v.rotor_inertia_kg_m2),
             _set_rotor_taus,
-            _const(0.01, 0.01, 0.01, 0.01),
-            _const(0.003, 0.003, 0.003, 0.003),
-            _const(0.3, 0.3, 0.3, 0.3),
-            ("motor_time_constant_s", "motor_time_constant_ratio"),
-            "one rotor lags its ESC command more than the others (a slow motor or ESC): its moments trail",
+            lambda v: np.array([0.01, 0.01, 0.01, 0.01, _rotor_inertia_resolution(v)]),
+            _const(0.003, 0.003, 0.003, 0.003, 0.0),
+            lambda v: np.array([0.3, 0.3, 0.3, 0.3, _rotor_inertia_max(v)]),
+            ("motor_time_constant_s", "motor_time_constant_ratio", "rotor_inertia_kg_m2"),
+            "one rotor lags its ESC command more than the others (a slow motor or ESC): its moments trail (the "
+            "rotors' spin-up reaction fitted with the lags)",
+        ),
+        Term(
+            "rotor_inertia",
+            ("rotor_inertia_kg_m2",),
+            *_ROTOR_INERTIA_ALONE,
+            ("rotor_inertia_kg_m2",),
+            "spinning a rotor up or down takes motor torque whose reaction yaws the body (rotor inertia x dω/dt): "
+            "yaw leads the drag torque",
         ),
         Term(
             "drag",
@@ -160,6 +203,24 @@ TERMS: dict[str, Term] = {
         ),
     )
 }
+
+
+def without_spin_up(term: Term) -> Term:
+    """A lag term as the library had it before the spin-up reaction joined it: the time constants alone, the rotor
+    inertia left at the vehicle's value. For before/after comparisons (``bench/yaw_spinup.py``), not for selection."""
+    if term.params[-1] != "rotor_inertia_kg_m2":
+        raise ValueError(f"{term.name}: not a lag term fitted with the spin-up reaction")
+    k = len(term.params) - 1
+    return dataclasses.replace(
+        term,
+        params=term.params[:k],
+        get=lambda v: term.get(v)[:k],
+        set=lambda v, x: term.set(v, np.append(x, v.rotor_inertia_kg_m2)),
+        scale=lambda v: term.scale(v)[:k],
+        lower=lambda v: term.lower(v)[:k],
+        upper=lambda v: term.upper(v)[:k],
+        fields=tuple(f for f in term.fields if f != "rotor_inertia_kg_m2"),
+    )
 
 
 def apply_terms(vehicle: VehicleConfig, terms: list[Term], x: np.ndarray) -> VehicleConfig:

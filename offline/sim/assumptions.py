@@ -265,7 +265,10 @@ def _default_register() -> tuple[Assumption, ...]:
             4.0e-5,
             0.0,
             "rotor + bell inertia for the spin-up yaw reaction J dω/dt (10-inch props ~1-2e-5 kg m^2 plus the motor "
-            "bell); the fixed simulator leaves the term out.",
+            "bell), drawn on top of the vehicle's rotor_inertia_kg_m2 (0 in models/vehicle.yaml: the fixed simulator "
+            "applies the vehicle's value). At hover it leads the yaw drag torque by J / (2 ktau w_hover): 52-210 ms "
+            "over this range, more than the motor lag, so a lag fitted without it fits yaw worse; the calibrator fits "
+            "it (term rotor_inertia, and with every lag term).",
             distribution="loguniform",
             group="motor and ESC",
         ),
@@ -496,10 +499,14 @@ class AssumptionRegister:
         return tuple(x.name for x in self.assumptions)
 
     def with_range(self, name: str, low: float, high: float) -> AssumptionRegister:
-        """A register with one range changed (e.g. an evaluation set with the torque change's sign flipped)."""
+        """A register with one range changed (e.g. an evaluation set with the torque change's sign flipped).
+
+        A point range (``low == high``) is drawn as uniform, so a log-uniform entry can be pinned at 0; the draw
+        takes one uniform variate either way, so every other entry's draw is unchanged."""
         self[name]  # raises on an unknown name
+        point = {"distribution": "uniform"} if low == high else {}
         return AssumptionRegister(
-            tuple(dataclasses.replace(x, low=low, high=high) if x.name == name else x for x in self.assumptions)
+            tuple(dataclasses.replace(x, low=low, high=high, **point) if x.name == name else x for x in self.assumptions)
         )
 
     def to_mapping(self) -> dict:

@@ -17,6 +17,8 @@ Every calibration term of ``VehicleConfig`` acts here:
   ``wind_ned_m_s``); with zero drag the wind cannot act and is skipped;
 - per-flight physics only: parasitic drag ``-c |v_air| v_air`` per body axis
   (``quadratic_drag_n_per_m2_s2``) and blade flapping;
+- ``rotor_inertia_kg_m2``: the spin-up yaw reaction J dω/dt (a rotor accelerated by its motor twists the body
+  the way its drag torque does);
 - mass (plus per-flight payload, a point mass at the CG) and inertia.
 ``gyro_bias_frd_rad_s`` is a sensor term and acts in ``simulator``.
 
@@ -145,6 +147,8 @@ class Dynamics:
         self.last_total_thrust_n = np.zeros(n)
         self.esc_offset_rad_s = None
         self.spin_up = None  # rotor inertia / dt, (B, 1): the spin-up yaw reaction J dω/dt
+        if vehicle.rotor_inertia_kg_m2 > 0:
+            self.spin_up = np.full((n, 1), vehicle.rotor_inertia_kg_m2 / dt)
         self.flap_dt_over_inertia = None  # (B, 2) k dt / (Ixx, Iyy): blade flapping (per-flight physics only)
         self.quad_drag = None  # (B, 3) parasitic drag, N per (m/s)^2 (per-flight physics only)
         if per_flight is not None:
@@ -159,8 +163,7 @@ class Dynamics:
             self.quad_drag = qd.copy() if qd is not None and np.any(qd > 0) else None  # (B, 3), N per (m/s)^2
             self.has_drag = bool(np.any(self.drag > 0)) or self.quad_drag is not None
             self.voltage_scale = np.ones((n, 1))  # (V / V_full)^k, rewritten by the simulator
-            if np.any(pf.rotor_inertia_kg_m2 > 0):
-                self.spin_up = (pf.rotor_inertia_kg_m2 / dt)[:, None]
+            self.spin_up = (pf.rotor_inertia_kg_m2 / dt)[:, None] if np.any(pf.rotor_inertia_kg_m2 > 0) else None
             k = pf.flapping_nm_per_rad_s_m_s
             if k is not None and np.any(k > 0):
                 # Blade flapping's moment k sum(omega) (-v_right, +v_forward, 0) (body FRD airspeed) turned into

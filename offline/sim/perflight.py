@@ -96,7 +96,7 @@ class PerFlightTerms:
             cg_offset_frd_m=cg,
             inertia_diag_kg_m2=np.array(vehicle.inertia_diag_kg_m2) * (1.0 + col("inertia_error_frac")),
             linear_drag_n_per_m_s=np.array(vehicle.linear_drag_n_per_m_s) + col("linear_drag_n_per_m_s"),
-            rotor_inertia_kg_m2=col("rotor_inertia_kg_m2"),
+            rotor_inertia_kg_m2=vehicle.rotor_inertia_kg_m2 + col("rotor_inertia_kg_m2"),
             esc_voltage_exponent=col("esc_voltage_exponent"),
             battery_internal_resistance_ohm=col("battery_internal_resistance_ohm"),
             gains=gains,
