@@ -19,6 +19,8 @@ import json
 import sys
 from pathlib import Path
 
+import numpy as np
+
 from monitor.vehicle import DEFAULT_VEHICLE, load_vehicle
 
 BIC_GRID = (10.0, 15.0, 20.0, 25.0, 30.0, 40.0, 50.0, 60.0, 80.0, 100.0, 150.0, 200.0)
@@ -48,6 +50,37 @@ def wrongly_named(rows: list[dict], gain_min: float, cut_min_pct: float) -> list
     return out
 
 
+def consistency_figures(rows: list[dict]) -> dict:
+    """What fitting a term does to the other signals on nominal flights: over every identifiable candidate of every
+    pair, the signal whose held-out RMS rose by more than ``fit.MAX_SIGNAL_WORSENING`` with the largest paired
+    mean-square rise. ``fit.WORSENING_SE`` is set at the largest such rise: the consistency gate vetoes only beyond
+    what nominal flights show."""
+    worst = [
+        (
+            v["gates"]["consistency"]["worst_rms_ratio"],
+            v["gates"]["consistency"]["worst_se_rise"],
+            n,
+            v["gates"]["consistency"]["worst_signal"],
+        )
+        for r in rows
+        for n, v in r["candidates"].items()
+        if v["gates"]["identifiable"]["passed"] and v["gates"]["consistency"].get("worst_signal")
+    ]
+    if not worst:
+        return {"candidates": 0}
+    ratios = np.array([w[0] for w in worst])
+    rises = np.array([w[1] for w in worst])
+    top = max(worst, key=lambda w: w[1])
+    return {
+        "candidates": len(worst),
+        "rms_ratio_max": float(ratios.max()),
+        "rms_ratio_q95": float(np.quantile(ratios, 0.95)),
+        "se_rise_max": float(rises.max()),
+        "se_rise_q95": float(np.quantile(rises, 0.95)),
+        "largest_rise": {"term": top[2], "signal": top[3], "rms_ratio": top[0], "se_rise": top[1]},
+    }
+
+
 def derive(rows: list[dict], target: float, rms_floors_pct: list[float]) -> dict:
     table = {}
     for floor in rms_floors_pct:
@@ -66,7 +99,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--rms-floors", type=float, nargs="+", default=[0.0, 1.0, 2.0], help="pooled RMS cut floors, %%")
     ap.add_argument("--out", type=Path, default=None)
     a = ap.parse_args(argv)
-    from offline.calibrate.fit import MIN_DELTA_BIC
+    from offline.calibrate.fit import MAX_SIGNAL_WORSENING, MIN_DELTA_BIC, WORSENING_SE
     from offline.calibrate.nominal_flights import nominal_flights
 
     vehicle = load_vehicle(DEFAULT_VEHICLE)
@@ -79,10 +112,15 @@ def main(argv: list[str] | None = None) -> int:
     in_force = wrongly_named(rows, MIN_DELTA_BIC, 0.0)
     out = {
         "config": vars(a) | {"out": str(a.out)},
-        "gates_in_force": {"heldout_bic_gain": MIN_DELTA_BIC},
+        "gates_in_force": {
+            "heldout_bic_gain": MIN_DELTA_BIC,
+            "consistency_rms_ratio": MAX_SIGNAL_WORSENING,
+            "consistency_se_rise": WORSENING_SE,
+        },
         "wrong_pairs_in_force": sum(x is not None for x in in_force),
         "named_in_force": {n: in_force.count(n) for n in set(in_force) if n},
         "derived": derive(rows, a.target, a.rms_floors),
+        "consistency_on_nominal": consistency_figures(rows),
         "largest_consistent_identifiable_gain_per_pair": [
             max(
                 [
@@ -100,7 +138,8 @@ def main(argv: list[str] | None = None) -> int:
     if a.out:
         a.out.parent.mkdir(parents=True, exist_ok=True)
         a.out.write_text(text + "\n", encoding="utf-8")
-    print(json.dumps({k: out[k] for k in ("gates_in_force", "wrong_pairs_in_force", "named_in_force", "derived")}, indent=1))
+    keys = ("gates_in_force", "wrong_pairs_in_force", "named_in_force", "derived", "consistency_on_nominal")
+    print(json.dumps({k: out[k] for k in keys}, indent=1))
     return 0
 
 

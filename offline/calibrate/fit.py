@@ -37,26 +37,31 @@ MAX_LAG = 40  # samples (2 s at 20 Hz) for the autocorrelation time
 REWEIGHT_PASSES = 2
 LATER_ROUND_CANDIDATES = 4
 # The held-out BIC gain a term must exceed to be named. Set on OUR simulator's nominal flights (the register
-# drawn, every library term at nominal: ``python -m offline.calibrate.derive_gates --pairs 40 --duration-s 40
-# --seed 11``): at 60, 1 of 40 pairs of 2 x 40 s flights names a term (2.5 %, the target); at 10 (Kass-Raftery
-# "very strong") 22 of 40 do (mass 14: battery sag and the ESC's voltage dependence look like a heavier vehicle).
-# The pooled held-out RMS cut is reported beside the gain, not gated: a floor of 1 or 2 % changes no pair's verdict
-# on those flights at any BIC threshold, and it can veto a real effect whose residual sits in few of the signals.
-MIN_DELTA_BIC = 60.0
+# drawn, every library term at nominal, the rotors' spin-up reaction among them: ``python -m
+# offline.calibrate.derive_gates --pairs 40 --duration-s 40 --seed 11``): at 80, 0 of 40 pairs of 2 x 40 s flights
+# name a term; at 60, 2 of 40 (5 %, above the 2.5 % target: mass 68 and motor_time_constant 70, a 44 ms lag on a
+# 20 ms vehicle); at 10 (Kass-Raftery "very strong") 24 of 40 (battery sag and the ESC's voltage dependence look
+# like a heavier vehicle). The pooled held-out RMS cut is reported beside the gain, not gated: a floor of 1 or 2 %
+# changes no pair's verdict on those flights at any BIC threshold, and it can veto a real effect whose residual
+# sits in few of the signals.
+MIN_DELTA_BIC = 80.0
 # The steady-state view's BIC is on per-flight mean commands (a handful of numbers): Kass-Raftery "very strong".
 STEADY_MIN_DELTA_BIC = 10.0
 # Consistency: a real vehicle effect improves the equations it enters and leaves the others
 # alone. A term that buys a better fit of one channel with a worse fit of another is fitting an
 # artefact of the log (e.g. the translation channel's streams resampled 0-10 ms stale in a
 # .tlog made a motor lag "improve" velocity while worsening every moment equation).
-# Worse means worse beyond noise: the held-out mean-square residual of that signal rises by more than
-# WORSENING_SE standard errors of the paired difference (effective samples = n / correlation time). A
-# low-bandwidth channel has few independent samples: on the evaluation simulator's hidden motor-lag airframe
-# (bench/evalsim_lag.py --hidden-set) the TRUE per-rotor lags raise the vertical channel's RMS by 4 % (ratio
-# 1.04) while its mean square moves by 0.7 standard errors (~39 independent held-out samples), and cut the
-# moment channels' mean squares by 37-57 %.
+# Worse means worse beyond what nominal flights show: the held-out RMS of that signal rises by more than
+# MAX_SIGNAL_WORSENING (3 %, the smallest rise that matters) and its mean square by more than WORSENING_SE standard
+# errors of the paired difference (effective samples = n / correlation time). WORSENING_SE is the largest such rise
+# any identifiable candidate shows on OUR simulator's nominal flights (``python -m offline.calibrate.derive_gates
+# --pairs 40 --duration-s 40 --seed 11``, ``consistency_on_nominal``: 3.55, cg_offset on one pair's pitch, RMS x1.11;
+# 95 % of those candidates stay below 2.5): a term fitting noise worsens a signal that much, so only beyond it does a
+# worse signal say the term is wrong. (A low-bandwidth channel has few independent samples: on the evaluation
+# simulator's hidden motor-lag airframe the true lags raise the vertical channel's RMS by 4 % at 0.7 standard
+# errors, ~39 independent held-out samples.)
 MAX_SIGNAL_WORSENING = 1.03
-WORSENING_SE = 2.0
+WORSENING_SE = 3.55
 # An outside-library rival (``offline.calibrate.unexplained.delay_probe``: the estimator's signals stamped later
 # than the motor outputs) competes with the terms in every round: where its held-out BIC is lower than that of the
 # round's best passing term by more than RIVAL_MARGIN_BIC, nothing is named and the residual is reported as
@@ -167,21 +172,29 @@ def worst_signal(rms: dict[str, float], base: dict[str, float]) -> float:
     )
 
 
-def worsened_signals(
+def signal_worsening(
     base: list[dict[str, np.ndarray]], new: list[dict[str, np.ndarray]], masks: list[np.ndarray], corr_time: dict[str, float]
-) -> list[str]:
-    """Signals a model ``new`` fits worse than ``base`` on the held-out blocks: RMS ratio above
-    MAX_SIGNAL_WORSENING and the mean-square rise beyond WORSENING_SE paired standard errors."""
+) -> dict[str, tuple[float, float]]:
+    """Per signal, how much worse ``new`` fits it than ``base`` on the held-out blocks: (held-out RMS ratio, each
+    floored at the signal's noise level; the mean-square rise in paired standard errors, with the effective sample
+    count n / correlation time)."""
     a_all, b_all = _pooled(base, masks), _pooled(new, masks)
-    out = []
+    out = {}
     for s, a in a_all.items():
         b, f2 = b_all[s], noise_floor(s) ** 2
-        if len(a) < 2 or np.sqrt((np.mean(b**2) + f2) / (np.mean(a**2) + f2)) <= MAX_SIGNAL_WORSENING:
+        if len(a) < 2:
             continue
         d = b**2 - a**2
-        if np.mean(d) > WORSENING_SE * np.std(d) / np.sqrt(len(d) / corr_time.get(s, 1.0)):
-            out.append(s)
+        se = np.std(d) / np.sqrt(len(d) / corr_time.get(s, 1.0))
+        out[s] = (float(np.sqrt((np.mean(b**2) + f2) / (np.mean(a**2) + f2))), float(np.mean(d) / se) if se > 0 else 0.0)
     return out
+
+
+def worsened_signals(worsening: dict[str, tuple[float, float]]) -> list[str]:
+    """Signals fitted worse beyond what nominal flights show: RMS ratio above MAX_SIGNAL_WORSENING and the
+    mean-square rise beyond WORSENING_SE paired standard errors (``signal_worsening``), worst first."""
+    worse = [s for s, (ratio, z) in worsening.items() if ratio > MAX_SIGNAL_WORSENING and z > WORSENING_SE]
+    return sorted(worse, key=lambda s: -worsening[s][1])
 
 
 def combined_rms(rms: dict[str, float], sigma: dict[str, float]) -> float:
@@ -330,7 +343,14 @@ def gate_checks(
     """Every gate a candidate must pass to be named, in order, each with the numbers that decided it."""
     gain = base_bic - trial.bic
     cut = 1.0 - relative_rms(trial.held_rms, base_rms)  # reported beside the gain, not a gate
-    worse = worsened_signals(base_res, trial.residuals, data.held_masks, data.corr_time)
+    worsening = signal_worsening(base_res, trial.residuals, data.held_masks, data.corr_time)
+    worse = worsened_signals(worsening)
+    # The signal closest to the veto: the largest paired rise among those whose RMS rose by MAX_SIGNAL_WORSENING.
+    risen = {s: w for s, w in worsening.items() if w[0] > MAX_SIGNAL_WORSENING}
+    worst = max(risen, key=lambda s: risen[s][1]) if risen else None
+    figures = ", ".join(
+        f"{s} held-out RMS x{worsening[s][0]:.3f}, mean square +{worsening[s][1]:.1f} paired standard errors" for s in worse
+    )
     ident = all(trial.identifiable.values())
     return [
         GateCheck(
@@ -348,10 +368,16 @@ def gate_checks(
         GateCheck(
             "consistency",
             not worse,
-            {"worsened_signals": len(worse)},
-            "no signal fitted worse beyond noise"
+            {
+                "worsened_signals": len(worse),
+                "worst_signal": worst,
+                "worst_rms_ratio": round(worsening[worst][0], 4) if worst else None,
+                "worst_se_rise": round(worsening[worst][1], 2) if worst else None,
+            },
+            "no signal fitted worse beyond what nominal flights show"
             if not worse
-            else f"fits {', '.join(worse)} worse (RMS ratio > {MAX_SIGNAL_WORSENING:g} and > {WORSENING_SE:g} paired standard errors)",
+            else f"fits {figures} (gate: RMS ratio > {MAX_SIGNAL_WORSENING:g} and > {WORSENING_SE:g} paired standard "
+            "errors, the most nominal flights show)",
         ),
     ]
 
