@@ -264,15 +264,16 @@ def _per_axis(res, masks) -> dict[str, float]:
     return {s: round(r[s], 5) for s in ROT}
 
 
-def calibrate_both(tabs) -> dict:
-    """Today's calibration (named, fitted lag, per-axis held-out RMS) and the library before the spin-up reaction."""
+def calibrate_both(tabs, before: bool = True) -> dict:
+    """Today's calibration (named, fitted lag, per-axis held-out RMS) and (``before``) the library before the
+    spin-up reaction on the same data."""
     from offline.calibrate.calibrate import calibrate
     from offline.calibrate.fit import select_terms
     from offline.calibrate.unexplained import delay_probe
 
     r = calibrate(tabs, NOM)
     data = r.data
-    old = select_terms(data, NOM, library(before=True), rival=delay_probe)
+    old = select_terms(data, NOM, library(before=True), rival=delay_probe) if before else None
     lag = next((f for f in r.findings if f["effect"] in LAG_TERMS), None)
     taus = [v for k, v in (lag["params"].items() if lag else []) if k.endswith("_s")]
     return {
@@ -282,13 +283,18 @@ def calibrate_both(tabs) -> dict:
         "rotor_inertia_kg_m2": _rotor_inertia_named(r.findings),
         "unexplained": r.unexplained["summary"] if r.unexplained["found"] else None,
         "vetoed": [n for n in r.notes if n.startswith("round ")],
-        "before_named": old.chosen,
+        "before_named": old.chosen if old else None,
         "before_vetoed": {
-            n: v.why for s in old.steps for n, v in s.verdicts.items() if n in LAG_TERMS and v.gate == "consistency"
+            n: v.why
+            for s in (old.steps if old else [])
+            for n, v in s.verdicts.items()
+            if n in LAG_TERMS and v.gate == "consistency"
         },
         "heldout_rms": {
             "nominal": _per_axis(r.selection.nominal_residuals, data.held_masks),
-            "before": _per_axis(old.final.residuals if old.final else r.selection.nominal_residuals, data.held_masks),
+            "before": _per_axis(old.final.residuals if old and old.final else r.selection.nominal_residuals, data.held_masks)
+            if old
+            else None,
             "after": _per_axis(
                 r.selection.final.residuals if r.selection.final else r.selection.nominal_residuals, data.held_masks
             ),
@@ -302,7 +308,7 @@ def evalsim(out: Path, lags_ms: list[float], seeds: int, nominal: int, duration_
 
     out.mkdir(parents=True, exist_ok=True)
     runs = out / "runs.jsonl"
-    plan = [(lag, seed_base + 100 * int(lag) + s) for lag in lags_ms for s in range(seeds)]
+    plan = [(lag, seed_base + 100 * int(lag) + s) for s in range(seeds) for lag in lags_ms]
     plan += [(None, seed_base + 50_000 + s) for s in range(nominal)]
     rows = []
     batch = 8  # runs simulated together (16 flights): the evaluation simulator's cost per flight falls with the batch
@@ -315,7 +321,8 @@ def evalsim(out: Path, lags_ms: list[float], seeds: int, nominal: int, duration_
         tabs = eval_tables(specs)
         for k, (lag, seed) in enumerate(chunk):
             t0 = time.process_time()
-            row = {"lag_ms": lag, "seed": seed} | calibrate_both(tabs[2 * k : 2 * k + 2])
+            # Nothing hidden: today's library only (the verdict the target is about; half the cost).
+            row = {"lag_ms": lag, "seed": seed} | calibrate_both(tabs[2 * k : 2 * k + 2], before=lag is not None)
             row["cpu_s"] = round(time.process_time() - t0, 1)
             rows.append(row)
             with runs.open("a", encoding="utf-8") as fh:
@@ -336,7 +343,6 @@ def summarise(rows: list[dict]) -> dict:
         cell = {"runs": len(rs)}
         if lag is None:
             cell["named_a_cause"] = sum(r["cause"] is not None for r in rs)
-            cell["before_named_a_cause"] = sum(bool(r["before_named"]) for r in rs)
             cell["named_terms"] = sorted({t for r in rs for t in r["named"]})
         else:
             ok = [r for r in rs if set(r["named"]) & set(LAG_TERMS)]
@@ -346,7 +352,9 @@ def summarise(rows: list[dict]) -> dict:
             cell["fitted_lag_ms"] = sorted(round(1000 * r["fitted_lag_s"], 1) for r in ok)
             cell["rotor_inertia_written"] = sum(r["rotor_inertia_kg_m2"] is not None and r["rotor_inertia_kg_m2"] > 0 for r in rs)
         for which in ("nominal", "before", "after"):
-            cell[f"heldout_rms_median_{which}"] = {s: float(np.median([r["heldout_rms"][which][s] for r in rs])) for s in ROT}
+            got = [r["heldout_rms"][which] for r in rs if r["heldout_rms"][which]]
+            if got:
+                cell[f"heldout_rms_median_{which}"] = {s: float(np.median([g[s] for g in got])) for s in ROT}
         out[key] = cell
     return out
 
