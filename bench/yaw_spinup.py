@@ -3,6 +3,7 @@
     nice python -m bench.yaw_spinup candidates [--lags-ms 20 60] [--seeds 0 1 2] [--duration-s 40]
     nice python -m bench.yaw_spinup crazypad
     nice python -m bench.yaw_spinup resolution [--sizes 2.5e-6 5e-6 1e-5 2e-5] [--seeds 10] [--duration-s 40]
+    nice python -m bench.yaw_spinup own [--lags-ms 60] [--seeds 5] [--duration-s 40] [--fixed-rotor-inertia 2e-5]
     nice python -m bench.yaw_spinup evalsim --out DIR [--lags-ms 30 45 60 80] [--seeds 5] [--nominal 60]
         [--duration-s 80] [--seed-base 90000]
 
@@ -24,7 +25,8 @@
    ``--duration-s`` through a .tlog; each calibrated with the library before the spin-up reaction (lag terms with
    the rotor inertia held at the vehicle's 0, no ``rotor_inertia`` term) and with today's. Per run: what is named,
    the fitted lag, and the held-out residual RMS per axis of the nominal vehicle and of each library's result.
-   Writes ``runs.jsonl`` as runs end and ``summary.json``.
+   Writes ``runs.jsonl`` as runs end and ``summary.json``. ``own`` does the same on OUR simulator's register
+   flights with the rotor inertia drawn (as ``candidates``), or on its fixed path with ``--fixed-rotor-inertia``.
 """
 
 from __future__ import annotations
@@ -82,31 +84,28 @@ def _yaw_rms(segs, masks, vehicle, **kw) -> float:
     return float(np.sqrt(np.mean(r**2)))
 
 
+def lag_and_spin_up_register(tau_s: float):
+    """The register as ``nominal_flights`` draws it, every rotor lagging by ``tau_s``, the rotor inertia drawn from
+    the register's own range (nominal flights hold it at the vehicle's 0)."""
+    from offline.calibrate.nominal_flights import nominal_register
+    from offline.sim.assumptions import REGISTER
+
+    j = REGISTER["rotor_inertia_kg_m2"]
+    reg = nominal_register().with_range("motor_time_constant_s", tau_s, tau_s)
+    return dataclasses.replace(reg, assumptions=tuple(j if a.name == j.name else a for a in reg.assumptions))
+
+
 def candidates(lags_ms: list[float], seeds: list[int], duration_s: float) -> list[dict]:
     from scipy.optimize import minimize_scalar
 
     from offline.calibrate.fit import Data
-    from offline.calibrate.nominal_flights import nominal_flights, nominal_register
+    from offline.calibrate.nominal_flights import nominal_flights
     from offline.calibrate.prepare import prepare
-    from offline.sim.assumptions import REGISTER
 
-    j_range = REGISTER["rotor_inertia_kg_m2"]
     rows = []
     for lag_ms in lags_ms:
         tau = lag_ms / 1000.0
-        # The register drawn as nominal_flights draws it, the rotor inertia from its own range, the lag pinned.
-        reg = (
-            nominal_register()
-            .with_range("motor_time_constant_s", tau, tau)
-            .with_range("rotor_inertia_kg_m2", j_range.low, j_range.high)
-        )
-        reg = dataclasses.replace(
-            reg,
-            assumptions=tuple(
-                dataclasses.replace(a, distribution=j_range.distribution) if a.name == "rotor_inertia_kg_m2" else a
-                for a in reg.assumptions
-            ),
-        )
+        reg = lag_and_spin_up_register(tau)
         for seed in seeds:
             segs = prepare(nominal_flights(NOM, 2, 60_000 + seed, duration_s, reg), NOM)
             data = Data.split(segs)
@@ -254,6 +253,32 @@ def resolution(sizes: list[float], seeds: int, duration_s: float) -> list[dict]:
     return rows
 
 
+def own(lags_ms: list[float], seeds: int, duration_s: float, fixed_rotor_inertia_kg_m2: float | None = None) -> dict:
+    """``evalsim``'s before/after on OUR simulator: its register flights with the spin-up reaction drawn, or (with
+    ``fixed_rotor_inertia_kg_m2``) its fixed path with that rotor inertia on the vehicle."""
+    from offline.calibrate.nominal_flights import fixed_flights, nominal_flights
+
+    rows = []
+    for lag in lags_ms:
+        for seed in range(seeds):
+            if fixed_rotor_inertia_kg_m2 is None:
+                tabs = nominal_flights(NOM, 2, 61_000 + seed, duration_s, lag_and_spin_up_register(lag / 1000.0))
+            else:
+                truth = dataclasses.replace(
+                    NOM, motor_time_constant_s=lag / 1000.0, rotor_inertia_kg_m2=fixed_rotor_inertia_kg_m2
+                )
+                tabs = fixed_flights(truth, 2, seed, duration_s)
+            row = {"lag_ms": lag, "seed": seed} | calibrate_both(tabs)
+            rows.append(row)
+            print(
+                json.dumps(
+                    {k: row[k] for k in ("lag_ms", "seed", "named", "fitted_lag_s", "rotor_inertia_kg_m2", "before_named")}
+                ),
+                flush=True,
+            )
+    return summarise(rows)
+
+
 # --- 4. the evaluation-only simulator ----------------------------------------------------------------------------
 
 
@@ -371,6 +396,11 @@ def main(argv: list[str] | None = None) -> int:
     r.add_argument("--sizes", type=float, nargs="+", default=[2.5e-6, 5e-6, 1e-5, 2e-5])
     r.add_argument("--seeds", type=int, default=10)
     r.add_argument("--duration-s", type=float, default=40.0)
+    o = sub.add_parser("own")
+    o.add_argument("--lags-ms", type=float, nargs="+", default=[60.0])
+    o.add_argument("--seeds", type=int, default=5)
+    o.add_argument("--duration-s", type=float, default=40.0)
+    o.add_argument("--fixed-rotor-inertia", type=float, default=None, help="kg m^2: the fixed path with this rotor inertia")
     e = sub.add_parser("evalsim")
     e.add_argument("--out", type=Path, required=True)
     e.add_argument("--lags-ms", type=float, nargs="+", default=[30.0, 45.0, 60.0, 80.0])
@@ -383,6 +413,8 @@ def main(argv: list[str] | None = None) -> int:
         res = candidates(a.lags_ms, a.seeds, a.duration_s)
     elif a.what == "crazypad":
         res = crazypad()
+    elif a.what == "own":
+        res = own(a.lags_ms, a.seeds, a.duration_s, a.fixed_rotor_inertia)
     elif a.what == "resolution":
         res = resolution(a.sizes, a.seeds, a.duration_s)
     else:

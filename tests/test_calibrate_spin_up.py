@@ -15,6 +15,7 @@ import pytest
 
 from monitor.vehicle import DEFAULT_VEHICLE, load_vehicle
 from offline.calibrate.fit import Data, select_terms
+from offline.calibrate.nominal_flights import fixed_flights
 from offline.calibrate.physics import rotor_forces
 from offline.calibrate.prepare import prepare
 from offline.calibrate.terms import TERMS, without_spin_up
@@ -25,24 +26,9 @@ LAG_S = 0.06
 ROTOR_INERTIA_KG_M2 = 2.0e-5  # inside the assumption register's 1e-5 .. 4e-5
 
 
-def _flights(vehicle, seed: int = 0, duration_s: float = 40.0):
-    from offline.sim.mission import random_waypoints
-    from offline.sim.propeller import QuadraticPropeller
-    from offline.sim.simulator import SimConfig, simulate
-
-    log = simulate(
-        vehicle,
-        random_waypoints(2, 5, seed=seed),
-        QuadraticPropeller.for_vehicle(vehicle),
-        SimConfig(duration_s=duration_s),
-        seed=seed,
-    )
-    return [log.to_flight_table(i, source=f"spin-up-{i}") for i in range(2)]
-
-
 def test_the_spin_up_reaction_is_rotor_inertia_times_the_lagged_speed_rate():
     """Steady ramp of one rotor's target: the lagged speed trails it by tau and the torque carries J * slope."""
-    seg = prepare(_flights(NOM, duration_s=12.0)[:1], NOM)[0]
+    seg = prepare(fixed_flights(NOM, 1, 0, 12.0), NOM)[0]
     n = len(seg.motor_cmd_fine)
     slope_rad_s2 = 50.0
     w_target = 500.0 + slope_rad_s2 * np.arange(n) * seg.dt_fine_s
@@ -59,7 +45,7 @@ def test_the_spin_up_reaction_is_rotor_inertia_times_the_lagged_speed_rate():
 @pytest.fixture(scope="module")
 def lag_and_spin_up():
     truth = dataclasses.replace(NOM, motor_time_constant_s=LAG_S, rotor_inertia_kg_m2=ROTOR_INERTIA_KG_M2)
-    return Data.split(prepare(_flights(truth), NOM))
+    return Data.split(prepare(fixed_flights(truth, 2, 0), NOM))
 
 
 def test_a_lag_fitted_without_the_spin_up_reaction_is_vetoed_by_yaw(lag_and_spin_up):
@@ -80,6 +66,6 @@ def test_a_lag_with_the_spin_up_reaction_is_named_with_both_values(lag_and_spin_
 
 
 def test_nothing_hidden_names_neither_a_lag_nor_rotor_inertia():
-    data = Data.split(prepare(_flights(NOM), NOM))
+    data = Data.split(prepare(fixed_flights(NOM, 2, 0), NOM))
     sel = select_terms(data, NOM, list(TERMS.values()), rival=delay_probe)
     assert not set(sel.chosen) & {"motor_time_constant", "rotor_time_constant", "rotor_inertia"}, sel.chosen

@@ -552,7 +552,7 @@ STEADY_CANNOT_SEPARATE = (
     ("cg_offset", "motor_efficiency"),  # both move thrust between motors at trim; motor_efficiency absorbs any static pattern
     ("mass", "esc_curve"),  # both scale every motor's command alike
 )
-STEADY_NOT_OBSERVABLE = ("inertia", "motor_time_constant", "rotor_time_constant", "drag", "gyro_bias")
+STEADY_NOT_OBSERVABLE = ("inertia", "motor_time_constant", "rotor_time_constant", "rotor_inertia", "drag", "gyro_bias")
 
 
 def predicted_commands(vehicle: VehicleConfig) -> np.ndarray:

@@ -58,29 +58,36 @@ def degrade_table(
     return dataclasses.replace(tab, **degrade_flight(signals, tab.rate_hz, delay_s, jitter_std_s, drop_prob, rng, groups))
 
 
+def _simulate(vehicle: VehicleConfig, flights: int, seed: int, duration_s: float, per_flight=None):
+    from offline.sim.mission import random_waypoints
+    from offline.sim.propeller import QuadraticPropeller
+    from offline.sim.simulator import SimConfig, simulate
+
+    wps = random_waypoints(flights, 5, seed=seed)
+    prop = QuadraticPropeller.for_vehicle(vehicle)
+    return simulate(vehicle, wps, prop, SimConfig(duration_s=duration_s), seed=seed, per_flight=per_flight)
+
+
 def nominal_flights(
     vehicle: VehicleConfig, flights: int, seed: int, duration_s: float = 40.0, register: AssumptionRegister | None = None
 ) -> list[FlightTable]:
     """``flights`` healthy flights of ``vehicle`` (random routes), each with its own register draw; flight i
     depends only on (seed, i)."""
-    from offline.sim.mission import random_waypoints
     from offline.sim.perflight import PerFlightTerms
-    from offline.sim.propeller import QuadraticPropeller
-    from offline.sim.simulator import SimConfig, simulate
 
     register = nominal_register() if register is None else register
     phys = draw_flights(register, seed, range(flights))
-    log = simulate(
-        vehicle,
-        random_waypoints(flights, 5, seed=seed),
-        QuadraticPropeller.for_vehicle(vehicle),
-        SimConfig(duration_s=duration_s),
-        seed=seed,
-        per_flight=PerFlightTerms.from_flights(phys, vehicle),
-    )
+    log = _simulate(vehicle, flights, seed, duration_s, PerFlightTerms.from_flights(phys, vehicle))
     out = []
     for i, f in enumerate(phys):
         tab = log.to_flight_table(i, source=f"nominal-{seed}-{i}")
         rng = np.random.default_rng([int(f["noise_seed"]) % 2**63, 2])
         out.append(degrade_table(tab, f["attitude_log_delay_s"], f["telemetry_jitter_std_s"], f["telemetry_drop_prob"], rng))
     return out
+
+
+def fixed_flights(vehicle: VehicleConfig, flights: int, seed: int, duration_s: float = 40.0) -> list[FlightTable]:
+    """``flights`` flights of our simulator's fixed path (random routes, no register draws, exact 20 Hz): ``vehicle``
+    exactly as it is, for hidden-effect checks with nothing else in the way."""
+    log = _simulate(vehicle, flights, seed, duration_s)
+    return [log.to_flight_table(i, source=f"fixed-{seed}-{i}") for i in range(flights)]
