@@ -29,6 +29,9 @@ class Term:
     upper: Callable[[VehicleConfig], np.ndarray]
     fields: tuple[str, ...]  # VehicleConfig keys this term writes
     why: str  # the physical cause, for the report
+    # Parameters fitted with the term (and written with it) whose standard error does not decide whether the term
+    # is identifiable: what the named effect needs beside it, not the effect itself.
+    nuisance: tuple[str, ...] = ()
 
 
 # Rotor inertia's resolution: the inertia whose spin-up reaction leads the yaw drag torque by
@@ -147,6 +150,7 @@ TERMS: dict[str, Term] = {
             ("motor_time_constant_s", "rotor_inertia_kg_m2"),
             "rotors lag the ESC command: moments trail the commands (the rotors' spin-up reaction, which leads the "
             "drag torque in yaw, fitted with the lag)",
+            nuisance=("rotor_inertia_kg_m2",),
         ),
         Term(
             "rotor_time_constant",
@@ -159,6 +163,7 @@ TERMS: dict[str, Term] = {
             ("motor_time_constant_s", "motor_time_constant_ratio", "rotor_inertia_kg_m2"),
             "one rotor lags its ESC command more than the others (a slow motor or ESC): its moments trail (the "
             "rotors' spin-up reaction fitted with the lags)",
+            nuisance=("rotor_inertia_kg_m2",),
         ),
         Term(
             "rotor_inertia",
@@ -220,6 +225,7 @@ def without_spin_up(term: Term) -> Term:
         lower=lambda v: term.lower(v)[:k],
         upper=lambda v: term.upper(v)[:k],
         fields=tuple(f for f in term.fields if f != "rotor_inertia_kg_m2"),
+        nuisance=(),
     )
 
 
