@@ -126,8 +126,9 @@ def test_a_60_ms_lag_on_all_rotors_is_named_and_every_verdict_says_its_gate(comm
     found = {f["effect"]: f["params"] for f in r.findings}
     lag = set(found) & {"motor_time_constant", "rotor_time_constant"}
     assert lag, (r.cause, r.notes, {n: c["verdict"] for n, c in r.candidates.items()})
-    for v in found[lag.pop()].values():
-        assert 0.045 <= v <= 0.075, found
+    for k, v in found[lag.pop()].items():
+        if k.endswith("_s"):  # the time constants (the rotor inertia fitted with them is no lag)
+            assert 0.045 <= v <= 0.075, found
     # No silent veto: every candidate carries its verdict, the gate that decided it and that gate's numbers.
     for name, c in r.candidates.items():
         v = c["verdict"]

@@ -28,10 +28,12 @@ from offline.calibrate.unexplained import delay_probe, one_rotor_reading, unexpl
 
 PHASES = ("hover", "cruise", "climb", "manoeuvre")
 LAG_TERMS = ("motor_time_constant", "rotor_time_constant")
-# The resolution of the lag terms on 20 Hz telemetry at the gates in force, so a report that names no lag says how
-# large a lag could still hide. Measured with ``python -m bench.evalsim_lag --duration-s 40 --lags-ms 45 60
-# --pattern common one --jitter-ms 4 --seeds 0 1``: all four rotors at 60 ms named 2 of 2 (45 ms: 1 of 2), one
-# rotor at 60 ms named 2 of 2 with held-out gains of 64-65, just over the gate (45 ms: 0 of 2).
+# The resolution of the lag terms on 20 Hz telemetry, so a report that names no lag says how large a lag could still
+# hide. Measured with ``python -m bench.evalsim_lag --duration-s 40 --lags-ms 45 60 --pattern common one --jitter-ms
+# 4 --seeds 0 1`` at the previous gates (held-out gain 60, consistency 2 standard errors): all four rotors at 60 ms
+# named 2 of 2 (45 ms: 1 of 2), one rotor at 60 ms named 2 of 2 with held-out gains of 64-65 (45 ms: 0 of 2). At
+# the gates in force, with the spin-up reaction, on 2 x 80 s flights: ``python -m bench.yaw_spinup evalsim``
+# (docs/CALIBRATION.md, "Yaw under a motor lag").
 LAG_RESOLUTION_NOTE = (
     "no motor lag named. Resolution measured at 20 Hz (bench/evalsim_lag.py: evaluation simulator, 2 x 40 s "
     "flights, 4 ms telemetry jitter, nominal lag 20 ms): one slow rotor is named from about {one} ms, all four "
