@@ -231,7 +231,7 @@ def _rotor_inertia_named(findings: list[dict]) -> float | None:
 
 
 def resolution(sizes: list[float], seeds: int, duration_s: float) -> list[dict]:
-    from offline.calibrate.calibrate import calibrate
+    from offline.calibrate.calibrate import calibrate_vehicle
     from offline.calibrate.nominal_flights import nominal_flights
 
     rows = []
@@ -239,7 +239,7 @@ def resolution(sizes: list[float], seeds: int, duration_s: float) -> list[dict]:
         truth = dataclasses.replace(NOM, rotor_inertia_kg_m2=size)
         named, vals = 0, []
         for seed in range(seeds):
-            r = calibrate(nominal_flights(truth, 2, 80_000 + seed, duration_s), NOM)
+            r = calibrate_vehicle(nominal_flights(truth, 2, 80_000 + seed, duration_s), NOM)
             j = _rotor_inertia_named(r.findings)
             named += j is not None
             vals += [j] if j is not None else []
@@ -292,11 +292,11 @@ def _per_axis(res, masks) -> dict[str, float]:
 def calibrate_both(tabs, before: bool = True) -> dict:
     """Today's calibration (named, fitted lag, per-axis held-out RMS) and (``before``) the library before the
     spin-up reaction on the same data."""
-    from offline.calibrate.calibrate import calibrate
+    from offline.calibrate.calibrate import calibrate_vehicle
     from offline.calibrate.fit import select_terms
     from offline.calibrate.unexplained import delay_probe
 
-    r = calibrate(tabs, NOM)
+    r = calibrate_vehicle(tabs, NOM)
     data = r.data
     old = select_terms(data, NOM, library(before=True), rival=delay_probe) if before else None
     lag = next((f for f in r.findings if f["effect"] in LAG_TERMS), None)
