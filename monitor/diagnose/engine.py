@@ -41,9 +41,7 @@ from monitor.decision.config import DecisionConfig
 from monitor.decision.effectiveness import PRE_CHANGE_MARGIN_S
 from monitor.decision.hypotheses import SetRule, flight_score, hypothesis_set, load_rule
 from monitor.decision.network_gate import RPM_FEATURES, RPM_RATIO_REFUSE, RPM_RATIO_WARN, RPM_Z_REFUSE, RPM_Z_WARN
-from monitor.decision.replay import FlightSteps, replay
-from monitor.decision.rule import Decision, WindowEvidence
-from monitor.decision.thresholds import file_sha256
+from monitor.decision.rule import WindowEvidence
 from monitor.diagnose.physics import SET_PRIOR, PhysicsEvidence, own_baseline, physics_evidence
 from monitor.diagnose.physics_first import (
     motor_output_alarms,
@@ -52,6 +50,7 @@ from monitor.diagnose.physics_first import (
     physics_verdict,
     propellers_for,
 )
+from monitor.diagnose.replayed import replay_record
 from monitor.diagnose.shares import ShareEvidence, has_outputs, share_evidence
 from monitor.errors import ModelError
 from monitor.esc import EscCurve
@@ -606,37 +605,8 @@ def replay_decision(
 ) -> dict:
     """The daemon's decision rule over the log, step by step, with the windows classified at ``ends``
     (``monitor.decision.replay``: the same replay as every offline evaluation)."""
-    dec = Decision(cfg, table.rate_hz, clf.info.window, model_sha256=file_sha256(clf.path))
-    t_s = _t_s(table, np.arange(len(table.timestamp_us)))
-    fault = None  # the last window at fault level: {"t_boot_s", "hypothesis_sets"} (a landing later resets the levels)
-
-    def after_window(j: int, t: float) -> None:
-        nonlocal fault
-        if "fault" in dec.level or dec.pair_level == "fault":
-            sets = [list(s) for s in dec.hypothesis_sets("fault") if s]
-            if sets:
-                fault = {"t_boot_s": round(t, 2), "hypothesis_sets": sets}
-
     evidence = {int(e): WindowEvidence(faults[k], labels[k]) for k, e in enumerate(ends)}
-    alerts = [
-        {
-            "t_boot_s": round(a.t_s, 2),
-            "level": a.level,
-            "propellers": list(a.propellers),
-            "text": a.text,
-            "hypothesis_sets": [list(s) for s in a.sets],
-        }
-        for a in replay(dec, FlightSteps.of_table(table), t_s, evidence, after_window)
-    ]
-    out = {"alerts": alerts, "final": dec.verdict()}
-    first = next((a for a in alerts if a["level"] == "fault"), None)
-    if fault is not None and first is not None:
-        out["in_flight_fault"] = {
-            "first_fault_boot_s": first["t_boot_s"],
-            "last_fault_boot_s": fault["t_boot_s"],
-            "hypothesis_sets": fault["hypothesis_sets"],
-        }
-    return out
+    return replay_record(table, clf.path, clf.info.window, evidence, cfg)
 
 
 def name_verdict(d: Diagnosis, label: int, confidence: str, motor_names) -> None:

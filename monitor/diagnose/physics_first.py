@@ -23,9 +23,8 @@ import numpy as np
 
 from monitor.decision.config import DecisionConfig
 from monitor.decision.motor_output import scan
-from monitor.decision.replay import FlightSteps, replay
-from monitor.decision.rule import Decision, WindowEvidence
-from monitor.decision.thresholds import file_sha256
+from monitor.decision.rule import WindowEvidence
+from monitor.diagnose.replayed import replay_record
 from monitor.diagnose.shares import ShareEvidence
 from monitor.flight import FlightTable
 from monitor.labels import LABEL_TABLE, label_for
@@ -60,39 +59,9 @@ def airborne_ends(table: FlightTable, window: int, hop: int) -> np.ndarray:
 def physics_replay(table: FlightTable, model_path, window: int, hop: int, cfg: DecisionConfig | None = None) -> dict:
     """The decision rule replayed with physics alone (every window's network evidence NaN): ``decision`` as the
     engine's ``replay_decision`` gives it, with ``network: false``."""
-    cfg = cfg or DecisionConfig()
-    dec = Decision(cfg, table.rate_hz, window, model_sha256=file_sha256(model_path) if model_path else None)
-    t_s = boot_s(table)
-    fault = None
-
-    def after_window(j: int, t: float) -> None:
-        nonlocal fault
-        if "fault" in dec.level or dec.pair_level == "fault":
-            sets = [list(s) for s in dec.hypothesis_sets("fault") if s]
-            if sets:
-                fault = {"t_boot_s": round(t, 2), "hypothesis_sets": sets}
-
     none = WindowEvidence(np.full(4, np.nan))
     evidence = {int(e): none for e in airborne_ends(table, window, hop)}
-    alerts = [
-        {
-            "t_boot_s": round(a.t_s, 2),
-            "level": a.level,
-            "propellers": list(a.propellers),
-            "text": a.text,
-            "hypothesis_sets": [list(s) for s in a.sets],
-        }
-        for a in replay(dec, FlightSteps.of_table(table), t_s, evidence, after_window)
-    ]
-    out = {"alerts": alerts, "final": dec.verdict(), "network": False}
-    first = next((a for a in alerts if a["level"] == "fault"), None)
-    if fault is not None and first is not None:
-        out["in_flight_fault"] = {
-            "first_fault_boot_s": first["t_boot_s"],
-            "last_fault_boot_s": fault["t_boot_s"],
-            "hypothesis_sets": fault["hypothesis_sets"],
-        }
-    return out
+    return replay_record(table, model_path, window, evidence, cfg) | {"network": False}
 
 
 def propellers_for(label: int, confidence: str, names, suspect=()) -> list[dict]:
