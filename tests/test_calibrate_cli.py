@@ -61,7 +61,7 @@ def test_calibrated_yaml_loads_cites_the_calibration_and_drives_the_simulator(ru
     assert loaded.sources["mass_kg"] == load_vehicle_with_sources(DEFAULT_VEHICLE).sources["mass_kg"]
     assert np.linalg.norm(np.array(loaded.config.cg_offset_frd_m) - HIDDEN_CG) < 0.25 * np.linalg.norm(HIDDEN_CG)
 
-    from offline.sim import cli as sim_cli
+    from offline import simulate as sim_cli
 
     rc = sim_cli.main(
         ["--out", str(tmp / "sim"), "--vehicle", str(out), "--duration-s", "2", "--propellers", "quadratic", "--format", "npz"]

@@ -43,9 +43,12 @@ def test_the_crazyflie_is_the_shipped_vehicle_for_cf16_commands():
 @pytest.mark.realdata
 @pytest.mark.skipif(not CRAZYPAD_CUT.is_file(), reason=f"CrazyPAD data not found at {CRAZYPAD_CUT}")
 def test_crazypad_without_vehicle_suggests_it(capsys):
-    assert propwatch(["diagnose", str(CRAZYPAD_CUT), "--format", "crazypad", "--json"]) == 1
+    # The paper quad's model takes PWM microseconds: it is silent, the shares of the raw outputs judge the flight,
+    # and the next step says to diagnose again with the Crazyflie's own vehicle file.
+    assert propwatch(["diagnose", str(CRAZYPAD_CUT), "--format", "crazypad", "--json"]) == 3
     out = json.loads(capsys.readouterr().out)
-    assert out["verdict"] is None and "--vehicle models/crazyflie.yaml" in out["reason"]
+    assert out["network"]["used"] is False and "--vehicle models/crazyflie.yaml" in out["network"]["why_not"]
+    assert "--vehicle models/crazyflie.yaml" in out["summary"]["next_step"]
 
 
 def test_report_says_where_it_wrote(tmp_path, capsys):

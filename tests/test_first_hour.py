@@ -79,10 +79,9 @@ def test_the_readme_says_the_browser_tests_need_chromium():
 @pytest.mark.realdata
 @pytest.mark.skipif(not CRAZYPAD_NORMAL.is_file(), reason=f"CrazyPAD data not found at {CRAZYPAD_NORMAL}")
 def test_a_crazypad_log_without_vehicle_is_told_to_add_it(capsys):
-    assert propwatch(["diagnose", str(CRAZYPAD_NORMAL), "--format", "crazypad"]) == 1
-    text = capsys.readouterr().out
-    step = next(line for line in text.splitlines() if "next step:" in line)
-    assert "--vehicle models/crazyflie.yaml" in step and "minute of steady flight" not in step, text
+    assert propwatch(["diagnose", str(CRAZYPAD_NORMAL), "--format", "crazypad", "--json"]) == 3  # physics alone
+    step = json.loads(capsys.readouterr().out)["summary"]["next_step"]
+    assert "--vehicle models/crazyflie.yaml" in step and "minute of steady flight" not in step, step
 
 
 def test_one_propeller_to_inspect_is_one_propeller():
@@ -90,7 +89,7 @@ def test_one_propeller_to_inspect_is_one_propeller():
 
     result = {
         "propellers": [{"name": n} for n in ("M1", "M3", "M4", "M2")],
-        "verdict": {"label": 4, "confidence": "suspect", "fault_probability": [0.1, 0.2, 0.9, 0.1]},
+        "verdict": {"label": 4, "faulty_propellers": [3], "confidence": "suspect", "fault_probability": [0.1, 0.2, 0.9, 0.1]},
         "hypotheses": [{"faulty_propellers": [3], "probability": 1.0}],
     }
     step = verdict_of(result).next_step

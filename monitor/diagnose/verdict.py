@@ -292,6 +292,10 @@ def verdict_of(result: dict) -> Verdict:
         )
     conf = v.get("confidence", "confident")
     sets = _verdict_sets(result)
+    silent = (result.get("network") or {}).get("why_not") or ""
+    other_vehicle = re.search(r"try (--vehicle \S+?(?: or --vehicle \S+?)*)\)?$", silent)
+    # where the log is another class of vehicle than the model's, the vehicle's own model may judge it too
+    own_model = f" Diagnose this log again with {other_vehicle.group(1)} to have its own model judge it too." if other_vehicle else ""
     evidence = _evidence(result, names, takeoff)
     change = flight_seconds(v["change_boot_s"], takeoff) if v.get("source") == "in-flight change" else None
     when = f" (from {change:.0f} s after take-off)" if change is not None else ""
@@ -360,7 +364,7 @@ def verdict_of(result: dict) -> Verdict:
                 headline=f"Rotor {n} works {harder:.0f} % harder than the mean of the four: a damaged propeller {n}, or "
                 "this airframe's balance; 3 healthy flights of this vehicle will tell.",
                 next_step=f"Inspect propeller {n} before the next flight; replace it if it is chipped, cracked or bent. "
-                "If it is intact, learn this vehicle's normal (propwatch baseline learn) from 3 healthy flights.",
+                "If it is intact, learn this vehicle's normal (propwatch baseline learn) from 3 healthy flights." + own_model,
                 why="Without the vehicle's history, a CG off towards this rotor or a weaker motor moves its share as "
                 "a damaged propeller does.",
                 **common,
@@ -374,7 +378,7 @@ def verdict_of(result: dict) -> Verdict:
             headline="No damage seen.",
             next_step="Fly as usual. A first flight cannot see a propeller damaged before take-off that moves its "
             "rotor's share no more than this airframe's own balance does: 3 healthy flights of this vehicle "
-            "(propwatch baseline learn) will.",
+            "(propwatch baseline learn) will." + own_model,
             why="No rotor's share stands out beyond what healthy airframes show; without the vehicle's history, "
             "damage present from take-off smaller than its own balance cannot be seen.",
             **common,
