@@ -222,7 +222,8 @@ def _diagnose_into(row: dict, path: Path, settings: IngestSettings) -> None:
             confidence=str(d.verdict.get("confidence", "confident")),
             verdict_label=int(d.verdict["label"]),
             faulty_propellers=[int(i) for i in d.verdict["faulty_propellers"]],
-            p_faulty=[float(x) for x in d.verdict["fault_probability"]],
+            # the network's P(faulty) per rotor; NULL where it was silent (a verdict of physics alone)
+            p_faulty=[float(x) for x in d.verdict["fault_probability"]] if d.verdict.get("fault_probability") else None,
         )
     # Physics evidence (rotor effectiveness, hypotheses) in PX4 rotor order, as p_faulty: from the Diagnosis
     # itself (the JSON may be renumbered to the vehicle's own numbers); NULL when diagnose gives none.

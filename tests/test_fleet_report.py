@@ -233,10 +233,12 @@ def test_pictures_are_drawn_from_the_logs_with_the_rows_own_words(site, tmp_path
     con = open_db(tmp_path / "one.duckdb")
     insert_rows(con, [row])
     con.close()
-    res = write_site(tmp_path / "one.duckdb", tmp_path / "site", pictures="action")
-    assert res["pictures"] == 1  # the classifier flags 3 and 4: a flight to act on
+    # the classifier alone flags 3 and 4, physics calls the flight healthy: nothing to act on, no picture then
+    assert write_site(tmp_path / "one.duckdb", tmp_path / "site", pictures="action")["pictures"] == 0
+    res = write_site(tmp_path / "one.duckdb", tmp_path / "site", pictures="latest")
+    assert res["pictures"] == 1
     png = tmp_path / "site" / "pictures" / ("e" * 16 + ".png")
     drawn = Image.open(png).text
-    assert drawn["Title"] == row_verdict(row).headline == "No damage or propellers 3+4: inspect 3 and 4."
+    assert drawn["Title"] == row_verdict(row).headline == "No damage seen."
     page = next((tmp_path / "site" / "vehicles").glob("*.html")).read_text(encoding="utf-8")
     assert f"src='../pictures/{'e' * 16}.png'" in page

@@ -89,7 +89,10 @@ def build_store(db: Path) -> None:
         "baseline_flights": "i % 20",
         "compared_with_first": "CASE WHEN i % 20 > 0 THEN '2026-01-01' END",
         "compared_with_last": "CASE WHEN i % 20 > 0 THEN strftime(DATE '2026-01-01' + CAST(i % 20 - 1 AS INTEGER), '%Y-%m-%d') END",
-        "memory": "CASE WHEN i % 20 >= 3 THEN '{\"deviation_sigma\": [0.1, -0.2, 0.3, -0.1]}' END",
+        # the judgement as monitor.diagnose.memory_adapter.judgement stores it: what it was compared with, the deviation
+        "memory": 'CASE WHEN i % 20 >= 3 THEN \'{"deviation_sigma": [0.1, -0.2, 0.3, -0.1], "compared_with": '
+        '{"flights": \' || (i % 20) || \', "first": "2026-01-01", "last": "\' || '
+        "strftime(DATE '2026-01-01' + CAST(i % 20 - 1 AS INTEGER), '%Y-%m-%d') || '\"}}' END",
     }
     names = [c for c, _ in COLUMNS if c in exprs]
     con = duckdb.connect(str(db))
