@@ -31,7 +31,7 @@ SAME_SPIN_PAIRS = ((1, 2), (3, 4))  # diagonal pairs spinning the same way (1, 2
 FLAG_PROBABILITY = 0.9  # the classifier's P(faulty) that puts a propeller in the next step (DecisionConfig's FAULTY)
 MAX_SETS_NAMED = 4  # beyond this many hypothesis sets the headline counts them instead of naming each
 
-STATES = ("damaged", "inspect", "healthy", "imbalance", "no verdict", "unreadable")
+STATES = ("damaged", "motor", "inspect", "healthy", "imbalance", "no verdict", "unreadable")
 
 
 @dataclass(frozen=True)
@@ -323,11 +323,11 @@ def verdict_of(result: dict) -> Verdict:
         since = flight_seconds(v["change_boot_s"], takeoff)
         n = _num(k, names)
         if kinds.get(k, "stopped") == "stopped":
-            return Verdict(
-                "damaged",
+            return Verdict(  # a motor, not a propeller: nothing to replace until the motor is checked
+                "motor",
                 conf,
-                (k,),
                 (),
+                (k,),
                 ((k,),),
                 headline=f"Motor {n} ({POSITION[k]}) stopped from {since:.0f} s after take-off: its output sat at the "
                 "bottom of its range while the others flew; a motor or ESC failure, not a propeller.",
