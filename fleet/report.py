@@ -49,7 +49,15 @@ MARKER = ".propwatch-fleet-site"
 UNIDENTIFIED = "(unidentified)"
 ROWS_PER_PAGE = 50
 EVIDENCE_POINTS = 40  # at most this many windows drawn per flight's evidence chart (a 20-s flight: every one)
-STATE_ORDER = {"damaged": 0, "motor": 1, "imbalance": 2, "inspect": 3, "unreadable": 4, "no verdict": 5, "healthy": 6}  # TABLE_JS's RANK
+STATE_ORDER = {
+    "damaged": 0,
+    "motor": 1,
+    "imbalance": 2,
+    "inspect": 3,
+    "unreadable": 4,
+    "no verdict": 5,
+    "healthy": 6,
+}  # TABLE_JS's RANK
 
 CSS = """
 body{font-family:system-ui,-apple-system,Segoe UI,Roboto,sans-serif;margin:1.5em;color:#222;max-width:1200px}

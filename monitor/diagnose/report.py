@@ -146,7 +146,13 @@ def figure(v: Verdict, d: Diagnosis, table: FlightTable, memory: dict | None = N
     ax = [fig.add_subplot(gs[0, 0])]
     ax += [fig.add_subplot(gs[k, 0], sharex=ax[0]) for k in range(1, 7)]
     names = [f"{v.names[i]} {POSITION[i + 1]}" for i in range(4)]
-    colour = {"damaged": "tab:red", "motor": "tab:red", "inspect": "darkorange", "imbalance": "darkorange", "healthy": "tab:green"}
+    colour = {
+        "damaged": "tab:red",
+        "motor": "tab:red",
+        "inspect": "darkorange",
+        "imbalance": "darkorange",
+        "healthy": "tab:green",
+    }
     fig.suptitle("\n".join(headline), x=0.07, y=0.985, ha="left", fontsize=13, weight="bold", color=colour.get(v.state, "0.2"))
     fig._suptitle.set_gid("verdict-headline")
     nxt = fig.text(0.07, next_y, "\n".join(next_step), fontsize=9.5, va="top")

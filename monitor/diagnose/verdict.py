@@ -295,7 +295,9 @@ def verdict_of(result: dict) -> Verdict:
     silent = (result.get("network") or {}).get("why_not") or ""
     other_vehicle = re.search(r"try (--vehicle \S+?(?: or --vehicle \S+?)*)\)?$", silent)
     # where the log is another class of vehicle than the model's, the vehicle's own model may judge it too
-    own_model = f" Diagnose this log again with {other_vehicle.group(1)} to have its own model judge it too." if other_vehicle else ""
+    own_model = (
+        f" Diagnose this log again with {other_vehicle.group(1)} to have its own model judge it too." if other_vehicle else ""
+    )
     evidence = _evidence(result, names, takeoff)
     change = flight_seconds(v["change_boot_s"], takeoff) if v.get("source") == "in-flight change" else None
     when = f" (from {change:.0f} s after take-off)" if change is not None else ""
