@@ -44,6 +44,7 @@ from monitor.decision.network_gate import RPM_FEATURES, RPM_RATIO_REFUSE, RPM_RA
 from monitor.decision.rule import WindowEvidence
 from monitor.diagnose.physics import SET_PRIOR, PhysicsEvidence, own_baseline, physics_evidence
 from monitor.diagnose.physics_first import (
+    NETWORK_FLAG_PROBABILITY,
     motor_output_alarms,
     network_alone,
     physics_replay,
@@ -86,7 +87,6 @@ LARGE_ATTITUDE_RAD = np.deg2rad(45.0)
 # our simulator passes 45 deg (`python -m bench.decision_constants`: largest fraction 0).
 LARGE_ATTITUDE_MAX_FRACTION = 0.01
 QUADROTOR = "MAV_TYPE_QUADROTOR"  # the one vehicle type the models are for (pymavlink's MAV_TYPE name)
-FLAG_LEVEL = 0.9  # the classifier's FAULTY level (DecisionConfig.faulty_probability): below it, alone, a note
 
 
 @dataclass
@@ -188,6 +188,13 @@ def _t_s(table: FlightTable, i) -> np.ndarray:
     return np.asarray(table.timestamp_us)[i] / US_PER_S
 
 
+def large_attitude_fraction(table: FlightTable) -> float:
+    """The share of airborne steps with roll or pitch beyond ``LARGE_ATTITUDE_RAD`` (an unknown angle reads level)."""
+    air = table.airborne
+    tilt = np.maximum(np.abs(table.roll_rad[air]), np.abs(table.pitch_rad[air]))
+    return float(np.mean(np.nan_to_num(tilt) > LARGE_ATTITUDE_RAD))
+
+
 def log_refusal(table: FlightTable) -> str | None:
     """Why this log gets no verdict at all (None: it gets one): not a quad-X, never airborne, or no motor outputs in
     flight. Everything else is judged, by physics at least (an unknown tilt reads as level: ``monitor.memory``)."""
@@ -238,8 +245,7 @@ def envelope_checks(
     warn, refusal = rpm_envelope(table, clf, figures)
     if refusal or warn:
         return warnings, refusal or warn.split(": the verdict is")[0]
-    tilt = np.maximum(np.abs(table.roll_rad[air]), np.abs(table.pitch_rad[air]))
-    big = float(np.mean(np.nan_to_num(tilt) > LARGE_ATTITUDE_RAD))
+    big = large_attitude_fraction(table)
     figures["large_attitude_fraction"] = round(big, 4)
     if big > LARGE_ATTITUDE_MAX_FRACTION:
         warnings.append(
@@ -409,18 +415,27 @@ def first_flight_confidence(d: Diagnosis, table: FlightTable) -> None:
         ):
             name_verdict(d, v["label"], "ambiguous" if d.hypothesis_rule is not None else "suspect", table.motor_names)
         return
+    if not physics_in_place_of_network(d, table, v.get("fault_probability")):
+        v["confidence"] = "uncertain"
+
+
+def physics_in_place_of_network(d: Diagnosis, table: FlightTable, probabilities) -> bool:
+    """Replace the network's whole-flight verdict by physics' first-flight verdict, what the network said kept in
+    ``verdict.network`` and its probabilities (``probabilities`` per propeller) beside it; False where the shares
+    cannot judge the flight (the network's verdict then stays)."""
+    v = d.verdict
     pv, ph, _ = physics_verdict(table, d.shares, None, [], [])
     if pv is None:
-        v["confidence"] = "uncertain"
-        return
+        return False
     pv["network"] = {k: v[k] for k in ("label", "faulty_propellers", "confidence") if k in v}
     pv["fault_probability"] = v.get("fault_probability")
     if v.get("network_fault_probability"):
         pv["network_fault_probability"] = v["network_fault_probability"]
     d.verdict, d.hypotheses = pv, ph
     d.propellers = propellers_for(pv["label"], pv["confidence"], table.motor_names)
-    for prop, q in zip(d.propellers, pv["fault_probability"] or []):
+    for prop, q in zip(d.propellers, probabilities or []):
         prop["fault_probability"] = float(q)
+    return True
 
 
 def balance_unlike_model(physics: PhysicsEvidence | None, rule: SetRule | None) -> str | None:
@@ -446,14 +461,9 @@ def physics_only(d: Diagnosis, table: FlightTable, clf: Classifier, window: int,
     file's mass and inertia is not this airframe's, so it is dropped."""
     d.physics = None
     d.decision = physics_replay(table, clf.path, window, hop)
-    unfit = [] if d.envelope.get("large_attitude_fraction", 0.0) <= LARGE_ATTITUDE_MAX_FRACTION else ["a flip or crash"]
-    if "large_attitude_fraction" not in d.envelope:
-        air = table.airborne
-        tilt = np.maximum(np.abs(table.roll_rad[air]), np.abs(table.pitch_rad[air]))
-        big = float(np.mean(np.nan_to_num(tilt) > LARGE_ATTITUDE_RAD))
-        d.envelope["large_attitude_fraction"] = round(big, 4)
-        if big > LARGE_ATTITUDE_MAX_FRACTION:
-            unfit = [f"{100 * big:.1f} % of the airborne time beyond 45 deg"]
+    big = large_attitude_fraction(table)
+    d.envelope["large_attitude_fraction"] = round(big, 4)
+    unfit = [f"{100 * big:.1f} % of the airborne time beyond 45 deg"] if big > LARGE_ATTITUDE_MAX_FRACTION else []
     d.verdict, d.hypotheses, reason = physics_verdict(table, d.shares, d.decision, alarms, unfit)
     d.warnings.append("physics only: this airframe is not the one the network was trained on (" + d.network["why_not"] + ")")
     if unfit and (d.decision or {}).get("in_flight_fault"):
@@ -476,22 +486,13 @@ def network_as_note(d: Diagnosis, table: FlightTable) -> None:
     if not network_alone(v, hyps, d.shares, physics_sets, p):
         return
     named = sorted({i for h in (hyps or [{"faulty_propellers": v["faulty_propellers"]}]) for i in h["faulty_propellers"]})
-    pv, ph, _ = physics_verdict(table, d.shares, None, [], [])
-    if pv is None:
+    if not physics_in_place_of_network(d, table, p):
         return
-    pv["network"] = {k: v[k] for k in ("label", "faulty_propellers", "confidence") if k in v}
-    pv["fault_probability"] = v.get("fault_probability")
-    if v.get("network_fault_probability"):
-        pv["network_fault_probability"] = v["network_fault_probability"]
-    d.verdict, d.hypotheses = pv, ph
-    d.propellers = propellers_for(pv["label"], pv["confidence"], table.motor_names)
-    for prop, q in zip(d.propellers, p or []):
-        prop["fault_probability"] = float(q)
     names = "+".join(table.motor_names[i - 1] for i in named)
     why = (
         "the balance of forces calls the flight healthy"
         if physics_sets
-        else f"physics names none of them, and its own probability stays below {100 * FLAG_LEVEL:.0f} %"
+        else f"physics names none of them, and its own probability stays below {100 * NETWORK_FLAG_PROBABILITY:.0f} %"
     )
     d.warnings.append(f"the fault classifier alone points at {names} ({why}): a note, not a propeller to inspect")
 
