@@ -240,7 +240,11 @@ def test_diagnose_and_fleet_give_one_verdict_on_the_same_history(fleet, tmp_path
         # and the verdict is right: the damaged propeller named, the healthy flights healthy
         from monitor.labels import LABEL_TABLE
 
-        assert list(LABEL_TABLE[label]) == truth[path] and conf == "confident", (path, label, conf)
+        assert list(LABEL_TABLE[label]) == truth[path], (path, label, conf)
+        # confident, except a healthy call on a flight that carried another load than its references: a load off
+        # centre could hide a damaged propeller's share move (monitor.memory.load)
+        load = out["baseline"]["load"]["change"]
+        assert conf == "confident" or (truth[path] == [] and abs(load) > 0.05), (path, label, conf, load)
 
 
 def test_diagnose_refuses_another_vehicles_baseline(fleet, tmp_path):

@@ -271,8 +271,8 @@ class VehicleMemory:
         # (the flight's own wander shrinks as it goes on, and the set with it). Below the fault level nothing is said
         # in flight: judged every second, the suspect level alone spoke on 7 of 24 healthy later flights of our
         # simulator's fleet (python -m bench.bench_vehicle_memory, seed 0, 6 airframes), the fault level on none.
-        faulty = bool(v["faulty_propellers"])
-        level = ("fault" if v["confidence"] == "confident" else "suspect") if faulty else ""
+        faulty = bool(v["faulty_propellers"] or v.get("imbalance_rotors"))  # an imbalance: load off centre or damage
+        level = ("fault" if v["confidence"] == "confident" and v["faulty_propellers"] else "suspect") if faulty else ""
         if not level or level in self._announced or (level == "suspect" and "fault" in self._announced):
             return None
         self._announced.add(level)
@@ -337,7 +337,7 @@ class VehicleMemory:
         """Inside the state dir's write lock: the flight judged against the baseline as it is on disk, then added."""
         if b is not None and b.ready:
             v = judge(b.normal(), s)
-            if v["label"] != 1 or v["confidence"] == "suspect":
+            if v["label"] != 1 or v["confidence"] == "suspect" or v.get("imbalance_rotors"):
                 raise _NotHealthy
         b = b or VehicleBaseline(self.key, "daemon", self.motor_names, "omega2")
         b.add(f"flight {len(b.flights) + 1}", today_utc(), s, "no fault")

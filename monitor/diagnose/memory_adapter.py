@@ -169,7 +169,8 @@ def _applied(result: dict, v: dict, motor_names, compared: str) -> dict:
             "nominal": None
             if nominal is None
             else {k: nominal[k] for k in ("label", "faulty_propellers", "confidence") if k in nominal},
-        },
+        }
+        | {k: v[k] for k in ("imbalance_rotors", "imbalance_why") if k in v},
         "reason": None,
         "propellers": propellers,
         "hypotheses": [

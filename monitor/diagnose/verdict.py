@@ -398,7 +398,8 @@ def verdict_of(result: dict) -> Verdict:
             next_step=f"Check that the load and battery sit centred, and inspect {_and([_num(i, names) for i in rotors])}"
             + (f" and {_and([_num(i, names) for i in extra])}" if extra else "")
             + ".",
-            why="On this airframe's healthy flights a mass off centre and a damaged propeller were measured to look alike.",
+            why=v.get("imbalance_why")
+            or "On this airframe's healthy flights a mass off centre and a damaged propeller were measured to look alike.",
             **common,
         )
     if conf == "confident" and sets[0]:

@@ -11,7 +11,9 @@ no share comparison can name them, and the set says what it can (docs/VEHICLE_ME
 
 Verdict: statistic below ``SUSPECT_STATISTIC``: healthy (confident only where a ``CLAIMED_LOSS`` on any rotor would
 have shown); up to ``FAULT_STATISTIC``: suspect; above: the hypotheses within ``SET_STATISTIC`` of the best: one
-set is ``confident`` FAULTY, several ``ambiguous``. Thresholds: ``monitor.memory.thresholds``.
+set is ``confident`` FAULTY, several ``ambiguous``; and where a load other than the normal's, carried off centre,
+explains the flight as well (``monitor.memory.load``), an imbalance with no propeller faulty. Thresholds:
+``monitor.memory.thresholds``.
 """
 
 from __future__ import annotations
@@ -19,6 +21,7 @@ from __future__ import annotations
 import numpy as np
 
 from monitor.labels import label_for
+from monitor.memory import load
 from monitor.memory import thresholds as th
 from monitor.memory.normal import Normal
 from monitor.memory.summary import FlightSummary
@@ -35,13 +38,14 @@ def _template(rotors) -> np.ndarray:
     return u - u.mean()
 
 
-def statistics(d: np.ndarray, cov: np.ndarray) -> tuple[dict[tuple[int, ...], float], np.ndarray]:
-    """Each hypothesis's statistic for deviation ``d`` under healthy covariance ``cov``; and the weight matrix."""
+def statistics(d: np.ndarray, cov: np.ndarray) -> tuple[dict[tuple[int, ...], float], np.ndarray, dict]:
+    """Each hypothesis's statistic for deviation ``d`` under healthy covariance ``cov``; the weight matrix; and each
+    hypothesis's share move ``a`` of its rotors (0 where they work less than normal)."""
     wi = np.linalg.inv(_Q.T @ cov @ _Q)
     dq = _Q.T @ d
     chi0 = float(dq @ wi @ dq)
     yq = _Q.T @ YAW
-    out = {}
+    out, moves = {}, {}
     for s in HYPOTHESES:
         a_mat = np.column_stack([_Q.T @ _template(s), yq])
         coef = np.linalg.solve(a_mat.T @ wi @ a_mat, a_mat.T @ wi @ dq)
@@ -50,7 +54,8 @@ def statistics(d: np.ndarray, cov: np.ndarray) -> tuple[dict[tuple[int, ...], fl
             coef = np.linalg.solve(a_mat.T @ wi @ a_mat, a_mat.T @ wi @ dq)
         r = dq - a_mat @ coef
         out[s] = chi0 - float(r @ wi @ r)
-    return out, wi
+        moves[s] = float(coef[0]) if a_mat.shape[1] == 2 else 0.0
+    return out, wi, moves
 
 
 def detectable_loss(wi: np.ndarray) -> float:
@@ -76,9 +81,15 @@ def judge(normal: Normal, s: FlightSummary) -> dict:
     """The flight (or the part flown so far) summarised in ``s`` against ``normal``: the verdict's fields."""
     d = normal.deviation(s)
     cov = normal.deviation_cov(s)
-    stats, wi = statistics(d, cov)
+    stats, wi, moves = statistics(d, cov)
     best = max(stats, key=stats.get)
     top = stats[best]
+    # a load other than the normal's, carried off centre: a rival of the damage hypotheses (monitor.memory.load)
+    collective = load.collective_change(normal, s)
+    p = None if collective is None else load.load_change(collective, damage_rise=len(best) * moves[best] / 4.0)
+    shift_arm = 0.0 if p is None else load.cg_shift_arm(p)
+    load_move = 2.0 * shift_arm  # the most one rotor's share can move with that CG
+    load_stat = load.rival_statistic(_Q.T @ d, wi, _Q, shift_arm)
     sigma = np.sqrt(np.diag(cov))
     in_set = sorted((h for h in HYPOTHESES if top - stats[h] <= th.SET_STATISTIC), key=lambda h: -stats[h])
     loss = detectable_loss(wi)
@@ -89,6 +100,16 @@ def judge(normal: Normal, s: FlightSummary) -> dict:
         "statistics": [{"faulty_propellers": list(h), "statistic": float(v)} for h, v in stats.items()],
         "detectable_loss": loss,
         "tested_s": s.seconds,
+        "load": None
+        if p is None
+        else {
+            "collective_change": collective,
+            "change": p,
+            "cg_shift_arm": shift_arm,
+            "largest_share_move": load_move,
+            "statistic": load_stat,
+            "radius_arm": load.PAYLOAD_RADIUS_ARM,
+        },
         "thresholds": {
             "suspect": th.SUSPECT_STATISTIC,
             "fault": th.FAULT_STATISTIC,
@@ -98,11 +119,11 @@ def judge(normal: Normal, s: FlightSummary) -> dict:
         },
     }
     if top < th.SUSPECT_STATISTIC:
-        conf = "confident" if loss <= th.CLAIMED_LOSS else "ambiguous"
+        conf = "confident" if loss + load_move <= th.CLAIMED_LOSS else "ambiguous"
         why = (
             f"every rotor within this vehicle's normal (statistic {top:.1f} < {th.SUSPECT_STATISTIC:g}); a loss of "
             f"{100 * loss:.0f} % on any one propeller would have shown"
-        )
+        ) + (f", less the {100 * load_move:.0f} % share a load off centre could hide" if load_move > 0 else "")
         return base | {"label": 1, "faulty_propellers": [], "confidence": conf, "hypotheses": [], "rule": why}
     sets = [{"faulty_propellers": list(h), "statistic": float(stats[h])} for h in in_set]
     if top < th.FAULT_STATISTIC:
@@ -119,4 +140,5 @@ def judge(normal: Normal, s: FlightSummary) -> dict:
     why = f"statistic {top:.1f} >= {th.FAULT_STATISTIC:g}; " + (
         "one hypothesis" if len(in_set) == 1 else f"{len(in_set)} hypotheses within {th.SET_STATISTIC:g} of the best"
     )
-    return base | {"label": label_for(best), "faulty_propellers": list(best), "confidence": conf, "hypotheses": sets, "rule": why}
+    v = base | {"label": label_for(best), "faulty_propellers": list(best), "confidence": conf, "hypotheses": sets, "rule": why}
+    return load.rival_verdict(v, collective, load_stat) if top - load_stat <= th.SET_STATISTIC else v

@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from monitor.flight import FlightTable
+from monitor.memory import thresholds as th
 from monitor.memory.baseline import MIN_FLIGHTS, BaselineError, VehicleBaseline
 from monitor.memory.judge import judge
 from monitor.memory.normal import FlightStack
@@ -93,13 +94,14 @@ def outliers(summaries: list[FlightSummary]):
         keep = np.ones(len(summaries), dtype=bool)
         keep[i] = False
         v = judge(stack.normal(keep), s)
-        if v["faulty_propellers"]:
+        if v["fault_statistic"] >= th.FAULT_STATISTIC:  # a load off centre that explains it is no excuse here
             yield i, v
 
 
 def _rotors(v: dict, motor_names=("1", "2", "3", "4")) -> str:
     """The hypotheses' rotors by the vehicle's own names (PX4 numbers 1..4 index ``motor_names``)."""
-    return " or ".join("+".join(motor_names[p - 1] for p in h["faulty_propellers"]) for h in v["hypotheses"])
+    sets = [h["faulty_propellers"] for h in v["hypotheses"] if h["faulty_propellers"]]
+    return " or ".join("+".join(motor_names[p - 1] for p in s) for s in sets)
 
 
 def check_outliers(names: list[str], summaries: list[FlightSummary], motor_names=("1", "2", "3", "4")) -> None:

@@ -4,7 +4,9 @@ Model, per rotor k: share_k(t) = c_k + slopes[:, k] . (roll_rad, pitch_rad). The
 within-flight regression over every flight (each flight its own intercept), ridged toward zero by
 ``TILT_RIDGE_RAD2`` per step (tilt that barely varies says nothing about a slope). A flight's intercept is its mean
 share minus its mean tilt times the slopes; the normal is the mean of its flights' intercepts and their spread the
-covariance, pooled with the population's prior (``thresholds.PRIOR_COV`` weighing ``PRIOR_FLIGHTS``).
+covariance, pooled with the population's prior (``thresholds.PRIOR_COV`` weighing ``PRIOR_FLIGHTS``). With omega^2
+shares, the normal also keeps the range of its flights' mean collectives (mean omega^2, proportional to the thrust
+the vehicle carried): the load its shares were learnt at (``monitor.memory.load``).
 """
 
 from __future__ import annotations
@@ -29,6 +31,8 @@ class Normal:
     own_cov: np.ndarray  # (4, 4) the vehicle's own (zeros with one flight)
     within_block_cov: np.ndarray  # (4, 4) 2-s block means' covariance within a flight, pooled
     n_flights: int
+    # (lowest, highest) mean collective of its flights (kRPM^2); None where the shares are raw commands or unknown
+    collective_range: tuple[float, float] | None = None
 
     def intercept_of(self, s: FlightSummary) -> np.ndarray:
         return s.mean_share() - s.mean_regime()[1:] @ self.slopes
@@ -56,6 +60,7 @@ class FlightStack:
     mean_tilt: np.ndarray  # (k, 2) mean (roll, pitch)
     within: np.ndarray  # (k, 4, 4) 2-s block means' covariance (zeros where fewer than 3 blocks)
     has_within: np.ndarray  # (k,) bool
+    collective: np.ndarray | None  # (k,) mean collective (kRPM^2); None unless every flight's basis is omega2
 
     @classmethod
     def of(cls, summaries: list[FlightSummary]) -> FlightStack:
@@ -76,6 +81,9 @@ class FlightStack:
             np.array([s.mean_regime()[1:] for s in summaries]).reshape(k, 2),
             within,
             np.array([c is not None for c in covs], dtype=bool),
+            np.array([s.mean_collective() for s in summaries], dtype=np.float64).reshape(k)
+            if summaries and all(s.basis == "omega2" for s in summaries)
+            else None,
         )
 
     def normal(self, keep: np.ndarray | None = None) -> Normal:
@@ -93,7 +101,9 @@ class FlightStack:
         cov = (th.PRIOR_FLIGHTS * prior + (m - 1) * own) / (th.PRIOR_FLIGHTS + m - 1)
         wk = keep & self.has_within
         wcov = self.within[wk].mean(axis=0) if wk.any() else np.zeros((4, 4))
-        return Normal(c.mean(axis=0), slopes, cov, own, wcov, m)
+        load = None if self.collective is None else self.collective[keep]
+        load_range = None if load is None else (float(load.min()), float(load.max()))
+        return Normal(c.mean(axis=0), slopes, cov, own, wcov, m, load_range)
 
 
 def slopes_of(summaries: list[FlightSummary]) -> np.ndarray:

@@ -56,6 +56,10 @@ class FlightSummary:
     def mean_share(self) -> np.ndarray:
         return self.sum_share / max(self.n, 1)
 
+    def mean_collective(self) -> float:
+        """The mean of the four rotors' values over the accepted steps (omega^2 in kRPM^2, or the raw command)."""
+        return self.sum_collective / max(self.n, 1)
+
     def mean_regime(self) -> np.ndarray:
         """(3,) mean of (1, roll, pitch) over the accepted steps."""
         return self.ftf[0] / max(self.n, 1)
