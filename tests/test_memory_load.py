@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from monitor.memory.judge import judge
-from monitor.memory.load import PAYLOAD_RADIUS_ARM, PITCH, ROLL, cg_shift_arm
+from monitor.memory.load import PAYLOAD_RADIUS_ARM, PITCH, ROLL, cg_shift_arm, hidden_loss
 from monitor.memory.normal import normal_of
 from monitor.memory.summary import ShareAccumulator
 
@@ -36,6 +36,20 @@ def test_the_share_patterns_and_the_bound_agree_with_the_moment_balance():
     assert moved - 1 == pytest.approx([0.2, -0.2, 0.0, 0.0], abs=1e-12)
     # a removed load is counted from the heavier vehicle: 20 % less is the 25 % payload taken off
     assert cg_shift_arm(-0.2) == pytest.approx(0.1, rel=1e-12)
+
+
+def test_a_damaged_propeller_with_its_torque_unchanged_is_a_moved_cg():
+    # rotor 1 gives 10 % less thrust per omega^2, the same torque: thrust, pitch and roll as healthy, yaw balanced in
+    # omega^2. Solve for omega^2 (shares of mean 1) and compare with the CG moved toward rotor 1 by a / 4 arm.
+    kt = np.array([0.9, 1.0, 1.0, 1.0])
+    a_mat = np.vstack([kt, kt * POS[:, 0], kt * POS[:, 1], SPIN])
+    w = np.linalg.solve(a_mat, np.array([4.0, 0.0, 0.0, 0.0]))
+    d = w / w.mean() - 1
+    a = 2 * d[0]
+    assert d == pytest.approx([a / 2, -a / 2, 0, 0], abs=1e-12)
+    shift = a / 4
+    assert thrust_shares((shift / np.sqrt(2), shift / np.sqrt(2))) - 1 == pytest.approx(d, abs=1e-12)
+    assert hidden_loss(shift) == pytest.approx(0.1, rel=1e-9)
 
 
 def flight(shares, collective_krpm2: float, seconds: float, rng) -> object:

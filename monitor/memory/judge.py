@@ -88,8 +88,9 @@ def judge(normal: Normal, s: FlightSummary) -> dict:
     collective = load.collective_change(normal, s)
     p = None if collective is None else load.load_change(collective, damage_rise=len(best) * moves[best] / 4.0)
     shift_arm = 0.0 if p is None else load.cg_shift_arm(p)
-    load_move = 2.0 * shift_arm  # the most one rotor's share can move with that CG
-    load_stat = load.rival_statistic(_Q.T @ d, wi, _Q, shift_arm)
+    hidden = load.hidden_loss(shift_arm)
+    dq, cg = _Q.T @ d, _Q.T @ load.CG_PATTERNS
+    load_stat = load.rival_statistic(dq, wi, cg, shift_arm)
     sigma = np.sqrt(np.diag(cov))
     in_set = sorted((h for h in HYPOTHESES if top - stats[h] <= th.SET_STATISTIC), key=lambda h: -stats[h])
     loss = detectable_loss(wi)
@@ -106,7 +107,7 @@ def judge(normal: Normal, s: FlightSummary) -> dict:
             "collective_change": collective,
             "change": p,
             "cg_shift_arm": shift_arm,
-            "largest_share_move": load_move,
+            "hidden_loss": hidden,
             "statistic": load_stat,
             "radius_arm": load.PAYLOAD_RADIUS_ARM,
         },
@@ -119,11 +120,11 @@ def judge(normal: Normal, s: FlightSummary) -> dict:
         },
     }
     if top < th.SUSPECT_STATISTIC:
-        conf = "confident" if loss + load_move <= th.CLAIMED_LOSS else "ambiguous"
+        conf = "confident" if loss + hidden <= th.CLAIMED_LOSS else "ambiguous"
         why = (
             f"every rotor within this vehicle's normal (statistic {top:.1f} < {th.SUSPECT_STATISTIC:g}); a loss of "
             f"{100 * loss:.0f} % on any one propeller would have shown"
-        ) + (f", less the {100 * load_move:.0f} % share a load off centre could hide" if load_move > 0 else "")
+        ) + (f", less the {100 * hidden:.0f} % loss a load off centre could hide" if hidden > 0 else "")
         return base | {"label": 1, "faulty_propellers": [], "confidence": conf, "hypotheses": [], "rule": why}
     sets = [{"faulty_propellers": list(h), "statistic": float(stats[h])} for h in in_set]
     if top < th.FAULT_STATISTIC:

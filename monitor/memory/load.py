@@ -15,8 +15,8 @@ has no rival: its normal already carries that load's CG.
 
 Where the rival, within that bound, explains the flight within ``thresholds.SET_STATISTIC`` of the best damage
 hypothesis, no propeller is called faulty: the rotors that work harder are an imbalance near them, the load and a
-damaged propeller both named (``rival_verdict``). A healthy verdict is confident only where the largest move the load
-can cause on one rotor plus the smallest loss the flight could show stays under ``thresholds.CLAIMED_LOSS``.
+damaged propeller both named (``rival_verdict``). A healthy verdict is confident only where the loss such a load can
+hide (``hidden_loss``) plus the smallest loss the flight could show stays under ``thresholds.CLAIMED_LOSS``.
 """
 
 from __future__ import annotations
@@ -30,7 +30,7 @@ PAYLOAD_RADIUS_ARM = 0.5
 # Share patterns (PX4 order: 1 front-right, 2 rear-left, 3 front-left, 4 rear-right) of a CG moved forward and right.
 PITCH = np.array([1.0, -1.0, 1.0, -1.0])
 ROLL = np.array([1.0, -1.0, -1.0, 1.0])
-_G = np.column_stack([PITCH, ROLL])
+CG_PATTERNS = np.column_stack([PITCH, ROLL])
 
 
 def collective_change(normal, s) -> float | None:
@@ -58,26 +58,42 @@ def cg_shift_arm(p: float) -> float:
     return float(frac * PAYLOAD_RADIUS_ARM)
 
 
-def rival_statistic(dq: np.ndarray, wi: np.ndarray, q: np.ndarray, shift_arm: float) -> float:
-    """chi^2(as normal) - chi^2(the CG moved by at most ``shift_arm`` arm lengths): deviation ``dq`` and weight ``wi``
-    in the basis ``q`` of ``monitor.memory.judge``."""
+def hidden_loss(shift_arm: float) -> float:
+    """The thrust loss on one propeller that a CG moved by ``shift_arm`` arm lengths can hide. A damaged propeller
+    whose torque per omega^2 is unchanged moves the shares by a (1/2, -1/2, 0, 0) from its rotor, a = 2 loss / (2 -
+    loss) (the controller keeps thrust, pitch and roll, and the yaw torque balanced): exactly the CG moved toward it
+    by a / 4 arm."""
+    a = 4.0 * shift_arm
+    return float(2.0 * a / (2.0 + a))
+
+
+def explained(dq: np.ndarray, wi: np.ndarray, cols: np.ndarray, cg: np.ndarray, shift_arm: float):
+    """(chi^2(as normal) - chi^2 of the best fit, its coefficients): deviation ``dq`` (weight ``wi``, in the basis of
+    ``monitor.memory.judge``) fitted by the free columns ``cols`` plus the CG moved by at most ``shift_arm`` arm
+    lengths (``cg``: the pitch and roll share patterns in that basis)."""
     chi0 = float(dq @ wi @ dq)
-    if shift_arm <= 0:
-        return 0.0
+    m = np.column_stack([cols, cg]) if shift_arm > 0 else cols
+    if m.shape[1] == 0:
+        return 0.0, np.zeros(0)
+    h = m.T @ wi @ m
+    g = m.T @ wi @ dq
+    x = np.linalg.lstsq(h, g, rcond=None)[0]
     bound = np.sqrt(2.0) * shift_arm  # on |(pitch, roll)| of the share pattern
-    a = q.T @ _G  # (3, 2)
-    h = a.T @ wi @ a
-    b = a.T @ wi @ dq
-    c = np.linalg.solve(h, b)
-    if np.hypot(*c) > bound:  # on the bound: (h + lam I) c = b with |c| = bound, lam > 0 found by bisection
-        lo, hi = 0.0, float(np.linalg.norm(b) / bound)
+    if shift_arm > 0 and np.hypot(*x[-2:]) > bound:  # on the bound: (h + lam P) x = g, P the CG block, bisected
+        pen = np.diag(np.r_[np.zeros(m.shape[1] - 2), 1.0, 1.0])
+        lo, hi = 0.0, float(np.linalg.norm(g) / bound + np.abs(h).max())
         for _ in range(60):
             lam = 0.5 * (lo + hi)
-            c = np.linalg.solve(h + lam * np.eye(2), b)
-            lo, hi = (lam, hi) if np.hypot(*c) > bound else (lo, lam)
-        c = np.linalg.solve(h + hi * np.eye(2), b)
-    r = dq - a @ c
-    return chi0 - float(r @ wi @ r)
+            x = np.linalg.lstsq(h + lam * pen, g, rcond=None)[0]
+            lo, hi = (lam, hi) if np.hypot(*x[-2:]) > bound else (lo, lam)
+        x = np.linalg.lstsq(h + hi * pen, g, rcond=None)[0]
+    r = dq - m @ x
+    return chi0 - float(r @ wi @ r), x
+
+
+def rival_statistic(dq: np.ndarray, wi: np.ndarray, cg: np.ndarray, shift_arm: float) -> float:
+    """The load alone: the CG moved within ``shift_arm``, propellers intact (no yaw move)."""
+    return explained(dq, wi, np.zeros((len(dq), 0)), cg, shift_arm)[0]
 
 
 def rival_verdict(v: dict, collective: float, statistic: float) -> dict:
