@@ -17,8 +17,9 @@ RATE_HZ = 20.0
 QUIRKY = np.array([1.03, 0.97, 0.95, 1.05])
 
 
-def fly(mem: VehicleMemory, share, seconds=60.0, seed=0, ground_s=2.0):
-    """Steps of one flight (ground, airborne ``seconds``, ground); returns the announcements."""
+def fly(mem: VehicleMemory, share, seconds=60.0, seed=0, ground_s=2.0, load=1.0):
+    """Steps of one flight (ground, airborne ``seconds``, ground), the collective ``load`` times the references';
+    returns the announcements."""
     rng = np.random.default_rng(seed)
     out = []
     n_air, n_gnd = int(seconds * RATE_HZ), int(ground_s * RATE_HZ)
@@ -26,7 +27,7 @@ def fly(mem: VehicleMemory, share, seconds=60.0, seed=0, ground_s=2.0):
     for i in range(n_gnd + n_air + n_gnd):
         air = n_gnd <= i < n_gnd + n_air
         s = np.asarray(share) * (1 + 0.01 * rng.standard_normal(4))
-        rpm = 6000.0 * np.sqrt(s) if air else np.full(4, 1000.0)
+        rpm = 6000.0 * np.sqrt(load * s) if air else np.full(4, 1000.0)
         a = mem.step(t, air, rpm, 0.01 * rng.standard_normal(), 0.01 * rng.standard_normal())
         if a is not None:
             out.append((t - n_gnd / RATE_HZ, a))
@@ -59,6 +60,20 @@ def test_learns_three_flights_then_names_damage_present_at_take_off(tmp_path):
     for k in range(3, 8):  # later healthy flights stay quiet and are learnt
         assert fly(mem, healthy_share(k), seed=k) == []
         assert mem.disarmed(None) == "learnt"
+
+
+def test_a_load_off_centre_is_said_as_a_suspect_and_not_learnt(tmp_path):
+    mem = VehicleMemory(tmp_path / "state", RATE_HZ)
+    mem.identify(sysid=1)
+    for k in range(3):
+        fly(mem, healthy_share(k), seed=k)
+        assert mem.disarmed(None) == "learnt"
+    moved = QUIRKY * np.array([1.12, 0.88, 1.0, 1.0])  # the CG moved 0.06 arm toward rotor 1: shares +-2 x 0.06
+    heavier = fly(mem, moved, seed=60, load=1.25)  # with 25 % more load: the load explains it
+    assert heavier and {a.level for _, a in heavier} == {"suspect"}, [a.text for _, a in heavier]
+    assert mem.disarmed(None) == "not learnt: it raised an alert"
+    same = fly(mem, moved, seed=61)  # at the references' load: rotor 1 works harder, a damaged propeller
+    assert any(a.level == "fault" and a.propellers == (1,) for _, a in same), [a.text for _, a in same]
 
 
 def test_never_learns_a_stopped_stream_a_short_or_an_unverified_flight(tmp_path):
