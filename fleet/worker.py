@@ -107,6 +107,15 @@ def choose_model(settings: IngestSettings, cmd_unit: str):
     return next((m for m in loaded if m[1].cmd_unit == cmd_unit), loaded[0])
 
 
+def declared(settings: IngestSettings, clf) -> bool:
+    """Whether the log's airframe is declared to be the model's (``diagnose``'s rule: ``--vehicle`` or ``--model``),
+    or its motor command unit names the vehicle class a shipped model was trained for (a Crazyflie's); the paper
+    quad's PWM names no airframe, and its classifier is then silent."""
+    from monitor.diagnose.engine import DEFAULT_MODEL
+
+    return bool(settings.vehicle_yaml or settings.models) or Path(clf.path).resolve() != DEFAULT_MODEL.resolve()
+
+
 def utc_naive(unix_us: float) -> _dt.datetime:
     """UTC as a naive datetime (the database's TIMESTAMP columns are UTC)."""
     return _dt.datetime.fromtimestamp(unix_us / 1e6, _dt.timezone.utc).replace(tzinfo=None)
@@ -193,7 +202,7 @@ def _diagnose_into(row: dict, path: Path, settings: IngestSettings) -> None:
     raw = read_guarded(path, fmt, settings.max_seconds)  # the guards `propwatch diagnose` applies
     clf, esc, model_id, model_version, vehicle = choose_model(settings, raw.cmd_unit)
     row.update(model_id=model_id, model_version=model_version)
-    table, d = diagnose_raw(raw, clf, esc, settings.hop, vehicle)
+    table, d = diagnose_raw(raw, clf, esc, settings.hop, vehicle, airframe_declared=declared(settings, clf))
     try:
         ident = identify(path, fmt)
     except Exception as exc:  # noqa: BLE001 - the id is extra: a log readable for diagnosis is still diagnosed

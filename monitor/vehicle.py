@@ -167,6 +167,17 @@ REPO_ROOT = Path(__file__).resolve().parent.parent
 DEFAULT_VEHICLE = shipped("vehicle.yaml")
 
 
+def vehicle_of_model(model_path) -> Path | None:
+    """The shipped vehicle YAML a shipped classifier was trained for (``NAME-classifier.onnx`` beside ``NAME.yaml``;
+    ``classifier.onnx``: the paper quad's ``vehicle.yaml``); None for any other model."""
+    path = Path(model_path)
+    if path.parent.resolve() != models_dir().resolve():
+        return None
+    stem = path.name.removesuffix(".onnx")
+    own = DEFAULT_VEHICLE if stem == "classifier" else path.with_name(stem.removesuffix("-classifier") + ".yaml")
+    return own if stem.endswith("classifier") and own.is_file() else None
+
+
 def vehicles_for_cmd_unit(unit: str) -> list[Path]:
     """Shipped vehicle YAMLs whose ESC curve takes motor commands in ``unit`` (and that ship their own classifier)."""
     found = []

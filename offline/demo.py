@@ -84,10 +84,10 @@ def run(out: Path, data: Path, duration_s: float = 40.0) -> int:
         if r.returncode != 0:
             print(r.stderr)
             return r.returncode
-    print("\n== 2. diagnose the simulated flights with models/classifier.onnx")
+    print("\n== 2. diagnose the simulated flights, declared the paper's quad (--vehicle models/vehicle.yaml)")
     for name, label, fault in cases:
         logs = sorted((out / name).glob("*.tlog"))
-        res = _diagnose(logs[0], out / "reports" / name)
+        res = _diagnose(logs[0], out / "reports" / name, "--vehicle", str(shipped("vehicle.yaml")))
         got = (res.get("verdict") or {}).get("label")
         ok = got == int(label)
         failures += 0 if ok else 1
@@ -97,7 +97,7 @@ def run(out: Path, data: Path, duration_s: float = 40.0) -> int:
     print("\n== 3. real logs")
     ardu = data / "ardupilot_log171" / "log171.bin"
     if ardu.is_file():
-        print("  (an ArduCopter of unknown build: the paper quad's model, uncalibrated for it; read the warnings)")
+        print("  (an ArduCopter of unknown build, no airframe declared: physics judges alone; read the warnings)")
         _diagnose(ardu, out / "reports")
     else:
         print(f"  (skipped: {ardu} not found)")

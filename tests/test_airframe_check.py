@@ -70,7 +70,7 @@ def diagnosed(tmp_path_factory):
 
 
 def _run(path, capsys):
-    rc = cli.main([str(path), "--json"])
+    rc = cli.main([str(path), "--json", "--vehicle", str(shipped("vehicle.yaml"))])  # the paper quad, declared
     return rc, json.loads(capsys.readouterr().out)
 
 

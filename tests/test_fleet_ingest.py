@@ -27,6 +27,9 @@ from monitor.cli import main as propwatch  # noqa: E402
 from offline.fleet_sim import FleetSpec, vehicle_uid, write_fleet  # noqa: E402
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
+# The simulated fleet is the paper's quad, declared as `fleet ingest --vehicle models/vehicle.yaml` would: its network
+# may speak (fleet.worker.declared).
+PAPER = IngestSettings(vehicle_yaml=str(Path(__file__).resolve().parents[1] / "models" / "vehicle.yaml"))
 SPEC = FleetSpec(vehicles=2, flights=3, duration_s=14.0, faulty_vehicle=1, fault_from_flight=1, faulty_propeller=3, seed=5)
 
 
@@ -55,7 +58,7 @@ def rows(db: Path) -> list[dict]:
 @pytest.fixture(scope="module")
 def serial_db(fleet_dir, tmp_path_factory) -> Path:
     db = tmp_path_factory.mktemp("db") / "fleet.duckdb"
-    s = ingest([str(fleet_dir)], db, ray_address="off", progress=False)
+    s = ingest([str(fleet_dir)], db, settings=PAPER, ray_address="off", progress=False)
     assert (s.found, s.new, s.error) == (9, 9, 3)
     return db
 
@@ -92,21 +95,23 @@ def test_bad_logs_are_error_rows_with_the_reason(serial_db):
 
 def test_reingest_skips_known_content_and_takes_only_new_logs(serial_db, fleet_dir, tmp_path):
     before = rows(serial_db)
-    again = ingest([str(fleet_dir)], serial_db, ray_address="off", progress=False)
+    again = ingest([str(fleet_dir)], serial_db, settings=PAPER, ray_address="off", progress=False)
     assert (again.found, again.already_known, again.new, again.hashed) == (9, 9, 0, 0)  # nothing re-read
     assert rows(serial_db) == before
     touched = fleet_dir / "sim" / "vehicle_1" / "flight_02.tlog"
     os.utime(touched, ns=(time.time_ns(), time.time_ns()))  # new mtime, same bytes: re-read, still known
-    again = ingest([str(fleet_dir)], serial_db, ray_address="off", progress=False)
+    again = ingest([str(fleet_dir)], serial_db, settings=PAPER, ray_address="off", progress=False)
     assert (again.already_known, again.new, again.hashed) == (9, 0, 1)
-    assert ingest([str(fleet_dir)], serial_db, ray_address="off", progress=False).hashed == 0  # new mtime recorded
-    assert ingest([str(fleet_dir)], serial_db, ray_address="off", progress=False, rehash=True).hashed == 9
+    assert (
+        ingest([str(fleet_dir)], serial_db, settings=PAPER, ray_address="off", progress=False).hashed == 0
+    )  # new mtime recorded
+    assert ingest([str(fleet_dir)], serial_db, settings=PAPER, ray_address="off", progress=False, rehash=True).hashed == 9
     # A copy under another name is the same flight; a new file is ingested alone.
     extra = tmp_path / "more"
     extra.mkdir()
     shutil.copy(fleet_dir / "sim" / "vehicle_1" / "flight_01.tlog", extra / "same_bytes.tlog")
     (extra / "new.tlog").write_bytes(b"\x00" * 100)
-    s = ingest([str(fleet_dir), str(extra)], serial_db, ray_address="off", progress=False)
+    s = ingest([str(fleet_dir), str(extra)], serial_db, settings=PAPER, ray_address="off", progress=False)
     assert (s.already_known, s.new, s.error) == (10, 1, 1)
     assert len(rows(serial_db)) == 10
 
@@ -114,7 +119,7 @@ def test_reingest_skips_known_content_and_takes_only_new_logs(serial_db, fleet_d
 @pytest.mark.usefixtures("ray_local")
 def test_ray_rows_equal_serial_rows(fleet_dir, serial_db, tmp_path):
     db = tmp_path / "ray.duckdb"
-    s = ingest([str(fleet_dir / "sim")], db, ray_address="auto", progress=False)
+    s = ingest([str(fleet_dir / "sim")], db, settings=PAPER, ray_address="auto", progress=False)
     assert s.mode == "ray" and s.new == 6 and s.ok == 6
     keep = ("log_hash", "vehicle_id", "start_time_utc", "status", "verdict_label", "faulty_propellers", "p_faulty", "diagnosis")
     ray_rows = {r["log_hash"]: {k: r[k] for k in keep} for r in rows(db)}
@@ -147,7 +152,9 @@ def test_a_worker_killed_mid_run_loses_no_row(fleet_dir, tmp_path):
     killer = threading.Thread(target=_kill_one_running_task, args=("LogWorker.process_batch", killed, stop))
     killer.start()
     try:
-        s = ingest([str(fleet_dir / "sim")], db, ray_address="auto", progress=False, batch_rows=2, logs_per_call=2)
+        s = ingest(
+            [str(fleet_dir / "sim")], db, settings=PAPER, ray_address="auto", progress=False, batch_rows=2, logs_per_call=2
+        )
     finally:
         stop.set()
         killer.join()
@@ -239,7 +246,7 @@ def test_real_logs_give_their_vehicle_ids(tmp_path):
     assert r2["vehicle_id_source"] == "ulog:sys_uuid" and r2["start_time_utc"].year == 2021
     assert (r3["vehicle_id"], r3["vehicle_id_source"], r3["status"]) == ("px4_ulog", "dir:1", "no_verdict")
     with pytest.raises(FleetError, match="no such file"):
-        ingest([str(tmp_path / "nowhere")], tmp_path / "x.duckdb", ray_address="off")
+        ingest([str(tmp_path / "nowhere")], tmp_path / "x.duckdb", settings=PAPER, ray_address="off")
 
 
 def test_ray_calls_hold_every_log_once_largest_first():
@@ -263,11 +270,11 @@ def test_rediagnose_replaces_stale_rows_each_log_still_once(serial_db, fleet_dir
     stale = next(h for h, r in before.items() if r["status"] == "ok")
     con.execute("UPDATE flights SET verdict_label = 16, model_version = 'an older model' WHERE log_hash = ?", [stale])
     con.close()
-    plain = ingest([str(fleet_dir / "sim")], db, ray_address="off", progress=False)
+    plain = ingest([str(fleet_dir / "sim")], db, settings=PAPER, ray_address="off", progress=False)
     still = {r["log_hash"]: r for r in rows(db)}[stale]
     assert plain.new == 0 and still["verdict_label"] == 16  # without the flag the stale verdict stays
     assert plain.other_model == 1 and plain.to_json()["other_model"] == 1  # ... but the run says it is another model's
-    s = ingest([str(fleet_dir / "sim")], db, ray_address="off", progress=False, rediagnose=True, batch_rows=4)
+    s = ingest([str(fleet_dir / "sim")], db, settings=PAPER, ray_address="off", progress=False, rediagnose=True, batch_rows=4)
     assert s.rediagnose and s.new == 6 and s.already_known == 0
     after = {r["log_hash"]: r for r in rows(db)}
     assert len(after) == len(before)  # each log exactly once

@@ -74,7 +74,9 @@ def test_installed_wheel_diagnoses_a_shared_log_from_root(tmp_path):
     monitor_file, models = where.stdout.split()
     assert monitor_file.startswith(str(site)) and models.startswith(str(site)), where.stdout + where.stderr
 
-    r = _run([str(venv / "bin" / "propwatch"), "diagnose", str(LOG171), "--json"], cwd="/")
+    # declared the paper's quad with the installed vehicle file, so the installed classifier reads the log too
+    declared = ["--vehicle", str(Path(models) / "vehicle.yaml")]
+    r = _run([str(venv / "bin" / "propwatch"), "diagnose", str(LOG171), "--json", *declared], cwd="/")
     assert r.returncode in (0, 1, 3), r.stderr  # a verdict or a stated refusal, never a missing file (2)
     out = json.loads(r.stdout)
     assert out["log"] == str(LOG171) and "error" not in out

@@ -16,6 +16,7 @@ from monitor.diagnose.cli import main as diagnose
 from monitor.logs import read_log
 
 ULOGS = Path(__file__).resolve().parents[2] / "shared" / "data" / "px4_ulog"
+PAPER_QUAD = Path(__file__).resolve().parents[1] / "models" / "vehicle.yaml"
 
 pytestmark = [
     pytest.mark.realdata,
@@ -23,8 +24,8 @@ pytestmark = [
 ]
 
 
-def _diagnose(capsys, name: str) -> tuple[int, dict]:
-    code = diagnose([str(ULOGS / name), "--json"])
+def _diagnose(capsys, name: str, *extra) -> tuple[int, dict]:
+    code = diagnose([str(ULOGS / name), "--json", *map(str, extra)])
     return code, json.loads(capsys.readouterr().out)
 
 
@@ -43,7 +44,13 @@ def test_vtol_is_refused_by_name(capsys):
 
 
 def test_sitl_flight_gets_no_false_fault(capsys):
+    # Nothing declares PX4's SITL quad to be the network's airframe: physics alone, no propeller named.
     code, out = _diagnose(capsys, "sample_px4_events.ulg")
+    assert code == 3 and out["network"]["used"] is False and out["network"]["why_not"].startswith("the network knows")
+    assert out["verdict"]["source"] == "first flight" and out["verdict"]["faulty_propellers"] == []
+    assert out["summary"]["state"] == "healthy" and out["summary"]["propellers"] == []
+    # Declared as the paper's quad, the network speaks too.
+    code, out = _diagnose(capsys, "sample_px4_events.ulg", "--vehicle", PAPER_QUAD)
     # Healthy is the verdict; 3 when the conformal set keeps a same-spin pair beside it (physics cannot exclude
     # one from 11 s of 10 Hz outputs): never a propeller marked FAULTY.
     assert code in (0, 3) and out["verdict"]["label"] == 1 and out["verdict"]["faulty_propellers"] == []

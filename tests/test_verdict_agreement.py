@@ -190,10 +190,13 @@ def test_every_rendering_states_the_same_verdict(diagnosed):
 
 
 def test_sample_px4_events_names_no_propeller_where_only_the_classifier_flags(diagnosed):
-    """PX4's healthy SITL flight: the classifier flags 3 and 4, the balance of forces and the shares call it healthy.
-    The network alone never turns such a flight into "inspect": its flags are a note."""
+    """PX4's healthy SITL flight: nothing declares its airframe, so physics alone calls it healthy. Declared as the
+    paper's quad, the classifier flags 3 and 4, the balance of forces and the shares call it healthy: the network
+    alone never turns such a flight into "inspect", its flags are a note."""
     results, _ = diagnosed
     res = next(r for r in results if r["log"].endswith("sample_px4_events.ulg"))
+    assert res["network"]["used"] is False and res["summary"]["state"] == "healthy" and res["summary"]["propellers"] == []
+    res = _run([DATA / "px4_ulog" / "sample_px4_events.ulg", "--vehicle", shipped("vehicle.yaml")], None)[0]
     assert min(res["verdict"]["network_fault_probability"][2:]) > 0.99  # the classifier alone flags 3 and 4
     s = res["summary"]
     assert s["state"] == "healthy" and s["propellers"] == [] and s["replace"] == []

@@ -19,6 +19,9 @@ import numpy as np
 # bound, none a REFUSE one.
 RPM_Z_WARN, RPM_Z_REFUSE = 2.0, 3.0
 RPM_RATIO_WARN = (0.85, 1.15)
+# How ``propwatch diagnose`` begins its reason where nothing declared the log's airframe to be the network's
+# (``monitor.diagnose.engine.undeclared``); the rendering recognises it by this start.
+UNDECLARED_START = "the network knows one airframe"
 RPM_RATIO_REFUSE = (0.6, 1.6)
 RPM_FEATURES = ("rpm_1", "rpm_2", "rpm_3", "rpm_4", "rpm_mean")
 MIN_S = 2.0  # airborne seconds of RPM before the daemon may silence the network in a flight (chosen)

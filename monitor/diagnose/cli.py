@@ -48,7 +48,8 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         "--vehicle",
         default=None,
         metavar="YAML|DIR",
-        help="vehicle YAML (ESC curve), or a folder written by propwatch adapt",
+        help="vehicle YAML (ESC curve), or a folder written by propwatch adapt (with --model, it declares the "
+        "airframe: without either, physics judges alone)",
     )
     # Windows are 5 s long; at a 1 s hop consecutive ones share 4 s: a finer hop costs
     # inference time without adding information to a post-flight verdict.
@@ -193,6 +194,7 @@ def main(argv: list[str] | None = None) -> int:
         print("propwatch diagnose: --max-seconds must be in (0, 604800]", file=sys.stderr)
         return 2
     memory = None
+    declared = bool(args.vehicle or args.model)  # the log is said to be of the model's airframe: the network may speak
     if args.vehicle and Path(args.vehicle).is_dir():
         # A `propwatch adapt` folder: its calibrated vehicle, its model, its airframe's healthy baseline.
 
@@ -227,7 +229,7 @@ def main(argv: list[str] | None = None) -> int:
             progress.set_postfix_str(Path(path).name)
         try:
             with contextlib.redirect_stdout(trap):
-                table, d = diagnose_file(path, clf, esc, args.fmt, args.hop, vehicle, args.max_seconds)
+                table, d = diagnose_file(path, clf, esc, args.fmt, args.hop, vehicle, args.max_seconds, declared)
         except PropwatchError as exc:
             results.append({"log": path, "error": str(exc)})
             print(f"propwatch diagnose: error: {exc}", file=sys.stderr)

@@ -40,7 +40,14 @@ import numpy as np
 from monitor.decision.config import DecisionConfig
 from monitor.decision.effectiveness import PRE_CHANGE_MARGIN_S
 from monitor.decision.hypotheses import SetRule, flight_score, hypothesis_set, load_rule
-from monitor.decision.network_gate import RPM_FEATURES, RPM_RATIO_REFUSE, RPM_RATIO_WARN, RPM_Z_REFUSE, RPM_Z_WARN
+from monitor.decision.network_gate import (
+    RPM_FEATURES,
+    RPM_RATIO_REFUSE,
+    RPM_RATIO_WARN,
+    RPM_Z_REFUSE,
+    RPM_Z_WARN,
+    UNDECLARED_START,
+)
 from monitor.decision.rule import WindowEvidence
 from monitor.diagnose.physics import SET_PRIOR, PhysicsEvidence, own_baseline, physics_evidence
 from monitor.diagnose.physics_first import (
@@ -292,11 +299,14 @@ def diagnose_table(
     batch: int = 4096,
     esc: EscCurve | None = None,
     vehicle=None,
+    airframe_declared: bool = True,
 ) -> Diagnosis:
     """Classify every usable window of ``table`` (one every ``hop`` steps) and aggregate.
 
     ``esc``: the curve the table's RPM came from, to refuse a log of another vehicle class.
     ``vehicle``: its geometry, inertia and kF/kτ give the moment-balance evidence (``physics``).
+    ``airframe_declared``: whoever asks says the log is of ``vehicle``'s airframe (``--vehicle``); where not, the
+    network is silent (``UNDECLARED``) and physics judges alone.
     """
     if hop < 1:
         raise ValueError("hop must be >= 1")
@@ -331,6 +341,8 @@ def diagnose_table(
         )
     physics_why_not = None
     rule = load_rule(clf.path)
+    if silent is None and not airframe_declared:
+        silent = undeclared(clf)
     if silent is None and vehicle is not None:
         d.physics, physics_why_not = physics_evidence(table, vehicle, window=info.window)
         silent = balance_unlike_model(d.physics, rule)
@@ -438,6 +450,24 @@ def physics_in_place_of_network(d: Diagnosis, table: FlightTable, probabilities)
     return True
 
 
+def undeclared(clf: Classifier) -> str:
+    """Why the network is silent on a log whose airframe nobody declared. Nothing in one flight tells the network's
+    airframe from another quad-X: their RPM overlaps (strangers hover at x0.64-1.32 of the nominal RPM, our own
+    randomised flights at x0.87-1.18), the response to differential thrust spans x0.04-0.60 on the network's own
+    airframe (`python -m bench.airframe_response`), and the balance of forces fits a damaged nominal airframe to a
+    healthy stranger (`python -m bench.strangers --set strangers_healthy`: the network spoke on 35 of 100 healthy
+    flights of other airframes and 27 of those read "inspect")."""
+    from monitor.resources import display_path
+    from monitor.vehicle import vehicle_of_model
+
+    own = vehicle_of_model(clf.path)
+    return (
+        UNDECLARED_START
+        + " and nothing declares this log's to be it"
+        + (f": if it is, try --vehicle {display_path(own)}" if own is not None else "")
+    )
+
+
 def balance_unlike_model(physics: PhysicsEvidence | None, rule: SetRule | None) -> str | None:
     """Why the model's airframe is not this one, from the flight's response: the balance of forces (its moments
     against the vehicle file's mass, inertia and geometry) favours an unmeasured airframe over the file's by more
@@ -465,13 +495,31 @@ def physics_only(d: Diagnosis, table: FlightTable, clf: Classifier, window: int,
     d.envelope["large_attitude_fraction"] = round(big, 4)
     unfit = [f"{100 * big:.1f} % of the airborne time beyond 45 deg"] if big > LARGE_ATTITUDE_MAX_FRACTION else []
     d.verdict, d.hypotheses, reason = physics_verdict(table, d.shares, d.decision, alarms, unfit)
-    d.warnings.append("physics only: this airframe is not the one the network was trained on (" + d.network["why_not"] + ")")
+    why = d.network["why_not"]
+    d.warnings.append(
+        f"physics only: {why}"
+        if why.startswith(UNDECLARED_START)
+        else f"physics only: this airframe is not the one the network was trained on ({why})"
+    )
     if unfit and (d.decision or {}).get("in_flight_fault"):
-        d.warnings.append(f"the in-flight rule reached fault level but {'; '.join(unfit)}: its answer is not the verdict")
+        d.warnings.append(unfit_warning(d, d.decision["in_flight_fault"], unfit))
     if d.verdict is None:
         d.reason = reason
         return
     d.propellers = propellers_for(d.verdict["label"], d.verdict["confidence"], table.motor_names)
+
+
+def unfit_warning(d: Diagnosis, change: dict, unfit: list[str]) -> str:
+    """The in-flight rule's fault on a log it does not fit (``unfit``: why), as the evidence line and the JSON tell
+    it: seconds after take-off, and the sets of that first fault alert."""
+    first = next((a for a in d.decision.get("alerts") or [] if a["level"] == "fault"), None)
+    sets = first["hypothesis_sets"] if first else change["hypothesis_sets"]
+    takeoff_s = d.segments[0]["start_boot_s"] if d.segments else 0.0
+    return (
+        f"the in-flight rule reached fault level at {change['first_fault_boot_s'] - takeoff_s:.0f} s after take-off "
+        f"({' or '.join('+'.join(map(str, s)) for s in sets)}) but this log is not like the "
+        f"flights its thresholds were calibrated on ({'; '.join(unfit)}): the verdict stays the whole flight's"
+    )
 
 
 def network_as_note(d: Diagnosis, table: FlightTable) -> None:
@@ -653,15 +701,7 @@ def apply_in_flight_fault(d: Diagnosis, motor_names, unfit: list[str] = ()) -> N
     if d.verdict is None or not change:
         return
     if unfit:
-        # As the evidence line and the JSON tell it: seconds after take-off, and the sets of that first fault alert.
-        first = next((a for a in d.decision.get("alerts") or [] if a["level"] == "fault"), None)
-        sets = first["hypothesis_sets"] if first else change["hypothesis_sets"]
-        takeoff_s = d.segments[0]["start_boot_s"] if d.segments else 0.0
-        d.warnings.append(
-            f"the in-flight rule reached fault level at {change['first_fault_boot_s'] - takeoff_s:.0f} s after take-off "
-            f"({' or '.join('+'.join(map(str, s)) for s in sets)}) but this log is not like the "
-            f"flights its thresholds were calibrated on ({'; '.join(unfit)}): the verdict stays the whole flight's"
-        )
+        d.warnings.append(unfit_warning(d, change, unfit))
         return
     sets = change["hypothesis_sets"]
     v = d.verdict
@@ -699,10 +739,12 @@ def read_guarded(path: str | Path, fmt: str | None, max_seconds: float = DEFAULT
     return raw
 
 
-def diagnose_raw(raw: RawFlight, clf: Classifier, esc: EscCurve | None, hop: int, vehicle=None) -> tuple[FlightTable, Diagnosis]:
+def diagnose_raw(
+    raw: RawFlight, clf: Classifier, esc: EscCurve | None, hop: int, vehicle=None, airframe_declared: bool = True
+) -> tuple[FlightTable, Diagnosis]:
     """A log read by ``read_guarded`` -> (its flight table on the model's grid, its ``Diagnosis``)."""
     table = to_flight_table(raw, esc=esc, rate_hz=clf.info.sample_rate_hz)
-    return table, diagnose_table(table, clf, hop=hop, esc=esc, vehicle=vehicle)
+    return table, diagnose_table(table, clf, hop=hop, esc=esc, vehicle=vehicle, airframe_declared=airframe_declared)
 
 
 def diagnose_file(
@@ -713,7 +755,8 @@ def diagnose_file(
     hop: int,
     vehicle=None,
     max_seconds: float = DEFAULT_MAX_SECONDS,
+    airframe_declared: bool = True,
 ) -> tuple[FlightTable, Diagnosis]:
     """One log file -> (flight table, ``Diagnosis``): the one path from a log to its verdict, shared by
     ``propwatch diagnose``, ``fleet ingest`` (``fleet.worker``) and offline evaluation."""
-    return diagnose_raw(read_guarded(path, fmt, max_seconds), clf, esc, hop, vehicle)
+    return diagnose_raw(read_guarded(path, fmt, max_seconds), clf, esc, hop, vehicle, airframe_declared)

@@ -25,6 +25,8 @@ from __future__ import annotations
 import re
 from dataclasses import asdict, dataclass, field
 
+from monitor.decision.network_gate import UNDECLARED_START
+
 # PX4 quad-X: where each rotor sits and which way it spins (monitor/vehicle.py's rotor positions).
 POSITION = {1: "front-right", 2: "rear-left", 3: "front-left", 4: "rear-right"}
 SAME_SPIN_PAIRS = ((1, 2), (3, 4))  # diagonal pairs spinning the same way (1, 2 CCW; 3, 4 CW)
@@ -214,7 +216,14 @@ def _evidence(result: dict, names, takeoff: float | None) -> list[str]:
         )
     net = result.get("network") or {}
     if net and not net.get("used"):
-        out.append("Fault classifier: silent (physics only: this airframe is not the one the network was trained on).")
+        out.append(
+            "Fault classifier: silent (physics only: "
+            + (
+                "nothing declares this airframe to be the one it was trained on)."
+                if undeclared(result)
+                else "this airframe is not the one the network was trained on)."
+            )
+        )
     dec = result.get("decision")
     if dec:
         faults = [a for a in dec.get("alerts", []) if a.get("level") == "fault"]
@@ -250,6 +259,11 @@ def _flagged_extra(result: dict, named: set[int]) -> list[int]:
     p = _classifier_probability(v) or []
     level = v.get("faulty_probability_required", FLAG_PROBABILITY)
     return [i + 1 for i, x in enumerate(p) if x >= level and i + 1 not in named]
+
+
+def undeclared(result: dict) -> bool:
+    """The network was silent because nothing declared the log's airframe (``monitor.diagnose.engine.undeclared``)."""
+    return ((result.get("network") or {}).get("why_not") or "").startswith(UNDECLARED_START)
 
 
 def verdict_of(result: dict) -> Verdict:
@@ -296,7 +310,14 @@ def verdict_of(result: dict) -> Verdict:
     other_vehicle = re.search(r"try (--vehicle \S+?(?: or --vehicle \S+?)*)\)?$", silent)
     # where the log is another class of vehicle than the model's, the vehicle's own model may judge it too
     own_model = (
-        f" Diagnose this log again with {other_vehicle.group(1)} to have its own model judge it too." if other_vehicle else ""
+        (
+            f" If this is the airframe of {other_vehicle.group(1).removeprefix('--vehicle ')}, diagnose it again with "
+            f"{other_vehicle.group(1)} to have its classifier judge it too."
+            if undeclared(result)
+            else f" Diagnose this log again with {other_vehicle.group(1)} to have its own model judge it too."
+        )
+        if other_vehicle
+        else ""
     )
     evidence = _evidence(result, names, takeoff)
     change = flight_seconds(v["change_boot_s"], takeoff) if v.get("source") == "in-flight change" else None
