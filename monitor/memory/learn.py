@@ -84,16 +84,16 @@ def distinct_names(flights: list[LoggedFlight]) -> list[str]:
     return [f.path or f.name if seen.count(f.name) > 1 else f.name for f in flights]
 
 
-def outliers(summaries: list[FlightSummary]):
-    """Each flight the others call FAULTY (judged against the normal of the rest), in order: (index, verdict).
-    None below ``MIN_FLIGHTS`` flights."""
+def outliers(summaries: list[FlightSummary], prior_cov=None):
+    """Each flight the others call FAULTY (judged against the normal of the rest, ``prior_cov`` its prior), in
+    order: (index, verdict). None below ``MIN_FLIGHTS`` flights."""
     if len(summaries) < MIN_FLIGHTS:
         return
     stack = FlightStack.of(summaries)  # each leave-one-out normal one vectorised pass: linear in flights, not quadratic
     for i, s in enumerate(summaries):
         keep = np.ones(len(summaries), dtype=bool)
         keep[i] = False
-        v = judge(stack.normal(keep), s)
+        v = judge(stack.normal(keep, prior_cov), s)
         if v["fault_statistic"] >= th.FAULT_STATISTIC:  # a load off centre that explains it is no excuse here
             yield i, v
 

@@ -86,8 +86,9 @@ class FlightStack:
             else None,
         )
 
-    def normal(self, keep: np.ndarray | None = None) -> Normal:
-        """The normal of the flights ``keep`` (a (k,) mask; default all) that have accepted steps."""
+    def normal(self, keep: np.ndarray | None = None, prior_cov=None) -> Normal:
+        """The normal of the flights ``keep`` (a (k,) mask; default all) that have accepted steps; ``prior_cov`` the
+        flight-to-flight prior (default ``thresholds.PRIOR_COV``, our simulator's)."""
         keep = (self.n > 0) if keep is None else (np.asarray(keep, dtype=bool) & (self.n > 0))
         if not keep.any():
             raise ValueError("normal_of: no flight with airborne steps")
@@ -97,7 +98,7 @@ class FlightStack:
         c = self.mean_share[keep] - self.mean_tilt[keep] @ slopes
         m = len(c)
         own = np.cov(c.T, ddof=1) if m > 1 else np.zeros((4, 4))
-        prior = np.asarray(th.PRIOR_COV, dtype=np.float64)
+        prior = np.asarray(th.PRIOR_COV if prior_cov is None else prior_cov, dtype=np.float64)
         cov = (th.PRIOR_FLIGHTS * prior + (m - 1) * own) / (th.PRIOR_FLIGHTS + m - 1)
         wk = keep & self.has_within
         wcov = self.within[wk].mean(axis=0) if wk.any() else np.zeros((4, 4))
@@ -110,6 +111,6 @@ def slopes_of(summaries: list[FlightSummary]) -> np.ndarray:
     return FlightStack.of(summaries).normal().slopes
 
 
-def normal_of(summaries: list[FlightSummary]) -> Normal:
+def normal_of(summaries: list[FlightSummary], prior_cov=None) -> Normal:
     """The normal of ``summaries`` (at least one flight with accepted steps)."""
-    return FlightStack.of(summaries).normal()
+    return FlightStack.of(summaries).normal(prior_cov=prior_cov)
