@@ -3,6 +3,8 @@
     python -m bench.bench_soak                     # 60-minute flight at real pace (the issue's soak)
     python -m bench.bench_soak --minutes 5 --sample-s 10   # a shorter run
     python -m bench.bench_soak --minutes 10 --sample-s 30   # the issue's 10-minute budget check (5 % CPU, p99 5 ms)
+    python -m bench.bench_soak --landings --out out/soak.json   # an hour of flights, learning at every landing
+    python -m bench.bench_soak --landings --tree /work/g84 --out out/soak-84adda2.json   # another tree's daemon
 
 As ``bench_daemon.py`` (``propwatch replay`` as PX4 on udpout, ``propwatch
 monitor`` on udpin), but long: the daemon's resident memory is read from
@@ -17,6 +19,17 @@ The issue's budget (5 % of a core, p99 5 ms) is printed as met or not. Results
 print as text, or JSON with
 ``--json``; ``--out FILE`` also writes the JSON there as the run goes (so a
 run cut short still leaves its samples).
+
+``--landings`` makes the hour a sequence of simulated flights of one
+airframe (``offline.vehicles.ours``, its healthy flights, each ``--flight-s``
+long, cycled), each ending landed and then disarmed, ``--gap-s`` apart (a
+battery change: the autopilot's boot clock starts again), sent from one UDP
+socket at real pace; the daemon keeps a vehicle memory in a temporary state
+dir and learns at every landing. The result adds the flights flown and the
+flights in the vehicle's baseline file (learnt). ``--tree DIR`` runs the
+daemon from another checkout (its own ``monitor`` package, e.g. an older
+commit), with the same sender, so two trees can be soaked side by side on
+the same machine load.
 """
 
 from __future__ import annotations
@@ -25,6 +38,7 @@ import argparse
 import json
 import os
 import signal
+import socket
 import subprocess
 import sys
 import tempfile
@@ -44,12 +58,16 @@ P99_BUDGET_MS = 5.0
 def run(args) -> dict:
     with tempfile.TemporaryDirectory() as tmp:
         work = Path(tmp)
-        model, tlog = build_inputs(args, work)
+        model, tlog = build_inputs(args, work) if not args.landings else (landings_model(args), None)
         port = free_udp_port()
         report = work / "report.json"
+        tree = Path(args.tree).resolve() if args.tree else REPO
         cmd = [sys.executable, "-m", "monitor", "--connect", f"udpin:127.0.0.1:{port}", "--model", str(model)]
         cmd += ["--report", str(report), "--events", str(work / "events.jsonl"), "--log-level", "WARNING"]
-        d = subprocess.Popen(cmd, cwd=REPO, stderr=subprocess.PIPE, text=True)
+        if args.landings:
+            cmd += ["--state-dir", str(work / "state")]
+        env = {**os.environ, "PYTHONPATH": str(tree)}
+        d = subprocess.Popen(cmd, cwd=tree, env=env, stderr=subprocess.PIPE, text=True)
         lines: list[str] = []
         threading.Thread(target=lambda: lines.extend(d.stderr), daemon=True).start()
         time.sleep(3.0)  # start-up (the 'ready' line is INFO, below --log-level WARNING)
@@ -58,31 +76,108 @@ def run(args) -> dict:
         idle_cpu0, idle_t0 = cpu_seconds(d.pid), time.monotonic()
         time.sleep(args.idle_s)  # the reference: the same daemon, no traffic
         idle_percent = 100.0 * (cpu_seconds(d.pid) - idle_cpu0) / max(time.monotonic() - idle_t0, 1e-9)
-        replay = [sys.executable, "-m", "monitor.cli", "replay", str(tlog), "--connect", f"udpout:127.0.0.1:{port}"]
-        replay += ["--speed", "1", "--linger", "0.5", "--log-level", "WARNING"]
+        if args.landings:
+            sender = FlightSender(fleet_flights(args, work), port, args.minutes * 60.0, args.gap_s)
+            threading.Thread(target=sender.run, daemon=True).start()
+            alive = sender.alive
+        else:
+            replay = [sys.executable, "-m", "monitor.cli", "replay", str(tlog), "--connect", f"udpout:127.0.0.1:{port}"]
+            replay += ["--speed", "1", "--linger", "0.5", "--log-level", "WARNING"]
+            r = subprocess.Popen(replay, cwd=REPO)
+            sender = None
+
+            def alive() -> bool:
+                return r.poll() is None
+
         cpu0, t0 = cpu_seconds(d.pid), time.monotonic()
         samples = [(0.0, rss_mb(d.pid))]
-        r = subprocess.Popen(replay, cwd=REPO)
         next_sample = t0 + args.sample_s
         result: dict = {}
-        while r.poll() is None:
+        while alive():
             time.sleep(0.5)
             now = time.monotonic()
             if now >= next_sample:
                 samples.append((round(now - t0, 1), rss_mb(d.pid)))
                 next_sample += args.sample_s
                 result = summarize(samples, cpu_seconds(d.pid) - cpu0, now - t0, None, args, idle_percent)
+                result |= landings(sender, work)
                 if args.out:
                     Path(args.out).write_text(json.dumps(result, indent=2) + "\n")
+        time.sleep(1.0 if sender else 0.0)  # the last landing's write
         cpu1, t1 = cpu_seconds(d.pid), time.monotonic()
         samples.append((round(t1 - t0, 1), rss_mb(d.pid)))
         d.send_signal(signal.SIGTERM)
         d.wait(30)
         rep = json.loads(report.read_text())
-    result = summarize(samples, cpu1 - cpu0, t1 - t0, rep, args, idle_percent)
+        result = summarize(samples, cpu1 - cpu0, t1 - t0, rep, args, idle_percent) | landings(sender, work)
+        result["tree"] = str(tree)
     if args.out:
         Path(args.out).write_text(json.dumps(result, indent=2) + "\n")
     return result
+
+
+def landings_model(args) -> Path:
+    model = Path(args.model) if args.model else REPO / "models" / "classifier.onnx"
+    if not model.is_file():
+        raise SystemExit(f"{model}: no model (--model names one)")
+    return model.resolve()
+
+
+def fleet_flights(args, work: Path) -> list[Path]:
+    """The healthy flights (references and healthy later flights) of the fleet's first airframe, simulated."""
+    from offline.evalsim.sets import VEHICLE_FLIGHTS
+    from offline.vehicles.ours import flight_plan, write_fleet
+
+    fleet = write_fleet(work / "fleet", VEHICLE_FLIGHTS, seed=args.seed, duration_s=args.flight_s)
+    return [fleet / f"{p['name']}.tlog" for p in flight_plan(VEHICLE_FLIGHTS, args.seed) if not p["rotor"]]
+
+
+class FlightSender:
+    """The flights one after another, ``gap_s`` apart, at their recorded pace, from one UDP socket (one autopilot
+    address, as a vehicle whose companion computer stays up through battery changes); stops starting flights once
+    ``total_s`` has passed, so the run ends with a landing."""
+
+    def __init__(self, tlogs: list[Path], port: int, total_s: float, gap_s: float):
+        self.tlogs, self.port, self.total_s, self.gap_s = tlogs, port, total_s, gap_s
+        self.flown = 0
+        self.done = threading.Event()
+
+    def alive(self) -> bool:
+        return not self.done.is_set()
+
+    def run(self) -> None:
+        from monitor.mavlink.player import read_tlog
+
+        sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        sock.bind(("127.0.0.1", 0))
+        t_end = time.monotonic() + self.total_s
+        try:
+            while time.monotonic() < t_end:
+                frames = [(t, b) for t, b, _ in read_tlog(self.tlogs[self.flown % len(self.tlogs)])]
+                t0, t0_log = time.monotonic(), frames[0][0]
+                for t_log, frame in frames:
+                    wait = t0 + (t_log - t0_log) - time.monotonic()
+                    if wait > 0:
+                        time.sleep(wait)
+                    sock.sendto(frame, ("127.0.0.1", self.port))
+                self.flown += 1
+                time.sleep(self.gap_s)
+        finally:
+            sock.close()
+            self.done.set()
+
+
+def landings(sender: FlightSender | None, work: Path) -> dict:
+    """Flights flown and flights in each vehicle's baseline file (any tree's format: a JSON object with ``flights``)."""
+    if sender is None:
+        return {}
+    learnt = {}
+    for path in sorted((work / "state").glob("vehicles/*/baseline.json")):
+        try:
+            learnt[path.parent.name] = len(json.loads(path.read_text())["flights"])
+        except (OSError, ValueError, KeyError):
+            learnt[path.parent.name] = None  # mid-write by a tree without atomic replace
+    return {"flights_flown": sender.flown, "flights_learnt": learnt}
 
 
 def summarize(samples, cpu_s: float, wall_s: float, rep: dict | None, args, idle_percent: float) -> dict:
@@ -126,6 +221,10 @@ def main(argv=None) -> int:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--idle-s", type=float, default=30.0, help="reference: the daemon idle this long first (default 30)")
     p.add_argument("--out", help="also write the JSON result here (updated at every sample)")
+    p.add_argument("--landings", action="store_true", help="a sequence of flights, each landed and disarmed, learnt")
+    p.add_argument("--flight-s", type=float, default=60.0, help="--landings: each flight's length (default 60 s)")
+    p.add_argument("--gap-s", type=float, default=5.0, help="--landings: on the ground between flights (default 5 s)")
+    p.add_argument("--tree", help="run the daemon from this checkout (default this one)")
     p.add_argument("--json", action="store_true")
     args = p.parse_args(argv)
     res = run(args)
