@@ -110,6 +110,7 @@ def bench_kill9(landings: int, seed: int) -> dict:
     path = seed_state(work / "state")
     reported = len(VehicleBaseline.load(path).flights)
     begun, kills, lost, unreadable, learnt, not_learnt, stale, mid_landing = 0, 0, 0, 0, 0, 0, 0, 0
+    why_not: dict[str, int] = {}  # each "not learnt" reason (its text up to the first colon after the verdict)
     landing_s = 2.5  # refined from the first landings
     t_start = time.monotonic()
     while begun < landings:
@@ -136,6 +137,8 @@ def bench_kill9(landings: int, seed: int) -> dict:
                     reported = max(reported, int(n))
                 else:
                     not_learnt += 1
+                    why = ":".join(what.split(":")[:2]).strip()
+                    why_not[why] = why_not.get(why, 0) + 1
         mid_landing += mid
         stale += sum(1 for q in path.parent.iterdir() if q.name.endswith(".tmp"))
         try:
@@ -158,6 +161,7 @@ def bench_kill9(landings: int, seed: int) -> dict:
         "kills_mid_landing": mid_landing,
         "reported_learnt": learnt,
         "reported_not_learnt": not_learnt,
+        "not_learnt_because": why_not,
         "learnt_flights_lost": lost,
         "unreadable_after_a_kill": unreadable,
         "temporary_files_seen_after_kills": stale,

@@ -118,7 +118,39 @@ def _two_vehicles(flight):  # noqa: F811
     return sign_and_pack(flight, None), sign_and_pack(healthy, None, sys_id=2)
 
 
-def test_two_autopilots_on_one_link_with_no_system_id_the_first_heard_is_kept_and_the_other_announced(
+def test_two_autopilots_on_one_link_are_each_monitored_and_the_alert_names_the_damaged_ones_system(
+    tmp_path,
+    toy,  # noqa: F811
+    flight,  # noqa: F811
+    caplog,
+):
+    """One router, two vehicles, vehicle 2 (healthy) heard first: each is pinned and monitored as its own vehicle;
+    vehicle 1's damaged propeller raises a FAULT that names system 1, answered as system 1 to its address."""
+    import json
+
+    caplog.set_level(logging.INFO)
+    v1, v2 = _two_vehicles(flight)
+    frames = [(t, f, 0) for t, f, _ in merged(v1, v2, offsets=[0.0, -0.3])]  # one router, both vehicles
+    daemon, got, _ = run_senders(tmp_path, toy, frames, {}, [(HOST, 0)])
+    rep = daemon.report()
+    assert rep["link"]["pin"]["system_id"] == 2 and set(rep["link"]["pin"]["vehicles"]) == {"1", "2"}
+    assert rep["system_id"] == 2 and set(rep["other_vehicles"]) == {"1"}
+    one = rep["other_vehicles"]["1"]
+    assert one["system_id"] == 1 and one["pipeline"]["classified"] > 0 and rep["pipeline"]["classified"] > 0
+    events = [json.loads(x) for x in (tmp_path / "events.jsonl").read_text().splitlines()]
+    faults = [e for e in events if e["event"] == "alert" and e["level"] == "fault"]
+    assert faults and {e["system_id"] for e in faults} == {1} and faults[0]["faulty_propellers"] == [3]
+    assert rep["alerts"] == 0 and one["alerts"] >= 1  # the healthy vehicle 2 raised nothing
+    p = mavlink.MAVLink(None)
+    sent = [m for f in got[0] for m in p.parse_buffer(f) or []]
+    texts = [m for m in sent if m.get_type() == "STATUSTEXT" and "FAULT" in m.text]
+    assert texts and {m.get_srcSystem() for m in texts} == {1}  # from vehicle 1's companion, as its ground station sees
+    assert {m.get_srcSystem() for m in sent if m.get_type() == "HEARTBEAT"} == {1, 2}
+    said = [r.getMessage() for r in caplog.records if "monitored as its own vehicle" in r.getMessage()]
+    assert len(said) == 1 and "system 1" in said[0]
+
+
+def test_with_one_vehicle_allowed_the_first_heard_is_kept_and_the_other_announced(
     tmp_path,
     toy,  # noqa: F811
     flight,  # noqa: F811
@@ -126,10 +158,10 @@ def test_two_autopilots_on_one_link_with_no_system_id_the_first_heard_is_kept_an
 ):
     caplog.set_level(logging.INFO)
     v1, v2 = _two_vehicles(flight)
-    frames = [(t, f, 0) for t, f, _ in merged(v1, v2, offsets=[0.0, -0.3])]  # one router, both vehicles
-    daemon, got, _ = run_senders(tmp_path, toy, frames, {}, [(HOST, 0)])
+    frames = [(t, f, 0) for t, f, _ in merged(v1, v2, offsets=[0.0, -0.3])]
+    daemon, got, _ = run_senders(tmp_path, toy, frames, {"link": {"max_vehicles": 1}}, [(HOST, 0)])
     rep = daemon.report()
-    assert rep["link"]["pin"]["system_id"] == 2  # heard first; monitoring never stops for the second
+    assert rep["link"]["pin"]["system_id"] == 2 and rep["other_vehicles"] == {}  # heard first; monitoring goes on
     assert rep["link"]["pin"]["conflict"].startswith("system 1 ") and "system 2 " in rep["link"]["pin"]["conflict"]
     assert rep["pipeline"]["steps"] > 0 and got[0]
     said = [r.getMessage() for r in caplog.records if "refused: another autopilot, heard after system 2" in r.getMessage()]
@@ -224,6 +256,32 @@ def test_one_packet_first_cannot_hold_the_pin():
         clock.t = float(k)
         pin.admit(_beat(1), AUTOPILOT)
     assert pin.pinned and pin.address == AUTOPILOT  # forgotten once silent, the autopilot pinned after it
+
+
+def test_a_flood_of_forged_system_ids_pins_at_most_max_vehicles_and_each_refusal_is_announced_once(caplog):
+    pin, clock = _pin(max_vehicles=3)
+    for k in range(6):
+        clock.t = float(k)
+        for sys_id in range(1, 201):  # 200 system ids' autopilot heartbeats, each second, from one router
+            pin.admit(_beat(sys_id), AUTOPILOT)
+    assert len(pin.vehicles) == 3 and set(pin.vehicles.values()) == {AUTOPILOT}
+    assert len(pin._candidates) <= 16 and len(pin.announced) <= 64
+    said = [r.getMessage() for r in caplog.records if "past the 3 monitored (link.max_vehicles)" in r.getMessage()]
+    assert said and len(said) == len(set(said))
+    assert pin.admit(_beat(2), AUTOPILOT) == (2 in pin.vehicles)
+
+
+def test_a_second_vehicle_from_its_own_port_is_pinned_there_and_its_system_from_elsewhere_refused(caplog):
+    pin, clock = _pin()
+    for k in range(4):
+        clock.t = float(k)
+        pin.admit(_beat(1), AUTOPILOT)
+        pin.admit(_beat(2), SECOND)
+    assert pin.vehicles == {1: AUTOPILOT, 2: SECOND} and pin.address_of(2) == SECOND and pin.address_of(None) == AUTOPILOT
+    assert not pin.admit(_beat(2), AUTOPILOT)  # vehicle 2's system from vehicle 1's address
+    assert any(
+        "the same system from another address, heard after system 2 at 127.0.0.1:40404" in r.getMessage() for r in caplog.records
+    )
 
 
 def test_by_default_only_an_autopilot_on_this_computer_is_listened_to(caplog):

@@ -78,6 +78,7 @@ class Announcer:
         self._status_base = ""
         self._status_sent = ""
         self._next_sink_report = 0.0
+        self.system_id: int | None = None  # the vehicle's (its alerts name it)
 
     def record(self, record: dict) -> None:
         self.events.write_record(record)
@@ -86,8 +87,8 @@ class Announcer:
     def alert(self, alert: Alert) -> None:
         self.counters.alerts += 1
         a, time_boot_ms = alert.announcement, alert.time_boot_ms
-        event = {"event": "alert", **a.event(), "time_boot_ms": time_boot_ms, **alert.fields}
-        log.warning("%s t=%d ms: %s (%s evidence)", a.level.upper(), time_boot_ms, a.text, a.evidence)
+        event = {"event": "alert", "system_id": self.system_id, **a.event(), "time_boot_ms": time_boot_ms, **alert.fields}
+        log.warning("%s system %s t=%d ms: %s (%s evidence)", a.level.upper(), self.system_id, time_boot_ms, a.text, a.evidence)
         # The ground station first: a failing disk must never delay or lose the alert itself.
         self.statustexts.add_text(a.text, a.severity)
         self.send_statustext()

@@ -76,6 +76,7 @@ class Autopilot:
         if dec.system_id is not None and self.system_id is None:
             self.system_id = dec.system_id
             self.link.set_system_id(dec.system_id)
+            self.announce.system_id = dec.system_id
             log.info("autopilot: system %d component %d", dec.system_id, dec.component_id)
             if self.memory is not None:
                 self.memory.identify(dec.system_id)

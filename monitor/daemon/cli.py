@@ -74,6 +74,7 @@ def guard(cfg: MonitorConfig) -> LinkGuard:
         ground_stations=tuple(parse_endpoint(g, "link.ground_stations") for g in c.ground_stations),
         autopilot_component_id=c.autopilot_component_id,
         pin_wait_s=c.pin_wait_s,
+        max_vehicles=c.max_vehicles,
     )
 
 

@@ -101,6 +101,9 @@ class LinkConfig:
     # "HOST:PORT" that also get our HEARTBEAT, STATUSTEXT and NAMED_VALUE_FLOAT (never a command); nobody else does.
     ground_stations: tuple[str, ...] = ()
     pin_wait_s: float = 2.0  # a candidate autopilot's HEARTBEATs span this long before it is pinned (first heard wins)
+    # Autopilots of distinct system ids monitored on the link, each its own vehicle (monitor.daemon.vehicles); one
+    # more is announced and ignored. With system_id set, that one alone.
+    max_vehicles: int = 4
     # udpin: sleep through the datagrams that cannot complete the next 20 Hz step and read them together
     # (monitor.daemon.pacing): measured 85 -> 55-60 wake-ups/s at 20 Hz; latency still counts from each arrival.
     pace_reads: bool = True
@@ -119,6 +122,7 @@ class LinkConfig:
         _within(self.tlog_speed, 0.0, 1000.0, "link.tlog_speed")
         _check(0 <= self.signing_link_id <= 255, "link.signing_link_id", "must be 0..255")
         _within(self.max_peers, 1, 1024, "link.max_peers")
+        _within(self.max_vehicles, 1, 16, "link.max_vehicles")
         for a in self.allow_addresses:
             parse_address(a)
         for s in self.allow_sources:

@@ -44,7 +44,7 @@ os.environ.setdefault("MAVLINK_DIALECT", "common")  # mavutil's default 'all' co
 from pymavlink import mavutil  # noqa: E402
 from pymavlink.dialects.v20 import common as mavlink2  # noqa: E402
 
-from monitor.daemon.pin import PIN_WAIT_S, AutopilotPin, Origin  # noqa: E402
+from monitor.daemon.pin import MAX_VEHICLES, PIN_WAIT_S, AutopilotPin, Origin  # noqa: E402
 from monitor.daemon.signing import TIMESTAMP_UNITS_PER_S, SignatureGate  # noqa: E402
 from monitor.errors import ConfigError  # noqa: E402
 from monitor.resample import US_PER_S  # noqa: E402
@@ -85,6 +85,7 @@ class LinkGuard:
     ground_stations: tuple[tuple[str, int], ...] = ()  # (host, port) that also get our HEARTBEAT, STATUSTEXT, values
     autopilot_component_id: int = 1
     pin_wait_s: float = PIN_WAIT_S
+    max_vehicles: int = MAX_VEHICLES  # autopilots of distinct system ids pinned at most (monitor.daemon.pin)
 
     def address_ok(self, addr: tuple[str, int]) -> bool:
         return not self.allow_addresses or any(h == addr[0] and p in (None, addr[1]) for h, p in self.allow_addresses)
@@ -162,6 +163,7 @@ class Link:
                 self.guard.autopilot_address,
                 self.guard.pin_wait_s,
                 one_peer=not self.is_udpin,
+                max_vehicles=self.guard.max_vehicles,
             )
         )
         self.unverified_frames = 0  # frames passed on without a verified signature (all of them with signing off)
@@ -379,6 +381,7 @@ class Link:
             }
         if self.pin is not None:
             out["pin"] = {"system_id": self.pin.system_id, "refused": dict(self.pin.refused), "conflict": self.pin.conflict}
+            out["pin"]["vehicles"] = {str(k): None if a is None else f"{a[0]}:{a[1]}" for k, a in self.pin.vehicles.items()}
             if self.pin.address is not None:
                 out["autopilot_address"] = f"{self.pin.address[0]}:{self.pin.address[1]}"
         return out
@@ -410,12 +413,14 @@ class Link:
         return [(m, time.perf_counter())]
 
     # -- sending (the complete list of what we ever send) ---------------------
-    def _send(self, encode: Callable[[Any], Any], to_ground: bool = True) -> None:
+    def _send(self, encode: Callable[[Any], Any], to_ground: bool = True, as_system: int | None = None) -> None:
         """``encode(mav)`` builds the message (signed with a key); it goes to the autopilot and, with ``to_ground``,
-        to the configured ground stations. Nothing is sent to a log or while the link is down."""
+        to the configured ground stations. ``as_system``: sent as a component of that vehicle, to its autopilot's
+        pinned address (None: the first pinned). Nothing is sent to a log or while the link is down."""
         if self.is_log or self.conn is None:
             return
         tx = self._tx
+        tx.srcSystem = (self._system_id or 1) if as_system is None else as_system
         if self.gate is not None:  # MAVLink signing: never sign behind the newest timestamp verified
             ref = self.gate.newest(time.monotonic())
             if ref is not None and ref > tx.signing.timestamp:
@@ -423,15 +428,16 @@ class Link:
         try:
             buf = encode(tx).pack(tx)
             tx.seq = (tx.seq + 1) % 256
-            self._write(buf, to_ground)
+            self._write(buf, to_ground, as_system)
         except OSError as exc:
             log.warning("send failed: %s", exc)
 
-    def _write(self, buf: bytes, to_ground: bool) -> None:
+    def _write(self, buf: bytes, to_ground: bool, as_system: int | None = None) -> None:
+        to = self.pin.address_of(as_system) if self.pin is not None and self.pin.pinned else None
         if not self.is_udpin:
             self.conn.write(buf)
-        elif self.pin is not None and self.pin.pinned and self.pin.address is not None:
-            self.conn.port.sendto(buf, self.pin.address)
+        elif to is not None:
+            self.conn.port.sendto(buf, to)
         if not to_ground or not self.guard.ground_stations:
             return
         if self.is_udpin:
@@ -443,17 +449,19 @@ class Link:
         for addr in self.guard.ground_stations:
             sock.sendto(buf, addr)
 
-    def send_heartbeat(self) -> None:
-        self._send(lambda mav: mav.heartbeat_encode(MAV_TYPE_ONBOARD_CONTROLLER, MAV_AUTOPILOT_INVALID, 0, 0, MAV_STATE_ACTIVE))
+    def send_heartbeat(self, as_system: int | None = None) -> None:
+        hb = (MAV_TYPE_ONBOARD_CONTROLLER, MAV_AUTOPILOT_INVALID, 0, 0, MAV_STATE_ACTIVE)
+        self._send(lambda mav: mav.heartbeat_encode(*hb), as_system=as_system)
 
-    def send_statustext(self, text: str, severity: int) -> None:
-        self._send(lambda mav: mav.statustext_encode(severity, text[:50].encode("ascii", "replace")))
+    def send_statustext(self, text: str, severity: int, as_system: int | None = None) -> None:
+        self._send(lambda mav: mav.statustext_encode(severity, text[:50].encode("ascii", "replace")), as_system=as_system)
 
-    def send_named_value_float(self, time_boot_ms: int, name: str, value: float) -> None:
+    def send_named_value_float(self, time_boot_ms: int, name: str, value: float, as_system: int | None = None) -> None:
         self._send(
             lambda mav: mav.named_value_float_encode(
                 int(time_boot_ms) & 0xFFFFFFFF, name[:NAMED_VALUE_MAX_CHARS].encode(), float(value)
-            )
+            ),
+            as_system=as_system,
         )
 
     def request_message_interval(self, target_system: int, target_component: int, message_id: int, rate_hz: float) -> None:
@@ -473,6 +481,7 @@ class Link:
                 0,
             ),
             to_ground=False,  # a command is for the autopilot only
+            as_system=target_system,
         )
 
     def request_message(self, target_system: int, target_component: int, message_id: int) -> None:
@@ -482,6 +491,7 @@ class Link:
                 target_system, target_component, MAV_CMD_REQUEST_MESSAGE, 0, float(message_id), 0, 0, 0, 0, 0, 0
             ),
             to_ground=False,
+            as_system=target_system,
         )
 
 

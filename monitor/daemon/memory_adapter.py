@@ -74,11 +74,17 @@ class _NotHealthy(Exception):
 
 class VehicleMemory:
     def __init__(
-        self, state_dir: str | Path, rate_hz: float, motor_names=("1", "2", "3", "4"), idle_rpm: float | None = None
+        self,
+        state_dir: str | Path,
+        rate_hz: float,
+        motor_names=("1", "2", "3", "4"),
+        idle_rpm: float | None = None,
+        shared: VehicleMemory | None = None,
     ) -> None:
         """Open and hold the state dir. Raises ``StateDirBusy`` where another daemon holds it; any other reason it
         cannot be used turns the memory off for the run (``status`` says why). ``idle_rpm``: the mean rotor speed
-        at or below which the outputs are at idle (None: a flight ends only by a landed state)."""
+        at or below which the outputs are at idle (None: a flight ends only by a landed state). ``shared``: the
+        memory of another vehicle on the same link, whose hold of the state dir this one uses."""
         self.state_dir = Path(state_dir)
         self.rate_hz = float(rate_hz)
         self.motor_names = tuple(motor_names)
@@ -94,6 +100,11 @@ class VehicleMemory:
         self._status: str | None = None  # STATUS suffix, made again only when something it shows changes
         self.learnt = 0
         self.store: StateDir | None = None
+        self.owner = shared is None  # holds the state dir (another vehicle's memory in it shares this one's hold)
+        if shared is not None:
+            self.store, self.off = shared.store, shared.off
+            self._reset_flight()
+            return
         try:
             self.store = StateDir.open(self.state_dir)
             removed = self.store.hold()
@@ -112,10 +123,14 @@ class VehicleMemory:
                 log.warning("vehicle memory: removed %d temporary files a crash left: %s", len(removed), ", ".join(removed))
         self._reset_flight()
 
+    def sharing(self) -> VehicleMemory:
+        """Another vehicle's memory in the same state dir, under this one's hold (another vehicle on the link)."""
+        return VehicleMemory(self.state_dir, self.rate_hz, self.motor_names, self.idle_rpm, shared=self)
+
     def close(self) -> None:
-        if self.store is not None:
+        if self.store is not None and self.owner:
             self.store.close()
-            self.store = None
+        self.store = None
 
     # -- identity and the file
     @property

@@ -5,7 +5,8 @@ features, the network) and shows it to the autopilot's bookkeeping once decoded 
 rates, arming, version, acks); each grid step it completes goes to ``decide`` (what is live, the pause, every judge
 of the flight, blindness from the step), which hands it to ``announce`` (STATUSTEXT, the events file, STATUS,
 latency). The loop itself reads the ``link``, runs the housekeeping at most every ``TICK_PERIOD_S``, paces its reads
-and reports.
+and reports. Another autopilot system id on the link is another vehicle, with a monitor of its own (``vehicles``):
+its messages go there.
 """
 
 from __future__ import annotations
@@ -29,6 +30,7 @@ from monitor.daemon.pacing import MAX_PAUSE_S
 from monitor.daemon.pipeline import Pipeline
 from monitor.daemon.rotor_evidence import RecentEffectiveness
 from monitor.daemon.sdnotify import Notifier
+from monitor.daemon.vehicles import Vehicles
 from monitor.decision.hypotheses import FlightSets, load_rule
 from monitor.decision.rule import Decision
 from monitor.decision.thresholds import file_sha256
@@ -54,13 +56,18 @@ class Daemon:
         notifier: Notifier | None = None,
         vehicle=None,
         memory: VehicleMemory | None = None,
+        one: bool = False,
     ):
+        """``one``: this monitors one vehicle of several on the link (``monitor.daemon.vehicles``): it routes nothing."""
         self.cfg = config
         self.link = link
         self.memory = memory  # the vehicle's healthy history (monitor.daemon.memory_adapter), None without a state dir
         self.pipeline = pipeline
         self.events = events
         self.notifier = notifier or Notifier({})
+        self.geometry = vehicle
+        many = not one and config.link.system_id == 0 and config.link.max_vehicles > 1
+        self.vehicles = Vehicles(self, config.link.max_vehicles) if many else None  # the other vehicles' monitors
         decision = Decision(
             config.alerts.decision(),
             config.resample.rate_hz,
@@ -120,8 +127,9 @@ class Daemon:
             if pace and self.link.drained:
                 self._pause()
             if self.link.is_log and self.link.eof:
-                for step in self.pipeline.flush():
-                    self._on_step(step)
+                for d in (self, *(self.vehicles.others.values() if self.vehicles is not None else ())):
+                    for step in d.pipeline.flush():
+                        d._on_step(step)
                 log.info("end of log %s", self.link.url)
                 break
         self.notifier.stopping()
@@ -133,6 +141,8 @@ class Daemon:
         """Sleep until the next grid step can first complete (at most ``MAX_PAUSE_S``)."""
         now = time.perf_counter()
         wake = self.pipeline.wake_at(now)
+        if self.vehicles is not None and self.vehicles.others:
+            wake = self.vehicles.wake_at(now, wake)
         if wake is not None and wake > now:
             self.counters.paces += 1
             time.sleep(min(wake - now, MAX_PAUSE_S))
@@ -154,6 +164,9 @@ class Daemon:
         if kind == "BAD_DATA":
             self.counters.bad_data += 1
             self._bad_since_log += 1
+            return
+        if self.vehicles is not None and (other := self.vehicles.route(msg)) is not None:
+            other.handle(msg, received_s, read_s)  # another vehicle's message, counted here and there
             return
         try:
             steps = self.pipeline.feed(msg, received_s)  # the autopilot watches it once decoded (Autopilot.watch)
@@ -195,6 +208,8 @@ class Daemon:
             log.warning("%d unparseable packets/bytes dropped (%d in total)", self._bad_since_log, self.counters.bad_data)
             self._bad_since_log = 0
             self._next_bad_log = now + BAD_DATA_LOG_PERIOD_S
+        for other in self.vehicles.others.values() if self.vehicles is not None else ():
+            other.tick(now)
 
     # -- reporting -----------------------------------------------------------------------
     def report(self) -> dict:
@@ -230,6 +245,8 @@ class Daemon:
             "loop": {"reads": c.reads, "paces": c.paces, "pace_misses": self.pipeline.pacer.misses},
             "decision": self.decision.verdict(),
             "esc_rejected": dict(self.esc_telemetry.rejected),
+            "system_id": self.autopilot.system_id,
+            "other_vehicles": self.vehicles.report() if self.vehicles is not None else {},
         }
 
     def summary(self) -> None:
