@@ -262,6 +262,9 @@ class Daemon:
             r["alerts"],
             r["bad_data"],
         )
+        for sys_id, o in r["other_vehicles"].items():
+            p = o["pipeline"]
+            log.info("vehicle system %s: %d steps (%d classified), %d alerts", sys_id, p["steps"], p["classified"], o["alerts"])
 
     def write_report(self, path: str | Path) -> None:
         Path(path).write_text(json.dumps(self.report(), indent=2, default=float) + "\n", encoding="utf-8")
