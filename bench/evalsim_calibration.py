@@ -173,7 +173,7 @@ def _effects() -> dict[str, Effect]:
             ("rotor_time_constant",),
             (0.045, 0.060, 0.090),
             "s (the slow rotor's time constant)",
-            lambda v, s, r: TERMS["rotor_time_constant"].set(v, taus(s, r, True)),
+            lambda v, s, r: TERMS["rotor_time_constant"].set(v, np.append(taus(s, r, True), v.rotor_inertia_kg_m2)),
             lambda sp, s, r: _af(sp, motor_time_constant_s=tuple(float(x) for x in taus(s, r, True))),
             lambda s, r: s,
             lambda f, r: _lag_one_fitted(_rotor)(f, r),
