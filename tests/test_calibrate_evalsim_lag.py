@@ -86,7 +86,8 @@ def test_no_hidden_lag_names_no_lag(tables):
     assert r.calibrated.motor_time_constant_ratio == (1.0, 1.0, 1.0, 1.0)
     # The report says how large a lag could hide at this rate, and what the lag terms alone would fit.
     (note,) = [n for n in r.notes if n.startswith("no motor lag named")]
-    assert "from about 60 ms" in note and "rotor_time_constant alone fits" in note, note
+    assert "one slow rotor is named from about 90 ms" in note and "all four rotors slower from about 60 ms" in note, note
+    assert "rotor_time_constant alone fits" in note, note
 
 
 @pytest.mark.slow
