@@ -34,7 +34,8 @@ LAG_TERMS = ("motor_time_constant", "rotor_time_constant")
 # common one --jitter-ms 4 --seeds 0 1`` (2 x 40 s): all four rotors at 60 and 90 ms named 2 of 2 (45 ms: 1 of 2);
 # one rotor at 90 ms named 2 of 2 (held-out gains 217 and 323), at 60 ms 0 of 2 (gains 59.8 and 59.0, under the
 # gate) and at 45 ms 0 of 2. At the previous gates (held-out gain 60) one rotor at 60 ms was named 2 of 2 with
-# gains of 64-65. On 2 x 80 s flights: ``python -m bench.yaw_spinup evalsim`` (docs/CALIBRATION.md, "Yaw under a
+# gains of 64-65. The hidden-effect matrix's flights (5 other seeds, docs/CALIBRATION.md) name one rotor at 60 and
+# 90 ms 5 of 5 and at 45 ms 0 of 5: 60 ms is named in 5 of 7 runs in all, 90 ms in 7 of 7. On 2 x 80 s flights: ``python -m bench.yaw_spinup evalsim`` (docs/CALIBRATION.md, "Yaw under a
 # motor lag").
 LAG_RESOLUTION_NOTE = (
     "no motor lag named. Resolution measured at 20 Hz (bench/evalsim_lag.py: evaluation simulator, 2 x 40 s "
