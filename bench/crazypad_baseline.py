@@ -22,9 +22,9 @@ import numpy as np
 from bench import REPO
 from monitor.vehicle import load_vehicle  # noqa: E402
 from offline.adapt.share_rule import OUTLIER_SPREADS, baseline_from_tables  # noqa: E402
-from offline.crazypad.data import AIRFRAMES, DEFAULT_ROOT, load_manifest, select  # noqa: E402
+from offline.crazypad.data import AIRFRAMES, DEFAULT_ROOT  # noqa: E402
 from offline.crazypad.experiment import GROUP_ORDER  # noqa: E402
-from offline.crazypad.real import read_flight  # noqa: E402
+from offline.crazypad.real import read_motor_flights  # noqa: E402
 from offline.crazypad.vehicle import PROJECT_INDEX_OF_BITCRAZE  # noqa: E402
 
 M3 = PROJECT_INDEX_OF_BITCRAZE["M3"]
@@ -36,8 +36,7 @@ def main(argv=None) -> int:
     ap.add_argument("--json", type=Path, default=None)
     args = ap.parse_args(argv)
     vehicle = load_vehicle(REPO / "models" / "crazyflie.yaml")
-    flights = select(load_manifest(args.root))
-    tables = {f.file: read_flight(f, vehicle, args.root) for f in flights}
+    flights, tables = read_motor_flights(vehicle, args.root)
     rows = []
     for af in AIRFRAMES:
         cal = [f for f in flights if f.airframe == af and f.role == "calibration"]

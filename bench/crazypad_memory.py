@@ -25,9 +25,9 @@ from monitor.memory.judge import judge
 from monitor.memory.learn import HealthyOutlierError, learn_baseline
 from monitor.memory.summary import summarize
 from monitor.vehicle import load_vehicle
-from offline.crazypad.data import AIRFRAMES, DEFAULT_ROOT, load_manifest, select
+from offline.crazypad.data import AIRFRAMES, DEFAULT_ROOT
 from offline.crazypad.experiment import GROUP_ORDER
-from offline.crazypad.real import read_flight
+from offline.crazypad.real import read_motor_flights
 from offline.crazypad.vehicle import PROJECT_INDEX_OF_BITCRAZE
 
 
@@ -44,8 +44,7 @@ def main(argv=None) -> int:
     ap.add_argument("--json", type=Path, default=None)
     args = ap.parse_args(argv)
     vehicle = load_vehicle(REPO / "models" / "crazyflie.yaml")
-    flights = select(load_manifest(args.root))
-    tables = {f.file: read_flight(f, vehicle, args.root) for f in flights}
+    flights, tables = read_motor_flights(vehicle, args.root)
     rows, notes = [], []
     for af in AIRFRAMES:
         cal = [f for f in flights if f.airframe == af and f.role == "calibration"]

@@ -30,9 +30,9 @@ from monitor.memory.learn import outliers
 from monitor.memory.normal import FlightStack
 from monitor.memory.summary import summarize
 from monitor.vehicle import load_vehicle
-from offline.crazypad.data import AIRFRAMES, DEFAULT_ROOT, load_manifest, select
+from offline.crazypad.data import AIRFRAMES, DEFAULT_ROOT
 from offline.crazypad.experiment import GROUP_ORDER
-from offline.crazypad.real import read_flight
+from offline.crazypad.real import read_motor_flights
 
 DAMAGE_KINDS = ("propeller_cut", "tape_on_propeller")
 
@@ -70,8 +70,8 @@ def main(argv=None) -> int:
     ap.add_argument("--json", type=Path, default=None)
     args = ap.parse_args(argv)
     vehicle = load_vehicle(REPO / "models" / "crazyflie.yaml")
-    flights = select(load_manifest(args.root))
-    summary = {f.file: summarize(read_flight(f, vehicle, args.root)) for f in flights}
+    flights, tables = read_motor_flights(vehicle, args.root)
+    summary = {k: summarize(t) for k, t in tables.items()}
     healthy = {af: [summary[f.file] for f in flights if f.airframe == af and f.fault_kind == "healthy"] for af in AIRFRAMES}
     damaged = {
         af: [(f.group, summary[f.file]) for f in flights if f.airframe == af and f.fault_kind in DAMAGE_KINDS] for af in AIRFRAMES

@@ -306,7 +306,7 @@ def diagnose_table(
     ``esc``: the curve the table's RPM came from, to refuse a log of another vehicle class.
     ``vehicle``: its geometry, inertia and kF/kτ give the moment-balance evidence (``physics``).
     ``airframe_declared``: whoever asks says the log is of ``vehicle``'s airframe (``--vehicle``); where not, the
-    network is silent (``UNDECLARED``) and physics judges alone.
+    network is silent (``undeclared``) and physics judges alone.
     """
     if hop < 1:
         raise ValueError("hop must be >= 1")

@@ -30,6 +30,7 @@ HYPOTHESES = ((1,), (2,), (3,), (4,), (1, 3), (1, 4), (2, 3), (2, 4))
 YAW = np.array([1.0, 1.0, -1.0, -1.0]) / 2.0
 # Orthonormal basis (4, 3) of shares that sum to zero.
 _Q = np.linalg.svd(np.eye(4) - 0.25)[0][:, :3]
+_CG = _Q.T @ load.CG_PATTERNS  # (3, 2) a CG moved forward and right, in that basis
 
 
 def _template(rotors) -> np.ndarray:
@@ -89,8 +90,7 @@ def judge(normal: Normal, s: FlightSummary) -> dict:
     p = None if collective is None else load.load_change(collective, damage_rise=len(best) * moves[best] / 4.0)
     shift_arm = 0.0 if p is None else load.cg_shift_arm(p)
     hidden = load.hidden_loss(shift_arm)
-    dq, cg = _Q.T @ d, _Q.T @ load.CG_PATTERNS
-    load_stat = load.rival_statistic(dq, wi, cg, shift_arm)
+    load_stat = load.rival_statistic(_Q.T @ d, wi, _CG, shift_arm)
     sigma = np.sqrt(np.diag(cov))
     in_set = sorted((h for h in HYPOTHESES if top - stats[h] <= th.SET_STATISTIC), key=lambda h: -stats[h])
     loss = detectable_loss(wi)

@@ -67,33 +67,25 @@ def hidden_loss(shift_arm: float) -> float:
     return float(2.0 * a / (2.0 + a))
 
 
-def explained(dq: np.ndarray, wi: np.ndarray, cols: np.ndarray, cg: np.ndarray, shift_arm: float):
-    """(chi^2(as normal) - chi^2 of the best fit, its coefficients): deviation ``dq`` (weight ``wi``, in the basis of
-    ``monitor.memory.judge``) fitted by the free columns ``cols`` plus the CG moved by at most ``shift_arm`` arm
-    lengths (``cg``: the pitch and roll share patterns in that basis)."""
-    chi0 = float(dq @ wi @ dq)
-    m = np.column_stack([cols, cg]) if shift_arm > 0 else cols
-    if m.shape[1] == 0:
-        return 0.0, np.zeros(0)
-    h = m.T @ wi @ m
-    g = m.T @ wi @ dq
-    x = np.linalg.lstsq(h, g, rcond=None)[0]
+def rival_statistic(dq: np.ndarray, wi: np.ndarray, cg: np.ndarray, shift_arm: float) -> float:
+    """The load alone, propellers intact (no yaw move): chi^2(as normal) - chi^2 of the best fit of deviation ``dq``
+    (weight ``wi``, in the basis of ``monitor.memory.judge``) by the CG moved at most ``shift_arm`` arm lengths
+    (``cg``: the pitch and roll share patterns in that basis)."""
+    if shift_arm <= 0:
+        return 0.0
+    h = cg.T @ wi @ cg  # 2 x 2, positive definite: pitch and roll are independent share patterns
+    g = cg.T @ wi @ dq
+    c = np.linalg.solve(h, g)
     bound = np.sqrt(2.0) * shift_arm  # on |(pitch, roll)| of the share pattern
-    if shift_arm > 0 and np.hypot(*x[-2:]) > bound:  # on the bound: (h + lam P) x = g, P the CG block, bisected
-        pen = np.diag(np.r_[np.zeros(m.shape[1] - 2), 1.0, 1.0])
+    if np.hypot(*c) > bound:  # on the bound: (h + lam I) c = g with |c| = bound, lam > 0 found by bisection
         lo, hi = 0.0, float(np.linalg.norm(g) / bound + np.abs(h).max())
         for _ in range(60):
             lam = 0.5 * (lo + hi)
-            x = np.linalg.lstsq(h + lam * pen, g, rcond=None)[0]
-            lo, hi = (lam, hi) if np.hypot(*x[-2:]) > bound else (lo, lam)
-        x = np.linalg.lstsq(h + hi * pen, g, rcond=None)[0]
-    r = dq - m @ x
-    return chi0 - float(r @ wi @ r), x
-
-
-def rival_statistic(dq: np.ndarray, wi: np.ndarray, cg: np.ndarray, shift_arm: float) -> float:
-    """The load alone: the CG moved within ``shift_arm``, propellers intact (no yaw move)."""
-    return explained(dq, wi, np.zeros((len(dq), 0)), cg, shift_arm)[0]
+            c = np.linalg.solve(h + lam * np.eye(2), g)
+            lo, hi = (lam, hi) if np.hypot(*c) > bound else (lo, lam)
+        c = np.linalg.solve(h + hi * np.eye(2), g)
+    r = dq - cg @ c
+    return float(dq @ wi @ dq - r @ wi @ r)
 
 
 def rival_verdict(v: dict, collective: float, statistic: float) -> dict:

@@ -19,7 +19,7 @@ import numpy as np
 from monitor.flight import FlightTable
 from monitor.logs import read_log
 from monitor.vehicle import VehicleConfig
-from offline.crazypad.data import DEFAULT_ROOT, CrazypadFlight
+from offline.crazypad.data import DEFAULT_ROOT, CrazypadFlight, load_manifest, select
 from offline.crazypad.vehicle import bitcraze_order
 
 TRIM_START_S = 1.5
@@ -32,6 +32,14 @@ def log_format(flight: CrazypadFlight) -> str:
 
 def read_flight(flight: CrazypadFlight, vehicle: VehicleConfig, root: str | Path = DEFAULT_ROOT) -> FlightTable:
     return read_log(Path(root) / flight.file, fmt=log_format(flight), esc=vehicle.esc, rate_hz=20.0)
+
+
+def read_motor_flights(
+    vehicle: VehicleConfig, root: str | Path = DEFAULT_ROOT
+) -> tuple[list[CrazypadFlight], dict[str, FlightTable]]:
+    """Every motor log of the manifest (``select``) and its flight table, by file: what the CrazyPAD benches read."""
+    flights = select(load_manifest(root))
+    return flights, {f.file: read_flight(f, vehicle, root) for f in flights}
 
 
 def core_mask(table: FlightTable, trim_start_s: float = TRIM_START_S, trim_end_s: float = TRIM_END_S) -> np.ndarray:
