@@ -1,7 +1,7 @@
 """Score ``propwatch diagnose`` on the evaluation-only ``strangers_*`` sets (quad-X airframes of other sizes).
 
     python -m bench.strangers --set strangers_healthy [--set strangers_onset ...] --seed S --flights N --out DIR
-                              [--repo PATH] [--duration-s 80] [--label NAME]
+                              [--repo PATH] [--duration-s 80] [--label NAME] [--folder FLIGHTS]
 
 Flights are simulated by THIS checkout's ``offline/evalsim`` into ``DIR/flights/<set>_seed<S>_<D>s`` (reused where
 that folder's manifest already holds at least N flights of the same seed and duration: flight i depends only on the
@@ -424,12 +424,20 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--repo", type=Path, default=REPO, help="the checkout whose propwatch judges (default: this one)")
     p.add_argument("--duration-s", type=float, default=DEFAULT_DURATION_S)
     p.add_argument("--label", help="results folder name (default: the --repo commit)")
+    p.add_argument(
+        "--folder",
+        type=Path,
+        help="judge the flights already in this folder (e.g. offline.vehicles.ours.write_fleet's, for development on "
+        "our own simulator) instead of the set's; one --set names how they are scored",
+    )
     a = p.parse_args(argv)
+    if a.folder and len(a.sets) != 1:
+        p.error("--folder takes exactly one --set")
     repo = a.repo.resolve()
     label = a.label or repo_label(repo)
     report = {"repo": str(repo), "label": label, "seed": a.seed, "flights": a.flights, "duration_s": a.duration_s, "sets": {}}
     for set_name in a.sets:
-        folder = ensure_flights(set_name, a.seed, a.flights, a.duration_s, a.out.resolve())
+        folder = a.folder.resolve() if a.folder else ensure_flights(set_name, a.seed, a.flights, a.duration_s, a.out.resolve())
         truths = load_truths(folder, a.flights)
         res_dir = a.out.resolve() / "results" / label / set_name
         res_dir.mkdir(parents=True, exist_ok=True)

@@ -19,6 +19,7 @@ from monitor.diagnose.memory_adapter import judgement, with_memory
 from monitor.memory.baseline import VehicleBaseline
 from monitor.memory.learn import set_aside_outliers
 from monitor.memory.summary import FlightSummary
+from monitor.memory.through_time import marks_from_json
 
 _COLS = (
     "log_hash, vehicle_id, start_time_utc, time_known, status, memory_summary, memory, verdict_label, confidence, "
@@ -48,9 +49,11 @@ def judge_store(con, rediagnose: bool = False) -> int:
         history = VehicleBaseline(vid, None, tuple(fl[0][9]), json.loads(fl[0][5])["basis"])
         for r in timed + untimed:
             log_hash, _, start, time_known, status, summ, memory, label, conf, names, path, diagnosis = r
-            summary = FlightSummary.from_dict(json.loads(summ), path)
+            trace = json.loads(summ)
+            summary = FlightSummary.from_dict(trace, path)
             if memory is None or rediagnose:
-                upd = _judge_row(history, summary, time_known, json.loads(diagnosis) if diagnosis else {})
+                marks = marks_from_json(trace.get("marks") or [], path)
+                upd = _judge_row(history, summary, time_known, json.loads(diagnosis) if diagnosis else {}, marks)
                 updates.append((log_hash, upd))
                 label, conf, memory = upd.get("verdict_label", label), upd.get("confidence", conf), upd["memory"]
                 status = upd.get("status", status)
@@ -71,7 +74,7 @@ def judge_store(con, rediagnose: bool = False) -> int:
     return len(updates)
 
 
-def _judge_row(b: VehicleBaseline, summary: FlightSummary, time_known, diagnosis: dict) -> dict:
+def _judge_row(b: VehicleBaseline, summary: FlightSummary, time_known, diagnosis: dict, marks) -> dict:
     """The row's memory columns, and where the history judged the flight its verdict columns: ``judgement`` and
     ``with_memory``, as ``propwatch diagnose --baseline`` with ``b``."""
     cw = b.compared_with()
@@ -84,7 +87,8 @@ def _judge_row(b: VehicleBaseline, summary: FlightSummary, time_known, diagnosis
     if b.ready and summary.basis != b.basis:
         upd["memory"] = json.dumps({"note": "another share basis"})
         return upd
-    judged = judgement(diagnosis, summary, b, "" if time_known else "; time unknown: judged against the baseline at ingest")
+    note = "" if time_known else "; time unknown: judged against the baseline at ingest"
+    judged = judgement(diagnosis, summary, b, note, marks=marks[0], boot_s_of_row=marks[1].get)
     upd["memory"] = json.dumps(judged, allow_nan=False)
     v = with_memory(diagnosis, judged)["verdict"]
     if v is not None and v.get("source") == "vehicle memory":

@@ -19,10 +19,12 @@ from pathlib import Path
 import numpy as np
 
 from monitor import __version__ as PROPWATCH_VERSION
+from monitor.diagnose.memory_adapter import boot_clock
 from monitor.errors import PropwatchError
 from monitor.logs.guards import DEFAULT_MAX_SECONDS
 from monitor.logs.identity import identify
-from monitor.memory.summary import summarize
+from monitor.memory.summary import accumulate
+from monitor.memory.through_time import marks_to_json
 from monitor.vehicle import REPO_ROOT
 
 SHIPPED_MODELS = (REPO_ROOT / "models" / "classifier.onnx", REPO_ROOT / "models" / "crazyflie-classifier.onnx")
@@ -224,8 +226,11 @@ def _diagnose_into(row: dict, path: Path, settings: IngestSettings) -> None:
         diagnosis=json.dumps(out, allow_nan=False),
     )
     row["warnings"] = row["warnings"] + list(d.warnings)
-    summary = summarize(table)
-    row["memory_summary"] = json.dumps(summary.to_dict(), allow_nan=False) if summary.n > 0 else None
+    acc = accumulate(table)
+    summary = acc.summary
+    # the flight's summary, and the marks it is judged through time from (monitor.memory.through_time)
+    trace = summary.to_dict() | {"marks": marks_to_json(acc.marks, summary, boot_clock(table))}
+    row["memory_summary"] = json.dumps(trace, allow_nan=False) if summary.n > 0 else None
     if d.verdict is not None:  # PX4 rotor order (the JSON may be in the vehicle's own numbering)
         row.update(
             confidence=str(d.verdict.get("confidence", "confident")),

@@ -105,3 +105,36 @@ def test_a_healthy_call_under_another_load_is_not_confident(normal):
     assert same["faulty_propellers"] == [] and same["confidence"] == "confident"
     assert heavier["faulty_propellers"] == [] and heavier["confidence"] == "ambiguous"
     assert "a load off centre could hide" in heavier["rule"]
+
+
+def damaged_shares(loss_rotor: int, loss: float, cg_xy=(0.0, 0.0)) -> np.ndarray:
+    """omega^2 shares (mean 1) of a quad-X of arm 1, CG at ``cg_xy``, rotor ``loss_rotor`` giving ``loss`` less thrust
+    per omega^2 with its torque per omega^2 unchanged: thrust = weight, no moment about the CG, yaw balanced."""
+    kt = np.ones(4)
+    kt[loss_rotor - 1] -= loss
+    a = np.vstack([kt, kt * (POS[:, 0] - cg_xy[0]), kt * (POS[:, 1] - cg_xy[1]), SPIN])
+    w = np.linalg.solve(a, np.array([4.0, 0.0, 0.0, 0.0]))
+    return w / w.mean()
+
+
+def test_damage_under_another_load_is_not_confident_where_the_moved_cg_lets_another_set_explain_it(normal):
+    rng = np.random.default_rng(7)
+    # rotor 2 at 20 % loss; a +10 % load placed 0.3 arm out toward rotor 3 moves the CG by 0.027 arm. As the shares
+    # go, 2+3 fits best and nothing else comes near it; with the CG free to move as far as the load allows, 2 alone
+    # (the truth) explains it as well: never a confident 2+3.
+    cg = 0.1 * 0.3 / 1.1 * np.array([1.0, -1.0]) / np.sqrt(2.0)
+    v = judge(normal, flight(damaged_shares(2, 0.20, cg), 40.0 * 1.1, 60.0, rng))
+    assert v["faulty_propellers"] == [2, 3] and v["fault_statistic"] >= v["thresholds"]["fault"]
+    assert v["confidence"] == "ambiguous"
+    assert [2] in [h["faulty_propellers"] for h in v["hypotheses"]]
+    assert "with the CG moved by the load (+10 % thrust)" in v["rule"]
+    # the same load carried at the CG: one propeller, confidently
+    same = judge(normal, flight(damaged_shares(2, 0.20), 40.0 * 1.1, 60.0, rng))
+    assert same["faulty_propellers"] == [2] and same["confidence"] == "confident"
+
+
+def test_a_large_loss_stays_confident_under_a_small_load_change(normal):
+    rng = np.random.default_rng(8)
+    # rotor 4 at 30 % loss, +5 % load: the CG can move 0.024 arm at most, far less than the loss's pattern
+    v = judge(normal, flight(damaged_shares(4, 0.30), 40.0 * 1.05, 60.0, rng))
+    assert v["faulty_propellers"] == [4] and v["confidence"] == "confident"

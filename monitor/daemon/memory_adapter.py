@@ -39,6 +39,7 @@ from monitor.memory.judge import judge, statistic_of
 from monitor.memory.learn import set_aside_outliers
 from monitor.memory.store import StateDir, StateDirBusy, StateDirError, baseline_path
 from monitor.memory.summary import ShareAccumulator
+from monitor.memory.through_time import judge_through_time
 
 log = logging.getLogger("propwatch.monitor")
 
@@ -328,7 +329,7 @@ class VehicleMemory:
         if why:
             return self._said(f"not learnt: {why}")
         try:
-            self.store.update(self.key, lambda b: self._learn(b, s), WRITE_WAIT_S)
+            self.store.update(self.key, lambda b: self._learn(b, s, acc.marks), WRITE_WAIT_S)
         except _NotHealthy:
             return self._said("not learnt: not healthy against the vehicle's history")
         except StateDirBusy as exc:
@@ -348,10 +349,11 @@ class VehicleMemory:
         log.info("vehicle memory: flight learnt (%.0f s); %s", s.seconds, self.status().lstrip("; "))
         return "learnt"
 
-    def _learn(self, b: VehicleBaseline | None, s) -> VehicleBaseline:
-        """Inside the state dir's write lock: the flight judged against the baseline as it is on disk, then added."""
+    def _learn(self, b: VehicleBaseline | None, s, marks) -> VehicleBaseline:
+        """Inside the state dir's write lock: the flight judged against the baseline as it is on disk, through time
+        (``monitor.memory.through_time``: a change its mean dilutes is not learnt), then added."""
         if b is not None and b.ready:
-            v = judge(b.normal(), s)
+            v = judge_through_time(b.normal(), s, marks)
             if v["label"] != 1 or v["confidence"] == "suspect" or v.get("imbalance_rotors"):
                 raise _NotHealthy
         b = b or VehicleBaseline(self.key, "daemon", self.motor_names, "omega2")

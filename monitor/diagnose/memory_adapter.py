@@ -15,8 +15,8 @@ from pathlib import Path
 from monitor.diagnose.engine import Diagnosis
 from monitor.labels import LABEL_TABLE
 from monitor.memory.baseline import MIN_FLIGHTS, VehicleBaseline
-from monitor.memory.judge import judge
-from monitor.memory.summary import FlightSummary, summarize
+from monitor.memory.summary import FlightSummary, Mark, accumulate
+from monitor.memory.through_time import judge_through_time
 
 
 def log_vehicle_id(path: str | Path, fmt: str | None) -> str | None:
@@ -68,9 +68,10 @@ def judge_flight(d: Diagnosis, table, baseline: VehicleBaseline, vehicle_id: str
     baseline judged the flight (``with_memory``). ``vehicle_id`` and ``date`` are the log's own (None: it carries
     none); where they do not tie the log to the baseline, its ``caveats`` say so. Raises ``BaselineError`` where
     the log is another vehicle's (identity or rotors)."""
-    s = summarize(table)
+    acc = accumulate(table)
+    s = acc.summary
     baseline.check_vehicle(vehicle_id, table.motor_names, s.basis, str(table.source or "log"))
-    out = judgement(d.to_json(), s, baseline)
+    out = judgement(d.to_json(), s, baseline, marks=acc.marks, boot_s_of_row=boot_clock(table))
     if caveats := ties(baseline, s, vehicle_id, date):
         out["caveats"] = caveats
     res = with_memory(d.to_json(), out)
@@ -79,12 +80,25 @@ def judge_flight(d: Diagnosis, table, baseline: VehicleBaseline, vehicle_id: str
     return out
 
 
-def judgement(result: dict, s: FlightSummary, baseline: VehicleBaseline, compared_note: str = "") -> dict:
+def boot_clock(table):
+    """A table row's boot-clock seconds (the last row's for a row past the end)."""
+    ts = table.timestamp_us
+    return lambda row: float(ts[min(int(row), len(ts) - 1)]) / 1e6
+
+
+def judgement(
+    result: dict,
+    s: FlightSummary,
+    baseline: VehicleBaseline,
+    compared_note: str = "",
+    marks: list[Mark] | None = None,
+    boot_s_of_row=None,
+) -> dict:
     """The ``baseline`` object of the diagnose JSON for the flight whose nominal diagnosis is ``result`` (a
     ``--json`` object) and whose rotor shares are ``s``, against ``baseline``: what it was compared with, and the
-    judgement (``monitor.memory.judge``) or a ``note`` saying why the verdict stays the nominal one.
-    ``compared_note`` is added to ``compared_with_text``. ``propwatch diagnose --baseline`` and the fleet both
-    judge here."""
+    judgement (``monitor.memory.through_time``: the whole flight, and its ends from each of ``marks``) or a
+    ``note`` saying why the verdict stays the nominal one. ``compared_note`` is added to ``compared_with_text``.
+    ``propwatch diagnose --baseline`` and the fleet both judge here."""
     out = {"compared_with": baseline.compared_with(), "compared_with_text": baseline.compared_with_text() + compared_note}
     if not baseline.ready:
         out["note"] = f"no vehicle baseline yet ({len(baseline.active())} of {MIN_FLIGHTS} flights): not compared"
@@ -92,7 +106,7 @@ def judgement(result: dict, s: FlightSummary, baseline: VehicleBaseline, compare
     if s.n == 0:
         out["note"] = "no airborne step past take-off to compare"
         return out
-    v = judge(baseline.normal(), s)
+    v = judge_through_time(baseline.normal(), s, marks or [], boot_s_of_row)
     if baseline.cg_damage_separable is False and v["faulty_propellers"]:
         v = as_imbalance(v)
     out.update(v)
@@ -103,6 +117,10 @@ def judgement(result: dict, s: FlightSummary, baseline: VehicleBaseline, compare
         # A propeller damaged mid-flight: the in-flight rule compared the flight with its own start and found the
         # change; the whole flight's shares mix the healthy part before it in, so its answer stands.
         out["note"] = "the in-flight rule's change stands: the whole flight against the vehicle's history did not name it"
+    elif _in_flight_change(result) and v["confidence"] != "confident":
+        # The in-flight rule compared the flight with its own start: the same load, the same CG. Against the
+        # history, another load's CG moves the shares too; where that leaves the history unsure, the change stands.
+        out["note"] = "the in-flight rule's change stands: the vehicle's history is not sure which propeller (another load)"
     return out
 
 

@@ -73,9 +73,9 @@ def rival_statistic(dq: np.ndarray, wi: np.ndarray, cg: np.ndarray, shift_arm: f
     (``cg``: the pitch and roll share patterns in that basis)."""
     if shift_arm <= 0:
         return 0.0
-    h = cg.T @ wi @ cg  # 2 x 2, positive definite: pitch and roll are independent share patterns
+    h = cg.T @ wi @ cg  # 2 x 2, positive semi-definite (singular where other columns were profiled out of wi)
     g = cg.T @ wi @ dq
-    c = np.linalg.solve(h, g)
+    c = np.linalg.lstsq(h, g, rcond=None)[0]  # the smallest CG move with the best fit
     bound = np.sqrt(2.0) * shift_arm  # on |(pitch, roll)| of the share pattern
     if np.hypot(*c) > bound:  # on the bound: (h + lam I) c = g with |c| = bound, lam > 0 found by bisection
         lo, hi = 0.0, float(np.linalg.norm(g) / bound + np.abs(h).max())
@@ -86,6 +86,23 @@ def rival_statistic(dq: np.ndarray, wi: np.ndarray, cg: np.ndarray, shift_arm: f
         c = np.linalg.solve(h + hi * np.eye(2), g)
     r = dq - cg @ c
     return float(dq @ wi @ dq - r @ wi @ r)
+
+
+def with_load(dq: np.ndarray, wi: np.ndarray, cg: np.ndarray, shift_arm: float, template: np.ndarray, yaw: np.ndarray) -> float:
+    """chi^2(as normal) - the least penalised misfit of ``dq`` by a damage hypothesis (its rotors working harder by
+    a >= 0 along ``template``, the yaw balance moved by any b) together with the CG moved by c, c's (pitch, roll)
+    pattern drawn with standard deviation half its bound sqrt(2) ``shift_arm`` (a Gaussian prior: a small move
+    likelier than one at the bound): chi^2 + |c|^2 / sigma^2. As in ``monitor.memory.judge.statistics``, where the
+    rotors would work less than normal, the yaw move alone."""
+    sigma = np.sqrt(2.0) * shift_arm / 2.0
+    for free in (np.column_stack([template, yaw]), yaw[:, None]):
+        x = np.column_stack([free, cg])
+        pen = np.diag([0.0] * free.shape[1] + [1.0 / sigma**2] * cg.shape[1])
+        coef = np.linalg.solve(x.T @ wi @ x + pen, x.T @ wi @ dq)
+        if free.shape[1] == 1 or coef[0] >= 0:
+            break
+    r = dq - x @ coef
+    return float(dq @ wi @ dq) - float(r @ wi @ r + coef @ pen @ coef)
 
 
 def rival_verdict(v: dict, collective: float, statistic: float) -> dict:

@@ -6,12 +6,14 @@ the raw command where no RPM is known (``basis``); the share s_t = x_t / mean(x_
 f_t = (1, roll_rad, pitch_rad). Kept: sums of s, f f^T and f s^T (the regression of shares on tilt: forward flight
 into wind tilts the vehicle and shifts load between front and rear rotors), the mean collective, and 2-s block means
 of s (how much a mean over a few seconds still wanders within one flight). Feeding a table in one call or step by
-step gives the same sums (a test checks it).
+step gives the same sums (a test checks it). The accumulator also marks the sums at the end of each 2-s block
+(``Mark``): the flight from any mark to its end is the whole flight ``minus`` that mark, which is how a flight is
+judged through time (``monitor.memory.through_time``).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -70,6 +72,21 @@ class FlightSummary:
             return None
         m = self.sum_block / self.n_blocks
         return (self.sum_block_outer - self.n_blocks * np.outer(m, m)) / (self.n_blocks - 1)
+
+    def minus(self, earlier: FlightSummary) -> FlightSummary:
+        """The steps after ``earlier`` (a ``Mark``'s sums of this flight, taken at a block's end)."""
+        return FlightSummary(
+            basis=self.basis,
+            rate_hz=self.rate_hz,
+            n=self.n - earlier.n,
+            sum_share=self.sum_share - earlier.sum_share,
+            ftf=self.ftf - earlier.ftf,
+            fts=self.fts - earlier.fts,
+            sum_collective=self.sum_collective - earlier.sum_collective,
+            n_blocks=self.n_blocks - earlier.n_blocks,
+            sum_block=self.sum_block - earlier.sum_block,
+            sum_block_outer=self.sum_block_outer - earlier.sum_block_outer,
+        )
 
     def to_dict(self) -> dict:
         return {
@@ -161,19 +178,31 @@ class FlightSummary:
             raise bad("sum_block_outer", f"is not the outer products of {nb} block means")
 
 
+@dataclass(frozen=True)
+class Mark:
+    """The sums at the end of a 2-s block: ``row`` is the first step fed after it (a table's row index)."""
+
+    row: int
+    summary: FlightSummary
+
+
 class ShareAccumulator:
-    """Builds a ``FlightSummary`` step by step (the daemon) or a table at a time (a log): identical sums."""
+    """Builds a ``FlightSummary`` step by step (the daemon) or a table at a time (a log): identical sums and marks."""
 
     def __init__(self, basis: str, rate_hz: float) -> None:
         self.summary = FlightSummary(basis=basis, rate_hz=float(rate_hz))
+        self.marks: list[Mark] = []
         self._settle = int(round(SETTLE_S * rate_hz))
         self._block = int(round(BLOCK_S * rate_hz))
         self._since_takeoff = 0
+        self._rows = 0  # steps fed so far, accepted or not
         self._blk_n = 0
         self._blk_sum = np.zeros(4)
 
     def step(self, x: np.ndarray, roll_rad: float, pitch_rad: float, airborne: bool) -> bool:
         """One grid step: ``x`` (4,) omega^2 or command. Returns whether the step was accepted."""
+        row = self._rows
+        self._rows += 1
         if not airborne:
             self._since_takeoff = 0
             return False
@@ -185,7 +214,7 @@ class ShareAccumulator:
         mean = float(np.mean(x))
         if not mean > 0:
             return False
-        self._add(x[None, :] / mean, np.array([[1.0, roll_rad, pitch_rad]]), np.array([mean]))
+        self._add(x[None, :] / mean, np.array([[1.0, roll_rad, pitch_rad]]), np.array([mean]), np.array([row]))
         return True
 
     def table(self, x: np.ndarray, roll_rad: np.ndarray, pitch_rad: np.ndarray, airborne: np.ndarray) -> None:
@@ -200,24 +229,29 @@ class ShareAccumulator:
         with np.errstate(invalid="ignore"):
             mean = np.mean(x, axis=1)
             ok &= np.all(np.isfinite(x) & (x >= 0), axis=1) & (mean > 0)
+        rows = self._rows + np.nonzero(ok)[0]
+        self._rows += len(x)
         if not ok.any():
             return
         s = x[ok] / mean[ok, None]
         f = np.column_stack([np.ones(int(ok.sum())), _tilt(np.asarray(roll_rad)[ok]), _tilt(np.asarray(pitch_rad)[ok])])
-        self._add(s, f, mean[ok])
+        self._add(s, f, mean[ok], rows)
 
-    def _add(self, s: np.ndarray, f: np.ndarray, collective: np.ndarray) -> None:
+    def _add(self, s: np.ndarray, f: np.ndarray, collective: np.ndarray, rows: np.ndarray) -> None:
+        """Accepted steps ``s`` (shares), ``f`` (regimes), their collectives and the rows they were fed at, added in
+        runs that end where a 2-s block of consecutive accepted steps ends (a block may span a landing: its steps
+        are still this flight's); at each block's end, a ``Mark``."""
         sm = self.summary
-        sm.n += len(s)
-        sm.sum_share = sm.sum_share + s.sum(axis=0)
-        sm.ftf = sm.ftf + f.T @ f
-        sm.fts = sm.fts + f.T @ s
-        sm.sum_collective += float(collective.sum())
-        # 2-s blocks of consecutive accepted steps (a block may span a landing: its steps are still this flight's)
         i = 0
         while i < len(s):
             take = min(self._block - self._blk_n, len(s) - i)
-            self._blk_sum = self._blk_sum + s[i : i + take].sum(axis=0)
+            si, fi = s[i : i + take], f[i : i + take]
+            sm.n += take
+            sm.sum_share = sm.sum_share + si.sum(axis=0)
+            sm.ftf = sm.ftf + fi.T @ fi
+            sm.fts = sm.fts + fi.T @ si
+            sm.sum_collective += float(collective[i : i + take].sum())
+            self._blk_sum = self._blk_sum + si.sum(axis=0)
             self._blk_n += take
             i += take
             if self._blk_n == self._block:
@@ -226,6 +260,8 @@ class ShareAccumulator:
                 sm.sum_block = sm.sum_block + m
                 sm.sum_block_outer = sm.sum_block_outer + np.outer(m, m)
                 self._blk_n, self._blk_sum = 0, np.zeros(4)
+                # every field is replaced, never changed in place: a shallow copy keeps these sums
+                self.marks.append(Mark(int(rows[i - 1]) + 1, replace(sm)))
 
 
 def _tilt(a):
@@ -245,9 +281,14 @@ def rotor_values(table: FlightTable) -> tuple[np.ndarray, str]:
     return np.asarray(table.motor_cmd, dtype=np.float64), "command"
 
 
-def summarize(table: FlightTable) -> FlightSummary:
-    """The whole flight's summary (every airborne span of the log)."""
+def accumulate(table: FlightTable) -> ShareAccumulator:
+    """The whole flight's summary (every airborne span of the log) and its block marks."""
     x, basis = rotor_values(table)
     acc = ShareAccumulator(basis, table.rate_hz)
     acc.table(x, table.roll_rad, table.pitch_rad, table.airborne)
-    return acc.summary
+    return acc
+
+
+def summarize(table: FlightTable) -> FlightSummary:
+    """The whole flight's summary (every airborne span of the log)."""
+    return accumulate(table).summary

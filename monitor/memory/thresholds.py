@@ -17,6 +17,9 @@ docs/VEHICLE_MEMORY.md.)
   (12.0; 1 of 96 healthy flights past it, ambiguous). ``SUSPECT_STATISTIC``: the healthy 95th percentile.
 - ``SET_STATISTIC``: a hypothesis stays in the set while its statistic is within this of the best: the 99th
   percentile of (best - truth) over damaged singles past the healthy 99th percentile.
+- ``SCAN_FAULT_STATISTIC`` / ``SCAN_SUSPECT_STATISTIC``: the same levels for a flight judged through time
+  (``monitor.memory.through_time``: the largest statistic of the flight's ends from each 2-s mark): the healthy later
+  flights' 99th / 95th percentile of that largest statistic, never below ``FAULT_STATISTIC`` / ``SUSPECT_STATISTIC``.
 """
 
 from __future__ import annotations
@@ -31,6 +34,8 @@ PRIOR_FLIGHTS = 3.0
 FAULT_STATISTIC = 12.0
 SUSPECT_STATISTIC = 3.5
 SET_STATISTIC = 3.6
+SCAN_FAULT_STATISTIC = 14.0
+SCAN_SUSPECT_STATISTIC = 6.5
 # The thrust loss a verdict of "healthy" claims to exclude: a healthy verdict is confident only where a loss this
 # large on any one rotor would have crossed FAULT_STATISTIC (the bar for exact naming).
 CLAIMED_LOSS = 0.06

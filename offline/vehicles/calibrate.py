@@ -11,6 +11,9 @@ DIR: ``offline.vehicles.ours.write_fleet(DIR, 288, seed=1)`` (24 airframes). Nev
 - FAULT_STATISTIC: at least the healthy 99th percentile (a false FAULT on at most 1 % of a vehicle's healthy
   flights), raised in steps of 0.5 as far as it costs no exactly named single of >= 6 % on this fleet: the margin
   against false alarms that exact naming does not pay for.
+- SCAN_FAULT_STATISTIC / SCAN_SUSPECT_STATISTIC: the healthy later flights' 99th / 95th percentile of the largest
+  statistic of a flight's ends (``monitor.memory.through_time.scan``, each log read again for its marks), never
+  below the fault / suspect level above.
 Prints the constants to paste, beside the ones in use.
 """
 
@@ -26,11 +29,12 @@ import numpy as np
 from monitor.memory import thresholds as th
 from monitor.memory.judge import judge, statistic_of
 from monitor.memory.normal import normal_of
+from monitor.memory.through_time import scan
 from offline.vehicles.evaluate import CLAIM, REFERENCES, later_flights, load_fleet
 
 
 def calibrate_memory_thresholds(fleet: Path) -> dict:
-    by = load_fleet(fleet)
+    by = load_fleet(fleet, marks=True)
     dev = []
     for refs, f in later_flights(by):
         if not f["faulty"]:
@@ -38,7 +42,13 @@ def calibrate_memory_thresholds(fleet: Path) -> dict:
     prior = np.cov(np.array(dev).T) / (1.0 + 1.0 / REFERENCES)
     with mock.patch.object(th, "PRIOR_COV", tuple(map(tuple, prior))):
         judged = [(f, judge(normal_of([r["summary"] for r in refs]), f["summary"])) for refs, f in later_flights(by)]
+        looks = [
+            scan(normal_of([r["summary"] for r in refs]), f["summary"], f["marks"])
+            for refs, f in later_flights(by)
+            if not f["faulty"]
+        ]
     healthy = [v["fault_statistic"] for f, v in judged if not f["faulty"]]
+    scan_max = [0.0 if b is None else b[1]["fault_statistic"] for b in looks]
     fault99 = float(np.quantile(healthy, 0.99))
     singles = [(f, v) for f, v in judged if len(f["faulty"]) == 1]
     gaps = [v["fault_statistic"] - statistic_of(v, f["faulty"]) for f, v in singles if v["fault_statistic"] >= fault99]
@@ -56,11 +66,15 @@ def calibrate_memory_thresholds(fleet: Path) -> dict:
     sweep = [(float(t), exact(t)) for t in np.arange(np.ceil(fault99 * 2) / 2, 3 * fault99, 0.5)]
     best = max(n for _, n in sweep)
     fault = max(t for t, n in sweep if n == best)
+    suspect = float(np.quantile(healthy, 0.95))
     return {
+        "scan_fault": max(fault, float(np.quantile(scan_max, 0.99))),
+        "scan_suspect": max(suspect, float(np.quantile(scan_max, 0.95))),
+        "scan_max": float(max(scan_max)),
         "prior_cov": prior.tolist(),
         "fault": fault,
         "fault_99th_percentile": fault99,
-        "suspect": float(np.quantile(healthy, 0.95)),
+        "suspect": suspect,
         "set": set_stat,
         "sweep": sweep,
         "healthy_flights": len(healthy),
@@ -85,6 +99,10 @@ def main(argv: list[str] | None = None) -> int:
     )
     print(f"SUSPECT_STATISTIC = {c['suspect']:.1f}  (in use {th.SUSPECT_STATISTIC})")
     print(f"SET_STATISTIC = {c['set']:.1f}  (in use {th.SET_STATISTIC})")
+    print(
+        f"SCAN_FAULT_STATISTIC = {c['scan_fault']:.1f}  (in use {th.SCAN_FAULT_STATISTIC}; largest healthy {c['scan_max']:.1f})"
+    )
+    print(f"SCAN_SUSPECT_STATISTIC = {c['scan_suspect']:.1f}  (in use {th.SCAN_SUSPECT_STATISTIC})")
     return 0
 
 

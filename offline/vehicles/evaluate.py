@@ -1,10 +1,11 @@
 """Vehicle memory on a same-airframe fleet: each later flight judged against its vehicle's 3 healthy references.
 
-    python -m offline.vehicles.evaluate --fleet DIR [--nominal] [--json OUT.json]
+    python -m offline.vehicles.evaluate --fleet DIR [--nominal] [--json OUT.json] [--whole-flight]
     python -m offline.vehicles.calibrate --fleet DIR     (the thresholds of monitor/memory/thresholds.py)
 
 DIR is ``offline.evalsim`` set ``vehicles`` or ``offline.vehicles.ours.write_fleet``'s output (truth JSON beside each
-log, ``airframe_id`` and ``reference`` in it). Rows: vehicle memory (``propwatch diagnose --baseline``'s judgement);
+log, ``airframe_id`` and ``reference`` in it). Rows: vehicle memory (``propwatch diagnose --baseline``'s judgement,
+through time unless ``--whole-flight``; flights damaged in the air, truth ``fault_onset_boot_s``, counted apart);
 the omega^2-share reference (flight-mean share minus the mean of the vehicle's references, argmax: always one
 propeller, never healthy); with ``--nominal`` today's nominal verdict (``propwatch diagnose`` without a baseline).
 """
@@ -20,15 +21,18 @@ import numpy as np
 
 from monitor.memory.judge import judge
 from monitor.memory.normal import normal_of
-from monitor.memory.summary import FlightSummary, summarize
+from monitor.memory.summary import FlightSummary
+from monitor.memory.through_time import judge_through_time
 
 REFERENCES = 3
 CLAIM = 0.06  # the issue's bar: losses at least this are to be named exactly
 
 
-def load_fleet(fleet: Path, esc=None, cache: bool = True) -> dict[str, list[dict]]:
-    """{airframe_id: [flight dicts in order]}, each with truth, loss, the summary (cached in DIR/memory-summaries.json)."""
+def load_fleet(fleet: Path, esc=None, cache: bool = True, marks: bool = False) -> dict[str, list[dict]]:
+    """{airframe_id: [flight dicts in order]}, each with truth, loss, the summary (cached in DIR/memory-summaries.json)
+    and, with ``marks``, its 2-s block marks (each log read again) for judging it through time."""
     from monitor.logs import read_log
+    from monitor.memory.summary import accumulate
     from monitor.vehicle import DEFAULT_VEHICLE, load_vehicle
 
     esc = esc or load_vehicle(DEFAULT_VEHICLE).esc
@@ -39,15 +43,17 @@ def load_fleet(fleet: Path, esc=None, cache: bool = True) -> dict[str, list[dict
         if tj.name in ("manifest.json", cache_path.name):
             continue
         t = json.loads(tj.read_text())
-        if tj.stem not in cached:
-            table = read_log(fleet / t["file"], esc=esc, rate_hz=20.0, extras=False)
-            cached[tj.stem] = summarize(table).to_dict()
+        acc = None
+        if tj.stem not in cached or marks:
+            acc = accumulate(read_log(fleet / t["file"], esc=esc, rate_hz=20.0, extras=False))
+            cached[tj.stem] = acc.summary.to_dict()
         fp = list(t.get("faulty_propellers") or [])
         loss = float(1.0 - min(t["thrust_factor_at_hover"][k - 1] for k in fp)) if fp else 0.0
         ref = bool(t.get("reference")) or t.get("nuisance") == "reference"
         by.setdefault(t["airframe_id"], []).append(
             {"name": tj.stem, "file": str(fleet / t["file"]), "faulty": fp, "loss": loss, "reference": ref,
-             "summary": FlightSummary.from_dict(cached[tj.stem], tj.stem)}
+             "summary": FlightSummary.from_dict(cached[tj.stem], tj.stem), "onset_boot_s": t.get("fault_onset_boot_s")}
+            | ({"marks": acc.marks} if marks else {})
         )  # fmt: skip
     if cache:
         cache_path.write_text(json.dumps(cached))
@@ -64,15 +70,16 @@ def later_flights(by: dict[str, list[dict]]):
 
 
 def score(by) -> list[dict]:
+    """Each later flight's judgement (through time where its marks were read) and the share reference."""
     rows = []
     for refs, f in later_flights(by):
         normal = normal_of([r["summary"] for r in refs])
-        v = judge(normal, f["summary"])
+        v = judge_through_time(normal, f["summary"], f["marks"]) if "marks" in f else judge(normal, f["summary"])
         ref_mean = np.mean([r["summary"].mean_share() for r in refs], axis=0)
         share_ref = int(np.argmax(f["summary"].mean_share() - ref_mean)) + 1
         rows.append(
             {"name": f["name"], "file": f["file"], "faulty": f["faulty"], "loss": f["loss"], "memory": v, "share_reference": share_ref,
-             "refs": [r["file"] for r in refs]}
+             "refs": [r["file"] for r in refs], "in_air": f.get("onset_boot_s") is not None}
         )  # fmt: skip
     return rows
 
@@ -94,10 +101,13 @@ def table(rows: list[dict], nominal: dict | None = None) -> dict:
         return out
 
     groups = {
-        "singles >= 6 %": [r for r in rows if len(r["faulty"]) == 1 and r["loss"] >= CLAIM],
-        "singles 3-6 %": [r for r in rows if len(r["faulty"]) == 1 and r["loss"] < CLAIM],
+        "singles >= 6 %": [r for r in rows if len(r["faulty"]) == 1 and r["loss"] >= CLAIM and not r.get("in_air")],
+        "singles 3-6 %": [r for r in rows if len(r["faulty"]) == 1 and r["loss"] < CLAIM and not r.get("in_air")],
+        "in-air singles >= 6 %": [r for r in rows if len(r["faulty"]) == 1 and r["loss"] >= CLAIM and r.get("in_air")],
+        "in-air singles 3-6 %": [r for r in rows if len(r["faulty"]) == 1 and r["loss"] < CLAIM and r.get("in_air")],
         "healthy": [r for r in rows if not r["faulty"]],
     }
+    groups = {g: sel for g, sel in groups.items() if sel or not g.startswith("in-air")}
     res = {}
     for g, sel in groups.items():
         res[g] = {
@@ -154,8 +164,13 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--fleet", required=True, type=Path, help="a same-airframe fleet folder (truth JSON beside each log)")
     p.add_argument("--nominal", action="store_true", help="also today's nominal diagnose verdict (slower)")
     p.add_argument("--json", type=Path, default=None, help="write the table and every row here")
+    p.add_argument(
+        "--whole-flight",
+        action="store_true",
+        help="judge each flight's mean only, not through time (the logs are not read again)",
+    )
     args = p.parse_args(argv)
-    rows = score(load_fleet(args.fleet))
+    rows = score(load_fleet(args.fleet, marks=not args.whole_flight))
     res = table(rows, nominal_verdicts(rows) if args.nominal else None)
     print(f"{args.fleet}: {len(rows)} later flights")
     print(format_table(res))

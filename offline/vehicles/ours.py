@@ -7,6 +7,12 @@ then 9 later flights (payload 0 to +25 % of the mass, new routes): 4 healthy and
 take-off (the register's bent or cracked signature of that flight). Every log ends in landing and disarm, one day
 after the airframe's previous flight, and carries the airframe's AUTOPILOT_VERSION uid.
 
+Two options make a development set for judging a flight through time against its vehicle's normal: ``onset_s``
+(lo, hi) switches each damaged later flight's propeller from healthy to damaged in the air at a time drawn in that
+range (``offline.dataset.onset.SwitchedPropellers``), and ``payload_offset_arm`` places each later flight's payload
+at a horizontal point drawn uniformly in a disc of that radius (a fraction of the arm) instead of at the CG: the CG
+moves to the mass-weighted mean of the airframe's and the payload's (the payload's own inertia is left out).
+
 Written like an evalsim set: ``NAME.tlog`` + ``NAME.json`` (truth) + ``manifest.json`` (last). Used to measure the
 vehicle-memory thresholds; never the evaluation-only simulator.
 """
@@ -57,14 +63,22 @@ CHUNK = 24  # flights simulated together
 SEED_CODE = 7301  # keeps these draws apart from every other use of the register's seeds
 
 
-def flight_plan(n_flights: int, seed: int) -> list[dict]:
-    """Flight i of the fleet: its airframe, index in the airframe's history, damage and payload (no simulation)."""
+def flight_plan(
+    n_flights: int, seed: int, onset_s: tuple[float, float] | None = None, payload_offset_arm: float = 0.0
+) -> list[dict]:
+    """Flight i of the fleet: its airframe, index in the airframe's history, damage (from take-off, or from
+    ``onset_s`` seconds where given) and payload with its horizontal place (fraction of the arm; no simulation)."""
     plan = []
     for i in range(n_flights):
         a, k = divmod(i, VEHICLE_FLIGHTS)
         rng = np.random.default_rng([seed, SEED_CODE, i])
         j = k - VEHICLE_REFERENCES
         damaged = k >= VEHICLE_REFERENCES and j not in VEHICLE_HEALTHY_LATER
+        kind = ("bent" if rng.random() < 0.5 else "cracked") if damaged else ""
+        payload = 0.0 if k < VEHICLE_REFERENCES else float(rng.uniform(*PAYLOAD_FRAC))
+        # drawn after the fleet's original draws, so that a fleet without these options is the same as before
+        angle, radius = rng.uniform(0.0, 2.0 * np.pi), payload_offset_arm * np.sqrt(rng.uniform())
+        onset = float(rng.uniform(*onset_s)) if damaged and onset_s is not None else None
         plan.append(
             {
                 "name": f"ours_vehicles_{i:04d}",
@@ -72,40 +86,59 @@ def flight_plan(n_flights: int, seed: int) -> list[dict]:
                 "k": k,
                 "reference": k < VEHICLE_REFERENCES,
                 "rotor": (a + j) % 4 + 1 if damaged else 0,
-                "kind": ("bent" if rng.random() < 0.5 else "cracked") if damaged else "",
-                "payload_frac": 0.0 if k < VEHICLE_REFERENCES else float(rng.uniform(*PAYLOAD_FRAC)),
+                "kind": kind,
+                "payload_frac": payload,
+                "payload_xy_arm": [float(radius * np.cos(angle)), float(radius * np.sin(angle))] if payload else [0.0, 0.0],
+                "onset_s": onset,
             }
         )
     return plan
 
 
-def _physics(seed: int, plan: list[dict]):
-    """Each flight's register draw with its airframe's keys replaced by the airframe's own draw."""
+def _physics(seed: int, plan: list[dict], vehicle):
+    """Each flight's register draw with its airframe's keys replaced by the airframe's own draw, and its CG moved
+    toward a payload placed off it."""
     from offline.sim.assumptions import REGISTER, FlightPhysics, draw_flights
 
     own = draw_flights(REGISTER, seed * 1000 + SEED_CODE, [p["airframe"] for p in plan])
     each = draw_flights(REGISTER, seed, [SEED_CODE * 100_000 + i for i in range(len(plan))])
+    base_cg_m = np.asarray(vehicle.cg_offset_frd_m, dtype=np.float64)[:2]
     out = []
-    for _, af, f in zip(plan, own, each, strict=True):
+    for p, af, f in zip(plan, own, each, strict=True):
         vals = dict(f.values)
         vals.update({k: af.values[k] for k in AIRFRAME_KEYS if k in af.values})
+        if p["payload_frac"] and any(p["payload_xy_arm"]):
+            payload_xy_m = np.asarray(p["payload_xy_arm"]) * vehicle.arm_length_m
+            cg_m = base_cg_m + np.asarray(vals["cg_offset_frd_m"], dtype=np.float64)
+            frac = p["payload_frac"] / (1.0 + p["payload_frac"])  # the payload's part of the total mass
+            vals["cg_offset_frd_m"] = (1.0 - frac) * cg_m + frac * payload_xy_m - base_cg_m
         out.append(FlightPhysics(vals))
     return out
 
 
-def write_fleet(out_dir: str | Path, n_flights: int, seed: int = 0, duration_s: float = 80.0) -> Path:
-    """Simulate the first ``n_flights`` of the fleet into ``out_dir`` (tlogs, truth, manifest last)."""
+def write_fleet(
+    out_dir: str | Path,
+    n_flights: int,
+    seed: int = 0,
+    duration_s: float = 80.0,
+    onset_s: tuple[float, float] | None = None,
+    payload_offset_arm: float = 0.0,
+) -> Path:
+    """Simulate the first ``n_flights`` of the fleet into ``out_dir`` (tlogs, truth, manifest last); ``onset_s`` and
+    ``payload_offset_arm`` as in the module docstring."""
     from offline.dataset.generate import DatasetSpec, flight_sim_seed, routes, sim_config
+    from offline.dataset.onset import SwitchedPropellers
     from offline.propellers import build_propellers
     from offline.sim.io_tlog import DEFAULT_WALL_BOOT_US, write_tlog
+    from offline.sim.log import BOOT_OFFSET_US
     from offline.sim.perflight import PerFlightTerms
     from offline.sim.simulator import simulate
 
     vehicle = load_vehicle(DEFAULT_VEHICLE)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    plan = flight_plan(n_flights, seed)
-    phys = _physics(seed, plan)
+    plan = flight_plan(n_flights, seed, onset_s, payload_offset_arm)
+    phys = _physics(seed, plan, vehicle)
     spec = DatasetSpec(
         "vehicles", waypoints=("random",), duration_s=duration_s, propellers="quadratic", physics="randomised", seed=seed
     )
@@ -125,6 +158,14 @@ def write_fleet(out_dir: str | Path, n_flights: int, seed: int = 0, duration_s: 
                 sigs[b, r] = f.signature(r, p["kind"])
         seeds = np.array([flight_sim_seed(seed * 1000 + SEED_CODE, int(i)) for i in idx])
         props = build_propellers(vehicle, cond, kind="quadratic", rng_seed=seeds, rotor_signatures=sigs)
+        onset = np.array([np.inf if plan[i]["onset_s"] is None else plan[i]["onset_s"] for i in idx])
+        if np.isfinite(onset).any():
+            healthy = np.empty((len(idx), 4), dtype=object)
+            for b, i in enumerate(idx):
+                for r in range(4):
+                    healthy[b, r] = phys[i].healthy_signature(r)
+            before = build_propellers(vehicle, np.zeros_like(cond), kind="quadratic", rng_seed=seeds, rotor_signatures=healthy)
+            props = SwitchedPropellers(before, props, np.where(np.isfinite(onset), onset, 1e9))
         payload = np.array([plan[i]["payload_frac"] * vehicle.mass_kg for i in idx])
         flog = simulate(
             vehicle, wps[idx], props, sim_config(spec), payload_kg=payload, seed=seeds,
@@ -144,7 +185,9 @@ def write_fleet(out_dir: str | Path, n_flights: int, seed: int = 0, duration_s: 
                 "file": tlog.name,
                 "label": label_for(tuple(faulty)),
                 "faulty_propellers": faulty,
-                "fault_onset_s": 0.0,
+                "index": p["k"],
+                "fault_onset_s": 0.0 if p["onset_s"] is None else p["onset_s"],
+                "fault_onset_boot_s": None if p["onset_s"] is None else BOOT_OFFSET_US / 1e6 + p["onset_s"],
                 "thrust_factor_at_hover": factor,
                 "airframe_id": f"ours-vehicle-{p['airframe']:03d}",
             }
@@ -153,6 +196,9 @@ def write_fleet(out_dir: str | Path, n_flights: int, seed: int = 0, duration_s: 
                 {k: truth[k] for k in ("file", "label", "faulty_propellers", "airframe_id", "reference")}
                 | {"truth": f"{p['name']}.json"}
             )
-    manifest = make_manifest("propwatch-ours-vehicles", {"flights": n_flights, "duration_s": duration_s}, seed, flights=entries)
+    config = {"flights": n_flights, "duration_s": duration_s}
+    if onset_s is not None or payload_offset_arm:
+        config |= {"onset_s": None if onset_s is None else list(onset_s), "payload_offset_arm": payload_offset_arm}
+    manifest = make_manifest("propwatch-ours-vehicles", config, seed, flights=entries)
     write_manifest(out / "manifest.json", manifest)
     return out
