@@ -164,3 +164,28 @@ def test_slow_streams_are_held_and_flagged(tmp_path):
     seg = table.airborne_segments()
     # 125 ms between samples, held up to 250 ms: the 20 Hz grid has no gaps in flight.
     assert np.isfinite(table.roll_rad[seg[0][0] : seg[0][1]]).all()
+
+
+def test_a_diagnosis_reads_the_accelerometer_the_daemon_uses(tmp_path):
+    """The decision rule's baseline plane takes the specific force (the daemon requests HIGHRES_IMU): a log read for a
+    diagnosis (``extras=False``) carries it too, the same samples as a full read, or forward flight reads as a change."""
+    import struct
+
+    from pymavlink.dialects.v20 import common as v2
+
+    from monitor.diagnose.engine import read_guarded
+    from monitor.logs.tlog import read_tlog
+
+    path = write_tlog(tmp_path / "f.tlog", duration_s=12.0, faulty=0)
+    m2 = v2.MAVLink(None, srcSystem=1, srcComponent=1)
+    extra = bytearray()
+    for i in range(200):  # 50 Hz for 4 s after the log's end (boot clock in µs); 1 m/s^2 forward, gravity along -z
+        t_us = 12_100_000 + 20_000 * i
+        imu = m2.highres_imu_encode(t_us, 1.0, 0.0, -9.8, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0b111, 0).pack(m2)
+        extra += struct.pack(">Q", t_us) + imu
+    path.write_bytes(path.read_bytes() + bytes(extra))
+    core, full = read_tlog(path, extras=False), read_tlog(path, extras=True)
+    assert core.accel_frd_m_s2 is not None and len(core.accel_frd_m_s2.t_us) == 200
+    np.testing.assert_array_equal(core.accel_frd_m_s2.values, full.accel_frd_m_s2.values)
+    assert core.accel_frd_m_s2.values[0].tolist() == pytest.approx([1.0, 0.0, -9.8])
+    assert read_guarded(path, None).accel_frd_m_s2 is not None

@@ -34,10 +34,12 @@ V2_OVERHEAD = 12  # magic, len, incompat, compat, seq, sys, comp, msgid(3), crc(
 V2_SIGNATURE = 13
 MAVLINK_IFLAG_SIGNED = 0x01
 HEARTBEAT_ID, LOCAL_POSITION_NED_ID = 0, 32
-# What a diagnosis needs: the ids the shared decoder handles, less ESC telemetry.
-CORE_IDS = frozenset((set(md.STREAM_IDS.values()) | {HEARTBEAT_ID}) - {md.ESC_STATUS_ID})
-# Plus ESC RPM (calibration), position/velocity and the accelerometer (the decision's context; calibration).
-WANTED_IDS = CORE_IDS | {md.ESC_STATUS_ID, LOCAL_POSITION_NED_ID, md.HIGHRES_IMU_ID, md.SCALED_IMU_ID}
+# What a diagnosis needs: the ids the shared decoder handles, less ESC telemetry, plus the accelerometer the daemon
+# requests (the decision rule's specific force: without it the rule's baseline plane has no force term, and a
+# forward flight's trims read as a change).
+CORE_IDS = frozenset((set(md.STREAM_IDS.values()) | {HEARTBEAT_ID, md.HIGHRES_IMU_ID, md.SCALED_IMU_ID}) - {md.ESC_STATUS_ID})
+# Plus ESC RPM (calibration); LOCAL_POSITION_NED is one of the decoder's streams already.
+WANTED_IDS = CORE_IDS | {md.ESC_STATUS_ID, LOCAL_POSITION_NED_ID}
 # A receive time further than this from the previous one is a false frame start.
 MAX_TS_JUMP_US = 3_600_000_000
 # Records proposed as a clean file's chain: those within a day of the first one's receive time. Speed only: the
@@ -246,7 +248,7 @@ def frame_starts(buf: bytes, wanted) -> tuple[list[int], int, bool]:
 
 
 def read_tlog(path: str | Path, system_id: int | None = None, extras: bool = True, bulk: bool = True) -> RawFlight:
-    """``extras=False`` skips ESC telemetry, position and IMU frames (a diagnosis does not use them).
+    """``extras=False`` skips ESC telemetry (a diagnosis does not use it).
 
     ``bulk``: unpack clean files with ``monitor.logs.mavbulk`` (same messages, several
     times faster) and, without ``extras``, decode their 50 Hz streams as columns (``monitor.logs.tlog_columns``,
