@@ -18,7 +18,7 @@ from test_diagnose_fixtures import write_tlog
 import monitor.logs.tlog as tlog
 from monitor.logs.tlog import read_tlog
 
-STREAMS = ("motor_cmd", "attitude_rad", "rates_rad_s", "battery_v", "armed", "landed", "vel_ned_m_s")
+STREAMS = ("motor_cmd", "attitude_rad", "rates_rad_s", "battery_v", "armed", "landed", "vel_ned_m_s", "accel_frd_m_s2")
 
 
 def read_three_ways(path, monkeypatch):
@@ -86,6 +86,13 @@ class Log:
             if i % 3 == 0:  # outputs 9..16: not motors
                 self.put(t_ms * 1000, self.ap.servo_output_raw_encode(t_servo, 1, *pwm, 0, 0, 0, 0))
             self.put(t_ms * 1000, self.ap.local_position_ned_encode(t_ms, 0.0, 0.0, -1.0, *rng.normal(0.0, 1.0, 3)))
+            acc = rng.normal(0.0, 1.0, 3) + [0.0, 0.0, -9.8]
+            self.put(t_ms * 1000, self.ap.highres_imu_encode(t_ms * 1000, *acc, *[0.0] * 10, 0b111, 0))
+            if i % 5 == 0:  # a second IMU: the decoder reads the first only
+                self.put(t_ms * 1000, self.ap.highres_imu_encode(t_ms * 1000, 9.0, 9.0, 9.0, *[0.0] * 10, 0b111, 1))
+            if i % 2 == 0:  # milli-g, read where HIGHRES_IMU is missing
+                mg = [int(v) for v in acc / 9.80665 * 1000.0]
+                self.put(t_ms * 1000, self.ap.scaled_imu_encode(t_ms, *mg, 0, 0, 0, 0, 0, 0, 0))
 
     def write(self, path):
         path.write_bytes(bytes(self.out))
@@ -108,6 +115,7 @@ def test_other_systems_unknown_outputs_and_messages_before_the_autopilot_speaks(
     assert used
     assert raw.attitude_rad.t_us[0] == 1_000_000 and np.abs(raw.attitude_rad.values).max() < 1.0  # not system 2's
     assert np.isnan(raw.motor_cmd.values).sum() > 0 and raw.battery_v is not None and raw.armed.values.min() == 1.0
+    assert len(raw.accel_frd_m_s2) == 2000 and raw.accel_frd_m_s2.values[:, 0].max() < 9.0  # IMU 0's, not IMU 1's
 
 
 @pytest.mark.parametrize(

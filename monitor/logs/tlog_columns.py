@@ -1,10 +1,11 @@
 """A clean tlog's 50 Hz streams decoded as whole columns, with the shared decoder's meaning.
 
 ``monitor.mavlink.decode.MavlinkDecoder`` takes one message at a time (the daemon's way): on a 30-minute tlog
-that is ~280 000 Python calls, most of what ``propwatch diagnose`` spends. Here ATTITUDE, SERVO_OUTPUT_RAW and
-LOCAL_POSITION_NED, nearly every message of such a log, are decoded column by column with that decoder's rules:
+that is ~280 000 Python calls, most of what ``propwatch diagnose`` spends. Here ATTITUDE, SERVO_OUTPUT_RAW,
+LOCAL_POSITION_NED, HIGHRES_IMU and SCALED_IMU, nearly every message of such a log, are decoded column by column with that decoder's rules:
 only the autopilot's messages (from the first HEARTBEAT ``MavlinkDecoder._is_autopilot`` takes), stamped on its
-boot clock, PWM 0 and 65535 unknown. The few other messages (HEARTBEAT, SYS_STATUS, BATTERY_STATUS,
+boot clock, PWM 0 and 65535 unknown; likewise the accelerometer (HIGHRES_IMU of the first IMU, SCALED_IMU in
+milli-g). The few other messages (HEARTBEAT, SYS_STATUS, BATTERY_STATUS,
 EXTENDED_SYS_STATE, VIBRATION) still go through the decoder itself, each with the boot clock it would have had.
 
 Only what the columns reproduce exactly is done here. A reboot (a clock going back), a SERVO_OUTPUT_RAW clock
@@ -20,7 +21,7 @@ from monitor.logs.mavbulk import Group, messages
 from monitor.mavlink import decode as md
 
 # Messages decoded here as columns (their handler's arithmetic below), and the ones left to the decoder.
-COLUMN_TYPES = ("ATTITUDE", "SERVO_OUTPUT_RAW", "LOCAL_POSITION_NED")
+COLUMN_TYPES = ("ATTITUDE", "SERVO_OUTPUT_RAW", "LOCAL_POSITION_NED", "HIGHRES_IMU", "SCALED_IMU")
 DECODER_TYPES = ("HEARTBEAT", "SYS_STATUS", "BATTERY_STATUS", "EXTENDED_SYS_STATE", "VIBRATION")
 
 
@@ -76,13 +77,20 @@ def decode_columns(groups: list[Group], n_frames: int, dec: md.MavlinkDecoder, a
     att_rows, att = cols["ATTITUDE"]
     servo_rows, servo = cols["SERVO_OUTPUT_RAW"]
     pos_rows, pos = cols["LOCAL_POSITION_NED"]
+    hi_rows, hi = cols["HIGHRES_IMU"]
+    if len(hi_rows):  # the decoder reads the first IMU only (id 0; absent in MAVLink 1, zero-filled here)
+        first_imu = hi["id"] == 0
+        hi_rows, hi = hi_rows[first_imu], hi[first_imu]
+    sc_rows, sc = cols["SCALED_IMU"]
 
     # The boot clock: every timed message of the autopilot's in file order (VIBRATION with a time too).
-    timed_rows = [att_rows, servo_rows, pos_rows]
+    timed_rows = [att_rows, servo_rows, pos_rows, hi_rows, sc_rows]
     timed_t = [
         att["time_boot_ms"].astype(np.int64) * md.US_PER_MS if len(att_rows) else np.zeros(0, np.int64),
         servo["time_usec"].astype(np.int64) if len(servo_rows) else np.zeros(0, np.int64),
         pos["time_boot_ms"].astype(np.int64) * md.US_PER_MS if len(pos_rows) else np.zeros(0, np.int64),
+        hi["time_usec"].astype(np.int64) if len(hi_rows) else np.zeros(0, np.int64),
+        sc["time_boot_ms"].astype(np.int64) * md.US_PER_MS if len(sc_rows) else np.zeros(0, np.int64),
     ]
     if "VIBRATION" in by:
         vib_rows, vib = accepted("VIBRATION")
@@ -131,4 +139,11 @@ def decode_columns(groups: list[Group], n_frames: int, dec: md.MavlinkDecoder, a
         out["cmd"] = (servo["time_usec"][port0].astype(np.int64), pwm)
     if len(pos_rows):
         out["vel"] = (pos["time_boot_ms"].astype(np.int64) * md.US_PER_MS, f64(pos, "vx", "vy", "vz"))
+    if len(hi_rows):
+        out["acc_HIGHRES_IMU"] = (hi["time_usec"].astype(np.int64), f64(hi, "xacc", "yacc", "zacc"))
+    if len(sc_rows):
+        out["acc_SCALED_IMU"] = (
+            sc["time_boot_ms"].astype(np.int64) * md.US_PER_MS,
+            f64(sc, "xacc", "yacc", "zacc") * md.M_S2_PER_MG,
+        )
     return out
