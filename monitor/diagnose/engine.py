@@ -51,7 +51,6 @@ from monitor.decision.network_gate import (
 from monitor.decision.rule import WindowEvidence
 from monitor.diagnose.physics import SET_PRIOR, PhysicsEvidence, own_baseline, physics_evidence
 from monitor.diagnose.physics_first import (
-    NETWORK_FLAG_PROBABILITY,
     motor_output_alarms,
     network_alone,
     physics_replay,
@@ -523,25 +522,21 @@ def unfit_warning(d: Diagnosis, change: dict, unfit: list[str]) -> str:
 
 
 def network_as_note(d: Diagnosis, table: FlightTable) -> None:
-    """Where the network alone names the verdict's propellers (physics names none of them and the network's own
-    probability stays below its FAULTY level), the verdict is physics' and the network's answer a note."""
+    """Where the network alone names the verdict's propellers (physics names none of them: ``network_alone``), the
+    verdict is physics' and the network's answer a note."""
     v = d.verdict
     if v is None or v.get("source"):
         return
     hyps = d.hypotheses if d.hypotheses is not None else (d.physics.hypotheses if d.physics else None)
     physics_sets = [tuple(h["faulty_propellers"]) for h in d.physics.hypotheses] if d.physics is not None else None
     p = v.get("network_fault_probability") or v.get("fault_probability")
-    if not network_alone(v, hyps, d.shares, physics_sets, p):
+    if not network_alone(v, hyps, d.shares, physics_sets):
         return
     named = sorted({i for h in (hyps or [{"faulty_propellers": v["faulty_propellers"]}]) for i in h["faulty_propellers"]})
     if not physics_in_place_of_network(d, table, p):
         return
     names = "+".join(table.motor_names[i - 1] for i in named)
-    why = (
-        "the balance of forces calls the flight healthy"
-        if physics_sets
-        else f"physics names none of them, and its own probability stays below {100 * NETWORK_FLAG_PROBABILITY:.0f} %"
-    )
+    why = "the balance of forces calls the flight healthy" if physics_sets else "physics names none of them"
     d.warnings.append(f"the fault classifier alone points at {names} ({why}): a note, not a propeller to inspect")
 
 

@@ -33,7 +33,6 @@ from monitor.resample import US_PER_S
 FIRST_FLIGHT = "first flight"
 MOTOR_OUTPUT = "motor output"
 IN_FLIGHT = "in-flight change"
-NETWORK_FLAG_PROBABILITY = 0.9  # the classifier's own FAULTY level (DecisionConfig.faulty_probability)
 
 
 def boot_s(table: FlightTable) -> np.ndarray:
@@ -138,12 +137,16 @@ def physics_verdict(
     return v, hyps, None
 
 
-def network_alone(verdict: dict, hypotheses, shares: ShareEvidence | None, physics_sets, network_p) -> bool:
+def network_alone(verdict: dict, hypotheses, shares: ShareEvidence | None, physics_sets) -> bool:
     """Whether the verdict's propellers rest on the network alone, so that it may only be a note.
 
     Physics names none of them (the share check names no rotor among them), and either the moment balance calls the
     flight healthy (its most probable set is "no damage": ``physics_sets`` from a balance on the vehicle file's
-    airframe) or, without a balance, the network's own probability stays below its FAULTY level on all of them."""
+    airframe) or there is no balance: however sure the network is, its flags alone are a note. Measured on every
+    CrazyPAD flight without history (`python -m bench.crazypad_first_flight`, the Crazyflie's own model): where its
+    flags at or above its FAULTY level still stood alone, 2 of 20 healthy flights were asked for M3+M4 (0 now);
+    propeller-cut flights asked for M3 fell from 91 to 71 of 180 (another propeller 28 -> 9), none confidently wrong
+    either way."""
     sets = [tuple(h["faulty_propellers"]) for h in (hypotheses or []) if "faulty_propellers" in h] or [
         tuple(verdict.get("faulty_propellers") or ())
     ]
@@ -152,7 +155,4 @@ def network_alone(verdict: dict, hypotheses, shares: ShareEvidence | None, physi
         return False
     if shares is not None and shares.named_rotor in named:
         return False
-    if physics_sets:
-        return not physics_sets[0]
-    p = list(network_p or [])
-    return not any(p[i - 1] >= NETWORK_FLAG_PROBABILITY for i in named if i - 1 < len(p))
+    return not physics_sets[0] if physics_sets else True
