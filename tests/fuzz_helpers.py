@@ -7,7 +7,7 @@ from collections.abc import Callable
 
 from pymavlink.dialects.v20 import common as mavlink
 
-from monitor.daemon.config import MonitorConfig, monitor_config_from_mapping
+from monitor.daemon.config import monitor_config_from_mapping
 from monitor.daemon.events import EventWriter
 from monitor.daemon.pipeline import Pipeline
 from monitor.daemon.sdnotify import Notifier
@@ -122,7 +122,8 @@ class RecordingNotifier(Notifier):
 
 
 def make_daemon(classifier, events_path=None, config: dict | None = None, events_clock=None):
-    cfg = monitor_config_from_mapping(config or {}) if config else MonitorConfig()
+    # the classifier given is declared the synthetic vehicle's (undeclared, a network is silent)
+    cfg = monitor_config_from_mapping({"airframe_declared": True, **(config or {})})
     link = FakeLink()
     kw = {"clock": events_clock} if events_clock else {}
     events = EventWriter(events_path, cfg.blind.events_retry_s, cfg.blind.events_backlog, **kw)

@@ -85,10 +85,13 @@ def run_senders(tmp_path, classifier, frames, config: dict, binds, extra_senders
     bound to ``binds[k]`` (k = 0 when not given). Returns the daemon, what each of those sockets received, and
     how many datagrams the ``extra_senders`` (ground stations sending HEARTBEATs) received."""
     # The link is under test, not the rule: the toy network is the evidence that raises FAULT here (the default lets
-    # only the omega^2 shares; the rule's own tests are in test_decision*.py and test_fuzz_daemon.py).
+    # only the omega^2 shares; the rule's own tests are in test_decision*.py and test_fuzz_daemon.py), declared the
+    # synthetic vehicle's classifier (undeclared, a network is silent).
     # Replayed at SPEED: the pin waits the same boot time as at real pace (PX4's 1 Hz heartbeats, two seconds).
     link_cfg = {"pin_wait_s": 2.0 / SPEED, **config.get("link", {})}
-    cfg = monitor_config_from_mapping({"alerts": {"fault_evidence": "all"}, **config, "link": link_cfg})
+    cfg = monitor_config_from_mapping(
+        {"alerts": {"fault_evidence": "all"}, "airframe_declared": True, **config, "link": link_cfg}
+    )
     rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     rx.bind(("127.0.0.1", 0))
     port = rx.getsockname()[1]

@@ -81,3 +81,21 @@ def test_the_network_gate_silences_the_classifier_off_its_airframe_only():
     stranger.step(None, False)  # landed: the next flight is judged again
     assert stranger.speaks and stranger.ratio is None
     assert NetworkGate(None, RATE_HZ).speaks  # a model without RPM statistics always speaks
+
+
+def test_the_daemon_network_speaks_only_on_a_declared_airframe(tmp_path):
+    from monitor.daemon.config import load_monitor_config, monitor_config_from_mapping
+    from monitor.decision.network_gate import NetworkGate
+    from monitor.vehicle import REPO_ROOT
+
+    trained = 6400.0
+    undeclared = NetworkGate(trained, RATE_HZ, declared=False)
+    for _ in range(int(12 * RATE_HZ)):
+        undeclared.step(np.full(4, trained), True)  # at the trained RPM itself
+    assert not undeclared.speaks and not NetworkGate(None, RATE_HZ, declared=False).speaks
+    # the defaults and the shipped deploy file declare nothing; naming the model or a vehicle file does
+    assert not load_monitor_config(None).airframe_declared
+    assert not load_monitor_config(REPO_ROOT / "deploy" / "monitor.yaml").airframe_declared
+    assert not monitor_config_from_mapping({"vehicle_path": ""}).airframe_declared
+    for declared in ({"model_path": "m.onnx"}, {"vehicle_path": "v.yaml"}, {"airframe_declared": True}):
+        assert monitor_config_from_mapping(declared).airframe_declared, declared

@@ -10,6 +10,7 @@ a bad config, model or connection (via ``monitor.cli``).
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import gc
 import logging
 import signal
@@ -83,6 +84,13 @@ def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     logging.basicConfig(level=args.log_level, stream=sys.stderr, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     cfg = load_monitor_config(args.config)
+    if args.model or args.vehicle:
+        cfg = dataclasses.replace(cfg, airframe_declared=True)
+    if not cfg.airframe_declared:
+        log.info(
+            "physics only: nothing declares this vehicle to be the classifier's airframe (airframe_declared, "
+            "model_path or vehicle_path in the configuration, or --model/--vehicle); the network is silent"
+        )
     model_path = args.model or cfg.model_path
     vehicle = args.vehicle or cfg.vehicle_path
     if vehicle and Path(vehicle).is_dir():  # a `propwatch adapt` folder: its model and calibrated vehicle

@@ -7,7 +7,7 @@ rejected by name. ``deploy/monitor.yaml`` lists them all with their meaning.
 from __future__ import annotations
 
 import os
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from monitor.config import from_mapping, read_yaml
@@ -272,6 +272,10 @@ DEFAULT_STATE_DIR = "/var/lib/propwatch"
 class MonitorConfig:
     model_path: str = str(shipped("classifier.onnx"))
     vehicle_path: str = ""  # optional vehicle YAML whose ESC curve overrides the model's
+    # Whether this vehicle is declared to be the classifier's airframe: a configuration that names ``model_path`` or
+    # ``vehicle_path``, or ``--model``/``--vehicle``, declares it (as ``propwatch diagnose --model/--vehicle``).
+    # Undeclared, the network is silent and physics judges alone (``monitor.decision.network_gate``).
+    airframe_declared: bool = False
     events_path: str = ""  # JSON lines, one per alert ('' = none; --events overrides)
     # Vehicle memory (monitor.daemon.memory_adapter): one healthy baseline per vehicle. Default /var/lib/propwatch, or
     # $PROPWATCH_STATE_DIR where set; '' = no vehicle memory. --state-dir overrides.
@@ -296,7 +300,10 @@ def monitor_config_from_mapping(data: dict, origin: str = "") -> MonitorConfig:
         _check_retired(data)
     except ConfigError as exc:
         raise ConfigError(f"{origin}: {exc}" if origin else str(exc)) from None
-    return from_mapping(MonitorConfig, data, origin=origin)[0]
+    cfg = from_mapping(MonitorConfig, data, origin=origin)[0]
+    if data.get("model_path") or data.get("vehicle_path"):
+        cfg = replace(cfg, airframe_declared=True)
+    return cfg
 
 
 def _check_retired(data: dict) -> None:

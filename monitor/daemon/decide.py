@@ -60,7 +60,7 @@ def stage_watches(config, pipeline: Pipeline) -> tuple[MotorOutputWatch | None, 
     info = pipeline.classifier.info
     return (
         watch_for(rate_hz, pipeline.esc, config.input.motor_source),
-        NetworkGate(trained_mean_rpm(info.metadata, info.features), rate_hz),
+        NetworkGate(trained_mean_rpm(info.metadata, info.features), rate_hz, declared=config.airframe_declared),
     )
 
 

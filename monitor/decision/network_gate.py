@@ -43,12 +43,14 @@ def ratio_known(ratio: float) -> bool:
 
 
 class NetworkGate:
-    """Per flight: the network speaks until the mean of the four rotors' RPM over at least ``MIN_S`` airborne says
-    the airframe is not its training airframe (outside ``RPM_RATIO_WARN`` of the training mean); the mean is frozen
-    after ``GATE_S``. On the model's own airframe it never holds anything, so the daemon and ``diagnose`` feed the
-    rule the same windows there."""
+    """Per flight: on a vehicle ``declared`` to be the model's airframe, the network speaks until the mean of the four
+    rotors' RPM over at least ``MIN_S`` airborne says the airframe is not its training airframe (outside
+    ``RPM_RATIO_WARN`` of the training mean); the mean is frozen after ``GATE_S``. On the model's own airframe it
+    never holds anything, so the daemon and ``diagnose`` feed the rule the same windows there. Undeclared, it never
+    speaks (``diagnose`` without ``--model``/``--vehicle`` alike)."""
 
-    def __init__(self, trained_rpm: float | None, rate_hz: float) -> None:
+    def __init__(self, trained_rpm: float | None, rate_hz: float, declared: bool = True) -> None:
+        self.declared = declared
         self.trained_rpm = trained_rpm
         self.min_steps = max(int(round(MIN_S * rate_hz)), 1)
         self.gate_steps = max(int(round(GATE_S * rate_hz)), self.min_steps)
@@ -78,5 +80,7 @@ class NetworkGate:
     @property
     def speaks(self) -> bool:
         """Whether the network's windows are evidence now."""
+        if not self.declared:
+            return False
         r = self.ratio
         return r is None or ratio_known(r)
