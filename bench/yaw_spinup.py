@@ -1,4 +1,4 @@
-"""Why yaw disagrees under a motor lag, and what the rotors' spin-up reaction buys: four measurements.
+"""Why yaw disagrees under a motor lag, and what the rotors' spin-up reaction buys: five measurements.
 
     nice python -m bench.yaw_spinup candidates [--lags-ms 20 60] [--seeds 0 1 2] [--duration-s 40]
     nice python -m bench.yaw_spinup crazypad
@@ -6,6 +6,7 @@
     nice python -m bench.yaw_spinup own [--lags-ms 60] [--seeds 5] [--duration-s 40] [--fixed-rotor-inertia 2e-5]
     nice python -m bench.yaw_spinup evalsim --out DIR [--lags-ms 30 45 60 80] [--seeds 5] [--nominal 60]
         [--duration-s 80] [--seed-base 90000]
+    nice python -m bench.yaw_spinup localise --fleet DIR [DIR ...] --out DIR
 
 1. ``candidates`` (OUR simulator, ``offline.calibrate.nominal_flights``: the register drawn, the rotor inertia
    from its 1e-5..4e-5 kg m^2 range, every rotor lagging by ``--lags-ms``): with the thrust lag at its true
@@ -27,6 +28,11 @@
    the fitted lag, and the held-out residual RMS per axis of the nominal vehicle and of each library's result.
    Writes ``runs.jsonl`` as runs end and ``summary.json``. ``own`` does the same on OUR simulator's register
    flights with the rotor inertia drawn (as ``candidates``), or on its fixed path with ``--fixed-rotor-inertia``.
+5. ``localise``: ``offline.vehicles.localise``'s rules on same-airframe fleets (``make evaluate-memory``'s, or the
+   first airframes of one: ``offline.evalsim.sets.write_set("vehicles", ...)``, ``offline.vehicles.ours.write_fleet``)
+   with the vehicle calibrated by the library before the spin-up reaction and by today's: both tables, each
+   airframe's named terms and the largest hover-share difference between the two calibrated vehicles, and the later
+   flights whose verdict differs. Writes ``localise.json`` under ``--out``.
 """
 
 from __future__ import annotations
@@ -360,6 +366,72 @@ def evalsim(out: Path, lags_ms: list[float], seeds: int, nominal: int, duration_
     return summary
 
 
+# --- 5. localisation with a vehicle calibrated by each library ----------------------------------------------------
+
+
+def localise(fleets: list[Path], out: Path) -> dict:
+    """Each fleet scored by ``offline.vehicles.localise.score`` twice: the vehicle calibrated by the library before
+    the spin-up reaction, then by today's. The calibration cache's key knows the calibrator's source, not the term
+    library it was handed, so each library caches in its own folder (``out/cal-before``, ``out/cal-after``)."""
+    from unittest import mock
+
+    from offline.calibrate.terms import TERMS
+    from offline.vehicles.evaluate import load_fleet
+    from offline.vehicles.localise import format_table, score, table
+
+    res: dict = {}
+    for fleet in fleets:
+        by = load_fleet(fleet)
+        got = {}
+        for which in ("before", "after"):
+            terms = {t.name: t for t in library(before=which == "before")}
+            with mock.patch.dict(TERMS, terms, clear=True):  # calibrate_vehicle reads its library from TERMS
+                got[which] = score(by, NOM, out / f"cal-{which}")
+        (rows_b, af_b), (rows_a, af_a) = got["before"], got["after"]
+        airframes = {
+            af: {
+                "named_2": {"before": af_b[af]["named_2"], "after": af_a[af]["named_2"]},
+                "named_3": {"before": af_b[af]["named_3"], "after": af_a[af]["named_3"]},
+                "share_diff_max": max(
+                    float(np.max(np.abs(np.subtract(af_a[af][k], af_b[af][k])))) for k in ("calibrated_2", "calibrated_3")
+                ),
+            }
+            for af in af_a
+        }
+        pairs = [(b, a, rule) for b, a in zip(rows_b, rows_a, strict=True) for rule in a["verdicts"]]
+        changed = [
+            {"name": a["name"], "rule": rule, "before": b["verdicts"][rule], "after": a["verdicts"][rule]}
+            for b, a, rule in pairs
+            if _verdict(a["verdicts"][rule]) != _verdict(b["verdicts"][rule])
+        ]
+        statistic_change = max(
+            (abs(a["verdicts"][r]["fault_statistic"] - b["verdicts"][r]["fault_statistic"]) for b, a, r in pairs), default=0.0
+        )
+        res[str(fleet)] = {
+            "airframes": airframes,
+            "later_flights": len(rows_a),
+            "verdicts_changed": changed,
+            "fault_statistic_change_max": statistic_change,
+            "table_before": table(rows_b),
+            "table_after": table(rows_a),
+        }
+        print(
+            f"{fleet}: {len(by)} airframes, {len(rows_a)} later flights; verdicts changed (propellers, confidence or "
+            f"set, any rule): {len(changed)}; fault statistic moved by at most {statistic_change:.3g}",
+            file=sys.stderr,
+        )
+        for which, rows in (("library before the spin-up reaction", rows_b), ("today's library", rows_a)):
+            print(format_table(table(rows), f"{fleet.name}, {which}"), file=sys.stderr)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "localise.json").write_text(json.dumps(res, indent=1, default=float) + "\n", encoding="utf-8")
+    return res
+
+
+def _verdict(v: dict) -> tuple:
+    """What a verdict says (its propellers, confidence and set), without the statistic behind it."""
+    return tuple(v["faulty_propellers"]), v["confidence"], tuple(v["set"])
+
+
 def summarise(rows: list[dict]) -> dict:
     out: dict = {}
     for lag in sorted({r["lag_ms"] for r in rows}, key=lambda x: -1 if x is None else x):
@@ -408,6 +480,9 @@ def main(argv: list[str] | None = None) -> int:
     e.add_argument("--nominal", type=int, default=60)
     e.add_argument("--duration-s", type=float, default=80.0)
     e.add_argument("--seed-base", type=int, default=90_000)
+    lo = sub.add_parser("localise")
+    lo.add_argument("--fleet", type=Path, nargs="+", required=True, help="same-airframe fleet folders")
+    lo.add_argument("--out", type=Path, required=True, help="localise.json and the two calibration caches go here")
     a = ap.parse_args(argv)
     if a.what == "candidates":
         res = candidates(a.lags_ms, a.seeds, a.duration_s)
@@ -417,6 +492,8 @@ def main(argv: list[str] | None = None) -> int:
         res = own(a.lags_ms, a.seeds, a.duration_s, a.fixed_rotor_inertia)
     elif a.what == "resolution":
         res = resolution(a.sizes, a.seeds, a.duration_s)
+    elif a.what == "localise":
+        res = localise(a.fleet, a.out)
     else:
         res = evalsim(a.out, a.lags_ms, a.seeds, a.nominal, a.duration_s, a.seed_base)
     json.dump(res, sys.stdout, indent=1)
