@@ -1,4 +1,4 @@
-"""Why yaw disagrees under a motor lag, and what the rotors' spin-up reaction buys: five measurements.
+"""Why yaw disagrees under a motor lag, and what the rotors' spin-up reaction buys: six measurements.
 
     nice python -m bench.yaw_spinup candidates [--lags-ms 20 60] [--seeds 0 1 2] [--duration-s 40]
     nice python -m bench.yaw_spinup crazypad
@@ -7,6 +7,7 @@
     nice python -m bench.yaw_spinup evalsim --out DIR [--lags-ms 30 45 60 80] [--seeds 5] [--nominal 60]
         [--duration-s 80] [--seed-base 90000]
     nice python -m bench.yaw_spinup localise --fleet DIR [DIR ...] --out DIR
+    nice python -m bench.yaw_spinup attitude-delay [--seeds 50001 50003 55002 55003 55004] [--duration-s 40]
 
 1. ``candidates`` (OUR simulator, ``offline.calibrate.nominal_flights``: the register drawn, the rotor inertia
    from its 1e-5..4e-5 kg m^2 range, every rotor lagging by ``--lags-ms``): with the thrust lag at its true
@@ -33,6 +34,11 @@
    with the vehicle calibrated by the library before the spin-up reaction and by today's: both tables, each
    airframe's named terms and the largest hover-share difference between the two calibrated vehicles, and the later
    flights whose verdict differs. Writes ``localise.json`` under ``--out``.
+6. ``attitude-delay`` (OUR simulator, nothing hidden): ``bench.evalsim_calibration``'s own flights
+   (``nominal_flights`` at the given seeds, the lag pinned to the vehicle's) with the rotor inertia held at the
+   vehicle's 0, as they are now, or drawn from the register's range, as they were before the library had the term;
+   each calibrated with both libraries. Per run: the terms named, the unexplained residual and the telemetry-delay
+   probe's fitted delay, beside the register's attitude log delay drawn for each flight.
 """
 
 from __future__ import annotations
@@ -366,6 +372,30 @@ def evalsim(out: Path, lags_ms: list[float], seeds: int, nominal: int, duration_
     return summary
 
 
+def summarise(rows: list[dict]) -> dict:
+    out: dict = {}
+    for lag in sorted({r["lag_ms"] for r in rows}, key=lambda x: -1 if x is None else x):
+        rs = [r for r in rows if r["lag_ms"] == lag]
+        key = "nothing_hidden" if lag is None else f"lag_{lag:g}ms"
+        cell = {"runs": len(rs)}
+        if lag is None:
+            cell["named_a_cause"] = sum(r["cause"] is not None for r in rs)
+            cell["named_terms"] = sorted({t for r in rs for t in r["named"]})
+        else:
+            ok = [r for r in rs if set(r["named"]) & set(LAG_TERMS)]
+            cell["lag_named"] = len(ok)
+            cell["before_lag_named"] = sum(bool(set(r["before_named"]) & set(LAG_TERMS)) for r in rs)
+            cell["within_15pct"] = sum(abs(r["fitted_lag_s"] - lag / 1000.0) <= 0.15 * lag / 1000.0 for r in ok)
+            cell["fitted_lag_ms"] = sorted(round(1000 * r["fitted_lag_s"], 1) for r in ok)
+            cell["rotor_inertia_written"] = sum(r["rotor_inertia_kg_m2"] is not None and r["rotor_inertia_kg_m2"] > 0 for r in rs)
+        for which in ("nominal", "before", "after"):
+            got = [r["heldout_rms"][which] for r in rs if r["heldout_rms"][which]]
+            if got:
+                cell[f"heldout_rms_median_{which}"] = {s: float(np.median([g[s] for g in got])) for s in ROT}
+        out[key] = cell
+    return out
+
+
 # --- 5. localisation with a vehicle calibrated by each library ----------------------------------------------------
 
 
@@ -432,28 +462,43 @@ def _verdict(v: dict) -> tuple:
     return tuple(v["faulty_propellers"]), v["confidence"], tuple(v["set"])
 
 
-def summarise(rows: list[dict]) -> dict:
-    out: dict = {}
-    for lag in sorted({r["lag_ms"] for r in rows}, key=lambda x: -1 if x is None else x):
-        rs = [r for r in rows if r["lag_ms"] == lag]
-        key = "nothing_hidden" if lag is None else f"lag_{lag:g}ms"
-        cell = {"runs": len(rs)}
-        if lag is None:
-            cell["named_a_cause"] = sum(r["cause"] is not None for r in rs)
-            cell["named_terms"] = sorted({t for r in rs for t in r["named"]})
-        else:
-            ok = [r for r in rs if set(r["named"]) & set(LAG_TERMS)]
-            cell["lag_named"] = len(ok)
-            cell["before_lag_named"] = sum(bool(set(r["before_named"]) & set(LAG_TERMS)) for r in rs)
-            cell["within_15pct"] = sum(abs(r["fitted_lag_s"] - lag / 1000.0) <= 0.15 * lag / 1000.0 for r in ok)
-            cell["fitted_lag_ms"] = sorted(round(1000 * r["fitted_lag_s"], 1) for r in ok)
-            cell["rotor_inertia_written"] = sum(r["rotor_inertia_kg_m2"] is not None and r["rotor_inertia_kg_m2"] > 0 for r in rs)
-        for which in ("nominal", "before", "after"):
-            got = [r["heldout_rms"][which] for r in rs if r["heldout_rms"][which]]
-            if got:
-                cell[f"heldout_rms_median_{which}"] = {s: float(np.median([g[s] for g in got])) for s in ROT}
-        out[key] = cell
-    return out
+# --- 6. the register's attitude delay, with and without the spin-up reaction in the flights ----------------------
+
+
+def attitude_delay(seeds: list[int], duration_s: float) -> list[dict]:
+    from unittest import mock
+
+    from offline.calibrate.calibrate import calibrate_vehicle
+    from offline.calibrate.nominal_flights import nominal_flights, nominal_register
+    from offline.calibrate.terms import TERMS
+    from offline.sim.assumptions import draw_flights
+
+    tau = NOM.motor_time_constant_s
+    registers = {
+        "rotor inertia 0": nominal_register().with_range("motor_time_constant_s", tau, tau),
+        "rotor inertia drawn": lag_and_spin_up_register(tau),
+    }
+    rows = []
+    for seed in seeds:
+        for flights, register in registers.items():
+            drawn = draw_flights(register, seed, range(2))
+            tabs = nominal_flights(NOM, 2, seed, duration_s, register)
+            for which in ("before", "after"):
+                with mock.patch.dict(TERMS, {t.name: t for t in library(before=which == "before")}, clear=True):
+                    r = calibrate_vehicle(tabs, NOM)
+                row = {
+                    "seed": seed,
+                    "flights": flights,
+                    "library": which,
+                    "attitude_log_delay_ms": [round(1000 * float(np.mean(f.values["attitude_log_delay_s"])), 1) for f in drawn],
+                    "rotor_inertia_kg_m2": [float(np.mean(f.values["rotor_inertia_kg_m2"])) for f in drawn],
+                    "named": [f["effect"] for f in r.findings],
+                    "unexplained": r.unexplained["summary"] if r.unexplained["found"] else None,
+                    "delay_probe_ms": round(1000 * r.unexplained["probes"]["telemetry_delay"]["value"], 1),
+                }
+                rows.append(row)
+                print(json.dumps(row), file=sys.stderr, flush=True)
+    return rows
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -483,6 +528,9 @@ def main(argv: list[str] | None = None) -> int:
     lo = sub.add_parser("localise")
     lo.add_argument("--fleet", type=Path, nargs="+", required=True, help="same-airframe fleet folders")
     lo.add_argument("--out", type=Path, required=True, help="localise.json and the two calibration caches go here")
+    ad = sub.add_parser("attitude-delay")
+    ad.add_argument("--seeds", type=int, nargs="+", default=[50_001, 50_003, 55_002, 55_003, 55_004])
+    ad.add_argument("--duration-s", type=float, default=40.0)
     a = ap.parse_args(argv)
     if a.what == "candidates":
         res = candidates(a.lags_ms, a.seeds, a.duration_s)
@@ -494,6 +542,8 @@ def main(argv: list[str] | None = None) -> int:
         res = resolution(a.sizes, a.seeds, a.duration_s)
     elif a.what == "localise":
         res = localise(a.fleet, a.out)
+    elif a.what == "attitude-delay":
+        res = attitude_delay(a.seeds, a.duration_s)
     else:
         res = evalsim(a.out, a.lags_ms, a.seeds, a.nominal, a.duration_s, a.seed_base)
     json.dump(res, sys.stdout, indent=1)
