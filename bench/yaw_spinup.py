@@ -410,8 +410,8 @@ def localise(fleets: list[Path], out: Path) -> dict:
     from offline.vehicles.localise import format_table, score, table
 
     res: dict = {}
-    for fleet in fleets:
-        by = load_fleet(fleet)
+    for folder in fleets:
+        by = load_fleet(folder)
         got = {}
         for which in ("before", "after"):
             terms = {t.name: t for t in library(before=which == "before")}
@@ -437,7 +437,7 @@ def localise(fleets: list[Path], out: Path) -> dict:
         statistic_change = max(
             (abs(a["verdicts"][r]["fault_statistic"] - b["verdicts"][r]["fault_statistic"]) for b, a, r in pairs), default=0.0
         )
-        res[str(fleet)] = {
+        res[str(folder)] = {
             "airframes": airframes,
             "later_flights": len(rows_a),
             "verdicts_changed": changed,
@@ -446,12 +446,12 @@ def localise(fleets: list[Path], out: Path) -> dict:
             "table_after": table(rows_a),
         }
         print(
-            f"{fleet}: {len(by)} airframes, {len(rows_a)} later flights; verdicts changed (propellers, confidence or "
+            f"{folder}: {len(by)} airframes, {len(rows_a)} later flights; verdicts changed (propellers, confidence or "
             f"set, any rule): {len(changed)}; fault statistic moved by at most {statistic_change:.3g}",
             file=sys.stderr,
         )
         for which, rows in (("library before the spin-up reaction", rows_b), ("today's library", rows_a)):
-            print(format_table(table(rows), f"{fleet.name}, {which}"), file=sys.stderr)
+            print(format_table(table(rows), f"{folder.name}, {which}"), file=sys.stderr)
     out.mkdir(parents=True, exist_ok=True)
     (out / "localise.json").write_text(json.dumps(res, indent=1, default=float) + "\n", encoding="utf-8")
     return res
