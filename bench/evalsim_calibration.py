@@ -2,6 +2,7 @@
 
     nice python -m bench.evalsim_calibration --out out/evaluate-calibration          # make evaluate-calibration
     nice python -m bench.evalsim_calibration --out DIR --seeds 2 --nominal 10 --outside-seeds 2   # reduced
+    python -m bench.evalsim_calibration --out DIR --rescore A/runs.jsonl B/runs.jsonl   # earlier runs, scored again
 
 Each run is what a user has: 2 healthy flights of ``--duration-s`` at 20 Hz with telemetry jitter and drops,
 read back through a .tlog, calibrated against the nominal vehicle (``offline.calibrate.calibrate``) with the
@@ -20,6 +21,11 @@ whole term library and the gates in force.
 4. **The matrix on the evaluation-only simulator** (``offline/evalsim``, never tuned on): every effect at the
    same three sizes, ``--seeds`` seeds; per cell the share of runs naming the hidden effect's term, the share
    naming another term, and the fitted value against the truth with its standard error.
+
+Our simulator's flights really carry the register's ``attitude_log_delay_s`` (0-30 ms per flight), an effect
+outside the library: each own-simulator run records the delay its flights drew, and a ``telemetry_delay`` report
+there counts as true where a flight's delay is at least ``DELAY_REPORT_RESOLUTION_S``, false below it
+(``score_delay_report``).
 
 Writes ``runs.jsonl`` as runs end, ``matrix.json`` (every run) and ``matrix.md`` (the tables) at the end; prints
 one JSON line per run.
@@ -45,6 +51,17 @@ from monitor.vehicle import DEFAULT_VEHICLE, VehicleConfig, load_vehicle
 
 NOM = load_vehicle(DEFAULT_VEHICLE)
 HOVER_RPM = NOM.hover_omega_rad_s * 60.0 / (2 * math.pi)
+OWN_FLIGHTS = 2  # flights per own-simulator run
+OWN_SEED_BASE = 50_000  # own_tables' flights: nominal_flights(..., OWN_SEED_BASE + seed)
+OWN_NOMINAL_SEED_BASE = 5000  # the nothing-hidden own runs pass OWN_NOMINAL_SEED_BASE + their seed to own_tables
+# The smallest attitude log delay whose ``telemetry_delay`` report counts as true on our simulator
+# (``score_delay_report``). offline.calibrate states no resolution for that probe (``unexplained.DELAY_GRID_S`` is
+# its search grid, refined to 1 ms), so this is the smallest delay it reported in the matrix's runs: 18.9 ms, on
+# our simulator's nothing-hidden run 5002 (``nice -n 19 python -m bench.evalsim_calibration --out
+# out/evaluate-calibration-own --effects lag_one_rotor lag_all_rotors esc_curve drag inertia mass gyro_bias
+# --own-seeds 5 --own-nominal 10 --seeds 0 --nominal 0 --outside-seeds 0``: delay_probe_ms). The evaluation-only
+# simulator's phases (``--own-seeds 0 --own-nominal 0``) reported none below 78 ms.
+DELAY_REPORT_RESOLUTION_S = 0.0189
 
 
 @dataclass(frozen=True)
@@ -327,14 +344,56 @@ def calibrate_tables(tabs, rival_vs_lag: bool = False) -> dict:
     }
 
 
-def own_tables(vehicle: VehicleConfig, seed: int, duration_s: float):
-    from offline.calibrate.nominal_flights import nominal_flights, nominal_register
+def own_register(vehicle: VehicleConfig):
+    """The assumption register an own-simulator run of ``vehicle`` draws its flights from."""
+    from offline.calibrate.nominal_flights import nominal_register
 
     # offline.sim takes each flight's motor time constant from the register (PerFlightTerms), not from the
     # vehicle: pinned to the vehicle's, or a lag hidden on the vehicle never reaches the flights.
     tau = vehicle.motor_time_constant_s
-    register = nominal_register().with_range("motor_time_constant_s", tau, tau)
-    return nominal_flights(vehicle, 2, 50_000 + seed, duration_s, register)
+    return nominal_register().with_range("motor_time_constant_s", tau, tau)
+
+
+def own_tables(vehicle: VehicleConfig, seed: int, duration_s: float):
+    from offline.calibrate.nominal_flights import nominal_flights
+
+    return nominal_flights(vehicle, OWN_FLIGHTS, OWN_SEED_BASE + seed, duration_s, own_register(vehicle))
+
+
+def own_attitude_delays_s(vehicle: VehicleConfig, seed: int) -> list[float]:
+    """The ``attitude_log_delay_s`` each flight of ``own_tables(vehicle, seed, ...)`` draws from the register: the
+    estimator's delay behind the motor outputs that the run's flights really carry (no flight is simulated)."""
+    from offline.sim.assumptions import draw_flights
+
+    draws = draw_flights(own_register(vehicle), OWN_SEED_BASE + seed, range(OWN_FLIGHTS))
+    return [float(f["attitude_log_delay_s"]) for f in draws]
+
+
+def _own_run(effects: dict[str, Effect], row: dict) -> tuple[VehicleConfig, int]:
+    """(vehicle, seed passed to ``own_tables``) of an own-simulator run, from its row."""
+    if row["effect"] == "none":
+        return NOM, OWN_NOMINAL_SEED_BASE + row["seed"]
+    name, size, seed = row["effect"], row["size"], row["seed"]
+    return effects[name].own(NOM, size, _rng("own", name, size, seed)), seed
+
+
+def delay_reported(row: dict) -> bool:
+    """Whether the run reported a ``telemetry_delay`` unexplained residual (``unexplained_residual``'s summary
+    gives each probe found on a line of its own, led by the probe's name)."""
+    return bool(row["unexplained"]) and any(
+        line.startswith("telemetry_delay (") for line in row["unexplained_summary"].split("; ")
+    )
+
+
+def score_delay_report(row: dict, resolution_s: float = DELAY_REPORT_RESOLUTION_S) -> bool | None:
+    """A run's ``telemetry_delay`` report scored against the attitude log delay its flights drew
+    (``attitude_log_delay_ms``, own-simulator runs): True (a delay the flights carry) where the largest flight's
+    drawn delay is at least ``resolution_s``, False (a delay they do not carry) below it; None where the run
+    reports no delay or its flights' delay is not known (the evaluation-only simulator's runs)."""
+    drawn = row.get("attitude_log_delay_ms")
+    if not drawn or not delay_reported(row):
+        return None
+    return max(drawn) >= 1000.0 * resolution_s
 
 
 def eval_tables(specs, post=None):
@@ -413,10 +472,17 @@ def _cell(rows: list[dict], terms: tuple[str, ...]) -> dict:
         "fitted_se_mean": float(np.mean([v[1] for v in vals])) if vals else None,
         "truth": rows[0]["truth"] if rows else None,
         "unexplained": sum(bool(r["unexplained"]) for r in rows),
+        **_delay_counts(rows),
         "inspect_rotor": sum(r.get("inspect_rotor") is not None for r in rows),
         "rival_minus_best_max": max((x["rival_minus_best"] for r in rows for x in r["rival"]), default=None),
         "rival_minus_lag_max": _max_of(rows, "rival_minus_lag"),
     }
+
+
+def _delay_counts(rows) -> dict:
+    """Runs whose telemetry_delay report is true / false by ``score_delay_report`` (own-simulator runs)."""
+    scores = [score_delay_report(r) for r in rows]
+    return {"delay_true": sum(x is True for x in scores), "delay_false": sum(x is False for x in scores)}
 
 
 def _max_of(rows, key):
@@ -432,29 +498,37 @@ def markdown(res: dict) -> str:
         "",
         "## Resolution on our own simulator (stated before the evaluation runs)",
         "",
-        "| effect | unit | " + " | ".join(f"size {i + 1}" for i in range(3)) + " | resolution | rival - lag (max) |",
-        "|---|---|---|---|---|---|---|",
+        "| effect | unit | " + " | ".join(f"size {i + 1}" for i in range(3)) + " | resolution | rival - lag (max) "
+        "| unexplained | delay reports: true / false |",
+        "|---|---|---|---|---|---|---|---|---|",
     ]
     f = lambda x: "-" if x is None else f"{x:.4g}"  # noqa: E731
     for name, e in res["own"].items():
         cells = " | ".join(f"{c['size']:g}: {c['named']}/{c['runs']}" for c in e["cells"])
         rival = max((c["rival_minus_lag_max"] for c in e["cells"] if c["rival_minus_lag_max"] is not None), default=None)
+        runs = sum(c["runs"] for c in e["cells"])
         lines.append(
             f"| {name} | {e['unit']} | {cells} | {e['resolution'] if e['resolution'] is not None else 'none of the sizes'} "
-            f"| {f(rival)} |"
+            f"| {f(rival)} | {sum(c['unexplained'] for c in e['cells'])}/{runs} "
+            f"| {sum(c['delay_true'] for c in e['cells'])} / {sum(c['delay_false'] for c in e['cells'])} |"
         )
     if "own_nominal" in res:
         n = res["own_nominal"]
         lines += [
             "",
-            f"Nothing hidden on our simulator: {n['wrong_named']} of {n['runs']} runs named a term "
-            f"({json.dumps(n['named_terms'])}); {n['unexplained']} reported an unexplained residual; the rival's BIC "
+            f"Nothing hidden on our simulator: {n['wrong_named']} of {n['runs']} runs named a term, a cause that is "
+            f"not there ({json.dumps(n['named_terms'])}); {n['unexplained']} reported an unexplained residual, of "
+            f"which {n['delay_true']} the attitude log delay the flights carry and {n['delay_false']} a delay they do "
+            "not carry; the rival's BIC "
             f"minus the best passing term's, largest: {f(n['rival_minus_best_max'])} (the rival wins above "
             f"fit.RIVAL_MARGIN_BIC), over the better lag term: {f(n['rival_minus_lag_max'])}; the kinematic residual's "
             f"correlation time, largest: {f(n['kin_corr_time_max'])} "
             "(unexplained.KIN_CORR_TIME_MAX).",
         ]
     lines += [
+        "",
+        f"A telemetry_delay report is true where a flight of the run drew an attitude log delay of at least "
+        f"{1000 * res['delay_resolution_s']:g} ms (score_delay_report).",
         "",
         "## Evaluation-only simulator",
         "",
@@ -505,11 +579,79 @@ def _nominal_summary(rows) -> dict:
         "wrong_named": sum(bool(r["named"]) for r in rows),
         "named_terms": _count(rows),
         "unexplained": sum(r["unexplained"] for r in rows),
+        **_delay_counts(rows),
         "rival_minus_best_max": max((x["rival_minus_best"] for r in rows for x in r["rival"]), default=None),
         "kin_corr_time_max": _max_of(rows, "kin_corr_time"),
         "kin_rms_max": _max_of(rows, "kin_rms"),
         "rival_minus_lag_max": _max_of(rows, "rival_minus_lag"),
     }
+
+
+def summarise(runs: list[dict], effects: dict[str, Effect], outside: list[str], config: dict) -> dict:
+    """The matrix's tables from its runs (rows as ``runs.jsonl`` holds them): each phase's cells per effect and size."""
+
+    def pick(sim: str, effect: str, size: float | None = None) -> list[dict]:
+        return [r for r in runs if r["sim"] == sim and r["effect"] == effect and (size is None or r.get("size") == size)]
+
+    res: dict = {"config": config, "delay_resolution_s": DELAY_REPORT_RESOLUTION_S, "own": {}}
+    # 1. Resolution on our own simulator.
+    for name, e in effects.items():
+        cells = [{"size": size, **_cell([r | {"truth": size} for r in pick("own", name, size)], e.terms)} for size in e.sizes]
+        ok = [c["size"] for c in cells if c["named"] == c["runs"]]
+        res["own"][name] = {"unit": e.unit, "cells": cells, "resolution": min(ok) if ok else None}
+    res["own_nominal"] = _nominal_summary(pick("own", "none"))
+    # 2. Outside the library.
+    res["outside"] = {}
+    for name in outside:
+        rows = pick("evalsim", name)
+        res["outside"][name] = {
+            "runs": len(rows),
+            "unexplained": sum(r["unexplained"] for r in rows),
+            "named_terms": _count(rows),
+            "inspect_rotor": sum(r["inspect_rotor"] is not None for r in rows),
+            "rival_minus_best_max": max((x["rival_minus_best"] for r in rows for x in r["rival"]), default=None),
+            "rival_minus_lag_min": min(
+                (r["rival_minus_lag"] for r in rows if r.get("rival_minus_lag") is not None), default=None
+            ),
+            "kin_corr_time_min": min((r["kin_corr_time"] for r in rows), default=None),
+            "kin_rms_min": min((r["kin_rms"] for r in rows), default=None),
+        }
+    # 3. Nothing hidden.
+    res["nominal"] = _nominal_summary(pick("evalsim", "none"))
+    # 4. The matrix on the evaluation-only simulator.
+    res["evalsim"] = {}
+    for name, e in effects.items():
+        resolution = res["own"][name]["resolution"]
+        cells = [
+            {
+                "size": size,
+                "above_resolution": resolution is not None and size >= resolution,
+                **_cell(pick("evalsim", name, size), e.terms),
+            }
+            for size in e.sizes
+        ]
+        res["evalsim"][name] = {"unit": e.unit, "terms": list(e.terms), "cells": cells}
+    res["runs"] = runs
+    return res
+
+
+def rescore(paths: list[Path], effects: dict[str, Effect]) -> list[dict]:
+    """The rows of ``runs.jsonl`` files, each own-simulator row given the attitude log delay its flights drew
+    where it does not hold it (rows written before the matrix recorded it)."""
+    rows = []
+    for path in paths:
+        for line in path.read_text(encoding="utf-8").splitlines():
+            if not line.strip():
+                continue
+            row = json.loads(line)
+            if row["sim"] == "own" and "attitude_log_delay_ms" not in row:
+                row["attitude_log_delay_ms"] = _delays_ms(own_attitude_delays_s(*_own_run(effects, row)))
+            rows.append(row)
+    return rows
+
+
+def _delays_ms(delays_s: list[float]) -> list[float]:
+    return [round(1000.0 * d, 2) for d in delays_s]
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -523,12 +665,26 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--own-nominal", type=int, default=10, help="our-simulator runs with nothing hidden (2 flights each)")
     ap.add_argument("--effects", nargs="+", default=None)
     ap.add_argument("--outside", nargs="+", default=None, help="outside-library effects to run (default: all)")
+    ap.add_argument(
+        "--rescore",
+        type=Path,
+        nargs="+",
+        default=None,
+        help="runs.jsonl files of earlier runs: score their rows again (no flight is simulated) and write the tables",
+    )
     a = ap.parse_args(argv)
     a.out.mkdir(parents=True, exist_ok=True)
     effects = _effects()
     if a.effects:
         effects = {k: effects[k] for k in a.effects}
-    res: dict = {"config": {k: (str(v) if isinstance(v, Path) else v) for k, v in vars(a).items()}}
+    outside = [n for n in _outside() if not a.outside or n in a.outside]
+    config = {k: (str(v) if isinstance(v, Path) else v) for k, v in vars(a).items() if k != "rescore"}
+    if a.rescore:
+        # The runs' own counts and seeds are in their rows; only what selects the tables applies here.
+        config = {"out": str(a.out), "effects": a.effects, "outside": a.outside, "rescore": [str(x) for x in a.rescore]}
+        rows = rescore(a.rescore, _effects())
+        res = summarise(rows, effects, [n for n in outside if any(r["effect"] == n for r in rows)], config)
+        return _write(a.out, res)
     t0 = time.time()
 
     runs: list[dict] = []
@@ -541,34 +697,26 @@ def main(argv: list[str] | None = None) -> int:
         print(json.dumps({k: row.get(k) for k in keys} | {"wall_s": round(time.time() - t0)}, default=float), flush=True)
 
     # 1. Resolution on our own simulator.
-    res["own"] = {}
     for name, e in effects.items():
-        cells = []
         for size in e.sizes:
-            rows = []
             for seed in range(a.own_seeds):
                 r = _rng("own", name, size, seed)
                 v = e.own(NOM, size, r)
                 row = {"sim": "own", "effect": name, "size": size, "seed": seed} | calibrate_tables(
                     own_tables(v, seed, a.duration_s), name.startswith("lag_")
                 )
+                row["attitude_log_delay_ms"] = _delays_ms(own_attitude_delays_s(v, seed))
                 log(row, ("sim", "effect", "size", "seed", "named", "unexplained", "rival", "rival_minus_lag"))
-                rows.append(row)
-            cells.append({"size": size, **_cell([r | {"truth": size} for r in rows], e.terms)})
-        ok = [c["size"] for c in cells if c["named"] == c["runs"]]
-        res["own"][name] = {"unit": e.unit, "cells": cells, "resolution": min(ok) if ok else None}
-    rows = []
     for seed in range(a.own_nominal):
-        row = {"sim": "own", "effect": "none", "seed": seed} | calibrate_tables(own_tables(NOM, 5000 + seed, a.duration_s), True)
+        row = {"sim": "own", "effect": "none", "seed": seed} | calibrate_tables(
+            own_tables(NOM, OWN_NOMINAL_SEED_BASE + seed, a.duration_s), True
+        )
+        row["attitude_log_delay_ms"] = _delays_ms(own_attitude_delays_s(NOM, OWN_NOMINAL_SEED_BASE + seed))
         log(row, ("sim", "effect", "seed", "named", "unexplained", "rival", "rival_minus_lag", "kin_corr_time"))
-        rows.append(row)
-    res["own_nominal"] = _nominal_summary(rows)
     # 2. Outside the library (before the matrix: a run cut short keeps the targets the matrix cannot miss).
-    res["outside"] = {}
     for name, (mod, post) in _outside().items():
-        if a.outside and name not in a.outside:
+        if name not in outside:
             continue
-        rows = []
         for seed in range(a.outside_seeds):
             specs = [mod(sp, _rng("outside", name, seed)) for sp in eval_specs(2000 + seed, a.duration_s)]
             row = {"sim": "evalsim", "effect": name, "seed": seed, **calibrate_tables(eval_tables(specs, post), "delay" in name)}
@@ -587,21 +735,7 @@ def main(argv: list[str] | None = None) -> int:
                     "kin_corr_time",
                 ),
             )
-            rows.append(row)
-        res["outside"][name] = {
-            "runs": len(rows),
-            "unexplained": sum(r["unexplained"] for r in rows),
-            "named_terms": _count(rows),
-            "inspect_rotor": sum(r["inspect_rotor"] is not None for r in rows),
-            "rival_minus_best_max": max((x["rival_minus_best"] for r in rows for x in r["rival"]), default=None),
-            "rival_minus_lag_min": min(
-                (r["rival_minus_lag"] for r in rows if r.get("rival_minus_lag") is not None), default=None
-            ),
-            "kin_corr_time_min": min((r["kin_corr_time"] for r in rows), default=None),
-            "kin_rms_min": min((r["kin_rms"] for r in rows), default=None),
-        }
     # 3. Nothing hidden.
-    rows = []
     for seed in range(a.nominal):
         row = {
             "sim": "evalsim",
@@ -610,19 +744,11 @@ def main(argv: list[str] | None = None) -> int:
             **calibrate_tables(eval_tables(eval_specs(1000 + seed, a.duration_s)), True),
         }
         log(row, ("sim", "effect", "seed", "named", "unexplained", "rival", "rival_minus_lag"))
-        rows.append(row)
-    res["nominal"] = _nominal_summary(rows)
     # 4. The matrix on the evaluation-only simulator.
-    res["evalsim"] = {}
     for name, e in effects.items():
-        cells = []
-        resolution = res["own"][name]["resolution"]
         for size in e.sizes:
-            rows = []
             for seed in range(a.seeds):
-                r_spec = _rng("evalsim", name, size, seed)
                 specs = [e.evalsim(sp, size, _rng("evalsim", name, size, seed)) for sp in eval_specs(seed, a.duration_s)]
-                del r_spec
                 out = calibrate_tables(eval_tables(specs), name.startswith("lag_"))
                 fitted = e.fitted(out["findings"], _rng("evalsim", name, size, seed))
                 row = {"sim": "evalsim", "effect": name, "size": size, "seed": seed, **out}
@@ -646,13 +772,12 @@ def main(argv: list[str] | None = None) -> int:
                         "inspect_rotor",
                     ),
                 )
-                rows.append(row)
-            above = resolution is not None and size >= resolution
-            cells.append({"size": size, "above_resolution": above, **_cell(rows, e.terms)})
-        res["evalsim"][name] = {"unit": e.unit, "terms": list(e.terms), "cells": cells}
-    res["runs"] = runs
-    (a.out / "matrix.json").write_text(json.dumps(res, indent=1, default=float) + "\n", encoding="utf-8")
-    (a.out / "matrix.md").write_text(markdown(res), encoding="utf-8")
+    return _write(a.out, summarise(runs, effects, outside, config))
+
+
+def _write(out: Path, res: dict) -> int:
+    (out / "matrix.json").write_text(json.dumps(res, indent=1, default=float) + "\n", encoding="utf-8")
+    (out / "matrix.md").write_text(markdown(res), encoding="utf-8")
     print(markdown(res))
     return 0
 
