@@ -149,7 +149,7 @@ def main(argv: list[str] | None = None) -> int:
     fleets = ensure_fleets(args.out, args.evalsim_airframes, args.ours_airframes)
     res = {}
     for name, fleet in fleets.items():
-        rows = score(load_fleet(fleet))
+        rows = score(load_fleet(fleet, marks=True))  # judged through time, as diagnose --baseline
         t = table(rows, None if args.no_nominal else nominal_verdicts(rows))
         res[name] = {"diagnose": t}
         print(f"\n## {name}: {fleet} ({len(rows)} later flights)\n")
