@@ -21,9 +21,9 @@ from pathlib import Path
 
 from bench import REPO
 from monitor.diagnose.memory_adapter import as_imbalance
-from monitor.memory.judge import judge
 from monitor.memory.learn import HealthyOutlierError, learn_baseline
-from monitor.memory.summary import summarize
+from monitor.memory.summary import accumulate
+from monitor.memory.through_time import judge_through_time
 from monitor.vehicle import load_vehicle
 from offline.crazypad.data import AIRFRAMES, DEFAULT_ROOT
 from offline.crazypad.experiment import GROUP_ORDER
@@ -57,7 +57,8 @@ def main(argv=None) -> int:
         for f in flights:
             if f.airframe != af or f.role == "calibration":
                 continue
-            v = judge(normal, summarize(tables[f.file]))
+            acc = accumulate(tables[f.file])  # judged through time, as diagnose --baseline judges a log
+            v = judge_through_time(normal, acc.summary, acc.marks)
             rows.append(
                 {
                     "file": f.file,
