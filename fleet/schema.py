@@ -58,7 +58,7 @@ COLUMNS: tuple[tuple[str, str], ...] = (
     ("compared_with_last", "VARCHAR"),
     ("compared_with_logs", "VARCHAR[]"),  # their log hashes
     ("time_known", "BOOLEAN"),  # the log carries its own clock (false: judged against the baseline at ingest)
-    ("memory_summary", "VARCHAR"),  # JSON monitor.memory.summary.FlightSummary of the flight
+    ("memory_summary", "VARCHAR"),  # JSON FlightSummary of the flight, with its through-time "marks" (at most 64)
     ("memory", "VARCHAR"),  # JSON: the judgement (monitor.memory.judge) or why there is none
 )
 # Columns a version-1 store lacks (added by migration).
