@@ -4,6 +4,7 @@
     python -m bench.bench_memory_faults --only kill9 --landings 30
     python -m bench.bench_memory_faults --only daemons --pairs 5
     python -m bench.bench_memory_faults --only diskfull
+    python -m bench.bench_memory_faults --only rss --landings 150
 
 Each starts from a state dir holding one vehicle's 200-flight baseline (synthetic healthy flights of one quirky
 airframe, the summaries of ``monitor.memory.summary`` as the daemon makes them).
@@ -14,6 +15,9 @@ airframe, the summaries of ``monitor.memory.summary`` as the daemon makes them).
   every flight reported learnt, and at most the one flight in progress more.
 - ``daemons``: ``--pairs`` times, two ``propwatch monitor`` processes started at once on one state dir (udpin on
   loopback, nothing sent): exactly one runs; the other exits 2 naming the first's pid.
+- ``rss``: ``--landings`` landings in one process through the daemon's memory, from an empty history: the
+  process's RSS every 25 landings and per landing (what the soak with learning at every landing grows by), and the
+  Python heap left (``tracemalloc`` is not used: it changes what it measures; ``--heap`` adds it, slower).
 - ``diskfull``: the state dir on a tmpfs (in a user and mount namespace: ``unshare``) with room for the baseline
   but not for a second copy of it: a landing is "not learnt: disk full", the file is unchanged and loads, no
   temporary file is left; with room made, the next landing is learnt.
@@ -91,9 +95,56 @@ def child_landings(state: Path, first: int) -> None:
         fly(mem, k)
         print(f"landing {k}", flush=True)
         what = mem.disarmed(None)
-        n = len(mem.baseline.flights) if mem.baseline is not None else -1
+        n = mem.history.flights if mem.history is not None else -1
         print(f"{what}|{n}", flush=True)
         k += 1
+
+
+def _rss_kb() -> int:
+    with open("/proc/self/status") as fh:
+        return next(int(line.split()[1]) for line in fh if line.startswith("VmRSS"))
+
+
+def bench_rss(landings: int, heap: bool) -> dict:
+    import gc
+    import tracemalloc
+
+    from monitor.daemon.memory_adapter import VehicleMemory
+
+    work = Path(tempfile.mkdtemp(prefix="pw-rss-"))
+    mem = VehicleMemory(work / "state", RATE_HZ)
+    mem.identify(sysid=1)
+    for k in range(5):  # warm-up: imports, first allocations, a normal
+        fly(mem, 90000 + k)
+        mem.disarmed(None)
+    gc.collect()
+    if heap:
+        tracemalloc.start()
+    heap0 = tracemalloc.get_traced_memory()[0] if heap else 0
+    rss = [(0, _rss_kb())]
+    outcomes: dict[str, int] = {}
+    cpu0 = time.process_time()
+    for k in range(landings):
+        fly(mem, k)
+        what = mem.disarmed(None)
+        outcomes[what] = outcomes.get(what, 0) + 1
+        if (k + 1) % 25 == 0 or k + 1 == landings:
+            rss.append((k + 1, _rss_kb()))
+    cpu_s = time.process_time() - cpu0
+    gc.collect()
+    out = {
+        "landings": landings,
+        "outcomes": outcomes,
+        "flights_in_file": len(json.loads(mem.path.read_text())["flights"]),
+        "rss_kb_by_landings": rss,
+        "rss_kb_per_landing": round((rss[-1][1] - rss[0][1]) / landings, 1),
+        "cpu_s": round(cpu_s, 1),
+    }
+    if heap:
+        out["heap_kb_per_landing"] = round((tracemalloc.get_traced_memory()[0] - heap0) / 1024 / landings, 2)
+    mem.close()
+    shutil.rmtree(work, ignore_errors=True)
+    return out
 
 
 def _child(args: list[str], **kw) -> subprocess.Popen:
@@ -270,8 +321,9 @@ def inside_diskfull() -> dict:
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="python -m bench.bench_memory_faults", description=__doc__.split("\n\n")[0])
-    p.add_argument("--only", choices=("kill9", "daemons", "diskfull"), action="append")
+    p.add_argument("--only", choices=("kill9", "daemons", "diskfull", "rss"), action="append")
     p.add_argument("--landings", type=int, default=30, help="kill9: landings begun (each ~2 s of CPU at 200 flights)")
+    p.add_argument("--heap", action="store_true", help="rss: also the Python heap left per landing (tracemalloc)")
     p.add_argument("--pairs", type=int, default=5, help="daemons: pairs started at once")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--child-landings", nargs=2, metavar=("STATE", "FIRST"), help=argparse.SUPPRESS)
@@ -290,6 +342,8 @@ def main(argv: list[str] | None = None) -> int:
             out[name] = bench_kill9(a.landings, a.seed)
         elif name == "daemons":
             out[name] = bench_daemons(a.pairs)
+        elif name == "rss":
+            out[name] = bench_rss(a.landings, a.heap)
         else:
             out[name] = bench_diskfull()
         out[name]["wall_s"] = round(time.monotonic() - t, 1)

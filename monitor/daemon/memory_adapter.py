@@ -26,9 +26,11 @@ under the same write lock; the daemon re-reads the file at each take-off and ins
 
 from __future__ import annotations
 
+import ctypes
 import datetime as _dt
 import errno
 import logging
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -54,7 +56,11 @@ IDLE_LANDED_S = 2.0
 # Longest wait at a landing for another writer of the state dir (`propwatch baseline note`: milliseconds): the loop
 # waits in it, and the unit's watchdog (WatchdogSec=10, pinged every 5 s) must still be pinged in time. Chosen.
 WRITE_WAIT_S = 3.0
-SEVERITY = {"fault": 2, "suspect": 4}  # MAV_SEVERITY_CRITICAL / WARNING, as the decision's own alerts
+SEVERITY = {"fault": 2, "suspect": 4}
+try:  # glibc's: hands back the heap that freed objects left (None elsewhere: nothing is handed back)
+    _malloc_trim = ctypes.CDLL(None).malloc_trim
+except (OSError, AttributeError):
+    _malloc_trim = None  # MAV_SEVERITY_CRITICAL / WARNING, as the decision's own alerts
 
 
 def today_utc() -> str | None:
@@ -63,10 +69,27 @@ def today_utc() -> str | None:
     return now.date().isoformat() if now.year >= 2020 else None
 
 
+def _return_heap() -> None:
+    """After a landing's read-modify-write: the whole history was read, judged and written, and the heap it needed
+    grows with the history; glibc keeps it after the objects are gone. Handed back, the daemon's RSS grows ~4 kB
+    per learnt flight, else ~10 kB (``python -m bench.bench_memory_faults --only rss --landings 150``)."""
+    if _malloc_trim is not None:
+        _malloc_trim(0)
+
+
 def vehicle_key(uid: int | None, sysid: int | None) -> str | None:
     if uid:
         return f"uid-{uid:016x}"
     return None if sysid is None else f"sysid-{int(sysid)}"
+
+
+@dataclass(frozen=True)
+class History:
+    """What the daemon keeps of a vehicle's baseline between reads: its counts for STATUS."""
+
+    flights: int  # in the file, set aside ones included
+    active: int  # the normal rests on these
+    compared_with: str  # ``VehicleBaseline.compared_with_text``
 
 
 class _NotHealthy(Exception):
@@ -93,7 +116,7 @@ class VehicleMemory:
         self.uid: int | None = None
         self.sysid: int | None = None
         self._uid_this_boot = False  # a uid was taken since the autopilot's last boot: no other until the next one
-        self.baseline: VehicleBaseline | None = None
+        self.history: History | None = None  # the baseline's counts (None: no usable baseline)
         self.normal = None
         self.off = ""  # the state dir cannot be used this run ('' = it can)
         self.paused = ""  # learning paused for this vehicle: its baseline cannot be used
@@ -182,25 +205,32 @@ class VehicleMemory:
         k = self.key
         if k is None or self.store is None:
             return
-        self.normal, self.baseline, self._status = None, None, None
-        paused = ""
         try:
-            self.baseline = self.store.load(k)
+            b = self.store.load(k)
         except (BaselineError, StateDirError, OSError) as exc:
-            paused = f"{exc}"
-        if self.baseline is not None and (
-            tuple(self.baseline.motor_names) != self.motor_names or self.baseline.basis != "omega2"
-        ):
+            self._adopt(None, f"{exc}")
+        else:
+            self._adopt(b)
+
+    def _adopt(self, b: VehicleBaseline | None, unusable: str = "") -> None:
+        """Keep what the flights need of baseline ``b`` (its normal, its counts for STATUS), not ``b``: the history
+        stays on disk between landings. ``unusable``: why the file could not be read (learning pauses)."""
+        k = self.key
+        self.normal, self.history, self._status = None, None, None
+        paused = unusable
+        if b is not None and (tuple(b.motor_names) != self.motor_names or b.basis != "omega2"):
             paused = (
-                f"{self.path}: rotors {list(self.baseline.motor_names)} on {self.baseline.basis} shares, this monitor's "
+                f"{self.path}: rotors {list(b.motor_names)} on {b.basis} shares, this monitor's "
                 f"{list(self.motor_names)} on omega2 (another airframe)"
             )
-            self.baseline = None
-        if self.baseline is not None and self.baseline.ready:
+            b = None
+        if b is not None and b.ready:
             try:
-                self.normal = self.baseline.normal()
+                self.normal = b.normal()
             except (ValueError, np.linalg.LinAlgError) as exc:  # checked values that still give no normal
-                paused, self.baseline = f"{self.path}: its flights give no normal ({exc})", None
+                paused, b = f"{self.path}: its flights give no normal ({exc})", None
+        if b is not None:
+            self.history = History(len(b.flights), len(b.active()), b.compared_with_text())
         if paused:
             why = (
                 f"learning paused for {k}: {paused}; "
@@ -222,11 +252,24 @@ class VehicleMemory:
             elif self.problem:
                 self._status = f"; vehicle {k}: {self.problem}"
             elif self.normal is not None:
-                self._status = f"; vehicle {k}: {self.baseline.compared_with_text()}"
+                self._status = f"; vehicle {k}: {self.history.compared_with}"
             else:
-                n = 0 if self.baseline is None else len(self.baseline.active())
+                n = 0 if self.history is None else self.history.active
                 self._status = f"; no vehicle baseline yet for {k} ({n} of {MIN_FLIGHTS} flights)"
         return self._status
+
+    def brief(self) -> str:
+        """The memory in a few words, for a STATUS that names several vehicles: the vehicle and its flights."""
+        k = self.key or "vehicle unknown"
+        if self.off:
+            return "memory off"
+        if self.paused:
+            return f"{k}: learning paused"
+        if self.problem:
+            return f"{k}: {'disk full' if self.problem == 'disk full' else 'state dir not writable'}"
+        if self.normal is not None:
+            return f"{k}: {self.history.active} flights"
+        return f"{k}: {0 if self.history is None else self.history.active} of {MIN_FLIGHTS} flights"
 
     # -- the flight
     def _reset_flight(self) -> None:
@@ -323,19 +366,22 @@ class VehicleMemory:
             why = self.off
         elif self.key is None:
             why = "vehicle unknown"
-        if not why:
-            self.load()  # notes made while we flew; a baseline that became unusable pauses learning
+        if not why and self.paused:
+            self.load()  # paused at take-off: the file may have been reset or repaired since
             why = self.paused and f"learning paused for {self.key} (its baseline cannot be used)"
         if why:
             return self._said(f"not learnt: {why}")
         try:
-            self.store.update(self.key, lambda b: self._learn(b, s, acc.marks), WRITE_WAIT_S)
+            b = self.store.update(self.key, lambda b: self._learn(b, s, acc.marks), WRITE_WAIT_S)
         except _NotHealthy:
+            _return_heap()
             return self._said("not learnt: not healthy against the vehicle's history")
         except StateDirBusy as exc:
             return self._said(f"not learnt: {exc}")
-        except (BaselineError, StateDirError) as exc:
+        except (BaselineError, StateDirError) as exc:  # the file as read inside the write cannot be used
             self.load()
+            if self.paused:
+                return self._said(f"not learnt: learning paused for {self.key} (its baseline cannot be used)")
             return self._said(f"not learnt: learning paused for {self.key}: {exc}")
         except OSError as exc:
             full = exc.errno in (errno.ENOSPC, errno.EDQUOT)
@@ -343,17 +389,26 @@ class VehicleMemory:
             self._status = None
             log.error("vehicle memory: %s; monitoring goes on", self.problem)
             return self._said(f"not learnt: {self.problem}")
-        self.problem, self._status = "", None
+        self.problem = ""
         self.learnt += 1
-        self.load()
+        self._adopt(b)  # the baseline just written: its normal for the next flight, without reading it again
+        del b
+        _return_heap()
         log.info("vehicle memory: flight learnt (%.0f s); %s", s.seconds, self.status().lstrip("; "))
         return "learnt"
 
     def _learn(self, b: VehicleBaseline | None, s, marks) -> VehicleBaseline:
-        """Inside the state dir's write lock: the flight judged against the baseline as it is on disk, through time
-        (``monitor.memory.through_time``: a change its mean dilutes is not learnt), then added."""
+        """Inside the state dir's write lock: the flight judged against the baseline as it is on disk (notes made
+        while it flew included), through time (``monitor.memory.through_time``: a change its mean dilutes is not
+        learnt), then added. Raises ``BaselineError`` where that baseline cannot be used."""
+        if b is not None and (tuple(b.motor_names) != self.motor_names or b.basis != "omega2"):
+            raise BaselineError(f"{self.path}: rotors {list(b.motor_names)} on {b.basis} shares (another airframe)")
         if b is not None and b.ready:
-            v = judge_through_time(b.normal(), s, marks)
+            try:
+                normal = b.normal()
+            except (ValueError, np.linalg.LinAlgError) as exc:
+                raise BaselineError(f"{self.path}: its flights give no normal ({exc})") from exc
+            v = judge_through_time(normal, s, marks)
             if v["label"] != 1 or v["confidence"] == "suspect" or v.get("imbalance_rotors"):
                 raise _NotHealthy
         b = b or VehicleBaseline(self.key, "daemon", self.motor_names, "omega2")

@@ -67,14 +67,23 @@ class VehicleBaseline:
     # not to (CrazyPAD: offline/crazypad/README.md), None where nobody measured it. False turns a propeller verdict
     # into an imbalance near its rotors, never a confident fault.
     cg_damage_separable: bool | None = None
+    # Each flight's summary, checked once (``summary_of``): id of its flight's dict -> (that dict, its summary).
+    _checked: dict = field(default_factory=dict, repr=False, compare=False)
 
     # -- the history
     def active(self) -> list[dict]:
         """The flights the normal rests on: this epoch's, less those set aside as unlike the others (``excluded``)."""
         return [f for f in self.flights if f["epoch"] == self.epoch and not f.get("excluded")]
 
+    def summary_of(self, f: dict) -> FlightSummary:
+        """One of ``flights``' summary, read and checked once for the life of this object."""
+        hit = self._checked.get(id(f))
+        if hit is None or hit[0] is not f:
+            hit = self._checked[id(f)] = (f, FlightSummary.from_dict(f["summary"], f"flight {f['name']}"))
+        return hit[1]
+
     def summaries(self) -> list[FlightSummary]:
-        return [FlightSummary.from_dict(f["summary"], f"flight {f['name']}") for f in self.active()]
+        return [self.summary_of(f) for f in self.active()]
 
     @property
     def ready(self) -> bool:
@@ -146,7 +155,18 @@ class VehicleBaseline:
         return write_atomic(Path(path), self.to_text())
 
     def to_text(self) -> str:
-        return json.dumps(self.to_dict(), indent=1, allow_nan=False) + "\n"
+        """The file's text: one line per field, per flight and per event (json's C encoder: a landing rewrites
+        every flight)."""
+
+        def one(x) -> str:
+            return json.dumps(x, allow_nan=False)
+
+        def lines(items: list) -> str:
+            return "[\n" + ",\n".join(f"  {one(x)}" for x in items) + "\n ]" if items else "[]"
+
+        d = self.to_dict()
+        body = ",\n".join(f" {one(k)}: {lines(v) if k in ('flights', 'events') else one(v)}" for k, v in d.items())
+        return "{\n" + body + "\n}\n"
 
     @classmethod
     def from_text(cls, text: str, origin: str) -> VehicleBaseline:
@@ -248,6 +268,7 @@ def _read_v1(d: dict, origin: str) -> VehicleBaseline:
     if epoch < 0:
         raise f.fail("epoch", f"{epoch} is negative")
     flights = f.get(d, "flights", "flights", (list,))
+    checked: dict = {}
     for i, fl in enumerate(flights):
         at = f"flights[{i}]"
         name = f.get(fl, "name", f"{at}.name", (str,))
@@ -267,6 +288,7 @@ def _read_v1(d: dict, origin: str) -> VehicleBaseline:
             raise BaselineError(str(exc)) from exc
         if s.basis != basis:
             raise f.fail(f"{at}.summary.basis", f"{s.basis!r}, the baseline's is {basis!r}")
+        checked[id(fl)] = (fl, s)
     events = f.get(d, "events", "events", (list,))
     for i, ev in enumerate(events):
         at = f"events[{i}]"
@@ -275,7 +297,7 @@ def _read_v1(d: dict, origin: str) -> VehicleBaseline:
             raise f.fail(f"{at}.event", f"{_short(name)} is not a known event")
         f.date(ev, "date", f"{at}.date")
         f.epoch(ev, f"{at}.epoch", epoch)
-    return VehicleBaseline(vid, id_source, tuple(names), basis, epoch, list(flights), list(events), cg)
+    return VehicleBaseline(vid, id_source, tuple(names), basis, epoch, list(flights), list(events), cg, checked)
 
 
 # The one place a file's version is turned into a baseline: a reader per version this propwatch reads. A new version

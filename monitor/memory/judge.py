@@ -39,19 +39,24 @@ def _template(rotors) -> np.ndarray:
     return u - u.mean()
 
 
+_YQ = _Q.T @ YAW
+# Each hypothesis's design in that basis: its rotors working harder, and the yaw balance; the yaw move alone.
+_DESIGNS = {s: np.column_stack([_Q.T @ _template(s), _YQ]) for s in HYPOTHESES}
+_YAW_ONLY = _YQ[:, None]
+
+
 def statistics(d: np.ndarray, cov: np.ndarray) -> tuple[dict[tuple[int, ...], float], np.ndarray, dict]:
     """Each hypothesis's statistic for deviation ``d`` under healthy covariance ``cov``; the weight matrix; and each
     hypothesis's share move ``a`` of its rotors (0 where they work less than normal)."""
     wi = np.linalg.inv(_Q.T @ cov @ _Q)
     dq = _Q.T @ d
     chi0 = float(dq @ wi @ dq)
-    yq = _Q.T @ YAW
     out, moves = {}, {}
     for s in HYPOTHESES:
-        a_mat = np.column_stack([_Q.T @ _template(s), yq])
+        a_mat = _DESIGNS[s]
         coef = np.linalg.solve(a_mat.T @ wi @ a_mat, a_mat.T @ wi @ dq)
         if coef[0] < 0:  # the rotors work less than normal: the yaw move alone
-            a_mat = yq[:, None]
+            a_mat = _YAW_ONLY
             coef = np.linalg.solve(a_mat.T @ wi @ a_mat, a_mat.T @ wi @ dq)
         r = dq - a_mat @ coef
         out[s] = chi0 - float(r @ wi @ r)

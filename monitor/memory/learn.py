@@ -20,7 +20,7 @@ import numpy as np
 from monitor.flight import FlightTable
 from monitor.memory import thresholds as th
 from monitor.memory.baseline import MIN_FLIGHTS, BaselineError, VehicleBaseline
-from monitor.memory.judge import judge
+from monitor.memory.judge import judge, statistics
 from monitor.memory.normal import FlightStack
 from monitor.memory.summary import FlightSummary, summarize
 from monitor.resample import US_PER_S
@@ -93,9 +93,11 @@ def outliers(summaries: list[FlightSummary], prior_cov=None):
     for i, s in enumerate(summaries):
         keep = np.ones(len(summaries), dtype=bool)
         keep[i] = False
-        v = judge(stack.normal(keep, prior_cov), s)
-        if v["fault_statistic"] >= th.FAULT_STATISTIC:  # a load off centre that explains it is no excuse here
-            yield i, v
+        normal = stack.normal(keep, prior_cov)
+        # judge's fault statistic alone first (the largest hypothesis statistic); the whole verdict only past it
+        stats, _, _ = statistics(normal.deviation(s), normal.deviation_cov(s))
+        if max(stats.values()) >= th.FAULT_STATISTIC:  # a load off centre that explains it is no excuse here
+            yield i, judge(normal, s)
 
 
 def _rotors(v: dict, motor_names=("1", "2", "3", "4")) -> str:
@@ -125,7 +127,7 @@ def set_aside_outliers(b: VehicleBaseline) -> list[str]:
     while True:
         act = b.active()
         found = max(
-            outliers([FlightSummary.from_dict(f["summary"], f["name"]) for f in act]),
+            outliers([b.summary_of(f) for f in act]),
             key=lambda iv: iv[1]["fault_statistic"],
             default=None,
         )
