@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import logging
 from collections import Counter
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from monitor.daemon.alerts import RateLimiter, StatusTextQueue
@@ -79,6 +80,11 @@ class Announcer:
         self._status_sent = ""
         self._next_sink_report = 0.0
         self.system_id: int | None = None  # the vehicle's (its alerts name it)
+        # Several vehicles on the link (``monitor.daemon.vehicles``): the first one's STATUS names every vehicle
+        # (``compose``), and another one's own text (``status_text``) goes into it (``status_changed``).
+        self.status_text = ""
+        self.compose: Callable[[str], str] | None = None
+        self.status_changed: Callable[[], None] | None = None
 
     def record(self, record: dict) -> None:
         self.events.write_record(record)
@@ -171,6 +177,12 @@ class Announcer:
             text += f"; decision paused, evidence live: {', '.join(self.live) or 'none'}"
         if self.events.failing:
             text += f"; events file failing ({self.events.last_error}, {self.events.pending} waiting)"
+        self.status_text = text
+        if self.status_changed is not None:
+            self.status_changed()
+            return
+        if self.compose is not None:
+            text = self.compose(text)
         if text and text != self._status_sent:
             self._status_sent = text
             self.notifier.status(text)

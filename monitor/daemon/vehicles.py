@@ -6,7 +6,9 @@ monitors the first system id it identifies, and ``Vehicles`` gives every other a
 alerts and vehicle memory, keyed by that system id or its uid, in the same state dir). Each message goes to the
 monitor of its source system; what belongs to no other vehicle (the first vehicle's, a ground station's) stays with
 the first. Such a monitor speaks as a component of its vehicle, to its autopilot's pinned address
-(``VehicleLink``), and every alert of it names its system id.
+(``VehicleLink``), and every alert of it names its system id. systemd's STATUS (sent by the first's daemon) names
+each vehicle by system id with its memory in a few words: the first's whole text, then each other's first clause
+(``status``).
 
 On a live link the pin (``monitor.daemon.pin``) already decided which autopilots are vehicles; on a recorded log
 the first autopilot HEARTBEAT of a system id makes it one. Either way there are at most ``link.max_vehicles``, a
@@ -77,6 +79,8 @@ class Vehicles:
                 )
             return None
         other = self.others[sys_id] = self._monitor(sys_id)
+        other.announce.status_changed = self.first.announce.publish_status
+        self.first.announce.compose = self.status
         log.warning(
             "another autopilot: system %d monitored as its own vehicle (%d of at most %d)",
             sys_id,
@@ -92,6 +96,14 @@ class Vehicles:
         pipeline = Pipeline(d.pipeline.classifier, cfg, d.pipeline.esc)
         return type(d)(cfg, VehicleLink(d.link, sys_id), pipeline, d.events, Notifier({}), d.geometry, memory, one=True)
 
+    def status(self, first_text: str) -> str:
+        """systemd's STATUS with several vehicles: ``system N (its memory): ...`` for each, the first's text
+        (``first_text``) whole, each other's first clause ("airborne: deciding", "last alert: ...", "BLIND: ...")."""
+        parts = [f"{_named(self.first.autopilot.system_id, self.first.memory)}: {first_text}"]
+        for sys_id, o in self.others.items():
+            parts.append(f"{_named(sys_id, o.memory)}: {o.announce.status_text.split('; ', 1)[0] or 'starting'}")
+        return " | ".join(parts)
+
     def wake_at(self, now: float, first: float | None) -> float | None:
         """When the earliest next grid step of any vehicle can complete (the loop sleeps until then)."""
         wakes = [w for w in (first, *(o.pipeline.wake_at(now) for o in self.others.values())) if w is not None]
@@ -99,3 +111,7 @@ class Vehicles:
 
     def report(self) -> dict:
         return {str(k): o.report() for k, o in self.others.items()}
+
+
+def _named(sys_id: int | None, memory: Any) -> str:
+    return f"system {sys_id}" + (f" ({memory.brief()})" if memory is not None else "")
