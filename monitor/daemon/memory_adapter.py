@@ -298,7 +298,7 @@ class VehicleMemory:
             airborne
             and self.idle_rpm is not None
             and motor_rpm is not None
-            and float(np.mean(motor_rpm)) <= self.idle_rpm  # NaN compares False: not idle
+            and float(np.sum(motor_rpm)) / len(motor_rpm) <= self.idle_rpm  # the mean (NaN compares False: not idle)
         )
         if not idle:
             self._idle_since = None
