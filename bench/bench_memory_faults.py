@@ -5,6 +5,7 @@
     python -m bench.bench_memory_faults --only daemons --pairs 5
     python -m bench.bench_memory_faults --only diskfull
     python -m bench.bench_memory_faults --only rss --landings 150
+    python -m bench.bench_memory_faults --only judged
 
 Each starts from a state dir holding one vehicle's 200-flight baseline (synthetic healthy flights of one quirky
 airframe, the summaries of ``monitor.memory.summary`` as the daemon makes them).
@@ -18,6 +19,10 @@ airframe, the summaries of ``monitor.memory.summary`` as the daemon makes them).
 - ``rss``: ``--landings`` landings in one process through the daemon's memory, from an empty history: the
   process's RSS every 25 landings and per landing (what the soak with learning at every landing grows by), and the
   Python heap left (``tracemalloc`` is not used: it changes what it measures; ``--heap`` adds it, slower).
+- ``judged``: why some of ``kill9``'s landings are "not learnt: not healthy against the vehicle's history": 100
+  flights the bench flies and 100 new summaries of the generator that seeded the history, each judged (as a landing
+  judges it) against a seeded history of 3, 20 and 200 flights: how many the landing would refuse, how many pass
+  the suspect and the fault level, the statistic's median and 95th percentile.
 - ``diskfull``: the state dir on a tmpfs (in a user and mount namespace: ``unshare``) with room for the baseline
   but not for a second copy of it: a landing is "not learnt: disk full", the file is unchanged and loads, no
   temporary file is left; with room made, the next landing is learnt.
@@ -144,6 +149,45 @@ def bench_rss(landings: int, heap: bool) -> dict:
         out["heap_kb_per_landing"] = round((tracemalloc.get_traced_memory()[0] - heap0) / 1024 / landings, 2)
     mem.close()
     shutil.rmtree(work, ignore_errors=True)
+    return out
+
+
+def bench_judged(sizes=(3, 20, 200), flights: int = 100) -> dict:
+    from monitor.daemon.memory_adapter import VehicleMemory
+    from monitor.memory import thresholds as th
+    from monitor.memory.judge import judge
+
+    def verdicts(normal, summaries) -> dict:
+        vs = [judge(normal, s) for s in summaries]
+        st = np.array([v["fault_statistic"] for v in vs])
+        refused = sum(v["label"] != 1 or v["confidence"] == "suspect" or bool(v.get("imbalance_rotors")) for v in vs)
+        return {
+            "refused_by_a_landing": int(refused),
+            "past_suspect": int((st >= th.SUSPECT_STATISTIC).sum()),
+            "past_fault": int((st >= th.FAULT_STATISTIC).sum()),
+            "statistic_p50": round(float(np.median(st)), 2),
+            "statistic_p95": round(float(np.percentile(st, 95)), 2),
+        }
+
+    out: dict = {"flights_each": flights, "suspect_statistic": th.SUSPECT_STATISTIC, "fault_statistic": th.FAULT_STATISTIC}
+    for size in sizes:
+        work = Path(tempfile.mkdtemp(prefix="pw-judged-"))
+        seed_state(work / "state", size)
+        mem = VehicleMemory(work / "state", RATE_HZ)
+        mem.identify(sysid=1)
+        flown = []
+        for k in range(flights):
+            fly(mem, k)
+            flown.append(mem.acc.summary)
+            mem.discard("judged, not learnt")
+        out[f"history_{size}"] = {
+            "seeding_generator_new_flights": verdicts(mem.normal, [flight_summary(k) for k in range(1000, 1000 + flights)]),
+            "flown_by_the_bench": verdicts(mem.normal, flown),
+            "own_spread_of_shares": np.sqrt(np.diag(mem.normal.own_cov)).round(5).tolist(),
+            "spread_judged_with": np.sqrt(np.diag(mem.normal.cov)).round(5).tolist(),
+        }
+        mem.close()
+        shutil.rmtree(work, ignore_errors=True)
     return out
 
 
@@ -321,7 +365,7 @@ def inside_diskfull() -> dict:
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="python -m bench.bench_memory_faults", description=__doc__.split("\n\n")[0])
-    p.add_argument("--only", choices=("kill9", "daemons", "diskfull", "rss"), action="append")
+    p.add_argument("--only", choices=("kill9", "daemons", "diskfull", "rss", "judged"), action="append")
     p.add_argument("--landings", type=int, default=30, help="kill9: landings begun (each ~2 s of CPU at 200 flights)")
     p.add_argument("--heap", action="store_true", help="rss: also the Python heap left per landing (tracemalloc)")
     p.add_argument("--pairs", type=int, default=5, help="daemons: pairs started at once")
@@ -344,6 +388,8 @@ def main(argv: list[str] | None = None) -> int:
             out[name] = bench_daemons(a.pairs)
         elif name == "rss":
             out[name] = bench_rss(a.landings, a.heap)
+        elif name == "judged":
+            out[name] = bench_judged()
         else:
             out[name] = bench_diskfull()
         out[name]["wall_s"] = round(time.monotonic() - t, 1)
