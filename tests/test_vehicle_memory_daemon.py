@@ -215,3 +215,24 @@ def test_the_daemon_asks_the_autopilot_for_its_uid_at_most_three_times_and_keys_
     d.autopilot.version_requests, d.autopilot.next_version_request = 0, 0.0
     d.tick(1e7)
     assert asked(link) == []
+
+
+def test_a_landing_reads_the_history_once_inside_its_write_and_keeps_none_of_it(tmp_path, monkeypatch):
+    """Between landings the daemon holds the normal and the counts STATUS shows, not every past flight's record
+    (its RSS grew with the history); a landing reads the file once, under the write lock, and learns from that."""
+    mem = VehicleMemory(tmp_path / "state", RATE_HZ)
+    mem.identify(sysid=1)
+    for k in range(4):
+        fly(mem, healthy_share(k), seed=k)
+        assert mem.disarmed(None) == "learnt"
+    reads = []
+    real = VehicleBaseline.from_text.__func__
+    monkeypatch.setattr(VehicleBaseline, "from_text", classmethod(lambda cls, *a: reads.append(a[1]) or real(cls, *a)))
+    fly(mem, healthy_share(4), seed=4)
+    reads.clear()  # the take-off's read (notes made on the ground)
+    assert mem.disarmed(None) == "learnt"
+    assert len(reads) == 1, reads
+    assert not [k for k, v in vars(mem).items() if isinstance(v, VehicleBaseline)]
+    assert mem.history.flights == 5 and mem.history.active == 5 and mem.normal.n_flights == 5
+    assert mem.status().startswith("; vehicle sysid-1: against 5 healthy flights of this vehicle")
+    assert len(VehicleBaseline.load(mem.path).flights) == 5
