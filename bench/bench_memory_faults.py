@@ -20,8 +20,8 @@ airframe, the summaries of ``monitor.memory.summary`` as the daemon makes them).
   process's RSS every 25 landings and per landing (what the soak with learning at every landing grows by), and the
   Python heap left (``tracemalloc`` is not used: it changes what it measures; ``--heap`` adds it, slower).
 - ``judged``: why some of ``kill9``'s landings are "not learnt: not healthy against the vehicle's history": 100
-  flights the bench flies and 100 new summaries of the generator that seeded the history, each judged (as a landing
-  judges it) against a seeded history of 3, 20 and 200 flights: how many the landing would refuse, how many pass
+  flights the bench flies and 100 new flights of the generator that seeded the history, each judged as a landing
+  judges it (the whole flight and its ends, ``monitor.memory.through_time``) against a seeded history of 3, 20 and 200 flights: how many the landing would refuse, how many pass
   the suspect and the fault level, the statistic's median and 95th percentile.
 - ``diskfull``: the state dir on a tmpfs (in a user and mount namespace: ``unshare``) with room for the baseline
   but not for a second copy of it: a landing is "not learnt: disk full", the file is unchanged and loads, no
@@ -53,6 +53,11 @@ ROOT = Path(__file__).resolve().parents[1]
 
 def flight_summary(k: int, seconds: float = 40.0):
     """The summary a healthy flight of the quirky airframe leaves (seeded by ``k``)."""
+    return flight_accumulator(k, seconds).summary
+
+
+def flight_accumulator(k: int, seconds: float = 40.0):
+    """``flight_summary``'s flight, its summary and 2-s marks (``monitor.memory.summary.ShareAccumulator``)."""
     from monitor.memory.summary import ShareAccumulator
 
     rng = np.random.default_rng(1000 + k)
@@ -61,7 +66,7 @@ def flight_summary(k: int, seconds: float = 40.0):
     x = 36.0 * share * (1 + 0.01 * rng.standard_normal((n, 4)))
     acc = ShareAccumulator("omega2", RATE_HZ)
     acc.table(x, 0.01 * rng.standard_normal(n), 0.01 * rng.standard_normal(n), np.ones(n, dtype=bool))
-    return acc.summary
+    return acc
 
 
 def seed_state(root: Path, flights: int = 200) -> Path:
@@ -155,10 +160,10 @@ def bench_rss(landings: int, heap: bool) -> dict:
 def bench_judged(sizes=(3, 20, 200), flights: int = 100) -> dict:
     from monitor.daemon.memory_adapter import VehicleMemory
     from monitor.memory import thresholds as th
-    from monitor.memory.judge import judge
+    from monitor.memory.through_time import judge_through_time
 
-    def verdicts(normal, summaries) -> dict:
-        vs = [judge(normal, s) for s in summaries]
+    def verdicts(normal, accs) -> dict:
+        vs = [judge_through_time(normal, a.summary, a.marks) for a in accs]
         st = np.array([v["fault_statistic"] for v in vs])
         refused = sum(v["label"] != 1 or v["confidence"] == "suspect" or bool(v.get("imbalance_rotors")) for v in vs)
         return {
@@ -178,10 +183,10 @@ def bench_judged(sizes=(3, 20, 200), flights: int = 100) -> dict:
         flown = []
         for k in range(flights):
             fly(mem, k)
-            flown.append(mem.acc.summary)
+            flown.append(mem.acc)
             mem.discard("judged, not learnt")
         out[f"history_{size}"] = {
-            "seeding_generator_new_flights": verdicts(mem.normal, [flight_summary(k) for k in range(1000, 1000 + flights)]),
+            "seeding_generator_new_flights": verdicts(mem.normal, [flight_accumulator(k) for k in range(1000, 1000 + flights)]),
             "flown_by_the_bench": verdicts(mem.normal, flown),
             "own_spread_of_shares": np.sqrt(np.diag(mem.normal.own_cov)).round(5).tolist(),
             "spread_judged_with": np.sqrt(np.diag(mem.normal.cov)).round(5).tolist(),
