@@ -83,6 +83,21 @@ def statistic_of(verdict: dict, rotors) -> float:
     return next((h["statistic"] for h in verdict["statistics"] if h["faulty_propellers"] == want), 0.0)
 
 
+def _rivals_with_the_load_cg(d, wi, stats, moves, collective, best) -> list[tuple[int, ...]]:
+    """The hypotheses other than ``best`` that, each with the CG moved as far as the load it leaves (the collective
+    change less its own rise) can move it (``load.with_load``), explain deviation ``d`` within ``SET_STATISTIC`` of
+    the best one so; [] where the flight carried its normal's load (or the normal keeps no range)."""
+    if not collective:
+        return []
+    dq, yq = _Q.T @ d, _Q.T @ YAW
+    with_cg = {}
+    for h in HYPOTHESES:
+        shift_h = load.cg_shift_arm(load.load_change(collective, damage_rise=len(h) * moves[h] / 4.0))
+        with_cg[h] = load.with_load(dq, wi, _CG, shift_h, _Q.T @ _template(h), yq) if shift_h > 0 else stats[h]
+    top_cg = max(with_cg.values())
+    return [h for h in HYPOTHESES if h != best and top_cg - with_cg[h] <= th.SET_STATISTIC]
+
+
 def judge(normal: Normal, s: FlightSummary) -> dict:
     """The flight (or the part flown so far) summarised in ``s`` against ``normal``: the verdict's fields."""
     d = normal.deviation(s)
@@ -149,24 +164,13 @@ def judge(normal: Normal, s: FlightSummary) -> dict:
     v = base | {"label": label_for(best), "faulty_propellers": list(best), "confidence": conf, "hypotheses": sets, "rule": why}
     if top - load_stat <= th.SET_STATISTIC:
         return load.rival_verdict(v, collective, load_stat)
-    if conf == "confident" and collective is not None:
-        # the load moved the CG too: the hypotheses that, each with the CG moved as far as the load left by its own
-        # rise can move it, explain the flight as well as the best one does so
-        dq, yq = _Q.T @ d, _Q.T @ YAW
-        with_cg = {}
-        for h in HYPOTHESES:
-            shift_h = load.cg_shift_arm(load.load_change(collective, damage_rise=len(h) * moves[h] / 4.0))
-            with_cg[h] = load.with_load(dq, wi, _CG, shift_h, _Q.T @ _template(h), yq) if shift_h > 0 else stats[h]
-        top_cg = max(with_cg.values())
-        rivals = [h for h in HYPOTHESES if h != best and top_cg - with_cg[h] <= th.SET_STATISTIC]
-        if rivals:
-            extra = [
-                {"faulty_propellers": list(h), "statistic": float(stats[h])} for h in sorted(rivals, key=lambda h: -stats[h])
-            ]
-            return v | {
-                "confidence": "ambiguous",
-                "hypotheses": sets + extra,
-                "rule": why + f"; with the CG moved by the load ({100 * collective:+.0f} % thrust), {len(rivals)} more "
-                f"explain it within {th.SET_STATISTIC:g}",
-            }
+    rivals = _rivals_with_the_load_cg(d, wi, stats, moves, collective, best) if conf == "confident" else []
+    if rivals:
+        extra = [{"faulty_propellers": list(h), "statistic": float(stats[h])} for h in sorted(rivals, key=lambda h: -stats[h])]
+        return v | {
+            "confidence": "ambiguous",
+            "hypotheses": sets + extra,
+            "rule": why + f"; with the CG moved by the load ({100 * collective:+.0f} % thrust), {len(rivals)} more "
+            f"explain it within {th.SET_STATISTIC:g}",
+        }
     return v
