@@ -597,7 +597,7 @@ def summarise(runs: list[dict], effects: dict[str, Effect], outside: list[str], 
     # 1. Resolution on our own simulator.
     for name, e in effects.items():
         cells = [{"size": size, **_cell([r | {"truth": size} for r in pick("own", name, size)], e.terms)} for size in e.sizes]
-        ok = [c["size"] for c in cells if c["named"] == c["runs"]]
+        ok = [c["size"] for c in cells if c["runs"] and c["named"] == c["runs"]]  # a cell with no run names nothing
         res["own"][name] = {"unit": e.unit, "cells": cells, "resolution": min(ok) if ok else None}
     res["own_nominal"] = _nominal_summary(pick("own", "none"))
     # 2. Outside the library.

@@ -89,3 +89,13 @@ def test_rescore_gives_each_own_run_the_delay_its_flights_drew(tmp_path):
     assert nominal["attitude_log_delay_ms"] != mass["attitude_log_delay_ms"]
     assert all(0.0 <= d <= 30.0 for d in nominal["attitude_log_delay_ms"] + mass["attitude_log_delay_ms"])
     assert "attitude_log_delay_ms" not in evalsim
+
+
+def test_a_cell_with_no_runs_gives_no_resolution():
+    from bench.evalsim_calibration import summarise
+
+    effects = _effects()
+    name = next(iter(effects))
+    res = summarise([], {name: effects[name]}, [], {})
+    assert res["own"][name]["resolution"] is None  # an empty cell names nothing, not "every run"
+    assert all(c["runs"] == 0 for c in res["own"][name]["cells"])
