@@ -56,11 +56,11 @@ IDLE_LANDED_S = 2.0
 # Longest wait at a landing for another writer of the state dir (`propwatch baseline note`: milliseconds): the loop
 # waits in it, and the unit's watchdog (WatchdogSec=10, pinged every 5 s) must still be pinged in time. Chosen.
 WRITE_WAIT_S = 3.0
-SEVERITY = {"fault": 2, "suspect": 4}
+SEVERITY = {"fault": 2, "suspect": 4}  # MAV_SEVERITY_CRITICAL / WARNING, as the decision's own alerts
 try:  # glibc's: hands back the heap that freed objects left (None elsewhere: nothing is handed back)
     _malloc_trim = ctypes.CDLL(None).malloc_trim
 except (OSError, AttributeError):
-    _malloc_trim = None  # MAV_SEVERITY_CRITICAL / WARNING, as the decision's own alerts
+    _malloc_trim = None
 
 
 def today_utc() -> str | None:
@@ -218,17 +218,10 @@ class VehicleMemory:
         k = self.key
         self.normal, self.history, self._status = None, None, None
         paused = unusable
-        if b is not None and (tuple(b.motor_names) != self.motor_names or b.basis != "omega2"):
-            paused = (
-                f"{self.path}: rotors {list(b.motor_names)} on {b.basis} shares, this monitor's "
-                f"{list(self.motor_names)} on omega2 (another airframe)"
-            )
-            b = None
-        if b is not None and b.ready:
-            try:
-                self.normal = b.normal()
-            except (ValueError, np.linalg.LinAlgError) as exc:  # checked values that still give no normal
-                paused, b = f"{self.path}: its flights give no normal ({exc})", None
+        try:
+            self.normal = self._normal_of(b)
+        except BaselineError as exc:
+            paused, b = str(exc), None
         if b is not None:
             self.history = History(len(b.flights), len(b.active()), b.compared_with_text())
         if paused:
@@ -397,17 +390,30 @@ class VehicleMemory:
         log.info("vehicle memory: flight learnt (%.0f s); %s", s.seconds, self.status().lstrip("; "))
         return "learnt"
 
+    def _normal_of(self, b: VehicleBaseline | None):
+        """Baseline ``b``'s normal (None where there is no baseline or it is not ready). Raises ``BaselineError``
+        where ``b`` cannot be this vehicle's: another airframe's rotors or basis, or checked values that still give
+        no normal."""
+        if b is None:
+            return None
+        if tuple(b.motor_names) != self.motor_names or b.basis != "omega2":
+            raise BaselineError(
+                f"{self.path}: rotors {list(b.motor_names)} on {b.basis} shares, this monitor's "
+                f"{list(self.motor_names)} on omega2 (another airframe)"
+            )
+        if not b.ready:
+            return None
+        try:
+            return b.normal()
+        except (ValueError, np.linalg.LinAlgError) as exc:
+            raise BaselineError(f"{self.path}: its flights give no normal ({exc})") from exc
+
     def _learn(self, b: VehicleBaseline | None, s, marks) -> VehicleBaseline:
         """Inside the state dir's write lock: the flight judged against the baseline as it is on disk (notes made
         while it flew included), through time (``monitor.memory.through_time``: a change its mean dilutes is not
         learnt), then added. Raises ``BaselineError`` where that baseline cannot be used."""
-        if b is not None and (tuple(b.motor_names) != self.motor_names or b.basis != "omega2"):
-            raise BaselineError(f"{self.path}: rotors {list(b.motor_names)} on {b.basis} shares (another airframe)")
-        if b is not None and b.ready:
-            try:
-                normal = b.normal()
-            except (ValueError, np.linalg.LinAlgError) as exc:
-                raise BaselineError(f"{self.path}: its flights give no normal ({exc})") from exc
+        normal = self._normal_of(b)
+        if normal is not None:
             v = judge_through_time(normal, s, marks)
             if v["label"] != 1 or v["confidence"] == "suspect" or v.get("imbalance_rotors"):
                 raise _NotHealthy

@@ -13,6 +13,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from monitor.diagnose.engine import Diagnosis
+from monitor.diagnose.physics_first import boot_s
 from monitor.labels import LABEL_TABLE
 from monitor.memory.baseline import MIN_FLIGHTS, VehicleBaseline
 from monitor.memory.summary import FlightSummary, Mark, accumulate
@@ -82,8 +83,8 @@ def judge_flight(d: Diagnosis, table, baseline: VehicleBaseline, vehicle_id: str
 
 def boot_clock(table):
     """A table row's boot-clock seconds (the last row's for a row past the end)."""
-    ts = table.timestamp_us
-    return lambda row: float(ts[min(int(row), len(ts) - 1)]) / 1e6
+    t_s = boot_s(table)
+    return lambda row: float(t_s[min(int(row), len(t_s) - 1)])
 
 
 def judgement(

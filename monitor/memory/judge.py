@@ -89,11 +89,11 @@ def _rivals_with_the_load_cg(d, wi, stats, moves, collective, best) -> list[tupl
     the best one so; [] where the flight carried its normal's load (or the normal keeps no range)."""
     if not collective:
         return []
-    dq, yq = _Q.T @ d, _Q.T @ YAW
+    dq = _Q.T @ d
     with_cg = {}
     for h in HYPOTHESES:
         shift_h = load.cg_shift_arm(load.load_change(collective, damage_rise=len(h) * moves[h] / 4.0))
-        with_cg[h] = load.with_load(dq, wi, _CG, shift_h, _Q.T @ _template(h), yq) if shift_h > 0 else stats[h]
+        with_cg[h] = load.with_load(dq, wi, _CG, shift_h, _DESIGNS[h]) if shift_h > 0 else stats[h]
     top_cg = max(with_cg.values())
     return [h for h in HYPOTHESES if h != best and top_cg - with_cg[h] <= th.SET_STATISTIC]
 

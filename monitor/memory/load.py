@@ -88,14 +88,14 @@ def rival_statistic(dq: np.ndarray, wi: np.ndarray, cg: np.ndarray, shift_arm: f
     return float(dq @ wi @ dq - r @ wi @ r)
 
 
-def with_load(dq: np.ndarray, wi: np.ndarray, cg: np.ndarray, shift_arm: float, template: np.ndarray, yaw: np.ndarray) -> float:
-    """chi^2(as normal) - the least penalised misfit of ``dq`` by a damage hypothesis (its rotors working harder by
-    a >= 0 along ``template``, the yaw balance moved by any b) together with the CG moved by c, c's (pitch, roll)
+def with_load(dq: np.ndarray, wi: np.ndarray, cg: np.ndarray, shift_arm: float, design: np.ndarray) -> float:
+    """chi^2(as normal) - the least penalised misfit of ``dq`` by a damage hypothesis (``design``'s columns: its
+    rotors working harder by a >= 0, the yaw balance moved by any b) together with the CG moved by c, c's (pitch, roll)
     pattern drawn with standard deviation half its bound sqrt(2) ``shift_arm`` (a Gaussian prior: a small move
     likelier than one at the bound): chi^2 + |c|^2 / sigma^2. As in ``monitor.memory.judge.statistics``, where the
     rotors would work less than normal, the yaw move alone."""
     sigma = np.sqrt(2.0) * shift_arm / 2.0
-    for free in (np.column_stack([template, yaw]), yaw[:, None]):
+    for free in (design, design[:, 1:]):
         x = np.column_stack([free, cg])
         pen = np.diag([0.0] * free.shape[1] + [1.0 / sigma**2] * cg.shape[1])
         coef = np.linalg.solve(x.T @ wi @ x + pen, x.T @ wi @ dq)

@@ -39,10 +39,11 @@ def thin(marks: list[Mark], whole: FlightSummary) -> list[Mark]:
     return keep[::step]
 
 
-def scan(normal: Normal, whole: FlightSummary, marks: list[Mark]) -> tuple[Mark, dict] | None:
-    """The candidate end of the flight with the largest statistic and its judgement; None where there is none."""
+def scan(normal: Normal, whole: FlightSummary, looks: list[Mark]) -> tuple[Mark, dict] | None:
+    """The end of the flight from one of ``looks`` (``thin``'s marks) with the largest statistic, and its judgement;
+    None where there is none."""
     best = None
-    for m in thin(marks, whole):
+    for m in looks:
         v = judge(normal, whole.minus(m.summary))
         if best is None or v["fault_statistic"] > best[1]["fault_statistic"]:
             best = (m, v)
@@ -54,7 +55,8 @@ def judge_through_time(normal: Normal, whole: FlightSummary, marks: list[Mark], 
     where the scan found a change the whole flight's mean diluted. ``boot_s_of_row`` maps a mark's row to the log's
     boot-clock seconds (None: rows are reported as they are)."""
     v = judge(normal, whole)
-    best = scan(normal, whole, marks)
+    looks = thin(marks, whole)
+    best = scan(normal, whole, looks)
     if best is None:
         return v | {"through_time": None}
     m, u = best
@@ -64,7 +66,7 @@ def judge_through_time(normal: Normal, whole: FlightSummary, marks: list[Mark], 
         "from_row": m.row,
         "from_boot_s": None if boot_s_of_row is None else float(boot_s_of_row(m.row)),
         "seconds": part.seconds,
-        "looks": len(thin(marks, whole)),
+        "looks": len(looks),
         "fault": th.SCAN_FAULT_STATISTIC,
         "suspect": th.SCAN_SUSPECT_STATISTIC,
     }

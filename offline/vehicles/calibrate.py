@@ -29,7 +29,7 @@ import numpy as np
 from monitor.memory import thresholds as th
 from monitor.memory.judge import judge, statistic_of
 from monitor.memory.normal import normal_of
-from monitor.memory.through_time import scan
+from monitor.memory.through_time import scan, thin
 from offline.vehicles.evaluate import CLAIM, REFERENCES, later_flights, load_fleet
 
 
@@ -41,12 +41,9 @@ def calibrate_memory_thresholds(fleet: Path) -> dict:
             dev.append(normal_of([r["summary"] for r in refs]).deviation(f["summary"]))
     prior = np.cov(np.array(dev).T) / (1.0 + 1.0 / REFERENCES)
     with mock.patch.object(th, "PRIOR_COV", tuple(map(tuple, prior))):
-        judged = [(f, judge(normal_of([r["summary"] for r in refs]), f["summary"])) for refs, f in later_flights(by)]
-        looks = [
-            scan(normal_of([r["summary"] for r in refs]), f["summary"], f["marks"])
-            for refs, f in later_flights(by)
-            if not f["faulty"]
-        ]
+        normals = [(f, normal_of([r["summary"] for r in refs])) for refs, f in later_flights(by)]
+        judged = [(f, judge(n, f["summary"])) for f, n in normals]
+        looks = [scan(n, f["summary"], thin(f["marks"], f["summary"])) for f, n in normals if not f["faulty"]]
     healthy = [v["fault_statistic"] for f, v in judged if not f["faulty"]]
     scan_max = [0.0 if b is None else b[1]["fault_statistic"] for b in looks]
     fault99 = float(np.quantile(healthy, 0.99))

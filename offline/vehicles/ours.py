@@ -147,23 +147,18 @@ def write_fleet(
     for c0 in range(0, n_flights, CHUNK):
         idx = np.arange(c0, min(n_flights, c0 + CHUNK))
         cond = np.zeros((len(idx), 4), dtype=int)
-        sigs = np.empty((len(idx), 4), dtype=object)
+        healthy = np.array([[phys[i].healthy_signature(r) for r in range(4)] for i in idx], dtype=object)
+        sigs = healthy.copy()
         for b, i in enumerate(idx):
-            p, f = plan[i], phys[i]
-            for r in range(4):
-                sigs[b, r] = f.healthy_signature(r)
+            p = plan[i]
             if p["rotor"]:
                 r = p["rotor"] - 1
                 cond[b, r] = 1 if p["kind"] == "bent" else 2
-                sigs[b, r] = f.signature(r, p["kind"])
+                sigs[b, r] = phys[i].signature(r, p["kind"])
         seeds = np.array([flight_sim_seed(seed * 1000 + SEED_CODE, int(i)) for i in idx])
         props = build_propellers(vehicle, cond, kind="quadratic", rng_seed=seeds, rotor_signatures=sigs)
         onset = np.array([np.inf if plan[i]["onset_s"] is None else plan[i]["onset_s"] for i in idx])
         if np.isfinite(onset).any():
-            healthy = np.empty((len(idx), 4), dtype=object)
-            for b, i in enumerate(idx):
-                for r in range(4):
-                    healthy[b, r] = phys[i].healthy_signature(r)
             before = build_propellers(vehicle, np.zeros_like(cond), kind="quadratic", rng_seed=seeds, rotor_signatures=healthy)
             props = SwitchedPropellers(before, props, np.where(np.isfinite(onset), onset, 1e9))
         payload = np.array([plan[i]["payload_frac"] * vehicle.mass_kg for i in idx])
