@@ -39,10 +39,11 @@ def rpm_at(t: float, rng, onset_s: float = math.inf, rotor: int = 3, loss: float
     return HOVER_RPM * np.sqrt(w2) * (1.0 + 0.002 * rng.standard_normal(4))
 
 
-def replay(inputs, duration_s: float, seed: int, after_step=None) -> tuple[Decision, list]:
+def replay(inputs, duration_s: float, seed: int, after_step=None, hop: int = 1) -> tuple[Decision, list]:
     """An airborne flight at the decision's own inputs: ``inputs(t, rng)`` gives each step's (RPM, heading-frame
-    velocity, horizontal specific force), either context None; every window is classified healthy (P = 0.01), so
-    whatever is announced comes from the shares. ``after_step(d, t)`` may touch the decision before each window."""
+    velocity, horizontal specific force), either context None; every ``hop``-th window is classified healthy
+    (P = 0.01), so whatever is announced comes from the shares. ``after_step(d, t)`` may touch the decision before
+    each window."""
     d = Decision(DecisionConfig(), RATE_HZ, WINDOW, use_stored_calibration=False)
     rng = np.random.default_rng(seed)
     out = []
@@ -52,13 +53,16 @@ def replay(inputs, duration_s: float, seed: int, after_step=None) -> tuple[Decis
         d.step(t, StepInputs(True, float(np.mean(rpm)), 0.05, 0.1, 15.5, rpm, vel, f))
         if after_step is not None:
             after_step(d, t)
-        if j >= WINDOW - 1:
+        if j >= WINDOW - 1 and (j - WINDOW + 1) % hop == 0:
             out += d.window_evidence(t, WindowEvidence(np.full(4, 0.01)))
     return d, out
 
 
-def fly(with_velocity: bool, duration_s: float = 150.0, **fault) -> list:
-    return replay(lambda t, rng: (rpm_at(t, rng, **fault), velocity(t) if with_velocity else None, None), duration_s, 11)[1]
+def fly(with_velocity: bool, duration_s: float = 150.0, hop: int = 1, **fault) -> list:
+    def inputs(t, rng):
+        return rpm_at(t, rng, **fault), velocity(t) if with_velocity else None, None
+
+    return replay(inputs, duration_s, 11, hop=hop)[1]
 
 
 def test_flapping_trim_in_fast_flight_raises_nothing_when_velocity_is_streamed():
@@ -75,6 +79,38 @@ def test_a_loss_in_fast_cruise_after_the_slope_is_learnt_names_the_right_propell
     assert all(a.propellers == (3,) for a in out), [(a.t_s, a.text) for a in out]
     faults = [a for a in out if a.level == "fault"]
     assert faults and 120.0 < faults[0].t_s <= 130.0, [(a.t_s, a.text) for a in out]
+
+
+def test_a_loss_in_fast_cruise_is_named_as_soon_with_a_window_every_second_as_every_step():
+    """``propwatch diagnose`` feeds the rule one window every 20 steps (``--hop 20``), the daemon one every step. The
+    plane must learn as much per second of flight either way. When each window counted as one step's worth of new
+    data, a hop of 20 learnt the plane twenty times slower, and this flight read "PROP 2 or 2+3?" at 80 s, 40 s
+    before the loss."""
+    every_step = [a for a in fly(with_velocity=True, onset_s=120.0, rotor=3, loss=0.10) if a.level == "fault"]
+    every_s = fly(with_velocity=True, onset_s=120.0, rotor=3, loss=0.10, hop=20)
+    faults = [a for a in every_s if a.level == "fault"]
+    assert all(a.propellers == (3,) for a in every_s), [(a.t_s, a.text) for a in every_s]
+    assert faults and 120.0 < faults[0].t_s <= 130.0, [(a.t_s, a.text) for a in every_s]
+    assert abs(faults[0].t_s - every_step[0].t_s) <= 2.0, (faults[0].t_s, every_step[0].t_s)
+    assert fly(with_velocity=True, hop=20) == []  # and the healthy flight stays quiet
+
+
+def test_the_plane_learns_as_much_per_second_fed_every_step_or_every_second():
+    """The same 100 s of flight into two shares, one asked for evidence every step, one every 20 steps: the plane's
+    doubt at (4, 5) m/s and its learnt slopes agree (each window counted as one new step made the hop-20 doubt 5-6 times larger here)."""
+    shares = {hop: RotorShare(WINDOW, RATE_HZ, 0.05, average_s=2.0) for hop in (1, 20)}
+    rng = np.random.default_rng(5)
+    for j in range(int(100 * RATE_HZ)):
+        t = (j + 1) / RATE_HZ
+        rpm, vel = rpm_at(t, rng), velocity(t)
+        for hop, s in shares.items():
+            s.push(rpm, vel)
+            if j % hop == hop - 1:
+                s.llr(hop / RATE_HZ, quiet=True)
+    at = np.array([4.0, 5.0, 0.0, 0.0])
+    ratio = shares[20].line(at)[1] / shares[1].line(at)[1]
+    assert np.all((ratio > 0.5) & (ratio < 2.0)), ratio
+    np.testing.assert_allclose(shares[20]._theta[:, 1], shares[1]._theta[:, 1], rtol=0.1)
 
 
 def test_the_line_learns_the_trim_per_m_s_and_says_what_it_does_not_know():

@@ -207,8 +207,8 @@ class RotorShare:
     smallest worth an alert: the reference is half of it): ``f U_i' S^-1 (e - f U_i / 2)``, S per axis the healthy
     spread 2 sigma^2 (``sigma = SHARE_SIGMA`` per rotor) plus what the plane does not know there. With
     S = 2 sigma^2 on both axes it is ``delta (x_i - b_i - delta/2) / sigma^2``, delta = f/2, the per-rotor test.
-    Windows that overlap by all but one step are not independent: the caller weighs each by ``dt / average_s``
-    (one independent sample per averaging span), and the filter counts each window as 1/``window`` of a sample.
+    Overlapping windows are not independent: the caller weighs each by ``dt / average_s`` (one independent sample
+    per averaging span), and the filter counts each window's new steps, 1/``window`` of a sample each.
     """
 
     def __init__(
@@ -350,7 +350,12 @@ class RotorShare:
                     P[i][i] += q[i]
         if not learn:
             return
-        r = self._r * self.window  # overlapping windows: one independent sample per ``window`` of them
+        # Overlapping windows: a window brings the steps that are new since the last one, each 1/``window`` of an
+        # independent sample. At every step (the daemon's default) that is one step; where windows are fed every
+        # ``hop`` steps (``propwatch diagnose --hop 20``) it is ``hop`` of them, so the plane learns as fast per
+        # second of flight at any cadence.
+        new_steps = min(max(round(dt_s * self.rate_hz), 1), self.window)
+        r = self._r * self.window / new_steps
         x = _floats(regressors)
         y = _floats(trims)
         for a in range(2):
