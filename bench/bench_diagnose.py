@@ -119,7 +119,7 @@ def stages(tlog: Path, model: Path | None) -> list[tuple[str, float]]:
     feats = compute_features(table.signals(), clf.info.features)
     ends = engine.window_ends(table, feats, clf.info.window, 20)
     mark("features and usable windows")
-    labels, faults = engine.predict_at(clf, feats, ends, clf.info.window, 4096)
+    labels, faults = engine.predict_at(clf, feats, ends, clf.info.window, engine.PREDICT_BATCH_WINDOWS)
     mark(f"network ({len(ends)} windows)")
     engine.replay_decision(table, clf, DecisionConfig(), ends, labels, faults)
     mark("decision replay")

@@ -11,7 +11,7 @@ from test_diagnose_fixtures import build_model, write_tlog
 
 from monitor.daemon.config import MonitorConfig, ResampleConfig
 from monitor.daemon.pipeline import Pipeline
-from monitor.diagnose.engine import predict_at, window_ends
+from monitor.diagnose.engine import PREDICT_BATCH_WINDOWS, predict_at, window_ends
 from monitor.esc import PAPER_ESC
 from monitor.features import compute_features
 from monitor.logs import raw as raw_mod
@@ -78,3 +78,21 @@ def test_parity_with_the_shipped_cnn(tmp_path):
     common = sorted(set(live) & set(offline))
     assert len(common) > 0.9 * max(len(live), len(offline)) > 150
     assert all(np.array_equal(live[t], offline[t]) for t in common)
+
+
+@pytest.mark.parametrize("shipped", [False, True])
+def test_diagnose_batches_give_the_outputs_of_one_call(tmp_path, shipped):
+    """``diagnose`` classifies in calls of ``PREDICT_BATCH_WINDOWS`` windows: its outputs must be those of one call
+    of all the windows (the JSON does not depend on how the windows were split), here for a count not a multiple
+    of 4, whose last windows take the runtime's other path."""
+    if shipped and not SHIPPED.is_file():
+        pytest.skip(f"no shipped classifier at {SHIPPED}")
+    clf = Classifier(SHIPPED if shipped else build_model(tmp_path / "m.onnx"))
+    table = read_log(write_tlog(tmp_path / "f.tlog", duration_s=30.0, faulty=2, seed=3), esc=PAPER_ESC)
+    feats = compute_features(table.signals(), clf.info.features)
+    ends = window_ends(table, feats, clf.info.window, hop=1)
+    ends = ends[: len(ends) - (len(ends) - 3) % 4]  # 3 windows past a multiple of 4
+    assert len(ends) > 3 * PREDICT_BATCH_WINDOWS
+    one = predict_at(clf, feats, ends, clf.info.window, batch=len(ends))
+    split = predict_at(clf, feats, ends, clf.info.window, batch=PREDICT_BATCH_WINDOWS)
+    assert all(np.array_equal(a, b) for a, b in zip(one, split))

@@ -143,6 +143,27 @@ def test_bulk_unpacking_equals_pymavlink_frame_by_frame(tmp_path):
     assert fast.attitude_rad.t_us[-1] == 14_780_000 and fast.motor_cmd.values[-1].tolist() == [1500, 1510, 1520, 1530]
 
 
+def test_the_bulk_crc_is_mavlinks_and_a_clean_log_passes_it(tmp_path):
+    """A wrong bulk CRC would only make every log fall back to the slow frame-by-frame read (same streams): here it
+    must equal pymavlink's X.25 over rows of any bytes and CRC extra, and a clean log's frames must all pass it."""
+    from pymavlink.generator.mavcrc import x25crc
+
+    from monitor.logs.mavbulk import unpack_groups, x25_crc
+    from monitor.logs.tlog import CORE_IDS, _mavlink, frame_starts
+
+    rows = np.random.default_rng(3).integers(0, 256, size=(37, 45), dtype=np.uint8)[:, 2:]  # not contiguous
+    for extra in (0, 39, 255):
+        want = []
+        for r in rows:
+            crc = x25crc(bytes(r))
+            crc.accumulate(bytes([extra]))
+            want.append(crc.crc)
+        assert x25_crc(rows, extra).tolist() == want
+    buf = write_tlog(tmp_path / "f.tlog", duration_s=12.0, faulty=3).read_bytes()
+    starts, skipped, _ = frame_starts(buf, CORE_IDS)
+    assert skipped == 0 and unpack_groups(buf, starts, _mavlink()[1]) is not None
+
+
 def test_a_bad_crc_falls_back_to_frame_by_frame(tmp_path):
     from monitor.logs.tlog import read_tlog
 

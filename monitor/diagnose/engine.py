@@ -71,6 +71,12 @@ from monitor.resample import US_PER_S
 from monitor.resources import shipped
 
 DEFAULT_MODEL = shipped("classifier.onnx")
+# Windows per classifier call. onnxruntime's outputs for a window change in their last bits with the window's place
+# in its call unless every call holds a multiple of 4 windows: then they equal those of one call of them all (bit for
+# bit at 4, 8, 12, 16, 32, 64, 100 and 4096 windows a call; not at 1-3, 5-7, 9-11, 13-15, 17). Smaller calls keep the
+# runtime's buffers small: one call of 1794 windows (a 30-min log at the 1 s hop) spent ~0.17 s of CPU more, most of
+# it in page faults, than calls of 32-128 (`python -m bench.bench_diagnose --model models/classifier.onnx --stages`).
+PREDICT_BATCH_WINDOWS = 32
 
 
 def default_model(vehicle_yaml: str | None) -> Path:
@@ -295,7 +301,7 @@ def diagnose_table(
     table: FlightTable,
     clf: Classifier,
     hop: int = 1,
-    batch: int = 4096,
+    batch: int = PREDICT_BATCH_WINDOWS,
     esc: EscCurve | None = None,
     vehicle=None,
     airframe_declared: bool = True,
@@ -713,7 +719,8 @@ def apply_in_flight_fault(d: Diagnosis, motor_names, unfit: list[str] = ()) -> N
 
 
 def predict_at(clf: Classifier, feats: np.ndarray, ends: np.ndarray, window: int, batch: int):
-    """Classifier outputs for the windows ending at ``ends`` (batched to bound memory)."""
+    """Classifier outputs for the windows ending at ``ends``, ``batch`` windows per call (to bound memory). Any
+    multiple of 4 gives the outputs of one call of them all (``PREDICT_BATCH_WINDOWS``); 1, the daemon's."""
     starts = ends - window + 1
     out_l, out_f = [], []
     for i in range(0, len(ends), batch):

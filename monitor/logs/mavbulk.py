@@ -81,13 +81,25 @@ def _dtype(cls) -> np.dtype:
 
 
 def x25_crc(rows: np.ndarray, extra: int) -> np.ndarray:
-    """MAVLink's X.25 CRC of each row of bytes (N, M), then the message's CRC extra byte."""
-    crc = np.full(len(rows), X25_INIT, dtype=np.uint32)
-    cols = list(rows.T.astype(np.uint32)) + [np.full(len(rows), extra, dtype=np.uint32)]
-    for b in cols:
-        tmp = b ^ (crc & 0xFF)
-        tmp = (tmp ^ (tmp << 4)) & 0xFF
-        crc = ((crc >> 8) ^ (tmp << 8) ^ (tmp << 3) ^ (tmp >> 4)) & 0xFFFF
+    """MAVLink's X.25 CRC of each row of bytes (N, M), then the message's CRC extra byte.
+
+    Byte-wide and 16-bit arithmetic, in place: the shifts wrap where the CRC's masks (& 0xFF, & 0xFFFF) cut."""
+    n = len(rows)
+    crc = np.full(n, X25_INIT, dtype=np.uint16)
+    tmp = np.empty(n, dtype=np.uint8)
+    t16 = np.empty(n, dtype=np.uint16)
+    shifted = np.empty(n, dtype=np.uint16)
+    for b in [*np.ascontiguousarray(rows.T), np.full(n, extra, dtype=np.uint8)]:
+        np.bitwise_xor(b, crc, out=tmp, casting="unsafe")  # b ^ (crc & 0xFF)
+        tmp ^= tmp << 4
+        t16[:] = tmp
+        crc >>= 8
+        np.left_shift(t16, 8, out=shifted)
+        crc ^= shifted
+        np.left_shift(t16, 3, out=shifted)
+        crc ^= shifted
+        t16 >>= 4
+        crc ^= t16
     return crc
 
 
