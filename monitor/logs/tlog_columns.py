@@ -32,6 +32,10 @@ def _by_type(groups: list[Group]) -> dict[str, tuple[np.ndarray, np.ndarray, np.
         parts.setdefault(g.cls.msgname, []).append(g)
     out = {}
     for name, gs in parts.items():
+        if len(gs) == 1:  # one group's rows are in file order already
+            g = gs[0]
+            out[name] = (g.rows, g.values, g.sys_id, g.comp_id)
+            continue
         rows = np.concatenate([g.rows for g in gs])
         order = np.argsort(rows, kind="stable")
         out[name] = (
