@@ -74,8 +74,9 @@ DEFAULT_MODEL = shipped("classifier.onnx")
 # Windows per classifier call. onnxruntime's outputs for a window change in their last bits with the window's place
 # in its call unless every call holds a multiple of 4 windows: then they equal those of one call of them all (bit for
 # bit at 4, 8, 12, 16, 32, 64, 100 and 4096 windows a call; not at 1-3, 5-7, 9-11, 13-15, 17). Smaller calls keep the
-# runtime's buffers small: one call of 1794 windows (a 30-min log at the 1 s hop) spent ~0.17 s of CPU more, most of
-# it in page faults, than calls of 32-128 (`python -m bench.bench_diagnose --model models/classifier.onnx --stages`).
+# runtime's buffers small: on a 30-min log (1794 windows at the 1 s hop) the network stage of `python -m
+# bench.bench_diagnose --model models/classifier.onnx --stages` took 0.66 s of CPU in one call, 0.46 s in calls of 32
+# (the difference mostly page faults; 16-128 a call within 0.02 s of each other).
 PREDICT_BATCH_WINDOWS = 32
 
 
