@@ -60,7 +60,7 @@ class FlightSteps:
         )
 
     def each(self) -> Iterator[StepInputs]:
-        """``inputs(j)`` of every step in order, the same values at a third of the cost: each column converted to
+        """``inputs(j)`` of every step in order, the same values at half the cost: each column converted to
         Python once, and every row's mean RPM at once as ``of_state``'s sum / size (numpy adds a row's values in the
         same order either way; tests/test_decision_replay_steps.py holds the two equal)."""
         n = len(self)
