@@ -232,7 +232,8 @@ class RotorShare:
         self._P: list[list[list[float]]] = [[[0.0] * 3 for _ in range(3)] for _ in range(2)]
         self._r = 2.0 * sigma**2  # one independent sample's variance per axis
         # Intercept drift per second that makes the filter's steady gain per window dt / SHARE_BASELINE_TAU_S
-        # (a random walk with gain K << 1 has K^2 = q dt / R per update; R = r * window per overlapping window).
+        # (a random walk with gain K << 1 has K^2 = q dt / R per update; R = r * window / (dt * rate_hz) for a window
+        # bringing dt * rate_hz new steps, ``_update_line``), at any cadence.
         self._q_b = self._r * self.window / (SHARE_BASELINE_TAU_S**2 * rate_hz)
         self._base = []  # the yaw balance's windows while the baseline is learnt
         self._wording_b: np.ndarray | None = None  # (pitch, roll) intercept the alert wording reads (yaw_free_rise)
