@@ -6,8 +6,9 @@ Each calibration gets two healthy flights of the nominal vehicle (``offline.cali
 register entry drawn except the ones the term library fits), so any term named there is named wrongly. For every
 pair the first selection round's numbers of every candidate are kept (held-out BIC gain, pooled RMS cut, whether
 it is identifiable and consistent); a pair is wrongly named under thresholds (gain, cut) when some identifiable,
-consistent candidate clears both. The held-out BIC threshold is the smallest on the grid that keeps the wrongly
-named pairs at or below ``--target``, with a pooled-RMS floor at each value of ``--rms-floors`` (the floor is not
+consistent candidate clears both ("in force": each candidate's own gate, ``fit.gain_threshold``, which grows with
+the held-out length beyond 2 x 40 s flights). The held-out BIC threshold is the smallest on the grid that keeps the
+wrongly named pairs at or below ``--target``, with a pooled-RMS floor at each value of ``--rms-floors`` (the floor is not
 a gate in force: this shows what one would change); the figures are printed beside the gates in force. Never run on the evaluation-only simulator:
 those flights measure the gates (``bench/evalsim_calibration.py``), they do not set them.
 """
@@ -34,8 +35,9 @@ def first_round(tables, vehicle) -> dict:
     return {"cause": r.cause, "candidates": {n: c["verdict"] for n, c in r.candidates.items()}}
 
 
-def wrongly_named(rows: list[dict], gain_min: float, cut_min_pct: float) -> list[str | None]:
-    """Per pair: the term that thresholds (gain, cut) would name first, or None."""
+def wrongly_named(rows: list[dict], gain_min: float | None, cut_min_pct: float) -> list[str | None]:
+    """Per pair: the term that thresholds (gain, cut) would name first, or None. ``gain_min`` None: each
+    candidate's gain gate in force (``fit.gain_threshold``, as its verdict records it)."""
     out = []
     for row in rows:
         ok = {
@@ -43,7 +45,7 @@ def wrongly_named(rows: list[dict], gain_min: float, cut_min_pct: float) -> list
             for n, v in row["candidates"].items()
             if v["gates"]["identifiable"]["passed"]
             and v["gates"]["consistency"]["passed"]
-            and v["heldout_bic_gain"] > gain_min
+            and v["heldout_bic_gain"] > (v["gates"]["heldout_bic_gain"]["threshold"] if gain_min is None else gain_min)
             and v["gates"]["heldout_bic_gain"]["pooled_rms_cut_pct"] >= cut_min_pct
         }
         out.append(max(ok, key=ok.get) if ok else None)
@@ -99,7 +101,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--rms-floors", type=float, nargs="+", default=[0.0, 1.0, 2.0], help="pooled RMS cut floors, %%")
     ap.add_argument("--out", type=Path, default=None)
     a = ap.parse_args(argv)
-    from offline.calibrate.fit import MAX_SIGNAL_WORSENING, MIN_DELTA_BIC, WORSENING_SE
+    from offline.calibrate.fit import GATE_HELDOUT_S, MAX_SIGNAL_WORSENING, MIN_DELTA_BIC, WORSENING_SE
     from offline.calibrate.nominal_flights import nominal_flights
 
     vehicle = load_vehicle(DEFAULT_VEHICLE)
@@ -109,11 +111,14 @@ def main(argv: list[str] | None = None) -> int:
         row = {"pair": p, **first_round(tabs, vehicle)}
         rows.append(row)
         print(json.dumps({"pair": p, "cause": row["cause"]}), file=sys.stderr, flush=True)
-    in_force = wrongly_named(rows, MIN_DELTA_BIC, 0.0)
+    in_force = wrongly_named(rows, None, 0.0)
+    thresholds = [v["gates"]["heldout_bic_gain"]["threshold"] for r in rows for v in r["candidates"].values()]
     out = {
         "config": vars(a) | {"out": str(a.out)},
         "gates_in_force": {
             "heldout_bic_gain": MIN_DELTA_BIC,
+            "heldout_bic_gain_per_heldout_s": MIN_DELTA_BIC / GATE_HELDOUT_S,
+            "heldout_bic_gain_in_force_range": [min(thresholds), max(thresholds)],
             "consistency_rms_ratio": MAX_SIGNAL_WORSENING,
             "consistency_se_rise": WORSENING_SE,
         },

@@ -17,7 +17,7 @@ the fit blocks and scored on the held-out blocks with the selection's BIC (``fit
 - ``slow_kinematic_error`` (no parameter): the attitude kinematics' residual correlated for longer than
   ``KIN_CORR_TIME_MAX`` samples, the logged rates and attitude drifting apart slowly (coloured noise).
 
-A probe whose held-out BIC gain exceeds the selection's gate (``fit.MIN_DELTA_BIC``), or a kinematic residual
+A probe whose held-out BIC gain exceeds the selection's gate (``fit.gain_threshold``), or a kinematic residual
 beyond its correlation-time ceiling, is reported with its size and where it sits (signal, rotor, delay); the cause
 stays whatever the library named: a probe never becomes a term of the calibrated vehicle.
 
@@ -34,7 +34,7 @@ import numpy as np
 from scipy.optimize import minimize_scalar
 
 from monitor.vehicle import VehicleConfig
-from offline.calibrate.fit import MIN_DELTA_BIC, Data, bic, correlation_time, fit_terms, rms_by_signal
+from offline.calibrate.fit import Data, bic, correlation_time, fit_terms, gain_threshold, rms_by_signal
 from offline.calibrate.physics import KIN_SIGNALS, integrated, residuals, rotor_forces
 from offline.calibrate.prepare import Segment, sg_smooth
 from offline.calibrate.terms import TERMS
@@ -212,7 +212,8 @@ def unexplained_residual(data: Data, vehicle: VehicleConfig, res: list[dict[str,
     # One rotor at a time: keep only the best rotor's torque probe.
     rotor = max((n for n in probes if n.startswith("rotor_torque_")), key=lambda n: probes[n]["heldout_bic_gain"])
     kept = {n: p for n, p in probes.items() if n == rotor or not n.startswith("rotor_torque_")}
-    found = {n: p for n, p in kept.items() if p.get("heldout_bic_gain", -np.inf) > MIN_DELTA_BIC}
+    threshold = gain_threshold(data)
+    found = {n: p for n, p in kept.items() if p.get("heldout_bic_gain", -np.inf) > threshold}
     lines = []
     slow = kept["slow_kinematic_error"]
     if slow["found"]:
@@ -228,11 +229,11 @@ def unexplained_residual(data: Data, vehicle: VehicleConfig, res: list[dict[str,
         at = f", rotor {n.rsplit('_', 1)[1]}" if n.startswith("rotor_torque_") else ""
         lines.append(
             f"{n} ({p['value']:+.3g} {p['unit'].split(' (')[0]}): {where}{at}, held-out RMS "
-            f"{p['heldout_rms_cut_pct'][where]:.1f} % of it, held-out BIC gain {p['heldout_bic_gain']:.1f} > {MIN_DELTA_BIC:g}"
+            f"{p['heldout_rms_cut_pct'][where]:.1f} % of it, held-out BIC gain {p['heldout_bic_gain']:.1f} > {threshold:.1f}"
         )
     return {
         "found": bool(found),
         "summary": "; ".join(lines) if lines else "none above the gate",
-        "threshold": MIN_DELTA_BIC,
+        "threshold": round(threshold, 1),
         "probes": kept,
     }
