@@ -5,6 +5,8 @@ of held-out log, never below it).
     nice python -m bench.gate_length own --out FILE [--pairs 40] [--duration-s 80] [--seed 12]
     nice python -m bench.gate_length own-lag --out FILE [--lags-ms 35 45 60] [--seeds 3] [--duration-s 80]
     nice python -m bench.gate_length evalsim --out FILE [--nominal 60] [--duration-s 80] [--seed-base 300000]
+    nice python -m bench.gate_length evalsim-lag --out FILE [--lags-ms 45] [--seeds 5] [--duration-s 80]
+        [--seed-base 190000]
 
 1. ``own`` (OUR simulator, nothing hidden): ``offline.calibrate.nominal_flights`` pairs, as
    ``offline.calibrate.derive_gates`` flies them (seed ``--seed`` x 1000 + pair): anything named is named wrongly.
@@ -12,6 +14,8 @@ of held-out log, never below it).
    ``bench.evalsim_calibration``'s own phase (``own_tables``, seeds 0..``--seeds``-1): how often the lag is named.
 3. ``evalsim`` (the evaluation-only simulator, nothing hidden, fresh seeds; run only with the gate frozen):
    ``bench.evalsim_calibration``'s nothing-hidden runs (``eval_specs(--seed-base + seed, ...)``).
+4. ``evalsim-lag`` (the evaluation-only simulator, run only with the gate frozen): ``bench.yaw_spinup evalsim``'s
+   runs with every rotor lagging, the same flights (``--seed-base`` 190000: docs/CALIBRATION.md's 2 x 80 s table).
 
 Each flight pair is flown once and calibrated with each gate (where the fixed gate names nothing and reports no
 unexplained residual, the gate in force cannot either, and its result is the fixed gate's, ``from_fixed``). Per run, per gate: the terms named, the unexplained residual's
@@ -100,6 +104,25 @@ def evalsim(nominal: int, duration_s: float, seed_base: int):
         )
 
 
+def evalsim_lag(lags_ms: list[float], seeds: int, duration_s: float, seed_base: int):
+    """``bench.yaw_spinup evalsim``'s lag runs: every rotor lagging by ``lag`` ms, flights ``motor_lag_specs(...,
+    seed_base + 100 * lag + s)`` (the default seed base flies docs/CALIBRATION.md's 2 x 80 s lag table again)."""
+    from bench.evalsim_calibration import _af, eval_tables
+    from offline.evalsim.sets import motor_lag_specs
+
+    for lag in lags_ms:
+        plan = [seed_base + 100 * int(lag) + s for s in range(seeds)]
+        specs = []
+        for seed in plan:
+            taus = [lag / 1000.0] * 4
+            specs += [_af(sp, motor_thrust_efficiency=(1.0,) * 4) for sp in motor_lag_specs(taus, 2, seed, duration_s)]
+        tabs = eval_tables(specs)
+        for k, seed in enumerate(plan):
+            yield {"sim": "evalsim", "effect": "lag_all_rotors", "lag_ms": lag, "seed": seed} | both_gates(
+                tabs[2 * k : 2 * k + 2]
+            )
+
+
 def summarise(rows: list[dict]) -> dict:
     out = {}
     for gate in ("fixed", "scaled"):
@@ -131,7 +154,11 @@ def main(argv: list[str] | None = None) -> int:
     e = sub.add_parser("evalsim")
     e.add_argument("--nominal", type=int, default=60)
     e.add_argument("--seed-base", type=int, default=300_000)
-    for p in (o, ol, e):
+    el = sub.add_parser("evalsim-lag")
+    el.add_argument("--lags-ms", type=float, nargs="+", default=[45.0])
+    el.add_argument("--seeds", type=int, default=5)
+    el.add_argument("--seed-base", type=int, default=190_000)
+    for p in (o, ol, e, el):
         p.add_argument("--out", type=Path, required=True)
         p.add_argument("--duration-s", type=float, default=80.0)
     a = ap.parse_args(argv)
@@ -139,6 +166,8 @@ def main(argv: list[str] | None = None) -> int:
         runs = own(a.pairs, a.duration_s, a.seed)
     elif a.cmd == "own-lag":
         runs = own_lag(a.lags_ms, a.seeds, a.duration_s)
+    elif a.cmd == "evalsim-lag":
+        runs = evalsim_lag(a.lags_ms, a.seeds, a.duration_s, a.seed_base)
     else:
         runs = evalsim(a.nominal, a.duration_s, a.seed_base)
     a.out.parent.mkdir(parents=True, exist_ok=True)
