@@ -390,7 +390,7 @@ def gate_checks(
                 "heldout_s": round(data.heldout_s, 1),
                 "pooled_rms_cut_pct": round(100 * cut, 2),
             },
-            f"held-out BIC gain {gain:.1f} {'>' if gain > threshold else '<='} {threshold:.1f}"
+            f"held-out BIC gain {gain:.1f} {'>' if gain > threshold else '<='} {threshold:.4g}"
             + (f" ({MIN_DELTA_BIC:g} per {GATE_HELDOUT_S:g} s of held-out log)" if threshold > MIN_DELTA_BIC else ""),
         ),
         GateCheck(

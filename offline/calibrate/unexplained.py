@@ -229,7 +229,7 @@ def unexplained_residual(data: Data, vehicle: VehicleConfig, res: list[dict[str,
         at = f", rotor {n.rsplit('_', 1)[1]}" if n.startswith("rotor_torque_") else ""
         lines.append(
             f"{n} ({p['value']:+.3g} {p['unit'].split(' (')[0]}): {where}{at}, held-out RMS "
-            f"{p['heldout_rms_cut_pct'][where]:.1f} % of it, held-out BIC gain {p['heldout_bic_gain']:.1f} > {threshold:.1f}"
+            f"{p['heldout_rms_cut_pct'][where]:.1f} % of it, held-out BIC gain {p['heldout_bic_gain']:.1f} > {threshold:.4g}"
         )
     return {
         "found": bool(found),
