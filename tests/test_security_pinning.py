@@ -130,7 +130,10 @@ def test_two_autopilots_on_one_link_are_each_monitored_and_the_alert_names_the_d
 
     caplog.set_level(logging.INFO)
     v1, v2 = _two_vehicles(flight)
-    frames = [(t, f, 0) for t, f, _ in merged(v1, v2, offsets=[0.0, -0.3])]  # one router, both vehicles
+    # One router, both vehicles; vehicle 2 three seconds ahead. Which is pinned first (the report's system_id) is
+    # decided by the daemon's clock: each is pinned at the first heartbeat that spans pin_wait_s of its own, so a
+    # lead shorter than one heartbeat period left it to the senders' pacing (0.3 s failed once on a loaded machine).
+    frames = [(t, f, 0) for t, f, _ in merged(v1, v2, offsets=[0.0, -3.0])]
     daemon, got, _ = run_senders(tmp_path, toy, frames, {}, [(HOST, 0)])
     rep = daemon.report()
     assert rep["link"]["pin"]["system_id"] == 2 and set(rep["link"]["pin"]["vehicles"]) == {"1", "2"}
