@@ -105,18 +105,15 @@ def evalsim(nominal: int, duration_s: float, seed_base: int):
 
 
 def evalsim_lag(lags_ms: list[float], seeds: int, duration_s: float, seed_base: int):
-    """``bench.yaw_spinup evalsim``'s lag runs: every rotor lagging by ``lag`` ms, flights ``motor_lag_specs(...,
-    seed_base + 100 * lag + s)`` (the default seed base flies docs/CALIBRATION.md's 2 x 80 s lag table again)."""
-    from bench.evalsim_calibration import _af, eval_tables
-    from offline.evalsim.sets import motor_lag_specs
+    """``bench.yaw_spinup evalsim``'s lag runs: every rotor lagging by ``lag`` ms, the same flights
+    (``yaw_spinup.lag_pair_specs`` at ``yaw_spinup.lag_seed``; the default seed base flies docs/CALIBRATION.md's
+    2 x 80 s lag table again)."""
+    from bench.evalsim_calibration import eval_tables
+    from bench.yaw_spinup import lag_pair_specs, lag_seed
 
     for lag in lags_ms:
-        plan = [seed_base + 100 * int(lag) + s for s in range(seeds)]
-        specs = []
-        for seed in plan:
-            taus = [lag / 1000.0] * 4
-            specs += [_af(sp, motor_thrust_efficiency=(1.0,) * 4) for sp in motor_lag_specs(taus, 2, seed, duration_s)]
-        tabs = eval_tables(specs)
+        plan = [lag_seed(seed_base, lag, s) for s in range(seeds)]
+        tabs = eval_tables([sp for seed in plan for sp in lag_pair_specs(lag / 1000.0, seed, duration_s)])
         for k, seed in enumerate(plan):
             yield {"sim": "evalsim", "effect": "lag_all_rotors", "lag_ms": lag, "seed": seed} | both_gates(
                 tabs[2 * k : 2 * k + 2]

@@ -31,20 +31,32 @@ from monitor.vehicle import DEFAULT_VEHICLE, load_vehicle
 NOM = load_vehicle(DEFAULT_VEHICLE)
 
 
+def first_round_lag(r) -> dict:
+    """Calibration ``r``'s first-round ``motor_time_constant`` fit, whatever was named: its value, held-out gain and
+    the gate that decided it."""
+    from offline.calibrate.terms import TERMS
+
+    first = r.selection.steps[0]
+    verdict = first.verdicts["motor_time_constant"]
+    tau_s = first.trials["motor_time_constant"].params(TERMS["motor_time_constant"])["motor_time_constant_s"]
+    return {
+        "round1_motor_time_constant_ms": round(1000 * tau_s, 1),
+        "round1_motor_time_constant_gain": round(verdict.gain, 1),
+        "round1_motor_time_constant_gate": verdict.gate,
+    }
+
+
 def run(lag_ms: float, delay_ms: float, jitter_ms: float, seed: int, duration_s: float) -> dict:
     from bench.evalsim_calibration import OWN_FLIGHTS, OWN_SEED_BASE, _lag_all_fitted, own_register
     from offline.calibrate.calibrate import calibrate_vehicle
     from offline.calibrate.nominal_flights import nominal_flights
-    from offline.calibrate.terms import TERMS
 
     v = dataclasses.replace(NOM, motor_time_constant_s=lag_ms / 1000.0)
     reg = own_register(v).with_range("attitude_log_delay_s", delay_ms / 1000.0, delay_ms / 1000.0)
     reg = reg.with_range("telemetry_jitter_std_s", jitter_ms / 1000.0, jitter_ms / 1000.0)
     r = calibrate_vehicle(nominal_flights(v, OWN_FLIGHTS, OWN_SEED_BASE + seed, duration_s, reg), NOM)
-    first = r.selection.steps[0]
-    mtc = first.trials["motor_time_constant"]
     named = _lag_all_fitted({f["effect"]: (f["params"], f["std"]) for f in r.findings})
-    rival = first.rival or {}
+    rival = r.selection.steps[0].rival or {}
     return {
         "lag_ms": lag_ms,
         "delay_ms": delay_ms,
@@ -52,9 +64,7 @@ def run(lag_ms: float, delay_ms: float, jitter_ms: float, seed: int, duration_s:
         "seed": seed,
         "named": [f["effect"] for f in r.findings],
         "named_lag_ms": round(1000 * named[0], 1) if named else None,
-        "round1_motor_time_constant_ms": round(1000 * mtc.params(TERMS["motor_time_constant"])["motor_time_constant_s"], 1),
-        "round1_motor_time_constant_gain": round(first.verdicts["motor_time_constant"].gain, 1),
-        "round1_motor_time_constant_gate": first.verdicts["motor_time_constant"].gate,
+        **first_round_lag(r),
         "rival_delay_ms": round(1000 * rival["delay_s"], 1) if "delay_s" in rival else None,
         "unexplained": r.unexplained["summary"],
     }
@@ -68,7 +78,6 @@ def fixed_run(lag_ms: float, seed: int, duration_s: float, through_tlog: bool) -
     from monitor.logs import read_log
     from offline.calibrate.calibrate import calibrate_vehicle
     from offline.calibrate.nominal_flights import _simulate
-    from offline.calibrate.terms import TERMS
     from offline.sim.io_tlog import write_tlog
 
     v = dataclasses.replace(NOM, motor_time_constant_s=lag_ms / 1000.0)
@@ -79,15 +88,12 @@ def fixed_run(lag_ms: float, seed: int, duration_s: float, through_tlog: bool) -
     else:
         tabs = [log.to_flight_table(i, source=f"fixed-{seed}-{i}") for i in range(2)]
     r = calibrate_vehicle(tabs, NOM)
-    first = r.selection.steps[0]
-    mtc = first.trials["motor_time_constant"].params(TERMS["motor_time_constant"])["motor_time_constant_s"]
     return {
         "path": "fixed-tlog" if through_tlog else "fixed",
         "lag_ms": lag_ms,
         "seed": seed,
         "named": [f["effect"] for f in r.findings],
-        "round1_motor_time_constant_ms": round(1000 * mtc, 1),
-        "round1_motor_time_constant_gain": round(first.verdicts["motor_time_constant"].gain, 1),
+        **first_round_lag(r),
     }
 
 

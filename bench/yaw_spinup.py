@@ -339,13 +339,25 @@ def calibrate_both(tabs, before: bool = True) -> dict:
     }
 
 
-def evalsim(out: Path, lags_ms: list[float], seeds: int, nominal: int, duration_s: float, seed_base: int) -> dict:
-    from bench.evalsim_calibration import _af, eval_tables
+def lag_seed(seed_base: int, lag_ms: float, k: int) -> int:
+    """The flight seed of the ``k``-th run of an all-rotor lag of ``lag_ms`` (``evalsim``'s plan)."""
+    return seed_base + 100 * int(lag_ms) + k
+
+
+def lag_pair_specs(tau_s: float, seed: int, duration_s: float) -> list:
+    """The two evaluation-only flights of one run: every rotor lagging by ``tau_s``, every motor's efficiency 1."""
+    from bench.evalsim_calibration import _af
     from offline.evalsim.sets import motor_lag_specs
+
+    return [_af(sp, motor_thrust_efficiency=(1.0,) * 4) for sp in motor_lag_specs([tau_s] * 4, 2, seed, duration_s)]
+
+
+def evalsim(out: Path, lags_ms: list[float], seeds: int, nominal: int, duration_s: float, seed_base: int) -> dict:
+    from bench.evalsim_calibration import eval_tables
 
     out.mkdir(parents=True, exist_ok=True)
     runs = out / "runs.jsonl"
-    plan = [(lag, seed_base + 100 * int(lag) + s) for s in range(seeds) for lag in lags_ms]
+    plan = [(lag, lag_seed(seed_base, lag, s)) for s in range(seeds) for lag in lags_ms]
     plan += [(None, seed_base + 50_000 + s) for s in range(nominal)]
     rows = []
     batch = 8  # runs simulated together (16 flights): the evaluation simulator's cost per flight falls with the batch
@@ -353,8 +365,7 @@ def evalsim(out: Path, lags_ms: list[float], seeds: int, nominal: int, duration_
         chunk = plan[i : i + batch]
         specs = []
         for lag, seed in chunk:
-            taus = [NOM.motor_time_constant_s if lag is None else lag / 1000.0] * 4
-            specs += [_af(sp, motor_thrust_efficiency=(1.0,) * 4) for sp in motor_lag_specs(taus, 2, seed, duration_s)]
+            specs += lag_pair_specs(NOM.motor_time_constant_s if lag is None else lag / 1000.0, seed, duration_s)
         tabs = eval_tables(specs)
         for k, (lag, seed) in enumerate(chunk):
             t0 = time.process_time()
